@@ -1,0 +1,186 @@
+//! The Generalized Maxwell-Slip model (paper eqs 1-6, DESIGN §2).
+
+use crate::error::{Field, ParamError, finite};
+use crate::math;
+use crate::model::{FrictionModel, Step, step_velocity};
+use crate::stribeck::{Stribeck, StribeckParams};
+
+/// One elementary Maxwell-slip block.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct Block {
+    /// Stiffness `k_i` [N/m or N·m/rad], `> 0`.
+    pub k: f32,
+    /// Relative weight `alpha_i` [-], `> 0`; the weights of a model sum to 1 ± 0.01.
+    pub alpha: f32,
+}
+
+impl Block {
+    /// The pre-sliding displacement at which the block saturates on the virgin curve,
+    /// `D_i = alpha_i Fs / k_i` [m or rad] (paper eq. 3).
+    pub fn breakpoint(&self, fs: f32) -> f32 {
+        self.alpha * fs / self.k
+    }
+}
+
+/// Parameters of a GMS model with `N` blocks (editable; validated by [`Gms::try_new`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct GmsParams<const N: usize> {
+    /// The Stribeck curve, for both directions unless `negative` is set.
+    pub stribeck: StribeckParams,
+    /// Separate Stribeck parameters for negative velocity (the paper's direction asymmetry).
+    pub negative: Option<StribeckParams>,
+    /// Viscous coefficient `sigma` [N·s/m or N·m·s/rad], `>= 0`.
+    pub sigma: f32,
+    /// Attraction parameter `C` of the slip dynamics [N/s or N·m/s], `> 0`.
+    pub c: f32,
+    /// The blocks.
+    #[cfg_attr(feature = "serde", serde(with = "crate::serde_array"))]
+    pub blocks: [Block; N],
+}
+
+impl<const N: usize> GmsParams<N> {
+    /// Checks every rule of the model; the error names the first offending field.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        Stribeck::try_new(self.stribeck, self.negative)?;
+        finite(self.sigma, Field::Sigma)?;
+        finite(self.c, Field::C)?;
+        if self.sigma < 0.0 {
+            return Err(ParamError::SigmaNegative);
+        }
+        if self.c <= 0.0 {
+            return Err(ParamError::CNotPositive);
+        }
+        let mut sum = 0.0f32;
+        for (i, b) in self.blocks.iter().enumerate() {
+            finite(b.k, Field::K(i))?;
+            finite(b.alpha, Field::Alpha(i))?;
+            if b.k <= 0.0 {
+                return Err(ParamError::KNotPositive(i));
+            }
+            if b.alpha <= 0.0 {
+                return Err(ParamError::AlphaNotPositive(i));
+            }
+            sum += b.alpha;
+        }
+        if !(sum >= 0.99 && sum <= 1.01) {
+            return Err(ParamError::AlphaSum);
+        }
+        Ok(())
+    }
+}
+
+/// A validated GMS model with `N` blocks and its state.
+///
+/// Numerics (DESIGN §2): a sticking block follows the position increment, `F_i += k_i dx`; a
+/// block that would pass `alpha_i |s(v)|` is clamped onto it; a slipping block relaxes
+/// exactly, `F_i = W + (F_i - W) exp(-C dt / |s(v)|)` with `W = alpha_i s(v)`; a block whose
+/// force points against the motion (just after a reversal) sticks. The result is exact for
+/// motion at constant velocity within a step, whatever the step size, up to f32 rounding.
+#[derive(Debug, Clone)]
+pub struct Gms<const N: usize> {
+    params: GmsParams<N>,
+    stribeck: Stribeck,
+    k: [f32; N],
+    alpha: [f32; N],
+    f: [f32; N],
+    viscous: f32,
+    force: f32,
+}
+
+impl<const N: usize> Gms<N> {
+    /// Validates `params` into a model in the virgin state (all block forces zero).
+    pub fn try_new(params: GmsParams<N>) -> Result<Self, ParamError> {
+        params.validate()?;
+        let stribeck = Stribeck::try_new(params.stribeck, params.negative)?;
+        Ok(Gms {
+            params,
+            stribeck,
+            k: core::array::from_fn(|i| params.blocks[i].k),
+            alpha: core::array::from_fn(|i| params.blocks[i].alpha),
+            f: [0.0; N],
+            viscous: 0.0,
+            force: 0.0,
+        })
+    }
+
+    /// The validated parameters.
+    pub fn params(&self) -> &GmsParams<N> {
+        &self.params
+    }
+
+    /// The validated Stribeck curve.
+    pub fn stribeck(&self) -> &Stribeck {
+        &self.stribeck
+    }
+
+    /// The force of each block `F_i` [N or N·m].
+    pub fn block_forces(&self) -> &[f32; N] {
+        &self.f
+    }
+
+    /// The viscous part `sigma v` of the last step's force [N or N·m].
+    pub fn viscous_force(&self) -> f32 {
+        self.viscous
+    }
+}
+
+impl<const N: usize> FrictionModel for Gms<N> {
+    fn advance(&mut self, dx: f32, dt: f32) -> f32 {
+        let (v, sign) = match step_velocity(dx, dt) {
+            Step::Ignore => return self.force,
+            Step::Hold => {
+                self.viscous = 0.0;
+                self.force = self.f.iter().sum();
+                return self.force;
+            }
+            Step::Move { v, sign } => (v, sign),
+        };
+        // |s(v)|, the argument of the slip relaxation, and the viscous force.
+        let (s_abs, relax_arg, viscous) = if v.is_finite() {
+            let s_abs = self.stribeck.magnitude(v);
+            // dt > 0 here; s_abs = 0 (Fs = Fc = 0) gives +inf, i.e. immediate relaxation.
+            (s_abs, self.params.c * dt / s_abs, self.params.sigma * v)
+        } else {
+            // dt = 0: the infinite-velocity limit, no time to relax, no viscous force.
+            (self.stribeck.coulomb(sign), 0.0, 0.0)
+        };
+        // exp(-C dt/|s|) is computed only if some block slips.
+        let mut relax = -1.0f32;
+        let mut sum = 0.0f32;
+        for ((f, &k), &alpha) in self.f.iter_mut().zip(&self.k).zip(&self.alpha) {
+            let fi = *f;
+            let w_abs = alpha * s_abs;
+            let new = if fi * sign < w_abs {
+                // Sticking (or against the motion, just after a reversal): elastic.
+                let g = fi + k * dx;
+                if g * sign > w_abs { w_abs * sign } else { g }
+            } else {
+                // Slipping: exact relaxation towards W for a step of constant velocity.
+                if relax < 0.0 {
+                    relax = math::exp(-relax_arg);
+                }
+                let w = w_abs * sign;
+                w + (fi - w) * relax
+            };
+            *f = new;
+            sum += new;
+        }
+        self.viscous = viscous;
+        self.force = sum + viscous;
+        self.force
+    }
+
+    fn force(&self) -> f32 {
+        self.force
+    }
+
+    fn reset(&mut self) {
+        self.f = [0.0; N];
+        self.viscous = 0.0;
+        self.force = 0.0;
+    }
+}
