@@ -66,7 +66,7 @@ impl<const N: usize> GmsParams<N> {
             }
             sum += b.alpha;
         }
-        if !(sum >= 0.99 && sum <= 1.01) {
+        if !(0.99..=1.01).contains(&sum) {
             return Err(ParamError::AlphaSum);
         }
         Ok(())
@@ -87,6 +87,8 @@ pub struct Gms<const N: usize> {
     k: [f32; N],
     alpha: [f32; N],
     f: [f32; N],
+    /// Rounding error of each `f` not yet added (Kahan compensation of the elastic sums).
+    comp: [f32; N],
     viscous: f32,
     force: f32,
 }
@@ -102,6 +104,7 @@ impl<const N: usize> Gms<N> {
             k: core::array::from_fn(|i| params.blocks[i].k),
             alpha: core::array::from_fn(|i| params.blocks[i].alpha),
             f: [0.0; N],
+            comp: [0.0; N],
             viscous: 0.0,
             force: 0.0,
         })
@@ -151,14 +154,25 @@ impl<const N: usize> FrictionModel for Gms<N> {
         // exp(-C dt/|s|) is computed only if some block slips.
         let mut relax = -1.0f32;
         let mut sum = 0.0f32;
-        for ((f, &k), &alpha) in self.f.iter_mut().zip(&self.k).zip(&self.alpha) {
+        let blocks = self.f.iter_mut().zip(&mut self.comp);
+        for ((f, comp), (&k, &alpha)) in blocks.zip(self.k.iter().zip(&self.alpha)) {
             let fi = *f;
             let w_abs = alpha * s_abs;
             let new = if fi * sign < w_abs {
-                // Sticking (or against the motion, just after a reversal): elastic.
-                let g = fi + k * dx;
-                if g * sign > w_abs { w_abs * sign } else { g }
+                // Sticking (or against the motion, just after a reversal): elastic. The sum
+                // is compensated (Kahan) so that thousands of tiny increments per cycle do
+                // not accumulate f32 rounding into a drift of the pre-sliding state.
+                let inc = k * dx - *comp;
+                let g = fi + inc;
+                if g * sign > w_abs {
+                    *comp = 0.0;
+                    w_abs * sign
+                } else {
+                    *comp = (g - fi) - inc;
+                    g
+                }
             } else {
+                *comp = 0.0;
                 // Slipping: exact relaxation towards W for a step of constant velocity.
                 if relax < 0.0 {
                     relax = math::exp(-relax_arg);
@@ -180,6 +194,7 @@ impl<const N: usize> FrictionModel for Gms<N> {
 
     fn reset(&mut self) {
         self.f = [0.0; N];
+        self.comp = [0.0; N];
         self.viscous = 0.0;
         self.force = 0.0;
     }

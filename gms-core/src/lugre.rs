@@ -104,7 +104,8 @@ impl FrictionModel for LuGre {
         self.z = z_ss + (self.z - z_ss) * math::exp(-p.sigma0 * dist / g);
         let (zdot, viscous) = if v.is_finite() && g > 0.0 {
             let speed = v * sign;
-            ((z_ss - self.z) * (p.sigma0 * speed / g), p.sigma * v)
+            // Bounded factor first (|sigma0 (z_ss - z) / g| <= 2), so that 0 * inf never occurs.
+            (speed * (p.sigma0 * (z_ss - self.z) / g), p.sigma * v)
         } else {
             (0.0, 0.0)
         };

@@ -34,9 +34,11 @@ pub fn exp(x: f32) -> f32 {
     if x > EXP_MAX {
         return f32::INFINITY;
     }
-    if !(x >= EXP_MIN) {
-        // x < EXP_MIN or NaN.
-        return if x.is_nan() { x } else { 0.0 };
+    if x.is_nan() {
+        return x;
+    }
+    if x < EXP_MIN {
+        return 0.0;
     }
     // x = n ln2 + r, |r| <= ln2/2 (plus rounding); Cody-Waite reduction keeps r exact enough.
     let t = x * LOG2_E;
@@ -76,12 +78,11 @@ fn pow2(n: i32) -> f32 {
 /// Natural logarithm for any `f32`: -inf for 0, NaN for negative or NaN, +inf for +inf.
 #[inline]
 pub fn ln(x: f32) -> f32 {
-    if !(x > 0.0) {
-        return if x == 0.0 {
-            f32::NEG_INFINITY
-        } else {
-            f32::NAN
-        };
+    if x.is_nan() || x < 0.0 {
+        return f32::NAN;
+    }
+    if x == 0.0 {
+        return f32::NEG_INFINITY;
     }
     if x == f32::INFINITY {
         return x;

@@ -49,6 +49,47 @@ fn params<const N: usize>() -> impl Strategy<Value = GmsParams<N>> {
         })
 }
 
+/// Parameter sets for the mass-spring simulations: like [`params`] but with the pre-sliding
+/// range tied to the sliding scale (largest breakpoint 1-10 % of Vs·tau, tau = Fs/C the slip
+/// time constant) so that one simulation resolves both in reasonable time, and Fs clearly
+/// above Fc (no velocity weakening, no stick-slip).
+fn dyn_params<const N: usize>() -> impl Strategy<Value = GmsParams<N>> {
+    (
+        -4.0f64..1.0,  // log10 fs
+        0.3f64..0.8,   // fc / fs
+        -3.0f64..0.0,  // log10 vs
+        0.5f64..2.0,   // delta
+        -3.0f64..-1.0, // log10 tau
+        -2.0f64..-1.0, // log10 (dmax / (vs tau))
+        prop::collection::vec((0.0f64..1.0, 0.05f64..1.0), N),
+    )
+        .prop_map(|(lfs, rc, lvs, delta, ltau, ld, blocks)| {
+            let fs = 10f64.powf(lfs);
+            let vs = 10f64.powf(lvs);
+            let tau = 10f64.powf(ltau);
+            let dmax = vs * tau * 10f64.powf(ld);
+            let wsum: f64 = blocks.iter().map(|b| b.1).sum();
+            GmsParams {
+                stribeck: StribeckParams {
+                    fs: fs as f32,
+                    fc: (rc * fs) as f32,
+                    vs: vs as f32,
+                    delta: delta as f32,
+                },
+                negative: None,
+                sigma: 0.0,
+                c: (fs / tau) as f32,
+                blocks: core::array::from_fn(|i| {
+                    let alpha = blocks[i].1 / wsum;
+                    Block {
+                        k: (alpha * fs * 10f64.powf(blocks[i].0) / dmax) as f32,
+                        alpha: alpha as f32,
+                    }
+                }),
+            }
+        })
+}
+
 // ---------------------------------------------------------------------------------------------
 // Independent f64 expectations.
 
@@ -341,5 +382,128 @@ proptest! {
         // The widest loop is a real effect: a sizeable fraction of (Fs - Fc) times the swing.
         let scale = (p.stribeck.fs - p.stribeck.fc) as f64 * v0;
         prop_assert!(areas[2] > 1e-3 * scale, "area {:e} vs scale {scale:e}", areas[2]);
+    }
+}
+
+/// A mass on the friction, pulled through a spring whose far end moves at `v_pull`.
+/// Returns, over the second half of the run, the mass's lowest and highest velocity and the
+/// range (max - min) of the spring force.
+///
+/// Sized from the friction so that one stick-slip cycle is visible: a slip travels
+/// A = 20 Vs tau (tau = Fs / C, the slip time constant), the spring k_s = 2 (Fs - Fc) / A, the
+/// natural period is 4 tau, so a slip reaches ~15 Vs. Semi-implicit Euler, 0.1 rad of the
+/// stiffest (pre-sliding) oscillation per step.
+fn pulled_mass<const N: usize>(
+    p: &GmsParams<N>,
+    zeta: f64,
+    v_pull: f64,
+    cycles: f64,
+) -> (f64, f64, f64) {
+    let st = &p.stribeck;
+    let (fs, fc, vs) = (st.fs as f64, st.fc as f64, st.vs as f64);
+    let tau = fs / p.c as f64;
+    let a = 20.0 * vs * tau;
+    let ks = 2.0 * (fs - fc) / a;
+    let wn = std::f64::consts::PI / (2.0 * tau);
+    let m = ks / (wn * wn);
+    // Damping by the viscous term only: zeta = sigma / (2 m wn).
+    let mut p = *p;
+    p.sigma = (zeta * 2.0 * m * wn) as f32;
+    let ktot: f64 = p.blocks.iter().map(|b| b.k as f64).sum::<f64>() + ks;
+    let dt = 0.1 / (ktot / m).sqrt();
+    // Time to break away, then the given number of stick-slip cycles (a stick lasts at most
+    // A / v_pull), and at least 40 natural periods.
+    let t_end = fs / (ks * v_pull) + (cycles * a / v_pull).max(40.0 * 4.0 * tau);
+    let steps = (t_end / dt) as usize;
+    let mut model = Gms::try_new(p).unwrap();
+    let (mut x, mut v) = (0.0f64, 0.0f64);
+    let (mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut smin, mut smax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for i in 0..steps {
+        let t = i as f64 * dt;
+        let spring = ks * (v_pull * t - x);
+        // The friction for the step about to be taken, at the current velocity.
+        let dx = v * dt;
+        let f = model.advance(dx as f32, dt as f32) as f64;
+        v += (spring - f) / m * dt;
+        x += dx;
+        if i > steps / 2 {
+            vmin = vmin.min(v);
+            vmax = vmax.max(v);
+            smin = smin.min(spring);
+            smax = smax.max(spring);
+        }
+    }
+    (vmin, vmax, smax - smin)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// Stick-slip: a mass-spring pulled slowly (v << Vs) alternates between sticking and fast
+    /// slips; pulled fast (v >> Vs) it slides and never sticks. (Some damping is needed for the
+    /// latter: undamped, the start-up oscillation from rest to the pulling speed never decays.)
+    #[test]
+    fn stick_slip_at_low_speed_vanishes_at_high_speed(
+        p in dyn_params::<4>(),
+        zeta in 0.05f64..0.2,
+    ) {
+        let vs = p.stribeck.vs as f64;
+        let dfs = (p.stribeck.fs - p.stribeck.fc) as f64;
+        // Slow: the mass stops, then slips fast; the spring force saws by about 2 (Fs - Fc).
+        let (vmin, vmax, range) = pulled_mass(&p, zeta, 0.05 * vs, 3.0);
+        prop_assert!(vmin <= 0.0, "slow pull: never stops, lowest velocity {vmin:e}");
+        prop_assert!(vmax > 5.0 * vs, "slow pull: slips reach only {vmax:e}");
+        prop_assert!(range > dfs, "slow pull: spring force range {range:e} vs Fs-Fc {dfs:e}");
+        // Fast: it keeps sliding, never slower than half the pulling speed.
+        let v_fast = 100.0 * vs;
+        let (vmin, _, _) = pulled_mass(&p, zeta, v_fast, 3.0);
+        prop_assert!(vmin > 0.5 * v_fast, "fast pull: lowest velocity {vmin:e} of {v_fast:e}");
+    }
+
+    /// No drift: an oscillating force below breakaway makes the mass cycle in pre-sliding,
+    /// on a closed hysteresis loop, without creeping away.
+    #[test]
+    fn no_drift_under_oscillating_force_below_breakaway(
+        p in dyn_params::<4>(),
+        amp in 0.2f64..0.8,
+        bias in -0.1f64..0.1,
+    ) {
+        let fs = p.stribeck.fs as f64;
+        let ktot: f64 = p.blocks.iter().map(|b| b.k as f64).sum();
+        let kmin = p.blocks.iter().map(|b| b.k as f64).fold(f64::INFINITY, f64::min);
+        // Some damping of the pre-sliding ringing (ratio 0.1 at the initial stiffness) and a
+        // quasi-static drive: the force period is at least 200 pre-sliding periods and 20
+        // viscous creep times at the softest block.
+        let m = 1.0;
+        let wpre = (ktot / m).sqrt();
+        let sigma = 0.1 * 2.0 * (ktot * m).sqrt();
+        let w = (wpre / 200.0).min(kmin / (20.0 * sigma));
+        let mut p = p;
+        p.sigma = sigma as f32;
+        // A whole number of steps per period, so that the samples below are at the same phase.
+        let per = (2.0 * std::f64::consts::PI / w / (0.1 / wpre)).round() as usize;
+        let dt = 2.0 * std::f64::consts::PI / w / per as f64;
+        let mut model = Gms::try_new(p).unwrap();
+        let (mut x, mut v) = (0.0f64, 0.0f64);
+        let mut at_phase = Vec::new();
+        let mut xmax = 0.0f64;
+        for i in 0..12 * per {
+            let t = i as f64 * dt;
+            let load = fs * (bias + amp * (w * t).sin());
+            let dx = v * dt;
+            let f = model.advance(dx as f32, dt as f32) as f64;
+            v += (load - f) / m * dt;
+            x += dx;
+            xmax = xmax.max(x.abs());
+            if i % per == 0 {
+                at_phase.push(x);
+            }
+        }
+        // Pre-sliding only: never beyond the largest breakpoint.
+        prop_assert!(xmax < dmax(&p), "x reached {xmax:e}, breakpoint {:e}", dmax(&p));
+        // The same position at the same phase from the third cycle on.
+        let drift = (at_phase[at_phase.len() - 1] - at_phase[2]).abs();
+        prop_assert!(drift < 1e-5 * xmax, "drift {drift:e} over 9 cycles, amplitude {xmax:e}");
     }
 }
