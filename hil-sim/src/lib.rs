@@ -1,1 +1,10 @@
-//! hil-sim
+//! # hil-sim
+//!
+//! The host side of gms: the simulator of the positioning axis and its command-line tools,
+//! reusing `gms-core` unchanged. Today: the parameter file ([`paramfile`]) and the friction
+//! command ([`friction_cmd`]).
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod friction_cmd;
+pub mod paramfile;
