@@ -21,12 +21,14 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod controller;
 pub mod error;
 pub mod gms;
 pub mod lugre;
 pub mod math;
 pub mod model;
 pub mod presets;
+pub mod reference;
 #[cfg(feature = "serde")]
 mod serde_array;
 pub mod static_map;

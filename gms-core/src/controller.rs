@@ -1,0 +1,419 @@
+//! The position controller of the axis: a PID position loop on the encoder, a PI current
+//! loop on the measured motor current, and friction feedforward added to the current command.
+//!
+//! All f32, fixed size, no allocation. The position loop runs at `pos_rate_hz` (default
+//! 10 kHz) and the current loop at `cur_rate_hz` (default 20 kHz, an integer multiple).
+//! Torques are motor-side [N·m], angles those of the encoder [rad], currents [A], volts [V].
+
+use crate::error::ParamError;
+use crate::gms::{Gms, GmsParams};
+use crate::math;
+use crate::model::FrictionModel;
+use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::static_map::{StaticMap, StaticParams};
+
+/// Which friction feedforward the controller adds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
+pub enum FfMode {
+    /// No friction feedforward.
+    None,
+    /// The static map `s(v) + sigma v` of the reference velocity.
+    Static,
+    /// The GMS model driven by the reference trajectory's position increments.
+    #[default]
+    Gms,
+}
+
+/// Position-loop PID gains (on the position error in rad, output torque in N·m).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct PidParams {
+    /// Proportional gain [N·m/rad], `>= 0`.
+    pub kp: f32,
+    /// Integral gain [N·m/(rad·s)], `>= 0`.
+    pub ki: f32,
+    /// Derivative gain [N·m·s/rad], `>= 0` (on the measurement, filtered).
+    pub kd: f32,
+    /// Corner of the derivative's first-order filter [Hz], `> 0`.
+    pub d_filter_hz: f32,
+    /// Limit of the integral term's torque [N·m], `>= 0` (anti-windup).
+    pub i_limit: f32,
+}
+
+/// Current-loop PI gains (on the current error in A, output voltage in V).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct CurrentParams {
+    /// Proportional gain [V/A], `>= 0`.
+    pub kp: f32,
+    /// Integral gain [V/(A·s)], `>= 0`.
+    pub ki: f32,
+}
+
+/// The motor as the controller knows it (for feedforward and scaling).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+pub struct MotorModel {
+    /// Torque constant k_M [N·m/A] (6.6e-3 in the paper), `> 0`.
+    pub k_m: f32,
+    /// Winding resistance [ohm], `>= 0` (voltage feedforward R i).
+    pub r: f32,
+    /// Back-EMF constant [V·s/rad], `>= 0` (voltage feedforward k_E omega_ref).
+    pub k_e: f32,
+    /// Rotor-side inertia estimate [kg·m^2], `>= 0` (acceleration feedforward J a_ref).
+    pub inertia: f32,
+}
+
+/// Friction feedforward: mode, gain, and the nominal friction of both sources.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FeedforwardParams<const N: usize> {
+    /// Which model feeds forward.
+    pub mode: FfMode,
+    /// Scale on the friction feedforward [-], in [0, 2].
+    pub gain: f32,
+    /// Nominal actuator friction (motor side, N·m and rad).
+    pub actuator: GmsParams<N>,
+    /// Nominal guideway friction (N and m), reflected through `ratio`; `None` to leave it out.
+    pub guideway: Option<GmsParams<N>>,
+    /// Slide travel per motor radian [m/rad] (lead / (2 pi gear ratio)), `> 0`.
+    pub ratio: f32,
+}
+
+/// Everything the controller needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ControllerParams<const N: usize> {
+    /// Position-loop rate [Hz], `> 0`.
+    pub pos_rate_hz: f32,
+    /// Current-loop rate [Hz], an integer multiple (1 to 16) of `pos_rate_hz`.
+    pub cur_rate_hz: f32,
+    /// Encoder resolution [rad/count], `> 0`.
+    pub rad_per_count: f32,
+    /// Position PID.
+    pub pid: PidParams,
+    /// Current PI.
+    pub current: CurrentParams,
+    /// Motor model.
+    pub motor: MotorModel,
+    /// Current command limit [A], `> 0`.
+    pub i_max: f32,
+    /// Supply voltage [V], `> 0` (duty = voltage / supply).
+    pub v_supply: f32,
+    /// Friction feedforward.
+    pub ff: FeedforwardParams<N>,
+}
+
+/// Why a controller parameter set was rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ControllerError {
+    /// A parameter is non-finite or out of its range; names it.
+    Invalid(&'static str),
+    /// The actuator friction model is invalid.
+    Actuator(ParamError),
+    /// The guideway friction model is invalid.
+    Guideway(ParamError),
+}
+
+impl core::fmt::Display for ControllerError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ControllerError::Invalid(name) => write!(f, "{name} is out of range"),
+            ControllerError::Actuator(e) => write!(f, "ff.actuator: {e}"),
+            ControllerError::Guideway(e) => write!(f, "ff.guideway: {e}"),
+        }
+    }
+}
+
+impl<const N: usize> ControllerParams<N> {
+    /// The number of current-loop steps per position-loop step.
+    pub fn ratio(&self) -> u32 {
+        let r = self.cur_rate_hz / self.pos_rate_hz;
+        (r + 0.5) as u32
+    }
+
+    /// Checks every parameter; the error names the first offending one.
+    pub fn validate(&self) -> Result<(), ControllerError> {
+        let checks: [(&'static str, f32, f32, f32); 17] = [
+            ("pos_rate_hz", self.pos_rate_hz, 1.0, 1e6),
+            ("cur_rate_hz", self.cur_rate_hz, 1.0, 1e6),
+            ("rad_per_count", self.rad_per_count, 1e-12, 1.0),
+            ("pid.kp", self.pid.kp, 0.0, 1e6),
+            ("pid.ki", self.pid.ki, 0.0, 1e9),
+            ("pid.kd", self.pid.kd, 0.0, 1e6),
+            ("pid.d_filter_hz", self.pid.d_filter_hz, 1e-3, 1e6),
+            ("pid.i_limit", self.pid.i_limit, 0.0, 1e6),
+            ("current.kp", self.current.kp, 0.0, 1e6),
+            ("current.ki", self.current.ki, 0.0, 1e9),
+            ("motor.k_m", self.motor.k_m, 1e-9, 1e3),
+            ("motor.r", self.motor.r, 0.0, 1e6),
+            ("motor.k_e", self.motor.k_e, 0.0, 1e3),
+            ("motor.inertia", self.motor.inertia, 0.0, 1e3),
+            ("i_max", self.i_max, 1e-9, 1e3),
+            ("v_supply", self.v_supply, 1e-6, 1e4),
+            ("ff.gain", self.ff.gain, 0.0, 2.0),
+        ];
+        for (name, v, lo, hi) in checks {
+            if !(v.is_finite() && v >= lo && v <= hi) {
+                return Err(ControllerError::Invalid(name));
+            }
+        }
+        if !(self.ff.ratio.is_finite() && self.ff.ratio > 0.0) {
+            return Err(ControllerError::Invalid("ff.ratio"));
+        }
+        let r = self.cur_rate_hz / self.pos_rate_hz;
+        let n = self.ratio();
+        if !(1..=16).contains(&n) || (r - n as f32) > 1e-3 * r || (n as f32 - r) > 1e-3 * r {
+            return Err(ControllerError::Invalid("cur_rate_hz"));
+        }
+        self.ff.actuator.validate().map_err(ControllerError::Actuator)?;
+        if let Some(g) = &self.ff.guideway {
+            g.validate().map_err(ControllerError::Guideway)?;
+        }
+        Ok(())
+    }
+}
+
+/// What one position-loop step computed (per term, for telemetry and tuning).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PositionOutput {
+    /// Position error, reference minus measurement [rad].
+    pub error: f32,
+    /// Proportional torque [N·m].
+    pub p: f32,
+    /// Integral torque [N·m].
+    pub i: f32,
+    /// Derivative torque [N·m].
+    pub d: f32,
+    /// Friction feedforward torque, after the gain [N·m].
+    pub ff_friction: f32,
+    /// Inertia feedforward torque [N·m].
+    pub ff_inertia: f32,
+    /// Current command after limiting [A].
+    pub i_cmd: f32,
+    /// True when the current command hit `i_max`.
+    pub saturated: bool,
+}
+
+/// What one current-loop step computed.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CurrentOutput {
+    /// Voltage command after limiting [V].
+    pub voltage: f32,
+    /// PWM duty in [-1, 1] (sign = direction).
+    pub duty: f32,
+}
+
+/// The controller and its state.
+#[derive(Debug, Clone)]
+pub struct Controller<const N: usize> {
+    p: ControllerParams<N>,
+    dt_pos: f32,
+    dt_cur: f32,
+    d_alpha: f32,
+    integ: f32,
+    d_filt: f32,
+    last_meas: Option<i64>,
+    last_ref: Option<SubCounts>,
+    gms_act: Gms<N>,
+    gms_guide: Option<Gms<N>>,
+    map_act: StaticMap,
+    map_guide: Option<StaticMap>,
+    i_cmd: f32,
+    w_ref: f32,
+    cur_integ: f32,
+    out: PositionOutput,
+}
+
+fn static_of<const N: usize>(g: &GmsParams<N>) -> StaticParams {
+    StaticParams {
+        stribeck: g.stribeck,
+        negative: g.negative,
+        sigma: g.sigma,
+    }
+}
+
+fn clamp(x: f32, lim: f32) -> f32 {
+    if x > lim {
+        lim
+    } else if x < -lim {
+        -lim
+    } else {
+        x
+    }
+}
+
+impl<const N: usize> Controller<N> {
+    /// Validates `p` into a controller at rest.
+    pub fn try_new(p: ControllerParams<N>) -> Result<Self, ControllerError> {
+        p.validate()?;
+        let dt_pos = 1.0 / p.pos_rate_hz;
+        let gms_act = Gms::try_new(p.ff.actuator).map_err(ControllerError::Actuator)?;
+        let map_act =
+            StaticMap::try_new(static_of(&p.ff.actuator)).map_err(ControllerError::Actuator)?;
+        let (gms_guide, map_guide) = match &p.ff.guideway {
+            Some(g) => (
+                Some(Gms::try_new(*g).map_err(ControllerError::Guideway)?),
+                Some(StaticMap::try_new(static_of(g)).map_err(ControllerError::Guideway)?),
+            ),
+            None => (None, None),
+        };
+        Ok(Controller {
+            dt_pos,
+            dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
+            d_alpha: 1.0 - math::exp(-2.0 * core::f32::consts::PI * p.pid.d_filter_hz * dt_pos),
+            p,
+            integ: 0.0,
+            d_filt: 0.0,
+            last_meas: None,
+            last_ref: None,
+            gms_act,
+            gms_guide,
+            map_act,
+            map_guide,
+            i_cmd: 0.0,
+            w_ref: 0.0,
+            cur_integ: 0.0,
+            out: PositionOutput::default(),
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ControllerParams<N> {
+        &self.p
+    }
+
+    /// Position-loop period [s].
+    pub fn dt_pos(&self) -> f32 {
+        self.dt_pos
+    }
+
+    /// Current-loop period [s].
+    pub fn dt_cur(&self) -> f32 {
+        self.dt_cur
+    }
+
+    /// The last position-loop output.
+    pub fn last_output(&self) -> &PositionOutput {
+        &self.out
+    }
+
+    /// Sets the feedforward mode and gain (gain clamped to [0, 2]); the friction models keep
+    /// their state.
+    pub fn set_feedforward(&mut self, mode: FfMode, gain: f32) {
+        self.p.ff.mode = mode;
+        self.p.ff.gain = if gain.is_finite() { gain.clamp(0.0, 2.0) } else { 0.0 };
+    }
+
+    /// Clears every integrator, filter and friction state (the axis is at rest).
+    pub fn reset(&mut self) {
+        self.integ = 0.0;
+        self.d_filt = 0.0;
+        self.last_meas = None;
+        self.last_ref = None;
+        self.gms_act.reset();
+        if let Some(g) = &mut self.gms_guide {
+            g.reset();
+        }
+        self.i_cmd = 0.0;
+        self.w_ref = 0.0;
+        self.cur_integ = 0.0;
+        self.out = PositionOutput::default();
+    }
+
+    /// The friction feedforward torque [N·m] (before the gain) for the reference moving by
+    /// `dx` [rad] at velocity `vel` [rad/s] over one position period. Every model is advanced
+    /// whatever the mode, so that switching modes finds them in the right state.
+    fn friction_ff(&mut self, dx: f32, vel: f32) -> f32 {
+        let dt = self.dt_pos;
+        let ratio = self.p.ff.ratio;
+        let gms = self.gms_act.advance(dx, dt)
+            + self.gms_guide.as_mut().map_or(0.0, |g| ratio * g.advance(ratio * dx, dt));
+        match self.p.ff.mode {
+            FfMode::None => 0.0,
+            FfMode::Gms => gms,
+            FfMode::Static => {
+                self.map_act.force_at(vel)
+                    + self.map_guide.as_ref().map_or(0.0, |m| ratio * m.force_at(ratio * vel))
+            }
+        }
+    }
+
+    /// One position-loop step: measured encoder count `meas` and the reference sample `r`.
+    /// Returns the per-term breakdown; the current command is kept for the current loop.
+    pub fn position_step(&mut self, meas: i64, r: &RefSample) -> PositionOutput {
+        let rpc = self.p.rad_per_count;
+        let meas_sub = meas.saturating_mul(SUB_PER_COUNT as i64);
+        let error = (r.pos.saturating_sub(meas_sub)) as f32 * (rpc / SUB_PER_COUNT);
+        // Reference increment for the GMS feedforward (exact in fixed point).
+        let dx_ref = match self.last_ref {
+            Some(prev) => (r.pos.saturating_sub(prev)) as f32 * (rpc / SUB_PER_COUNT),
+            None => 0.0,
+        };
+        self.last_ref = Some(r.pos);
+        // Derivative on the measurement, first-order filtered.
+        let vel_meas = match self.last_meas {
+            Some(prev) => (meas.saturating_sub(prev)) as f32 * rpc / self.dt_pos,
+            None => 0.0,
+        };
+        self.last_meas = Some(meas);
+        self.d_filt += self.d_alpha * (vel_meas - self.d_filt);
+
+        let pid = self.p.pid;
+        let p_term = pid.kp * error;
+        let d_term = -pid.kd * self.d_filt;
+        let ff_fric = self.p.ff.gain * self.friction_ff(dx_ref, r.vel);
+        let ff_inertia = self.p.motor.inertia * r.acc;
+        // Conditional integration: the integrator stops when the command is saturated in the
+        // direction the error would push it further.
+        let integ_new = clamp(self.integ + pid.ki * error * self.dt_pos, pid.i_limit);
+        let torque = p_term + integ_new + d_term + ff_fric + ff_inertia;
+        let i_unsat = torque / self.p.motor.k_m;
+        let i_cmd = clamp(i_unsat, self.p.i_max);
+        let saturated = i_cmd != i_unsat;
+        if !saturated || (error > 0.0) != (i_unsat > 0.0) {
+            self.integ = integ_new;
+        }
+        self.i_cmd = i_cmd;
+        self.w_ref = r.vel;
+        self.out = PositionOutput {
+            error,
+            p: p_term,
+            i: self.integ,
+            d: d_term,
+            ff_friction: ff_fric,
+            ff_inertia,
+            i_cmd,
+            saturated,
+        };
+        self.out
+    }
+
+    /// One current-loop step on the measured current `i_meas` [A]; returns the voltage and
+    /// PWM duty to apply.
+    pub fn current_step(&mut self, i_meas: f32) -> CurrentOutput {
+        let c = &self.p.current;
+        let e = self.i_cmd - i_meas;
+        let ff = self.p.motor.r * self.i_cmd + self.p.motor.k_e * self.w_ref;
+        let integ_new = self.cur_integ + c.ki * e * self.dt_cur;
+        let v_unsat = c.kp * e + integ_new + ff;
+        let vmax = self.p.v_supply;
+        let v = clamp(v_unsat, vmax);
+        if v == v_unsat || (e > 0.0) != (v_unsat > 0.0) {
+            self.cur_integ = clamp(integ_new, vmax);
+        }
+        CurrentOutput {
+            voltage: v,
+            duty: v / vmax,
+        }
+    }
+}

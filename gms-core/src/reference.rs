@@ -1,0 +1,345 @@
+//! Reference trajectories for the position loop: holds, steps, staircases, sinusoids with
+//! velocity reversals, and jerk-limited point-to-point moves, played one after the other.
+//!
+//! Positions are kept as fixed-point encoder counts ([`SubCounts`], 1/65536 count) so that a
+//! long stroke loses nothing to f32 rounding; each segment's shape is computed in f32 relative
+//! to the segment's start.
+
+use crate::math;
+
+/// Fractional bits of [`SubCounts`].
+pub const SUB_BITS: u32 = 16;
+/// One encoder count in [`SubCounts`].
+pub const SUB_PER_COUNT: f32 = (1u32 << SUB_BITS) as f32;
+
+/// A position in 1/65536 of an encoder count (fixed point, i64).
+pub type SubCounts = i64;
+
+/// One piece of a reference trajectory. Distances in rad (at the encoder), times in s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Segment {
+    /// Stay where the previous segment ended for `duration` [s].
+    Hold {
+        /// Duration [s].
+        duration: f32,
+    },
+    /// An instantaneous step of `distance` [rad], then `dwell` [s] at rest.
+    Step {
+        /// Step size [rad].
+        distance: f32,
+        /// Time at rest after the step [s].
+        dwell: f32,
+    },
+    /// `count` steps of `distance` [rad], each followed by `dwell` [s].
+    Staircase {
+        /// Step size [rad].
+        distance: f32,
+        /// Number of steps.
+        count: u32,
+        /// Time at rest after each step [s].
+        dwell: f32,
+    },
+    /// `x = A (1 - cos(2 pi f t))` for `cycles` periods: starts and ends at rest, reverses
+    /// at 0 and 2A.
+    Sine {
+        /// Amplitude A [rad].
+        amplitude: f32,
+        /// Frequency f [Hz].
+        freq: f32,
+        /// Number of periods.
+        cycles: f32,
+    },
+    /// A jerk-limited point-to-point move of `distance` [rad] (quintic minimum-jerk profile,
+    /// its duration the shortest that keeps speed, acceleration and jerk within the limits),
+    /// then `dwell` [s] at rest.
+    Move {
+        /// Distance [rad].
+        distance: f32,
+        /// Speed limit [rad/s].
+        vmax: f32,
+        /// Acceleration limit [rad/s^2].
+        amax: f32,
+        /// Jerk limit [rad/s^3].
+        jmax: f32,
+        /// Time at rest after the move [s].
+        dwell: f32,
+    },
+}
+
+/// Why a segment is invalid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SegmentError {
+    /// A value is NaN or infinite (segment index).
+    NonFinite(usize),
+    /// A duration, dwell, frequency, cycle count or limit is not positive where it must be.
+    NotPositive(usize),
+}
+
+impl core::fmt::Display for SegmentError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SegmentError::NonFinite(i) => write!(f, "reference segment {i}: value not finite"),
+            SegmentError::NotPositive(i) => {
+                write!(f, "reference segment {i}: durations, frequency and limits must be > 0")
+            }
+        }
+    }
+}
+
+impl Segment {
+    /// Checks the segment (index `i` names it in the error).
+    pub fn validate(&self, i: usize) -> Result<(), SegmentError> {
+        let (vals, pos): (&[f32], &[f32]) = match self {
+            Segment::Hold { duration } => (&[*duration], &[*duration]),
+            Segment::Step { distance, dwell } => (&[*distance, *dwell], &[*dwell]),
+            Segment::Staircase {
+                distance, dwell, ..
+            } => (&[*distance, *dwell], &[*dwell]),
+            Segment::Sine {
+                amplitude,
+                freq,
+                cycles,
+            } => (&[*amplitude, *freq, *cycles], &[*freq, *cycles]),
+            Segment::Move {
+                distance,
+                vmax,
+                amax,
+                jmax,
+                dwell,
+            } => (
+                &[*distance, *vmax, *amax, *jmax, *dwell],
+                &[*vmax, *amax, *jmax],
+            ),
+        };
+        if vals.iter().any(|v| !v.is_finite()) {
+            return Err(SegmentError::NonFinite(i));
+        }
+        if pos.iter().any(|v| *v <= 0.0) {
+            return Err(SegmentError::NotPositive(i));
+        }
+        Ok(())
+    }
+
+    /// Duration of the move part of a `Move` [s].
+    fn move_time(distance: f32, vmax: f32, amax: f32, jmax: f32) -> f32 {
+        let d = abs(distance);
+        // Quintic x = D(10u^3 - 15u^4 + 6u^5): peak v = 1.875 D/T, a = 5.7735 D/T^2,
+        // jerk = 60 D/T^3.
+        let tv = 1.875 * d / vmax;
+        let ta = sqrt(5.773_502_7 * d / amax);
+        let tj = cbrt(60.0 * d / jmax);
+        tv.max(ta).max(tj).max(1e-6)
+    }
+
+    /// Total duration [s].
+    pub fn duration(&self) -> f32 {
+        match *self {
+            Segment::Hold { duration } => duration,
+            Segment::Step { dwell, .. } => dwell,
+            Segment::Staircase { count, dwell, .. } => count as f32 * dwell,
+            Segment::Sine { freq, cycles, .. } => cycles / freq,
+            Segment::Move {
+                distance,
+                vmax,
+                amax,
+                jmax,
+                dwell,
+            } => Self::move_time(distance, vmax, amax, jmax) + dwell,
+        }
+    }
+
+    /// Offset from the segment's start [rad], velocity [rad/s] and acceleration [rad/s^2] at
+    /// time `t` [s] into the segment (t in [0, duration]).
+    fn eval(&self, t: f32) -> (f32, f32, f32) {
+        match *self {
+            Segment::Hold { .. } => (0.0, 0.0, 0.0),
+            Segment::Step { distance, .. } => (distance, 0.0, 0.0),
+            Segment::Staircase {
+                distance,
+                count,
+                dwell,
+            } => {
+                let k = ((t / dwell) as u32 + 1).min(count);
+                (distance * k as f32, 0.0, 0.0)
+            }
+            Segment::Sine {
+                amplitude, freq, ..
+            } => {
+                let w = 2.0 * core::f32::consts::PI * freq;
+                let (s, c) = sin_cos(w * t);
+                (amplitude * (1.0 - c), amplitude * w * s, amplitude * w * w * c)
+            }
+            Segment::Move {
+                distance,
+                vmax,
+                amax,
+                jmax,
+                ..
+            } => {
+                let tm = Self::move_time(distance, vmax, amax, jmax);
+                if t >= tm {
+                    return (distance, 0.0, 0.0);
+                }
+                let u = t / tm;
+                let u2 = u * u;
+                let x = distance * u2 * u * (10.0 - 15.0 * u + 6.0 * u2);
+                let v = distance / tm * 30.0 * u2 * (1.0 - 2.0 * u + u2);
+                let a = distance / (tm * tm) * 60.0 * u * (1.0 - 3.0 * u + 2.0 * u2);
+                (x, v, a)
+            }
+        }
+    }
+}
+
+/// One sample of the reference: position (fixed-point counts), velocity, acceleration.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RefSample {
+    /// Position [1/65536 count].
+    pub pos: SubCounts,
+    /// Velocity [rad/s].
+    pub vel: f32,
+    /// Acceleration [rad/s^2].
+    pub acc: f32,
+}
+
+/// Plays up to `S` segments one after the other, sampled at a fixed period.
+#[derive(Debug, Clone)]
+pub struct Reference<const S: usize> {
+    segs: [Segment; S],
+    len: usize,
+    rad_per_count: f32,
+    idx: usize,
+    t: f32,
+    start: SubCounts,
+    last: RefSample,
+}
+
+impl<const S: usize> Reference<S> {
+    /// A reference starting at `start` [1/65536 count] with the segments `segs` (at most
+    /// `S`), for an encoder of `rad_per_count` [rad]. Errors name the first bad segment.
+    pub fn try_new(
+        segs: &[Segment],
+        rad_per_count: f32,
+        start: SubCounts,
+    ) -> Result<Self, SegmentError> {
+        if segs.len() > S {
+            return Err(SegmentError::NotPositive(S));
+        }
+        let mut arr = [Segment::Hold { duration: 0.0 }; S];
+        for (i, (slot, s)) in arr.iter_mut().zip(segs).enumerate() {
+            s.validate(i)?;
+            *slot = *s;
+        }
+        Ok(Reference {
+            segs: arr,
+            len: segs.len(),
+            rad_per_count,
+            idx: 0,
+            t: 0.0,
+            start,
+            last: RefSample {
+                pos: start,
+                vel: 0.0,
+                acc: 0.0,
+            },
+        })
+    }
+
+    /// Total duration of all segments [s].
+    pub fn duration(&self) -> f32 {
+        self.segs[..self.len].iter().map(Segment::duration).sum()
+    }
+
+    /// True once every segment has been played.
+    pub fn done(&self) -> bool {
+        self.idx >= self.len
+    }
+
+    /// The last sample returned (the start position before the first call).
+    pub fn last(&self) -> RefSample {
+        self.last
+    }
+
+    /// Index of the segment being played (== number of segments when done).
+    pub fn segment_index(&self) -> usize {
+        self.idx
+    }
+
+    /// Advances by `dt` [s] and returns the new sample. After the last segment the
+    /// reference holds its final position.
+    pub fn next(&mut self, dt: f32) -> RefSample {
+        self.t += dt;
+        while self.idx < self.len {
+            let seg = self.segs[self.idx];
+            let d = seg.duration();
+            if self.t < d {
+                let (x, v, a) = seg.eval(self.t);
+                self.last = RefSample {
+                    pos: self.start + self.to_sub(x),
+                    vel: v,
+                    acc: a,
+                };
+                return self.last;
+            }
+            // Segment finished: its end becomes the next start.
+            let (x, _, _) = seg.eval(d);
+            self.start += self.to_sub(x);
+            self.t -= d;
+            self.idx += 1;
+        }
+        self.last = RefSample {
+            pos: self.start,
+            vel: 0.0,
+            acc: 0.0,
+        };
+        self.last
+    }
+
+    fn to_sub(&self, rad: f32) -> SubCounts {
+        let c = rad / self.rad_per_count * SUB_PER_COUNT;
+        // Round to nearest; saturating conversion for absurd values.
+        (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64
+    }
+}
+
+fn abs(x: f32) -> f32 {
+    if x < 0.0 { -x } else { x }
+}
+
+/// sqrt by exp/ln (accurate to ~1e-6 relative; only used for segment timing).
+fn sqrt(x: f32) -> f32 {
+    if x <= 0.0 { 0.0 } else { math::exp(0.5 * math::ln(x)) }
+}
+
+/// Cube root of x >= 0.
+fn cbrt(x: f32) -> f32 {
+    if x <= 0.0 {
+        0.0
+    } else {
+        math::exp(math::ln(x) / 3.0)
+    }
+}
+
+/// sin and cos of `x` [rad]: reduction to [-pi/4, pi/4] and Taylor polynomials (error below
+/// 1e-7 there; the reduction keeps ~1e-7 relative phase accuracy for |x| up to ~1e3).
+pub fn sin_cos(x: f32) -> (f32, f32) {
+    const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;
+    const PIO2_HI: f32 = 1.570_796_4;
+    const PIO2_LO: f32 = -4.371_139e-8;
+    let q = x * FRAC_2_PI;
+    let n = if q >= 0.0 { (q + 0.5) as i32 } else { (q - 0.5) as i32 };
+    let nf = n as f32;
+    let r = (x - nf * PIO2_HI) - nf * PIO2_LO;
+    let r2 = r * r;
+    let s = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0))));
+    let c = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 / 40320.0)));
+    match n & 3 {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
