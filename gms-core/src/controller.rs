@@ -173,7 +173,10 @@ impl<const N: usize> ControllerParams<N> {
         if !(1..=16).contains(&n) || (r - n as f32) > 1e-3 * r || (n as f32 - r) > 1e-3 * r {
             return Err(ControllerError::Invalid("cur_rate_hz"));
         }
-        self.ff.actuator.validate().map_err(ControllerError::Actuator)?;
+        self.ff
+            .actuator
+            .validate()
+            .map_err(ControllerError::Actuator)?;
         if let Some(g) = &self.ff.guideway {
             g.validate().map_err(ControllerError::Guideway)?;
         }
@@ -311,7 +314,11 @@ impl<const N: usize> Controller<N> {
     /// their state.
     pub fn set_feedforward(&mut self, mode: FfMode, gain: f32) {
         self.p.ff.mode = mode;
-        self.p.ff.gain = if gain.is_finite() { gain.clamp(0.0, 2.0) } else { 0.0 };
+        self.p.ff.gain = if gain.is_finite() {
+            gain.clamp(0.0, 2.0)
+        } else {
+            0.0
+        };
     }
 
     /// Clears every integrator, filter and friction state (the axis is at rest).
@@ -337,13 +344,19 @@ impl<const N: usize> Controller<N> {
         let dt = self.dt_pos;
         let ratio = self.p.ff.ratio;
         let gms = self.gms_act.advance(dx, dt)
-            + self.gms_guide.as_mut().map_or(0.0, |g| ratio * g.advance(ratio * dx, dt));
+            + self
+                .gms_guide
+                .as_mut()
+                .map_or(0.0, |g| ratio * g.advance(ratio * dx, dt));
         match self.p.ff.mode {
             FfMode::None => 0.0,
             FfMode::Gms => gms,
             FfMode::Static => {
                 self.map_act.force_at(vel)
-                    + self.map_guide.as_ref().map_or(0.0, |m| ratio * m.force_at(ratio * vel))
+                    + self
+                        .map_guide
+                        .as_ref()
+                        .map_or(0.0, |m| ratio * m.force_at(ratio * vel))
             }
         }
     }

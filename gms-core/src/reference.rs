@@ -82,7 +82,10 @@ impl core::fmt::Display for SegmentError {
         match self {
             SegmentError::NonFinite(i) => write!(f, "reference segment {i}: value not finite"),
             SegmentError::NotPositive(i) => {
-                write!(f, "reference segment {i}: durations, frequency and limits must be > 0")
+                write!(
+                    f,
+                    "reference segment {i}: durations, frequency and limits must be > 0"
+                )
             }
         }
     }
@@ -169,7 +172,11 @@ impl Segment {
             } => {
                 let w = 2.0 * core::f32::consts::PI * freq;
                 let (s, c) = sin_cos(w * t);
-                (amplitude * (1.0 - c), amplitude * w * s, amplitude * w * w * c)
+                (
+                    amplitude * (1.0 - c),
+                    amplitude * w * s,
+                    amplitude * w * w * c,
+                )
             }
             Segment::Move {
                 distance,
@@ -311,7 +318,11 @@ fn abs(x: f32) -> f32 {
 
 /// sqrt by exp/ln (accurate to ~1e-6 relative; only used for segment timing).
 fn sqrt(x: f32) -> f32 {
-    if x <= 0.0 { 0.0 } else { math::exp(0.5 * math::ln(x)) }
+    if x <= 0.0 {
+        0.0
+    } else {
+        math::exp(0.5 * math::ln(x))
+    }
 }
 
 /// Cube root of x >= 0.
@@ -330,7 +341,11 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
     const PIO2_HI: f32 = 1.570_796_4;
     const PIO2_LO: f32 = -4.371_139e-8;
     let q = x * FRAC_2_PI;
-    let n = if q >= 0.0 { (q + 0.5) as i32 } else { (q - 0.5) as i32 };
+    let n = if q >= 0.0 {
+        (q + 0.5) as i32
+    } else {
+        (q - 0.5) as i32
+    };
     let nf = n as f32;
     let r = (x - nf * PIO2_HI) - nf * PIO2_LO;
     let r2 = r * r;

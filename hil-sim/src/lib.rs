@@ -6,5 +6,10 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+pub mod commands;
 pub mod friction_cmd;
 pub mod paramfile;
+pub mod plant;
+pub mod plot;
+pub mod scenario;
+pub mod sim;

@@ -1,10 +1,12 @@
 //! `hil-sim`: the gms simulator and tools.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use hil_sim::commands;
 use hil_sim::friction_cmd;
+use hil_sim::scenario::{DEFAULT_SCENARIO, Scenario};
 
 /// The gms host simulator and tools.
 #[derive(Parser)]
@@ -28,26 +30,173 @@ enum Cmd {
         #[arg(long, value_name = "OUT.csv")]
         output: PathBuf,
     },
+    /// Run one closed-loop scenario: DIR/trace.csv, DIR/metrics.json, DIR/plot.svg.
+    Run {
+        /// Scenario file (TOML); every key optional. Without it, the default scenario.
+        #[arg(value_name = "SCENARIO.toml")]
+        scenario: Option<PathBuf>,
+        /// Output directory (created if missing).
+        #[arg(
+            long,
+            value_name = "DIR",
+            required_unless_present = "print_default_scenario"
+        )]
+        out: Option<PathBuf>,
+        /// Print the complete default scenario (every key, with units) and exit.
+        #[arg(long)]
+        print_default_scenario: bool,
+    },
+    /// Run the scenario for every feedforward mode over N friction draws; print a table,
+    /// write OUT.json and a plot (OUT.svg beside it).
+    Compare {
+        /// Scenario file (TOML); without it, the default scenario.
+        #[arg(value_name = "SCENARIO.toml")]
+        scenario: Option<PathBuf>,
+        /// Number of friction draws per mode.
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        runs: u32,
+        /// First seed (draw i uses seed + i).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Where to write the JSON summary.
+        #[arg(long, value_name = "OUT.json")]
+        json: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+        threads: Option<u32>,
+    },
+    /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
+    /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
+    Demo {
+        /// Output directory.
+        #[arg(long, default_value = "hil-out")]
+        out: PathBuf,
+        /// Number of friction draws per mode.
+        #[arg(long, default_value_t = 50, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        runs: u32,
+    },
+}
+
+fn load_scenario(path: Option<&Path>) -> Result<Scenario, String> {
+    match path {
+        Some(p) => Scenario::load(p).map_err(|e| e.to_string()),
+        None => Ok(Scenario::default()),
+    }
+}
+
+fn threads(n: Option<u32>) -> usize {
+    n.map(|n| n as usize)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+fn compare_and_write(
+    sc: &Scenario,
+    runs: u32,
+    seed: u64,
+    json: &Path,
+    threads: usize,
+) -> Result<(), String> {
+    let (cmp, traces) = commands::compare(sc, runs as usize, seed, threads, true)?;
+    print!("{}", commands::table(&cmp, sc.plant.rad_per_count));
+    let text = serde_json::to_string_pretty(&cmp).map_err(|e| e.to_string())?;
+    commands::write_atomic(json, text.as_bytes())?;
+    let svg = json.with_extension("svg");
+    // The zoomed panel starts at the first step segment.
+    let segs = sc.segments()?;
+    let mut t = 0.0f64;
+    let mut zoom = 0.0f64;
+    for s in &segs {
+        if matches!(s, gms_core::reference::Segment::Step { .. }) {
+            zoom = t;
+            break;
+        }
+        t += s.duration() as f64;
+    }
+    let named: Vec<(&str, &[hil_sim::sim::TraceRow])> = commands::MODES
+        .iter()
+        .zip(&traces)
+        .map(|((_, n), t)| (*n, t.as_slice()))
+        .collect();
+    hil_sim::plot::compare_plot(
+        &svg,
+        &format!("position error by feedforward mode (draw seed {seed})"),
+        &named,
+        sc.plant.rad_per_count,
+        zoom,
+    )?;
+    println!("wrote {} and {}", json.display(), svg.display());
+    Ok(())
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.cmd {
+    let result = match cli.cmd {
         Cmd::Friction {
             params,
             input,
             output,
-        } => match friction_cmd::run(&params, &input, &output) {
-            Ok((_, warnings)) => {
-                for w in warnings {
-                    eprintln!("warning: {w}");
-                }
-                ExitCode::SUCCESS
+        } => friction_cmd::run(&params, &input, &output).map(|(_, warnings)| {
+            for w in warnings {
+                eprintln!("warning: {w}");
             }
-            Err(e) => {
-                eprintln!("error: {e}");
-                ExitCode::from(2)
+        }),
+        Cmd::Run {
+            scenario,
+            out,
+            print_default_scenario,
+        } => {
+            if print_default_scenario {
+                print!("{DEFAULT_SCENARIO}");
+                Ok(())
+            } else {
+                load_scenario(scenario.as_deref()).and_then(|sc| {
+                    let out = out.unwrap_or_else(|| PathBuf::from("hil-out"));
+                    let res = commands::run(&sc, &out)?;
+                    let m = res.metrics;
+                    let c = sc.plant.rad_per_count;
+                    println!(
+                        "rms error {:.2} counts, max {:.1} counts, reversal peak {:.1} counts, \
+                         settle {:.1} ms; wrote {}/trace.csv, metrics.json, plot.svg",
+                        m.rms_error / c,
+                        m.max_error / c,
+                        m.reversal_error / c,
+                        m.settle_time * 1e3,
+                        out.display()
+                    );
+                    Ok(())
+                })
             }
-        },
+        }
+        Cmd::Compare {
+            scenario,
+            runs,
+            seed,
+            json,
+            threads: t,
+        } => load_scenario(scenario.as_deref())
+            .and_then(|sc| compare_and_write(&sc, runs, seed, &json, threads(t))),
+        Cmd::Demo { out, runs } => (|| {
+            let sc = Scenario::default();
+            std::fs::create_dir_all(&out)
+                .map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+            compare_and_write(&sc, runs, 1, &out.join("compare.json"), threads(None))?;
+            for (mode, name) in commands::MODES {
+                let mut one = sc.clone();
+                one.controller.ff.mode = mode;
+                commands::run(&one, &out.join(format!("run-{name}")))?;
+            }
+            println!(
+                "wrote {0}/run-none/, {0}/run-static/, {0}/run-gms/ (trace.csv, metrics.json, plot.svg)",
+                out.display()
+            );
+            Ok(())
+        })(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
     }
 }

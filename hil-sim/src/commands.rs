@@ -1,0 +1,272 @@
+//! The `run`, `compare` and `demo` commands.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use gms_core::controller::FfMode;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+
+use crate::plot;
+use crate::scenario::Scenario;
+use crate::sim::{self, Metrics, RunResult, TraceRow};
+
+/// The three feedforward modes, in table order.
+pub const MODES: [(FfMode, &str); 3] = [
+    (FfMode::None, "none"),
+    (FfMode::Static, "static"),
+    (FfMode::Gms, "gms"),
+];
+
+/// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
+pub fn write_atomic(path: &Path, text: &[u8]) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let err = |e: std::io::Error| format!("{}: cannot write: {e}", path.display());
+    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(err)?;
+    tmp.write_all(text).map_err(err)?;
+    tmp.as_file().sync_all().map_err(err)?;
+    tmp.persist(path).map_err(|e| err(e.error))?;
+    Ok(())
+}
+
+/// The trace as CSV text.
+pub fn trace_csv(trace: &[TraceRow]) -> String {
+    let mut s = String::from(
+        "t,reference,position,error,current,current_cmd,voltage,friction,feedforward,ref_velocity,segment\n",
+    );
+    for r in trace {
+        s += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            r.t,
+            r.reference,
+            r.position,
+            r.error,
+            r.current,
+            r.current_cmd,
+            r.voltage,
+            r.friction,
+            r.feedforward,
+            r.ref_velocity,
+            r.segment
+        );
+    }
+    s
+}
+
+/// `hil-sim run`: one run of the scenario with its own feedforward mode and seed; writes
+/// `trace.csv`, `metrics.json` and `plot.svg` into `out`.
+pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    let res = sim::run(sc, sc.controller.ff.mode, sc.plant.seed)?;
+    #[derive(Serialize)]
+    struct Out<'a> {
+        mode: &'a str,
+        seed: u64,
+        metrics: &'a Metrics,
+        energy_balance: EnergyOut,
+    }
+    let mode = MODES
+        .iter()
+        .find(|m| m.0 == sc.controller.ff.mode)
+        .map_or("?", |m| m.1);
+    let e = res.energy;
+    let json = serde_json::to_string_pretty(&Out {
+        mode,
+        seed: sc.plant.seed,
+        metrics: &res.metrics,
+        energy_balance: EnergyOut {
+            input: e.input,
+            copper: e.copper,
+            friction: e.friction,
+            kinetic: e.kinetic,
+            magnetic: e.magnetic,
+            residual: e.input - e.copper - e.friction - e.kinetic - e.magnetic,
+        },
+    })
+    .map_err(|e| e.to_string())?;
+    write_atomic(&out.join("trace.csv"), trace_csv(&res.trace).as_bytes())?;
+    write_atomic(&out.join("metrics.json"), json.as_bytes())?;
+    plot::run_plot(
+        &out.join("plot.svg"),
+        &format!("hil-sim run: feedforward {mode}, seed {}", sc.plant.seed),
+        &res.trace,
+        sc.plant.rad_per_count,
+    )?;
+    Ok(res)
+}
+
+/// The energy ledger in metrics.json [J].
+#[derive(Serialize)]
+struct EnergyOut {
+    input: f64,
+    copper: f64,
+    friction: f64,
+    kinetic: f64,
+    magnetic: f64,
+    residual: f64,
+}
+
+/// Median and 95th percentile of one metric over the draws.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Summary {
+    /// Median.
+    pub median: f64,
+    /// 95th percentile (nearest rank).
+    pub p95: f64,
+}
+
+fn summarize(mut v: Vec<f64>) -> Summary {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        return Summary {
+            median: f64::NAN,
+            p95: f64::NAN,
+        };
+    }
+    let median = if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    };
+    let rank = ((0.95 * n as f64).ceil() as usize).clamp(1, n);
+    Summary {
+        median,
+        p95: v[rank - 1],
+    }
+}
+
+/// The result of `compare`: per mode, per metric, the median and p95 over the draws.
+#[derive(Debug, Serialize)]
+pub struct Comparison {
+    /// mode → metric → summary.
+    pub modes: BTreeMap<String, BTreeMap<String, Summary>>,
+    /// Number of friction draws.
+    pub runs: usize,
+    /// First seed (draw i uses seed + i).
+    pub seed: u64,
+}
+
+/// `hil-sim compare`: every mode over `runs` friction draws (seeds `seed`, `seed+1`, …),
+/// on `threads` threads, with a progress bar when `progress`. Returns the comparison and the
+/// traces of the first draw (for the plot).
+pub fn compare(
+    sc: &Scenario,
+    runs: usize,
+    seed: u64,
+    threads: usize,
+    progress: bool,
+) -> Result<(Comparison, Vec<Vec<TraceRow>>), String> {
+    let jobs: Vec<(usize, usize)> = (0..runs)
+        .flat_map(|r| (0..MODES.len()).map(move |m| (r, m)))
+        .collect();
+    let bar = if progress {
+        let b = ProgressBar::new(jobs.len() as u64);
+        b.set_style(
+            ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} runs {elapsed}")
+                .map_err(|e| e.to_string())?
+                .progress_chars("=> "),
+        );
+        b.set_prefix("compare");
+        b
+    } else {
+        ProgressBar::hidden()
+    };
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Result<(Metrics, Option<Vec<TraceRow>>), String>>>> =
+        Mutex::new(vec![None; jobs.len()]);
+    std::thread::scope(|s| {
+        for _ in 0..threads.max(1) {
+            s.spawn(|| {
+                loop {
+                    let j = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&(r, m)) = jobs.get(j) else { break };
+                    let res = sim::run(sc, MODES[m].0, seed.wrapping_add(r as u64))
+                        .map(|res| (res.metrics, (r == 0).then_some(res.trace)));
+                    if let Ok(mut g) = results.lock() {
+                        g[j] = Some(res);
+                    }
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+    let results = results
+        .into_inner()
+        .map_err(|_| "a run panicked".to_string())?;
+    let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); MODES.len()];
+    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); MODES.len()];
+    for (j, res) in results.into_iter().enumerate() {
+        let (metrics, trace) = res.ok_or("a run did not finish")??;
+        let m = jobs[j].1;
+        per_mode[m].push(metrics);
+        if let Some(t) = trace {
+            traces[m] = t;
+        }
+    }
+    let mut modes = BTreeMap::new();
+    for (m, (_, name)) in MODES.iter().enumerate() {
+        let mut table = BTreeMap::new();
+        for (k, (metric, _)) in Metrics::default().named().iter().enumerate() {
+            let vals = per_mode[m].iter().map(|x| x.named()[k].1).collect();
+            table.insert(metric.to_string(), summarize(vals));
+        }
+        modes.insert(name.to_string(), table);
+    }
+    Ok((Comparison { modes, runs, seed }, traces))
+}
+
+/// The comparison as a text table (medians, p95 in brackets), in readable units.
+pub fn table(c: &Comparison, rad_per_count: f64) -> String {
+    let rows: [(&str, &str, f64); 8] = [
+        ("rms_error", "counts", 1.0 / rad_per_count),
+        ("sine_rms_error", "counts", 1.0 / rad_per_count),
+        ("max_error", "counts", 1.0 / rad_per_count),
+        ("reversal_error", "counts", 1.0 / rad_per_count),
+        ("settle_time", "ms", 1e3),
+        ("steady_state_error", "counts", 1.0 / rad_per_count),
+        ("unsettled_steps", "", 1.0),
+        ("hunting_crossings", "", 1.0),
+    ];
+    let mut s = format!("{} friction draws, median [p95]\n{:<28}", c.runs, "metric");
+    for (_, name) in MODES {
+        s += &format!("{name:>22}");
+    }
+    s.push('\n');
+    for (metric, unit, scale) in rows {
+        s += &format!("{:<28}", format!("{metric} [{unit}]").replace(" []", ""));
+        for (_, name) in MODES {
+            let v = c.modes.get(name).and_then(|t| t.get(metric));
+            s += &match v {
+                Some(v) => format!(
+                    "{:>22}",
+                    format!("{:.3} [{:.3}]", v.median * scale, v.p95 * scale)
+                ),
+                None => format!("{:>22}", "-"),
+            };
+        }
+        s.push('\n');
+    }
+    let ratio = |metric: &str, a: &str, b: &str| {
+        let g = |m: &str| c.modes.get(m).and_then(|t| t.get(metric)).map(|v| v.median);
+        match (g(a), g(b)) {
+            (Some(x), Some(y)) if y > 0.0 => format!("{:.2}", x / y),
+            _ => "-".into(),
+        }
+    };
+    s += &format!(
+        "sine RMS ratio none/gms {}, static/gms {}; reversal peak ratio none/gms {}, static/gms {}\n",
+        ratio("sine_rms_error", "none", "gms"),
+        ratio("sine_rms_error", "static", "gms"),
+        ratio("reversal_error", "none", "gms"),
+        ratio("reversal_error", "static", "gms"),
+    );
+    s
+}

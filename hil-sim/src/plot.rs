@@ -1,0 +1,194 @@
+//! SVG plots of runs (plotters' SVG backend: no fonts or system libraries needed).
+
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::sim::TraceRow;
+
+/// Colours of the three feedforward modes: none, static, gms.
+pub const MODE_COLOURS: [RGBColor; 3] = [RGBColor(200, 60, 60), RGBColor(230, 150, 20), BLUE];
+
+fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() || !hi.is_finite() {
+        return (-1.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.05).max(1e-12);
+    (lo - pad, hi + pad)
+}
+
+/// One run: reference and position, error in counts, friction and feedforward, over time.
+pub fn run_plot(
+    path: &Path,
+    title: &str,
+    trace: &[TraceRow],
+    rad_per_count: f64,
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = root
+        .titled(title, ("sans-serif", 22))
+        .map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((3, 1));
+    let t_end = trace.last().map_or(1.0, |r| r.t);
+    let e = |msg: &dyn std::fmt::Display| msg.to_string();
+
+    let (lo, hi) = range(
+        trace
+            .iter()
+            .flat_map(|r| [r.reference * 1e3, r.position * 1e3]),
+    );
+    let mut c = ChartBuilder::on(&panels[0])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .y_desc("position [mrad]")
+        .draw()
+        .map_err(|x| e(&x))?;
+    c.draw_series(LineSeries::new(
+        trace.iter().map(|r| (r.t, r.reference * 1e3)),
+        BLACK,
+    ))
+    .map_err(|x| e(&x))?
+    .label("reference")
+    .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
+    c.draw_series(LineSeries::new(
+        trace.iter().map(|r| (r.t, r.position * 1e3)),
+        BLUE,
+    ))
+    .map_err(|x| e(&x))?
+    .label("encoder")
+    .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE));
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+
+    let (lo, hi) = range(trace.iter().map(|r| r.error / rad_per_count));
+    let mut c = ChartBuilder::on(&panels[1])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .y_desc("error [counts]")
+        .draw()
+        .map_err(|x| e(&x))?;
+    c.draw_series(LineSeries::new(
+        trace.iter().map(|r| (r.t, r.error / rad_per_count)),
+        RED,
+    ))
+    .map_err(|x| e(&x))?;
+
+    let (lo, hi) = range(
+        trace
+            .iter()
+            .flat_map(|r| [r.friction * 1e6, r.feedforward * 1e6]),
+    );
+    let mut c = ChartBuilder::on(&panels[2])
+        .margin(8)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(0.0..t_end, lo..hi)
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .x_desc("time [s]")
+        .y_desc("torque [uN·m]")
+        .draw()
+        .map_err(|x| e(&x))?;
+    c.draw_series(LineSeries::new(
+        trace.iter().map(|r| (r.t, r.friction * 1e6)),
+        BLACK,
+    ))
+    .map_err(|x| e(&x))?
+    .label("true friction")
+    .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
+    c.draw_series(LineSeries::new(
+        trace.iter().map(|r| (r.t, r.feedforward * 1e6)),
+        GREEN,
+    ))
+    .map_err(|x| e(&x))?
+    .label("feedforward")
+    .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], GREEN));
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
+/// The error traces of several modes over time, one panel for the whole run and one for the
+/// last part (the fine steps), in counts.
+pub fn compare_plot(
+    path: &Path,
+    title: &str,
+    traces: &[(&str, &[TraceRow])],
+    rad_per_count: f64,
+    zoom_from: f64,
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1200, 800)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = root
+        .titled(title, ("sans-serif", 22))
+        .map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((2, 1));
+    let e = |msg: &dyn std::fmt::Display| msg.to_string();
+    let t_end = traces
+        .iter()
+        .filter_map(|(_, t)| t.last().map(|r| r.t))
+        .fold(1e-9, f64::max);
+    for (pi, (from, label)) in [(0.0, "whole run"), (zoom_from, "fine steps")]
+        .iter()
+        .enumerate()
+    {
+        let rows = || {
+            traces
+                .iter()
+                .flat_map(|(_, t)| t.iter().filter(|r| r.t >= *from))
+        };
+        let (lo, hi) = range(rows().map(|r| r.error / rad_per_count));
+        let mut c = ChartBuilder::on(&panels[pi])
+            .margin(8)
+            .caption(*label, ("sans-serif", 16))
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(*from..t_end, lo..hi)
+            .map_err(|x| e(&x))?;
+        c.configure_mesh()
+            .x_desc("time [s]")
+            .y_desc("error [counts]")
+            .draw()
+            .map_err(|x| e(&x))?;
+        for (i, (name, t)) in traces.iter().enumerate() {
+            let col = MODE_COLOURS[i % MODE_COLOURS.len()];
+            c.draw_series(LineSeries::new(
+                t.iter()
+                    .filter(|r| r.t >= *from)
+                    .map(|r| (r.t, r.error / rad_per_count)),
+                col,
+            ))
+            .map_err(|x| e(&x))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col));
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

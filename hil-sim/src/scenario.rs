@@ -1,0 +1,470 @@
+//! Scenario files: plant, controller and reference of one simulated run.
+//!
+//! The complete default is `default_scenario.toml` (printed by
+//! `hil-sim run --print-default-scenario`); a scenario file may leave out any key, which then
+//! takes that default, and an unknown key is an error naming it.
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use gms_core::controller::{
+    ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
+};
+use gms_core::reference::Segment;
+use serde::{Deserialize, Serialize};
+
+use crate::paramfile::{FileError, FrictionSpec, line_col};
+
+/// The default scenario, with a comment on every key.
+pub const DEFAULT_SCENARIO: &str = include_str!("default_scenario.toml");
+
+/// Blocks of the compensator's GMS models (the controller is built for this many).
+pub const FF_BLOCKS: usize = 6;
+
+/// The default scenario as a TOML table (every key present).
+fn default_table() -> &'static toml::Table {
+    static D: OnceLock<toml::Table> = OnceLock::new();
+    D.get_or_init(|| {
+        toml::from_str(DEFAULT_SCENARIO).expect("the built-in default scenario parses")
+    })
+}
+
+/// Merges `user` into `base`: tables key by key (recursively), everything else replaced.
+fn merge(base: &mut toml::Table, user: toml::Table) {
+    for (k, v) in user {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(u)) => merge(b, u),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+/// A whole scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// The simulated axis.
+    pub plant: Plant,
+    /// The controller (the firmware's own).
+    pub controller: Controller,
+    /// The reference trajectory.
+    pub reference: Reference,
+}
+
+impl Default for Scenario {
+    fn default() -> Self {
+        Scenario::parse(DEFAULT_SCENARIO, "default scenario")
+            .expect("the default scenario is valid")
+    }
+}
+
+/// The plant: motor, transmission, sensors, friction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plant {
+    /// H-bridge supply [V].
+    pub supply_v: f64,
+    /// Winding resistance [ohm].
+    pub resistance: f64,
+    /// Winding inductance [H].
+    pub inductance: f64,
+    /// Torque constant [N·m/A].
+    pub k_m: f64,
+    /// Back-EMF constant [V·s/rad].
+    pub k_e: f64,
+    /// Inertia reflected to the motor [kg·m^2].
+    pub inertia: f64,
+    /// Gearhead reduction [-].
+    pub gear_ratio: f64,
+    /// Lead-screw lead [m/rev].
+    pub lead: f64,
+    /// Encoder resolution [rad/count].
+    pub rad_per_count: f64,
+    /// ADC resolution [bits].
+    pub adc_bits: u32,
+    /// ADC full scale, ± [A].
+    pub adc_range: f64,
+    /// Current-sense noise, standard deviation [A].
+    pub adc_noise: f64,
+    /// PWM duty resolution [steps].
+    pub pwm_steps: u32,
+    /// Plant steps per current-loop period.
+    pub substeps: u32,
+    /// Friction variability, ± fraction of nominal.
+    pub variability: f64,
+    /// Seed of the friction draw and the noise.
+    pub seed: u64,
+    /// Actuator friction (motor side, N·m, rad).
+    pub actuator: FrictionSpec,
+    /// Guideway friction (slide, N, m).
+    pub guideway: FrictionSpec,
+}
+
+impl Plant {
+    /// Slide travel per motor radian [m/rad].
+    pub fn ratio(&self) -> f64 {
+        self.lead / (2.0 * std::f64::consts::PI * self.gear_ratio)
+    }
+}
+
+/// The controller's settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Controller {
+    /// Position-loop rate [Hz].
+    pub pos_rate_hz: f32,
+    /// Current-loop rate [Hz].
+    pub cur_rate_hz: f32,
+    /// Current limit [A].
+    pub i_max: f32,
+    /// Position PID.
+    pub pid: Pid,
+    /// Current PI.
+    pub current: Current,
+    /// Friction feedforward.
+    pub ff: Ff,
+}
+
+/// Position PID gains.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Pid {
+    /// [N·m/rad]
+    pub kp: f32,
+    /// [N·m/(rad·s)]
+    pub ki: f32,
+    /// [N·m·s/rad]
+    pub kd: f32,
+    /// [Hz]
+    pub d_filter_hz: f32,
+    /// [N·m]
+    pub i_limit: f32,
+}
+
+/// Current PI gains.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Current {
+    /// [V/A]
+    pub kp: f32,
+    /// [V/(A·s)]
+    pub ki: f32,
+}
+
+/// Friction feedforward settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ff {
+    /// Mode.
+    pub mode: FfMode,
+    /// Gain [-].
+    pub gain: f32,
+    /// Acceleration feedforward inertia [kg·m^2].
+    pub inertia: f32,
+    /// Compensate the guideway too.
+    pub guideway: bool,
+}
+
+/// The reference trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reference {
+    /// The segments, in order.
+    pub segments: Vec<SegmentSpec>,
+}
+
+/// One reference segment as written in the file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum SegmentSpec {
+    /// Rest.
+    Hold {
+        /// [s]
+        duration: f32,
+    },
+    /// One step.
+    Step {
+        /// [rad]
+        distance: f32,
+        /// [s]
+        dwell: f32,
+    },
+    /// Steps of the given numbers of encoder counts.
+    Steps {
+        /// Step sizes [counts].
+        counts: Vec<i64>,
+        /// [s]
+        dwell: f32,
+    },
+    /// Equal steps.
+    Staircase {
+        /// [rad]
+        distance: f32,
+        /// Number of steps.
+        count: u32,
+        /// [s]
+        dwell: f32,
+    },
+    /// x = A (1 - cos 2 pi f t).
+    Sine {
+        /// [rad]
+        amplitude: f32,
+        /// [Hz]
+        freq: f32,
+        /// Periods.
+        cycles: f32,
+    },
+    /// Jerk-limited move.
+    Move {
+        /// [rad]
+        distance: f32,
+        /// [rad/s]
+        vmax: f32,
+        /// [rad/s^2]
+        amax: f32,
+        /// [rad/s^3]
+        jmax: f32,
+        /// [s]
+        dwell: f32,
+    },
+}
+
+/// The most segments a reference may expand to.
+pub const MAX_SEGMENTS: usize = 64;
+
+impl Scenario {
+    /// Reads and checks a scenario file; errors are one line naming file, position and key.
+    pub fn load(path: &Path) -> Result<Scenario, FileError> {
+        let file = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| FileError {
+            file: file.clone(),
+            at: None,
+            reason: format!("cannot read: {e}"),
+        })?;
+        Self::parse(&text, &file)
+    }
+
+    /// Parses and checks scenario text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Scenario, FileError> {
+        let user: toml::Table = toml::from_str(text).map_err(|e| FileError {
+            file: file.to_string(),
+            at: e.span().map(|s| line_col(text, s.start)),
+            reason: e.message().replace('\n', " ").trim().to_string(),
+        })?;
+        let mut merged = default_table().clone();
+        merge(&mut merged, user);
+        let sc: Scenario =
+            serde_path_to_error::deserialize(toml::Value::Table(merged)).map_err(|e| {
+                let path = e.path().to_string();
+                let msg = e.inner().message().replace('\n', " ").trim().to_string();
+                FileError {
+                    file: file.to_string(),
+                    at: None,
+                    reason: if path == "." {
+                        msg
+                    } else {
+                        format!("{path}: {msg}")
+                    },
+                }
+            })?;
+        sc.check().map_err(|reason| FileError {
+            file: file.to_string(),
+            at: None,
+            reason,
+        })?;
+        Ok(sc)
+    }
+
+    /// Checks everything that the types do not: ranges, the friction models, the controller.
+    pub fn check(&self) -> Result<(), String> {
+        let p = &self.plant;
+        let pos = [
+            ("plant.supply_v", p.supply_v),
+            ("plant.resistance", p.resistance),
+            ("plant.inductance", p.inductance),
+            ("plant.k_m", p.k_m),
+            ("plant.inertia", p.inertia),
+            ("plant.gear_ratio", p.gear_ratio),
+            ("plant.lead", p.lead),
+            ("plant.rad_per_count", p.rad_per_count),
+            ("plant.adc_range", p.adc_range),
+        ];
+        for (name, v) in pos {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a finite number > 0"));
+            }
+        }
+        for (name, v) in [("plant.k_e", p.k_e), ("plant.adc_noise", p.adc_noise)] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("{name} must be a finite number >= 0"));
+            }
+        }
+        if !(p.variability.is_finite() && (0.0..0.9).contains(&p.variability)) {
+            return Err("plant.variability must be in [0, 0.9)".into());
+        }
+        if !(2..=24).contains(&p.adc_bits) {
+            return Err("plant.adc_bits must be in 2..=24".into());
+        }
+        if !(2..=1_000_000).contains(&p.pwm_steps) {
+            return Err("plant.pwm_steps must be in 2..=1000000".into());
+        }
+        if !(10..=1000).contains(&p.substeps) {
+            return Err("plant.substeps must be in 10..=1000".into());
+        }
+        p.actuator
+            .build()
+            .map_err(|e| format!("plant.actuator: {e}"))?;
+        p.guideway
+            .build()
+            .map_err(|e| format!("plant.guideway: {e}"))?;
+        self.controller_params()?;
+        self.segments()?;
+        Ok(())
+    }
+
+    /// The controller's parameters (compensator = the plant's nominal friction).
+    pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
+        let c = &self.controller;
+        let p = &self.plant;
+        let gms = |spec: &FrictionSpec, what: &str| {
+            if spec.model != crate::paramfile::ModelKind::Gms {
+                return Err(format!(
+                    "plant.{what}: the compensator needs model \"gms\" (it has {})",
+                    spec.model
+                ));
+            }
+            spec.gms_params::<FF_BLOCKS>().map_err(|e| {
+                format!("plant.{what}: {e} (the compensator is built for {FF_BLOCKS})")
+            })
+        };
+        let params = ControllerParams {
+            pos_rate_hz: c.pos_rate_hz,
+            cur_rate_hz: c.cur_rate_hz,
+            rad_per_count: p.rad_per_count as f32,
+            pid: PidParams {
+                kp: c.pid.kp,
+                ki: c.pid.ki,
+                kd: c.pid.kd,
+                d_filter_hz: c.pid.d_filter_hz,
+                i_limit: c.pid.i_limit,
+            },
+            current: CurrentParams {
+                kp: c.current.kp,
+                ki: c.current.ki,
+            },
+            motor: MotorModel {
+                k_m: p.k_m as f32,
+                r: p.resistance as f32,
+                k_e: p.k_e as f32,
+                inertia: c.ff.inertia,
+            },
+            i_max: c.i_max,
+            v_supply: p.supply_v as f32,
+            ff: FeedforwardParams {
+                mode: c.ff.mode,
+                gain: c.ff.gain,
+                actuator: gms(&p.actuator, "actuator")?,
+                guideway: if c.ff.guideway {
+                    Some(gms(&p.guideway, "guideway")?)
+                } else {
+                    None
+                },
+                ratio: p.ratio() as f32,
+            },
+        };
+        params
+            .validate()
+            .map_err(|e| format!("controller: {}", controller_key(e)))?;
+        Ok(params)
+    }
+
+    /// The reference segments expanded into gms-core's form.
+    pub fn segments(&self) -> Result<Vec<Segment>, String> {
+        let rpc = self.plant.rad_per_count as f32;
+        let mut out = Vec::new();
+        for s in &self.reference.segments {
+            match s {
+                SegmentSpec::Hold { duration } => out.push(Segment::Hold {
+                    duration: *duration,
+                }),
+                SegmentSpec::Step { distance, dwell } => out.push(Segment::Step {
+                    distance: *distance,
+                    dwell: *dwell,
+                }),
+                SegmentSpec::Steps { counts, dwell } => {
+                    for c in counts {
+                        out.push(Segment::Step {
+                            distance: *c as f32 * rpc,
+                            dwell: *dwell,
+                        });
+                    }
+                }
+                SegmentSpec::Staircase {
+                    distance,
+                    count,
+                    dwell,
+                } => out.push(Segment::Staircase {
+                    distance: *distance,
+                    count: *count,
+                    dwell: *dwell,
+                }),
+                SegmentSpec::Sine {
+                    amplitude,
+                    freq,
+                    cycles,
+                } => out.push(Segment::Sine {
+                    amplitude: *amplitude,
+                    freq: *freq,
+                    cycles: *cycles,
+                }),
+                SegmentSpec::Move {
+                    distance,
+                    vmax,
+                    amax,
+                    jmax,
+                    dwell,
+                } => out.push(Segment::Move {
+                    distance: *distance,
+                    vmax: *vmax,
+                    amax: *amax,
+                    jmax: *jmax,
+                    dwell: *dwell,
+                }),
+            }
+        }
+        if out.is_empty() {
+            return Err("reference.segments is empty".into());
+        }
+        if out.len() > MAX_SEGMENTS {
+            return Err(format!(
+                "reference.segments expands to {} segments, at most {MAX_SEGMENTS}",
+                out.len()
+            ));
+        }
+        for (i, s) in out.iter().enumerate() {
+            s.validate(i).map_err(|e| e.to_string())?;
+        }
+        let total: f32 = out.iter().map(Segment::duration).sum();
+        if !(total <= 3600.0) {
+            return Err(format!("the reference lasts {total} s, at most 3600 s"));
+        }
+        Ok(out)
+    }
+}
+
+/// The scenario key of a controller error.
+fn controller_key(e: gms_core::controller::ControllerError) -> String {
+    use gms_core::controller::ControllerError as E;
+    match e {
+        E::Invalid("ff.ratio") => "plant.lead / plant.gear_ratio out of range".into(),
+        E::Invalid("motor.inertia") => "controller.ff.inertia is out of range".into(),
+        E::Invalid(name) if name.starts_with("motor.") || name == "v_supply" => {
+            format!("{name} (from [plant]) is out of range")
+        }
+        E::Invalid("rad_per_count") => "plant.rad_per_count is out of range".into(),
+        E::Invalid(name) => format!("controller.{name} is out of range"),
+        other => other.to_string(),
+    }
+}

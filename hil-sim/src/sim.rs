@@ -1,0 +1,219 @@
+//! One closed-loop run: gms-core's controller (the firmware's code) against the plant.
+
+use gms_core::controller::{Controller, FfMode};
+use gms_core::reference::{Reference, SUB_PER_COUNT, Segment};
+use serde::Serialize;
+
+use crate::plant::{Energy, Plant};
+use crate::scenario::{FF_BLOCKS, MAX_SEGMENTS, Scenario};
+
+/// One row of the trace, at the position-loop rate.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct TraceRow {
+    /// Time [s].
+    pub t: f64,
+    /// Reference position [rad].
+    pub reference: f64,
+    /// Measured position (encoder) [rad].
+    pub position: f64,
+    /// Position error, reference - measured [rad].
+    pub error: f64,
+    /// True motor current [A].
+    pub current: f64,
+    /// Current command [A].
+    pub current_cmd: f64,
+    /// Voltage applied by the bridge [V].
+    pub voltage: f64,
+    /// True friction torque, actuator + reflected guideway [N·m].
+    pub friction: f64,
+    /// Friction feedforward torque [N·m].
+    pub feedforward: f64,
+    /// Reference velocity [rad/s].
+    pub ref_velocity: f64,
+    /// Index of the reference segment.
+    pub segment: usize,
+}
+
+/// The figures of one run (SI units: rad, s).
+#[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
+pub struct Metrics {
+    /// RMS position error over the whole run [rad].
+    pub rms_error: f64,
+    /// Largest |error| [rad].
+    pub max_error: f64,
+    /// Largest |error| within 50 ms after a velocity reversal of the reference [rad].
+    pub reversal_error: f64,
+    /// RMS error over the sine segments only [rad].
+    pub sine_rms_error: f64,
+    /// Longest time after a step until |error| stays within 1 count (the dwell when it never
+    /// does) [s].
+    pub settle_time: f64,
+    /// Largest mean |error| over the last 20 % of a step's dwell [rad].
+    pub steady_state_error: f64,
+    /// Steps that did not settle within ±1 count before their dwell ended.
+    pub unsettled_steps: f64,
+    /// Sign changes of the error beyond ±1 count in the second half of step dwells (a hunting
+    /// limit cycle shows as many).
+    pub hunting_crossings: f64,
+}
+
+impl Metrics {
+    /// The metrics by name, in a fixed order.
+    pub fn named(&self) -> [(&'static str, f64); 8] {
+        [
+            ("rms_error", self.rms_error),
+            ("max_error", self.max_error),
+            ("reversal_error", self.reversal_error),
+            ("sine_rms_error", self.sine_rms_error),
+            ("settle_time", self.settle_time),
+            ("steady_state_error", self.steady_state_error),
+            ("unsettled_steps", self.unsettled_steps),
+            ("hunting_crossings", self.hunting_crossings),
+        ]
+    }
+}
+
+/// The result of one run.
+pub struct RunResult {
+    /// The trace at the position-loop rate.
+    pub trace: Vec<TraceRow>,
+    /// Its figures.
+    pub metrics: Metrics,
+    /// The plant's energy ledger at the end.
+    pub energy: Energy,
+    /// The expanded reference segments.
+    pub segments: Vec<Segment>,
+}
+
+/// Runs `sc` with feedforward `mode` and the friction draw `seed`.
+pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> {
+    let mut cp = sc.controller_params()?;
+    cp.ff.mode = mode;
+    let mut ctrl = Controller::<FF_BLOCKS>::try_new(cp).map_err(|e| e.to_string())?;
+    let segments = sc.segments()?;
+    let rpc = sc.plant.rad_per_count;
+    let mut reference =
+        Reference::<MAX_SEGMENTS>::try_new(&segments, rpc as f32, 0).map_err(|e| e.to_string())?;
+    let mut plant = Plant::new(&sc.plant, seed)?;
+    let n_cur = cp.ratio();
+    let dt_pos = ctrl.dt_pos();
+    let dt_plant = ctrl.dt_cur() as f64 / sc.plant.substeps as f64;
+    let steps = (reference.duration() / dt_pos).ceil() as usize;
+    let mut trace = Vec::with_capacity(steps);
+    for k in 0..steps {
+        let r = reference.next(dt_pos);
+        let seg = reference.segment_index();
+        let count = plant.encoder();
+        let out = ctrl.position_step(count, &r);
+        for _ in 0..n_cur {
+            let i_meas = plant.adc();
+            let c = ctrl.current_step(i_meas);
+            plant.set_duty(c.duty);
+            for _ in 0..sc.plant.substeps {
+                plant.step(dt_plant);
+            }
+        }
+        let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
+        let position = plant.encoder() as f64 * rpc;
+        trace.push(TraceRow {
+            t: (k + 1) as f64 * dt_pos as f64,
+            reference: reference_rad,
+            position,
+            error: reference_rad - position,
+            current: plant.i,
+            current_cmd: out.i_cmd as f64,
+            voltage: plant.voltage,
+            friction: plant.friction,
+            feedforward: out.ff_friction as f64,
+            ref_velocity: r.vel as f64,
+            segment: seg,
+        });
+    }
+    let metrics = metrics(&trace, &segments, rpc);
+    Ok(RunResult {
+        trace,
+        metrics,
+        energy: plant.energy,
+        segments,
+    })
+}
+
+/// Computes the run's figures from its trace.
+pub fn metrics(trace: &[TraceRow], segments: &[Segment], rad_per_count: f64) -> Metrics {
+    let mut m = Metrics::default();
+    if trace.is_empty() {
+        return m;
+    }
+    let n = trace.len() as f64;
+    m.rms_error = (trace.iter().map(|r| r.error * r.error).sum::<f64>() / n).sqrt();
+    m.max_error = trace.iter().map(|r| r.error.abs()).fold(0.0, f64::max);
+    let sine: Vec<f64> = trace
+        .iter()
+        .filter(|r| matches!(segments.get(r.segment), Some(Segment::Sine { .. })))
+        .map(|r| r.error)
+        .collect();
+    if !sine.is_empty() {
+        m.sine_rms_error = (sine.iter().map(|e| e * e).sum::<f64>() / sine.len() as f64).sqrt();
+    }
+    // Reversals: the reference velocity changes sign (ignoring exact zeros).
+    let mut last_sign = 0.0f64;
+    let mut window_end = f64::NEG_INFINITY;
+    for r in trace {
+        let s = if r.ref_velocity > 0.0 {
+            1.0
+        } else if r.ref_velocity < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        if s != 0.0 {
+            if last_sign != 0.0 && s != last_sign {
+                window_end = r.t + 0.05;
+            }
+            last_sign = s;
+        }
+        if r.t <= window_end {
+            m.reversal_error = m.reversal_error.max(r.error.abs());
+        }
+    }
+    // Steps: per step segment, settling and steady state.
+    let band = rad_per_count * (1.0 + 1e-9);
+    for (idx, seg) in segments.iter().enumerate() {
+        if !matches!(seg, Segment::Step { .. } | Segment::Staircase { .. }) {
+            continue;
+        }
+        let rows: Vec<&TraceRow> = trace.iter().filter(|r| r.segment == idx).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let t0 = rows[0].t;
+        let t_end = rows[rows.len() - 1].t;
+        let last_out = rows.iter().rposition(|r| r.error.abs() > band);
+        let settle = match last_out {
+            None => 0.0,
+            Some(i) if i + 1 < rows.len() => rows[i + 1].t - t0,
+            Some(_) => {
+                m.unsettled_steps += 1.0;
+                t_end - t0
+            }
+        };
+        m.settle_time = m.settle_time.max(settle);
+        let tail: Vec<f64> = rows[rows.len() * 4 / 5..]
+            .iter()
+            .map(|r| r.error.abs())
+            .collect();
+        let mean_tail = tail.iter().sum::<f64>() / tail.len().max(1) as f64;
+        m.steady_state_error = m.steady_state_error.max(mean_tail);
+        let mut prev = 0.0f64;
+        for r in &rows[rows.len() / 2..] {
+            if r.error.abs() > band {
+                let s = r.error.signum();
+                if prev != 0.0 && s != prev {
+                    m.hunting_crossings += 1.0;
+                }
+                prev = s;
+            }
+        }
+    }
+    m
+}
