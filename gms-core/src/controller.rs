@@ -36,7 +36,8 @@ pub struct PidParams {
     pub kp: f32,
     /// Integral gain [N·m/(rad·s)], `>= 0`.
     pub ki: f32,
-    /// Derivative gain [N·m·s/rad], `>= 0` (on the measurement, filtered).
+    /// Derivative gain [N·m·s/rad], `>= 0`: on the velocity error (reference velocity minus
+    /// the encoder's), filtered.
     pub kd: f32,
     /// Corner of the derivative's first-order filter [Hz], `> 0`.
     pub d_filter_hz: f32,
@@ -379,11 +380,12 @@ impl<const N: usize> Controller<N> {
             None => 0.0,
         };
         self.last_meas = Some(meas);
-        self.d_filt += self.d_alpha * (vel_meas - self.d_filt);
+        // Derivative of the error: reference velocity minus measured velocity, filtered.
+        self.d_filt += self.d_alpha * ((r.vel - vel_meas) - self.d_filt);
 
         let pid = self.p.pid;
         let p_term = pid.kp * error;
-        let d_term = -pid.kd * self.d_filt;
+        let d_term = pid.kd * self.d_filt;
         let ff_fric = self.p.ff.gain * self.friction_ff(dx_ref, r.vel);
         let ff_inertia = self.p.motor.inertia * r.acc;
         // Conditional integration: the integrator stops when the command is saturated in the

@@ -275,10 +275,10 @@ impl<const S: usize> Reference<S> {
         self.idx
     }
 
-    /// Advances by `dt` [s] and returns the new sample. After the last segment the
-    /// reference holds its final position.
+    /// Returns the sample at the current time, then advances the time by `dt` [s]. The first
+    /// call returns the start (t = 0). After the last segment the reference holds its final
+    /// position.
     pub fn next(&mut self, dt: f32) -> RefSample {
-        self.t += dt;
         while self.idx < self.len {
             let seg = self.segs[self.idx];
             let d = seg.duration();
@@ -289,6 +289,7 @@ impl<const S: usize> Reference<S> {
                     vel: v,
                     acc: a,
                 };
+                self.t += dt;
                 return self.last;
             }
             // Segment finished: its end becomes the next start.
@@ -297,6 +298,7 @@ impl<const S: usize> Reference<S> {
             self.t -= d;
             self.idx += 1;
         }
+        self.t += dt;
         self.last = RefSample {
             pos: self.start,
             vel: 0.0,

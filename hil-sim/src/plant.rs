@@ -14,7 +14,10 @@
 //!   (±33 uN·m); and their 40 um pre-sliding range is 2.2 rad of motor rotation, so while the
 //!   actuator slides (beyond its 7.8 mrad pre-sliding) the guideways stay in pre-sliding.
 //! - Encoder 3.8 urad/count (paper), on the motor side as DESIGN §3 reads Table 1.
-//! - Current sense: 12-bit ADC over ±1 A (0.49 mA/LSB) with 0.5 mA rms noise.
+//! - Current sense: 12-bit ADC over ±0.5 A (0.24 mA/LSB), 0.15 mA rms noise: a shunt
+//!   amplifier's ~0.6 mA rms averaged over 16 conversions per period. It matters: in
+//!   pre-sliding the actuator's stiffness (1.25 N·m/rad) turns 0.7 mA into one encoder count,
+//!   so with 0.5 mA of noise the axis dithers by ±2 counts at rest whatever the controller.
 //! - PWM: 20 kHz center-aligned from a 168 MHz timer, 4200 duty steps (2.9 mV at 12 V).
 //!
 //! Integration: `substeps` (default 10, i.e. 200 kHz, 10× the current loop) steps per

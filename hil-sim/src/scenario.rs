@@ -191,12 +191,21 @@ pub enum SegmentSpec {
         /// [s]
         dwell: f32,
     },
-    /// Steps of the given numbers of encoder counts.
+    /// Jerk-limited moves of the given numbers of encoder counts, each followed by a dwell.
     Steps {
         /// Step sizes [counts].
         counts: Vec<i64>,
-        /// [s]
+        /// Rest after each move [s].
         dwell: f32,
+        /// Speed limit [rad/s].
+        #[serde(default = "default_vmax")]
+        vmax: f32,
+        /// Acceleration limit [rad/s^2].
+        #[serde(default = "default_amax")]
+        amax: f32,
+        /// Jerk limit [rad/s^3].
+        #[serde(default = "default_jmax")]
+        jmax: f32,
     },
     /// Equal steps.
     Staircase {
@@ -229,6 +238,16 @@ pub enum SegmentSpec {
         /// [s]
         dwell: f32,
     },
+}
+
+fn default_vmax() -> f32 {
+    0.5
+}
+fn default_amax() -> f32 {
+    50.0
+}
+fn default_jmax() -> f32 {
+    1e4
 }
 
 /// The most segments a reference may expand to.
@@ -393,10 +412,19 @@ impl Scenario {
                     distance: *distance,
                     dwell: *dwell,
                 }),
-                SegmentSpec::Steps { counts, dwell } => {
+                SegmentSpec::Steps {
+                    counts,
+                    dwell,
+                    vmax,
+                    amax,
+                    jmax,
+                } => {
                     for c in counts {
-                        out.push(Segment::Step {
+                        out.push(Segment::Move {
                             distance: *c as f32 * rpc,
+                            vmax: *vmax,
+                            amax: *amax,
+                            jmax: *jmax,
                             dwell: *dwell,
                         });
                     }

@@ -45,8 +45,8 @@ pub struct Metrics {
     pub reversal_error: f64,
     /// RMS error over the sine segments only [rad].
     pub sine_rms_error: f64,
-    /// Longest time after a step until |error| stays within 1 count (the dwell when it never
-    /// does) [s].
+    /// Longest time, after a step's reference has come to rest at its target, until |error|
+    /// stays within 1 count (the rest of the dwell when it never does) [s].
     pub settle_time: f64,
     /// Largest mean |error| over the last 20 % of a step's dwell [rad].
     pub steady_state_error: f64,
@@ -101,10 +101,14 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
     let steps = (reference.duration() / dt_pos).ceil() as usize;
     let mut trace = Vec::with_capacity(steps);
     for k in 0..steps {
+        // The reference and the measurement at the same instant t_k.
         let r = reference.next(dt_pos);
         let seg = reference.segment_index();
         let count = plant.encoder();
         let out = ctrl.position_step(count, &r);
+        let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
+        let position = count as f64 * rpc;
+        let (current, voltage, friction) = (plant.i, plant.voltage, plant.friction);
         for _ in 0..n_cur {
             let i_meas = plant.adc();
             let c = ctrl.current_step(i_meas);
@@ -113,17 +117,15 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
                 plant.step(dt_plant);
             }
         }
-        let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
-        let position = plant.encoder() as f64 * rpc;
         trace.push(TraceRow {
-            t: (k + 1) as f64 * dt_pos as f64,
+            t: k as f64 * dt_pos as f64,
             reference: reference_rad,
             position,
             error: reference_rad - position,
-            current: plant.i,
+            current,
             current_cmd: out.i_cmd as f64,
-            voltage: plant.voltage,
-            friction: plant.friction,
+            voltage,
+            friction,
             feedforward: out.ff_friction as f64,
             ref_velocity: r.vel as f64,
             segment: seg,
@@ -136,6 +138,11 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
         energy: plant.energy,
         segments,
     })
+}
+
+/// Time of the first trace row of segment `idx`.
+fn trace_start(trace: &[TraceRow], idx: usize) -> f64 {
+    trace.iter().find(|r| r.segment == idx).map_or(0.0, |r| r.t)
 }
 
 /// Computes the run's figures from its trace.
@@ -177,12 +184,20 @@ pub fn metrics(trace: &[TraceRow], segments: &[Segment], rad_per_count: f64) -> 
         }
     }
     // Steps: per step segment, settling and steady state.
-    let band = rad_per_count * (1.0 + 1e-9);
+    // ±1 count, with 1 % allowance for a target that is not exactly on a count boundary.
+    let band = rad_per_count * 1.01;
     for (idx, seg) in segments.iter().enumerate() {
-        if !matches!(seg, Segment::Step { .. } | Segment::Staircase { .. }) {
-            continue;
-        }
-        let rows: Vec<&TraceRow> = trace.iter().filter(|r| r.segment == idx).collect();
+        // Time from the segment's start until the reference is at rest at its target.
+        let motion = match *seg {
+            Segment::Step { .. } | Segment::Staircase { .. } => 0.0,
+            Segment::Move { dwell, .. } => (seg.duration() - dwell) as f64,
+            _ => continue,
+        };
+        let rows: Vec<&TraceRow> = trace
+            .iter()
+            .filter(|r| r.segment == idx)
+            .skip_while(|r| r.t < trace_start(trace, idx) + motion)
+            .collect();
         if rows.is_empty() {
             continue;
         }
