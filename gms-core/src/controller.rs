@@ -85,6 +85,9 @@ pub struct FeedforwardParams<const N: usize> {
     pub guideway: Option<GmsParams<N>>,
     /// Slide travel per motor radian [m/rad] (lead / (2 pi gear ratio)), `> 0`.
     pub ratio: f32,
+    /// Velocity band of the static map [rad/s], `>= 0`: below it the map's output is scaled
+    /// by |v| / band, so that it does not jump by 2 Fs at a reversal (0: no band).
+    pub static_band: f32,
 }
 
 /// Everything the controller needs.
@@ -168,6 +171,9 @@ impl<const N: usize> ControllerParams<N> {
         }
         if !(self.ff.ratio.is_finite() && self.ff.ratio > 0.0) {
             return Err(ControllerError::Invalid("ff.ratio"));
+        }
+        if !(self.ff.static_band.is_finite() && self.ff.static_band >= 0.0) {
+            return Err(ControllerError::Invalid("ff.static_band"));
         }
         let r = self.cur_rate_hz / self.pos_rate_hz;
         let n = self.ratio();
@@ -353,11 +359,13 @@ impl<const N: usize> Controller<N> {
             FfMode::None => 0.0,
             FfMode::Gms => gms,
             FfMode::Static => {
-                self.map_act.force_at(vel)
-                    + self
-                        .map_guide
-                        .as_ref()
-                        .map_or(0.0, |m| ratio * m.force_at(ratio * vel))
+                let band = self.p.ff.static_band;
+                let speed = if vel < 0.0 { -vel } else { vel };
+                let scale = if speed < band { speed / band } else { 1.0 };
+                let guide = self.map_guide.as_ref();
+                scale
+                    * (self.map_act.force_at(vel)
+                        + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
             }
         }
     }

@@ -165,6 +165,8 @@ pub struct Ff {
     pub inertia: f32,
     /// Compensate the guideway too.
     pub guideway: bool,
+    /// Velocity band of the static map [rad/s].
+    pub static_band: f32,
 }
 
 /// The reference trajectory.
@@ -391,6 +393,7 @@ impl Scenario {
                     None
                 },
                 ratio: p.ratio() as f32,
+                static_band: c.ff.static_band,
             },
         };
         params
