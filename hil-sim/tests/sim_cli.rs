@@ -1,0 +1,158 @@
+//! `hil-sim run`, `compare` and their contracts, as a user runs them.
+
+use std::path::Path;
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
+
+fn hil(args: &[&str], cwd: &Path) -> (i32, String, String) {
+    let out = Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A short scenario so that the tests run fast.
+const SHORT: &str = r#"
+[reference]
+segments = [
+  { kind = "sine", amplitude = 0.02, freq = 4.0, cycles = 1.0 },
+  { kind = "steps", counts = [10], dwell = 0.05 },
+]
+"#;
+
+#[test]
+fn default_scenario_is_complete_and_documented() {
+    let d = tempfile::tempdir().unwrap();
+    let (code, text, _) = hil(&["run", "--print-default-scenario"], d.path());
+    assert_eq!(code, 0);
+    let parsed = hil_sim::scenario::Scenario::parse(&text, "printed").unwrap();
+    assert_eq!(parsed, hil_sim::scenario::Scenario::default());
+    // Units in comments on the physical keys.
+    for key in [
+        "resistance",
+        "inductance",
+        "inertia",
+        "kp",
+        "ki",
+        "pos_rate_hz",
+    ] {
+        let line = text
+            .lines()
+            .find(|l| l.trim_start().starts_with(key))
+            .unwrap();
+        assert!(line.contains('[') && line.contains('#'), "{line}");
+    }
+}
+
+#[test]
+fn run_writes_trace_metrics_and_plot() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("s.toml"), SHORT).unwrap();
+    let (code, out, err) = hil(&["run", "s.toml", "--out", "res"], d.path());
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("rms error"));
+    let trace = std::fs::read_to_string(d.path().join("res/trace.csv")).unwrap();
+    let header = trace.lines().next().unwrap();
+    for f in [
+        "t",
+        "reference",
+        "position",
+        "error",
+        "current",
+        "voltage",
+        "friction",
+        "feedforward",
+    ] {
+        assert!(header.split(',').any(|h| h == f), "{header}");
+    }
+    // 0.25 s + 0.05 s + move at 10 kHz.
+    assert!(trace.lines().count() > 3000);
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path().join("res/metrics.json")).unwrap())
+            .unwrap();
+    for k in [
+        "rms_error",
+        "max_error",
+        "reversal_error",
+        "settle_time",
+        "steady_state_error",
+    ] {
+        assert!(m["metrics"][k].as_f64().unwrap().is_finite(), "{k}");
+    }
+    let svg = std::fs::read_to_string(d.path().join("res/plot.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("error [counts]"));
+}
+
+#[test]
+fn compare_writes_the_json_contract() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("s.toml"), SHORT).unwrap();
+    let (code, out, err) = hil(
+        &[
+            "compare", "s.toml", "--runs", "3", "--seed", "5", "--json", "c.json",
+        ],
+        d.path(),
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("none") && out.contains("gms"));
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path().join("c.json")).unwrap()).unwrap();
+    for mode in ["none", "static", "gms"] {
+        for k in [
+            "rms_error",
+            "max_error",
+            "reversal_error",
+            "settle_time",
+            "steady_state_error",
+        ] {
+            let s = &c["modes"][mode][k];
+            let (med, p95) = (s["median"].as_f64().unwrap(), s["p95"].as_f64().unwrap());
+            assert!(med.is_finite() && p95 >= med, "{mode} {k}: {s}");
+        }
+    }
+    assert!(d.path().join("c.svg").exists());
+}
+
+#[test]
+fn bad_scenarios_and_arguments_exit_2_with_one_line() {
+    let d = tempfile::tempdir().unwrap();
+    let cases: [(&str, &str); 6] = [
+        ("[plant]\nresistence = 3\n", "resistence"),
+        ("[controller.pid]\nkp = \"high\"\n", "controller.pid.kp"),
+        ("[controller.pid]\nkp = -1\n", "controller.pid.kp"),
+        ("[plant.actuator]\nfs = 1e-6\n", "plant.actuator"),
+        (
+            "[reference]\nsegments = [{ kind = \"sine\", amplitude = 0.1, freq = 0, cycles = 1 }]\n",
+            "segment 0",
+        ),
+        ("[plant\n", "bad.toml:1"),
+    ];
+    for (text, want) in cases {
+        std::fs::write(d.path().join("bad.toml"), text).unwrap();
+        let (code, _, err) = hil(&["run", "bad.toml", "--out", "o"], d.path());
+        assert_eq!(code, 2, "{text}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(want), "{err:?} should name {want:?}");
+        assert!(!d.path().join("o").exists(), "{text}: wrote output");
+        let (code, _, _) = hil(
+            &["compare", "bad.toml", "--runs", "1", "--json", "c.json"],
+            d.path(),
+        );
+        assert_eq!(code, 2);
+        assert!(!d.path().join("c.json").exists());
+    }
+    let (code, _, err) = hil(&["run", "missing.toml", "--out", "o"], d.path());
+    assert_eq!(code, 2);
+    assert!(err.contains("missing.toml"));
+    let (code, _, _) = hil(&["compare", "--runs", "0", "--json", "c.json"], d.path());
+    assert_eq!(code, 2);
+    let (code, _, _) = hil(&["compare", "--runs", "x", "--json", "c.json"], d.path());
+    assert_eq!(code, 2);
+}
