@@ -131,7 +131,7 @@ impl Segment {
         // Quintic x = D(10u^3 - 15u^4 + 6u^5): peak v = 1.875 D/T, a = 5.7735 D/T^2,
         // jerk = 60 D/T^3.
         let tv = 1.875 * d / vmax;
-        let ta = sqrt(5.773_502_7 * d / amax);
+        let ta = sqrt(5.773_503 * d / amax);
         let tj = cbrt(60.0 * d / jmax);
         tv.max(ta).max(tj).max(1e-6)
     }

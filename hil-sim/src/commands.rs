@@ -142,6 +142,9 @@ fn summarize(mut v: Vec<f64>) -> Summary {
     }
 }
 
+/// One run's figures, and its trace when it is the first draw.
+type JobResult = Result<(Metrics, Option<Vec<TraceRow>>), String>;
+
 /// The result of `compare`: per mode, per metric, the median and p95 over the draws.
 #[derive(Debug, Serialize)]
 pub struct Comparison {
@@ -179,8 +182,7 @@ pub fn compare(
         ProgressBar::hidden()
     };
     let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<(Metrics, Option<Vec<TraceRow>>), String>>>> =
-        Mutex::new(vec![None; jobs.len()]);
+    let results: Mutex<Vec<Option<JobResult>>> = Mutex::new(vec![None; jobs.len()]);
     std::thread::scope(|s| {
         for _ in 0..threads.max(1) {
             s.spawn(|| {

@@ -106,7 +106,10 @@ fn compare_and_write(
     let mut t = 0.0f64;
     let mut zoom = 0.0f64;
     for s in &segs {
-        if matches!(s, gms_core::reference::Segment::Step { .. }) {
+        if matches!(
+            s,
+            gms_core::reference::Segment::Step { .. } | gms_core::reference::Segment::Move { .. }
+        ) {
             zoom = t;
             break;
         }

@@ -478,7 +478,7 @@ impl Scenario {
             s.validate(i).map_err(|e| e.to_string())?;
         }
         let total: f32 = out.iter().map(Segment::duration).sum();
-        if !(total <= 3600.0) {
+        if total.is_nan() || total > 3600.0 {
             return Err(format!("the reference lasts {total} s, at most 3600 s"));
         }
         Ok(out)
