@@ -29,6 +29,7 @@ pub mod math;
 pub mod model;
 pub mod presets;
 pub mod reference;
+pub mod selftest;
 #[cfg(feature = "serde")]
 mod serde_array;
 pub mod static_map;

@@ -1,0 +1,224 @@
+//! The gms-core cost benchmark and host/target equivalence check, for an emulated
+//! STM32F405 (QEMU `netduinoplus2`, Cortex-M4F) with `-icount shift=0`, where every
+//! instruction takes 1 ns of virtual time and SysTick runs at the 168 MHz core clock.
+//!
+//! Prints, over semihosting, lines the host tool (`cargo target-bench`) turns into
+//! instruction counts:
+//! - `calib <ticks>`: SysTick ticks for `CALIB_REPS` × 32 extra `nop`s (the tick/instruction
+//!   ratio, measured rather than assumed);
+//! - `cost <name> <ticks> <calls>`: ticks of `calls` calls minus the same loop without them;
+//! - `equiv <name> <hash>`: gms-core's self-test hashes.
+#![no_std]
+#![no_main]
+
+use core::fmt::Write;
+use core::hint::black_box;
+
+use cortex_m::peripheral::{SYST, syst::SystClkSource};
+use cortex_m_rt::entry;
+use cortex_m_semihosting::{debug, hio};
+use gms_core::controller::Controller;
+use gms_core::reference::RefSample;
+use gms_core::{
+    FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
+};
+
+#[panic_handler]
+fn panic(_: &core::panic::PanicInfo) -> ! {
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
+
+/// Repetitions of each measured call.
+const CALLS: u32 = 2000;
+/// Repetitions of the calibration block.
+const CALIB_REPS: u32 = 2000;
+
+/// SysTick ticks elapsed while running `f` (the counter counts down, 24 bits).
+fn ticks(f: impl FnOnce()) -> u32 {
+    let t0 = SYST::get_current();
+    f();
+    let t1 = SYST::get_current();
+    t0.wrapping_sub(t1) & 0x00ff_ffff
+}
+
+macro_rules! nops {
+    (8) => {
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+        cortex_m::asm::nop();
+    };
+}
+
+#[inline(never)]
+fn block32() {
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+}
+
+#[inline(never)]
+fn block64() {
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+    nops!(8);
+}
+
+/// Ticks of `CALLS` calls of `step(i)` minus `CALLS` iterations of `base(i)`.
+fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
+    let with = ticks(|| {
+        for i in 0..CALLS {
+            step(black_box(i));
+        }
+    });
+    let without = ticks(|| {
+        for i in 0..CALLS {
+            base(black_box(i));
+        }
+    });
+    with.saturating_sub(without)
+}
+
+#[entry]
+fn main() -> ! {
+    let Some(mut p) = cortex_m::Peripherals::take() else {
+        debug::exit(debug::EXIT_FAILURE);
+        loop {}
+    };
+    p.SYST.set_clock_source(SystClkSource::Core);
+    p.SYST.set_reload(0x00ff_ffff);
+    p.SYST.clear_current();
+    p.SYST.enable_counter();
+    let Ok(mut out) = hio::hstdout() else {
+        debug::exit(debug::EXIT_FAILURE);
+        loop {}
+    };
+
+    // Calibration: 32 nops more per repetition.
+    let t64 = ticks(|| {
+        for _ in 0..CALIB_REPS {
+            block64();
+        }
+    });
+    let t32 = ticks(|| {
+        for _ in 0..CALIB_REPS {
+            block32();
+        }
+    });
+    writeln!(out, "calib {}", t64.saturating_sub(t32)).ok();
+
+    let table1 = presets::table1();
+    let dither = [3.8e-6f32, -3.8e-6];
+    let dt = 1e-4f32;
+
+    // Gms<6>, sticking: a ±1 count dither in pre-sliding (every block elastic).
+    if let Ok(mut m) = Gms::try_new(table1) {
+        let c = cost(
+            |i| {
+                black_box(m.advance(black_box(dither[(i & 1) as usize]), black_box(dt)));
+            },
+            |i| {
+                black_box(black_box(dither[(i & 1) as usize]) + black_box(dt));
+            },
+        );
+        writeln!(out, "cost gms6_step_sticking {c} {CALLS}").ok();
+    }
+    // Gms<6>, slipping: steady sliding at 0.5 rad/s (every block on the slip branch).
+    if let Ok(mut m) = Gms::try_new(table1) {
+        m.advance(0.5, 1.0);
+        let c = cost(
+            |_| {
+                black_box(m.advance(black_box(0.5 * dt), black_box(dt)));
+            },
+            |_| {
+                black_box(black_box(0.5 * dt) + black_box(dt));
+            },
+        );
+        writeln!(out, "cost gms6_step_slipping {c} {CALLS}").ok();
+    }
+    let lp = LugreParams {
+        stribeck: table1.stribeck,
+        negative: None,
+        sigma0: 2.0,
+        sigma1: 1e-3,
+        sigma: table1.sigma,
+    };
+    if let Ok(mut m) = LuGre::try_new(lp) {
+        let c = cost(
+            |_| {
+                black_box(m.advance(black_box(0.5 * dt), black_box(dt)));
+            },
+            |_| {
+                black_box(black_box(0.5 * dt) + black_box(dt));
+            },
+        );
+        writeln!(out, "cost lugre_step {c} {CALLS}").ok();
+    }
+    let sp = StaticParams {
+        stribeck: table1.stribeck,
+        negative: None,
+        sigma: table1.sigma,
+    };
+    if let Ok(mut m) = StaticMap::try_new(sp) {
+        let c = cost(
+            |_| {
+                black_box(m.advance(black_box(0.5 * dt), black_box(dt)));
+            },
+            |_| {
+                black_box(black_box(0.5 * dt) + black_box(dt));
+            },
+        );
+        writeln!(out, "cost static_step {c} {CALLS}").ok();
+    }
+    // One controller step: position loop (PID + GMS feedforward of both friction sources +
+    // inertia feedforward) and one current-loop step, tracking a 0.3 rad/s ramp.
+    if let Ok(mut ctl) = Controller::try_new(selftest::controller_params()) {
+        let inc = (0.3f32 * 1e-4 / 3.8e-6 * 65536.0) as i64;
+        let c = cost(
+            |i| {
+                let pos = (i as i64 + 1) * inc;
+                let r = RefSample {
+                    pos,
+                    vel: 0.3,
+                    acc: 0.0,
+                };
+                let count = black_box(pos >> 16) - black_box(i as i64 & 3);
+                black_box(ctl.position_step(count, &black_box(r)));
+                black_box(ctl.current_step(black_box(0.02)));
+            },
+            |i| {
+                let pos = (i as i64 + 1) * inc;
+                let r = RefSample {
+                    pos,
+                    vel: 0.3,
+                    acc: 0.0,
+                };
+                black_box(black_box(pos >> 16) - black_box(i as i64 & 3));
+                black_box(black_box(r));
+                black_box(black_box(0.02f32));
+            },
+        );
+        writeln!(out, "cost controller_step {c} {CALLS}").ok();
+    }
+
+    writeln!(out, "equiv friction {}", selftest::friction_hash(20_000)).ok();
+    writeln!(out, "equiv controller {}", selftest::controller_hash(5_000)).ok();
+    writeln!(out, "done").ok();
+    debug::exit(debug::EXIT_SUCCESS);
+    loop {
+        cortex_m::asm::wfi();
+    }
+}
