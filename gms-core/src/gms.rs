@@ -89,6 +89,8 @@ pub struct Gms<const N: usize> {
     f: [f32; N],
     /// Rounding error of each `f` not yet added (Kahan compensation of the elastic sums).
     comp: [f32; N],
+    /// alpha_i Fc for positive and negative motion: the least alpha_i |s(v)| can be.
+    alpha_fc: [[f32; N]; 2],
     viscous: f32,
     force: f32,
 }
@@ -105,6 +107,10 @@ impl<const N: usize> Gms<N> {
             alpha: core::array::from_fn(|i| params.blocks[i].alpha),
             f: [0.0; N],
             comp: [0.0; N],
+            alpha_fc: [
+                core::array::from_fn(|i| params.blocks[i].alpha * stribeck.coulomb(1.0)),
+                core::array::from_fn(|i| params.blocks[i].alpha * stribeck.coulomb(-1.0)),
+            ],
             viscous: 0.0,
             force: 0.0,
         })
@@ -142,14 +148,46 @@ impl<const N: usize> FrictionModel for Gms<N> {
             }
             Step::Move { v, sign } => (v, sign),
         };
-        // |s(v)|, the argument of the slip relaxation, and the viscous force.
-        let (s_abs, relax_arg, viscous) = if v.is_finite() {
+        let viscous = if v.is_finite() {
+            self.params.sigma * v
+        } else {
+            0.0
+        };
+        // Fast path: when every block sticks and stays below alpha_i Fc, the least that
+        // alpha_i |s(v)| can be, the Stribeck curve is not needed (the common case in fine
+        // positioning). The result is bit for bit that of the full path below.
+        let afc = &self.alpha_fc[if sign < 0.0 { 1 } else { 0 }];
+        let mut trial = [0.0f32; N];
+        let mut fast = true;
+        for i in 0..N {
+            let fi = self.f[i];
+            let g = fi + (self.k[i] * dx - self.comp[i]);
+            if !(fi * sign < afc[i] && g * sign <= afc[i]) {
+                fast = false;
+                break;
+            }
+            trial[i] = g;
+        }
+        if fast {
+            let mut sum = 0.0f32;
+            for i in 0..N {
+                let inc = self.k[i] * dx - self.comp[i];
+                self.comp[i] = (trial[i] - self.f[i]) - inc;
+                self.f[i] = trial[i];
+                sum += trial[i];
+            }
+            self.viscous = viscous;
+            self.force = sum + viscous;
+            return self.force;
+        }
+        // |s(v)| and the argument of the slip relaxation.
+        let (s_abs, relax_arg) = if v.is_finite() {
             let s_abs = self.stribeck.magnitude(v);
             // dt > 0 here; s_abs = 0 (Fs = Fc = 0) gives +inf, i.e. immediate relaxation.
-            (s_abs, self.params.c * dt / s_abs, self.params.sigma * v)
+            (s_abs, self.params.c * dt / s_abs)
         } else {
             // dt = 0: the infinite-velocity limit, no time to relax, no viscous force.
-            (self.stribeck.coulomb(sign), 0.0, 0.0)
+            (self.stribeck.coulomb(sign), 0.0)
         };
         // exp(-C dt/|s|) is computed only if some block slips.
         let mut relax = -1.0f32;

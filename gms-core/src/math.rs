@@ -28,41 +28,53 @@ const EXP_MAX: f32 = 88.722_83;
 /// Below this `e^x` is smaller than half the smallest subnormal f32 and rounds to zero.
 const EXP_MIN: f32 = -103.972_08;
 
+/// 1.5 × 2^23: adding it to |t| < 2^22 rounds t to an integer held in the low mantissa bits.
+const ROUND_MAGIC: f32 = 12_582_912.0;
+
 /// e^x for any `f32`: +inf above 88.72, 0 below -103.97, NaN for NaN.
 #[inline]
 pub fn exp(x: f32) -> f32 {
-    if x > EXP_MAX {
-        return f32::INFINITY;
-    }
-    if x.is_nan() {
-        return x;
-    }
-    if x < EXP_MIN {
-        return 0.0;
+    if !(x > EXP_MIN && x <= EXP_MAX) {
+        return exp_edge(x);
     }
     // x = n ln2 + r, |r| <= ln2/2 (plus rounding); Cody-Waite reduction keeps r exact enough.
-    let t = x * LOG2_E;
-    let n = if t >= 0.0 {
-        (t + 0.5) as i32
-    } else {
-        (t - 0.5) as i32
-    };
-    let nf = n as f32;
+    // n = round(x log2 e) by the magic-number addition (round to nearest even).
+    let shifted = x * LOG2_E + ROUND_MAGIC;
+    let n = shifted.to_bits() as i32 - ROUND_MAGIC.to_bits() as i32;
+    let nf = shifted - ROUND_MAGIC;
     let r = (x - nf * LN2_HI) - nf * LN2_LO;
     let p = EXP_P[0] + r * (EXP_P[1] + r * (EXP_P[2] + r * EXP_P[3]));
     let er = 1.0 + (r + r * r * p);
     scale_pow2(er, n)
 }
 
+/// e^x outside (EXP_MIN, EXP_MAX]: 0, +inf or NaN.
+#[cold]
+fn exp_edge(x: f32) -> f32 {
+    if x.is_nan() {
+        x
+    } else if x > EXP_MAX {
+        f32::INFINITY
+    } else {
+        0.0
+    }
+}
+
 /// `x * 2^n` for x in [0.5, 2] and n in [-151, 128], exact unless the result is subnormal.
 #[inline]
 fn scale_pow2(x: f32, n: i32) -> f32 {
-    if n >= -126 {
-        if n <= 127 {
-            x * pow2(n)
-        } else {
-            x * pow2(127) * 2.0
-        }
+    // n in [-126, 127]: one unsigned comparison.
+    if ((n + 126) as u32) <= 253 {
+        x * pow2(n)
+    } else {
+        scale_pow2_edge(x, n)
+    }
+}
+
+#[cold]
+fn scale_pow2_edge(x: f32, n: i32) -> f32 {
+    if n > 127 {
+        x * pow2(127) * 2.0
     } else {
         // Two steps so that each factor is a normal number; the last multiply rounds once.
         x * pow2(n + 64) * pow2(-64)
@@ -107,6 +119,85 @@ pub fn ln(x: f32) -> f32 {
     let ln_m = 2.0 * f + f * series;
     let ef = e as f32;
     ef * LN2_HI + (ef * LN2_LO + ln_m)
+}
+
+/// 1 / ln 2.
+const INV_LN2: f32 = core::f32::consts::LOG2_E;
+
+/// Base-2 logarithm for any `f32`: -inf for 0, NaN for negative or NaN, +inf for +inf.
+///
+/// The same reduction as [`ln`] without the split of ln 2: `e + log2(m)`.
+#[inline]
+pub fn log2(x: f32) -> f32 {
+    let bits = x.to_bits();
+    // Positive normal numbers in one unsigned comparison; the rest elsewhere.
+    if bits.wrapping_sub(0x0080_0000) >= 0x7f00_0000 {
+        return log2_edge(x);
+    }
+    log2_normal(bits, 0)
+}
+
+/// log2 of 0, subnormals, negatives, infinities and NaN.
+#[cold]
+fn log2_edge(x: f32) -> f32 {
+    if x.is_nan() || x < 0.0 {
+        f32::NAN
+    } else if x == 0.0 {
+        f32::NEG_INFINITY
+    } else if x == f32::INFINITY {
+        x
+    } else {
+        // Subnormal: scale into the normal range first (exact).
+        log2_normal((x * 33_554_432.0).to_bits(), -25)
+    }
+}
+
+/// log2 of the positive normal number with bits `bits`, plus `e`.
+#[inline]
+fn log2_normal(bits: u32, mut e: i32) -> f32 {
+    const SQRT_HALF_BITS: u32 = 0x3f35_04f3;
+    let shifted = bits + (0x3f80_0000 - SQRT_HALF_BITS);
+    e += (shifted >> 23) as i32 - 127;
+    let m = f32::from_bits((shifted & 0x007f_ffff) + SQRT_HALF_BITS);
+    let f = (m - 1.0) / (m + 1.0);
+    let z = f * f;
+    // log2 m = (2/ln 2) atanh(f): the odd series to f^7, scaled.
+    let series = z * (2.0 / 3.0 + z * (2.0 / 5.0 + z * (2.0 / 7.0)));
+    let log2_m = (2.0 * INV_LN2) * f + (INV_LN2 * f) * series;
+    e as f32 + log2_m
+}
+
+/// 2^y for any `f32`: +inf above 128, 0 below -150, NaN for NaN.
+#[inline]
+pub fn exp2(y: f32) -> f32 {
+    if !(y > -150.0 && y < 128.0) {
+        return exp2_edge(y);
+    }
+    let shifted = y + ROUND_MAGIC;
+    let n = shifted.to_bits() as i32 - ROUND_MAGIC.to_bits() as i32;
+    // y - n is exact, |y - n| <= 0.5; e^((y - n) ln 2) by the same polynomial as exp.
+    let r = (y - (shifted - ROUND_MAGIC)) * core::f32::consts::LN_2;
+    let p = EXP_P[0] + r * (EXP_P[1] + r * (EXP_P[2] + r * EXP_P[3]));
+    scale_pow2(1.0 + (r + r * r * p), n)
+}
+
+/// 2^y outside (-150, 128): 0, +inf or NaN.
+#[cold]
+fn exp2_edge(y: f32) -> f32 {
+    if y.is_nan() {
+        y
+    } else if y >= 128.0 {
+        f32::INFINITY
+    } else {
+        0.0
+    }
+}
+
+/// `exp(-(r^delta))` for `r >= 0` (including 0 and +inf) and `delta > 0`: the decay of the
+/// Stribeck curve, with one log2, one exp2 and one exp.
+#[inline]
+pub fn stribeck_decay(r: f32, delta: f32) -> f32 {
+    exp(-exp2(delta * log2(r)))
 }
 
 /// `base^p` for `base >= 0`: `exp(p ln base)`, with 0^p = 0 for p > 0 and +inf^p = +inf.

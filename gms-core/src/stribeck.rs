@@ -67,12 +67,12 @@ impl Branch {
     #[inline]
     fn magnitude(&self, speed: f32) -> f32 {
         let r = speed / self.vs;
-        let p = if self.delta_is_one {
-            r
+        let decay = if self.delta_is_one {
+            math::exp(-r)
         } else {
-            math::powf(r, self.delta)
+            math::stribeck_decay(r, self.delta)
         };
-        self.fc + self.dfs * math::exp(-p)
+        self.fc + self.dfs * decay
     }
 }
 

@@ -135,3 +135,32 @@ fn stribeck_and_relaxation_within_1e5_relative() {
         "relaxation factor worst relative error {worst:e}"
     );
 }
+
+#[test]
+fn log2_and_exp2_are_accurate() {
+    let mut worst = 0.0f64;
+    for x in logspace(1e-44, 3e38, 200_000) {
+        let xf = x as f32;
+        let want = (xf as f64).log2();
+        worst = worst.max((math::log2(xf) as f64 - want).abs() / want.abs().max(1.0));
+    }
+    eprintln!("log2: worst error {worst:.3e} (relative to max(1, |log2 x|))");
+    assert!(worst < 2e-7, "log2 worst {worst:e}");
+    assert_eq!(math::log2(0.0), f32::NEG_INFINITY);
+    assert_eq!(math::log2(f32::INFINITY), f32::INFINITY);
+    assert!(math::log2(-1.0).is_nan() && math::log2(f32::NAN).is_nan());
+    let mut worst = 0.0f64;
+    let n = 200_000;
+    for i in 0..=n {
+        let y = -125.0 + 252.0 * i as f32 / n as f32;
+        worst = worst.max(rel(math::exp2(y), (y as f64).exp2()));
+    }
+    eprintln!("exp2: worst relative error {worst:.3e}");
+    assert!(worst < 3e-7, "exp2 worst {worst:e}");
+    assert_eq!(math::exp2(200.0), f32::INFINITY);
+    assert_eq!(math::exp2(-200.0), 0.0);
+    assert_eq!(math::exp2(f32::NEG_INFINITY), 0.0);
+    assert!(math::exp2(f32::NAN).is_nan());
+    // The top of exp's range is finite.
+    assert!(math::exp(88.722_83).is_finite());
+}

@@ -214,6 +214,47 @@ fn main() -> ! {
         writeln!(out, "cost controller_step {c} {CALLS}").ok();
     }
 
+    {
+        let xs = [0.3f32, 1.7, 0.05, 3.0];
+        let c = cost(
+            |i| {
+                black_box(gms_core::math::exp(black_box(-xs[(i & 3) as usize])));
+            },
+            |i| {
+                black_box(black_box(-xs[(i & 3) as usize]));
+            },
+        );
+        writeln!(out, "cost math_exp {c} {CALLS}").ok();
+        let c = cost(
+            |i| {
+                black_box(gms_core::math::log2(black_box(xs[(i & 3) as usize])));
+            },
+            |i| {
+                black_box(black_box(xs[(i & 3) as usize]));
+            },
+        );
+        writeln!(out, "cost math_log2 {c} {CALLS}").ok();
+        let c = cost(
+            |i| {
+                black_box(gms_core::math::exp2(black_box(xs[(i & 3) as usize])));
+            },
+            |i| {
+                black_box(black_box(xs[(i & 3) as usize]));
+            },
+        );
+        writeln!(out, "cost math_exp2 {c} {CALLS}").ok();
+        if let Ok(st) = gms_core::Stribeck::try_new(table1.stribeck, None) {
+            let c = cost(
+                |i| {
+                    black_box(st.magnitude(black_box(xs[(i & 3) as usize])));
+                },
+                |i| {
+                    black_box(black_box(xs[(i & 3) as usize]));
+                },
+            );
+            writeln!(out, "cost stribeck_magnitude {c} {CALLS}").ok();
+        }
+    }
     writeln!(out, "equiv friction {}", selftest::friction_hash(20_000)).ok();
     writeln!(out, "equiv controller {}", selftest::controller_hash(5_000)).ok();
     writeln!(out, "done").ok();
