@@ -170,11 +170,12 @@ impl<const N: usize> FrictionModel for Gms<N> {
         }
         if fast {
             let mut sum = 0.0f32;
-            for i in 0..N {
-                let inc = self.k[i] * dx - self.comp[i];
-                self.comp[i] = (trial[i] - self.f[i]) - inc;
-                self.f[i] = trial[i];
-                sum += trial[i];
+            let state = self.f.iter_mut().zip(&mut self.comp);
+            for ((f, comp), (&k, &g)) in state.zip(self.k.iter().zip(&trial)) {
+                let inc = k * dx - *comp;
+                *comp = (g - *f) - inc;
+                *f = g;
+                sum += g;
             }
             self.viscous = viscous;
             self.force = sum + viscous;

@@ -257,7 +257,8 @@ impl<const S: usize> Reference<S> {
 
     /// Total duration of all segments [s].
     pub fn duration(&self) -> f32 {
-        self.segs[..self.len].iter().map(Segment::duration).sum()
+        let segs = self.segs.get(..self.len).unwrap_or(&[]);
+        segs.iter().map(Segment::duration).sum()
     }
 
     /// True once every segment has been played.
@@ -279,8 +280,7 @@ impl<const S: usize> Reference<S> {
     /// call returns the start (t = 0). After the last segment the reference holds its final
     /// position.
     pub fn next(&mut self, dt: f32) -> RefSample {
-        while self.idx < self.len {
-            let seg = self.segs[self.idx];
+        while let Some(&seg) = self.segs.get(self.idx).filter(|_| self.idx < self.len) {
             let d = seg.duration();
             if self.t < d {
                 let (x, v, a) = seg.eval(self.t);

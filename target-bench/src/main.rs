@@ -96,7 +96,9 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
 fn main() -> ! {
     let Some(mut p) = cortex_m::Peripherals::take() else {
         debug::exit(debug::EXIT_FAILURE);
-        loop {}
+        loop {
+            cortex_m::asm::wfi();
+        }
     };
     p.SYST.set_clock_source(SystClkSource::Core);
     p.SYST.set_reload(0x00ff_ffff);
@@ -104,7 +106,9 @@ fn main() -> ! {
     p.SYST.enable_counter();
     let Ok(mut out) = hio::hstdout() else {
         debug::exit(debug::EXIT_FAILURE);
-        loop {}
+        loop {
+            cortex_m::asm::wfi();
+        }
     };
 
     // Calibration: 32 nops more per repetition.
@@ -118,7 +122,7 @@ fn main() -> ! {
             block32();
         }
     });
-    writeln!(out, "calib {}", t64.saturating_sub(t32)).ok();
+    writeln!(out, "calib {} {}", t64.saturating_sub(t32), CALIB_REPS * 32).ok();
 
     let table1 = presets::table1();
     let dither = [3.8e-6f32, -3.8e-6];

@@ -1,0 +1,172 @@
+//! `cargo target-bench`: builds `target-bench` for thumbv7em-none-eabihf, runs it on QEMU's
+//! emulated STM32F405 (`netduinoplus2`, Cortex-M4F) with `-icount shift=0`, and prints one
+//! line per figure, `<name> <instructions>`. Checks that the emulated chip computes gms-core's
+//! self-test workload bit for bit as the host does, and the budgets
+//! (`gms6_step` <= 300, `controller_step` <= 1500 instructions).
+//!
+//! Exit status: 0 when everything holds; 1 when a budget is exceeded or the target's results
+//! differ from the host's; 2 when the benchmark cannot run (no QEMU, build failure).
+//! `--report-only` prints the budget check but does not fail on it (equivalence still does).
+
+use std::process::{Command, ExitCode};
+use std::time::Duration;
+
+/// The budgets [instructions].
+const BUDGETS: [(&str, f64); 2] = [("gms6_step", 300.0), ("controller_step", 1500.0)];
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("target-bench") => {
+            let report_only = args.iter().any(|a| a == "--report-only");
+            match target_bench(report_only) {
+                Ok(code) => ExitCode::from(code),
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::from(2)
+                }
+            }
+        }
+        _ => {
+            eprintln!("usage: cargo xtask target-bench [--report-only]");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn target_bench(report_only: bool) -> Result<u8, String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(&cargo)
+        .args([
+            "build",
+            "-q",
+            "-p",
+            "target-bench",
+            "--release",
+            "--target",
+            "thumbv7em-none-eabihf",
+        ])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err("building target-bench for thumbv7em-none-eabihf failed".into());
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let target_dir = std::env::var("CARGO_TARGET_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|_| root.join("target"));
+    let elf = target_dir.join("thumbv7em-none-eabihf/release/target-bench");
+    let mut child = Command::new("qemu-system-arm")
+        .args([
+            "-machine",
+            "netduinoplus2",
+            "-cpu",
+            "cortex-m4",
+            "-nographic",
+            "-monitor",
+            "none",
+            "-serial",
+            "none",
+            "-semihosting-config",
+            "enable=on,target=native",
+            "-icount",
+            "shift=0",
+            "-kernel",
+        ])
+        .arg(&elf)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .map_err(|e| {
+            format!("cannot run qemu-system-arm ({e}); install it: apt-get install qemu-system-arm")
+        })?;
+    // A watchdog: the benchmark takes well under a second of host time.
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    loop {
+        match child.try_wait() {
+            Ok(Some(_)) => break,
+            Ok(None) if std::time::Instant::now() > deadline => {
+                let _ = child.kill();
+                return Err("qemu did not finish within 120 s".into());
+            }
+            Ok(None) => std::thread::sleep(Duration::from_millis(20)),
+            Err(e) => return Err(format!("waiting for qemu: {e}")),
+        }
+    }
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("reading qemu's output: {e}"))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() || !text.lines().any(|l| l == "done") {
+        return Err(format!(
+            "the benchmark failed on the target (exit {:?}): {}",
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ));
+    }
+    let mut per_instr = None;
+    let mut figures: Vec<(String, f64)> = Vec::new();
+    let mut target_hashes: Vec<(String, u64)> = Vec::new();
+    for line in text.lines() {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        match f.as_slice() {
+            ["calib", ticks, instr] => {
+                let (t, i): (f64, f64) = (parse(ticks)?, parse(instr)?);
+                per_instr = Some(t / i);
+            }
+            ["cost", name, ticks, calls] => {
+                let r = per_instr.ok_or("cost before calib")?;
+                let n = parse::<f64>(ticks)? / r / parse::<f64>(calls)?;
+                figures.push((name.to_string(), n));
+            }
+            ["equiv", name, hash] => target_hashes.push((name.to_string(), parse(hash)?)),
+            _ => {}
+        }
+    }
+    let get = |figs: &[(String, f64)], n: &str| figs.iter().find(|f| f.0 == n).map(|f| f.1);
+    if let (Some(a), Some(b)) = (
+        get(&figures, "gms6_step_sticking"),
+        get(&figures, "gms6_step_slipping"),
+    ) {
+        figures.insert(0, ("gms6_step".into(), a.max(b)));
+    }
+    for (name, n) in &figures {
+        println!("{name} {}", n.round() as u64);
+    }
+    let mut code = 0u8;
+    // Host/target equivalence: the same workload, the same bits.
+    let host = [
+        ("friction", gms_core::selftest::friction_hash(20_000)),
+        ("controller", gms_core::selftest::controller_hash(5_000)),
+    ];
+    for (name, h) in host {
+        match target_hashes.iter().find(|t| t.0 == name) {
+            Some((_, t)) if *t == h => println!("equivalence_{name} identical {h:016x}"),
+            Some((_, t)) => {
+                println!("equivalence_{name} DIFFERS host {h:016x} target {t:016x}");
+                code = 1;
+            }
+            None => return Err(format!("the target printed no {name} hash")),
+        }
+    }
+    for (name, budget) in BUDGETS {
+        match get(&figures, name) {
+            Some(n) if n.round() <= budget => {
+                println!("budget {name} ok ({} <= {budget})", n.round())
+            }
+            Some(n) => {
+                println!("budget {name} EXCEEDED ({} > {budget})", n.round());
+                if !report_only {
+                    code = 1;
+                }
+            }
+            None => return Err(format!("no figure for {name}")),
+        }
+    }
+    Ok(code)
+}
+
+fn parse<T: std::str::FromStr>(s: &str) -> Result<T, String> {
+    s.parse()
+        .map_err(|_| format!("unexpected number in the target's output: {s:?}"))
+}
