@@ -148,11 +148,8 @@ impl<const N: usize> FrictionModel for Gms<N> {
             }
             Step::Move { v, sign } => (v, sign),
         };
-        let viscous = if v.is_finite() {
-            self.params.sigma * v
-        } else {
-            0.0
-        };
+        let v_finite = v.is_finite();
+        let viscous = if v_finite { self.params.sigma * v } else { 0.0 };
         // Fast path: when every block sticks and stays below alpha_i Fc, the least that
         // alpha_i |s(v)| can be, the Stribeck curve is not needed (the common case in fine
         // positioning). The result is bit for bit that of the full path below.
@@ -182,7 +179,7 @@ impl<const N: usize> FrictionModel for Gms<N> {
             return self.force;
         }
         // |s(v)| and the argument of the slip relaxation.
-        let (s_abs, relax_arg) = if v.is_finite() {
+        let (s_abs, relax_arg) = if v_finite {
             let s_abs = self.stribeck.magnitude(v);
             // dt > 0 here; s_abs = 0 (Fs = Fc = 0) gives +inf, i.e. immediate relaxation.
             (s_abs, self.params.c * dt / s_abs)
@@ -190,8 +187,10 @@ impl<const N: usize> FrictionModel for Gms<N> {
             // dt = 0: the infinite-velocity limit, no time to relax, no viscous force.
             (self.stribeck.coulomb(sign), 0.0)
         };
-        // exp(-C dt/|s|) is computed only if some block slips.
-        let mut relax = -1.0f32;
+        // Slipping: F = W + (F - W) r = F r + alpha_i (s(v) (1 - r)) with r = exp(-C dt/|s|),
+        // W = alpha_i s(v): exact relaxation towards W for a step of constant velocity.
+        let relax = math::exp(-relax_arg);
+        let pull = s_abs * sign * (1.0 - relax);
         let mut sum = 0.0f32;
         let blocks = self.f.iter_mut().zip(&mut self.comp);
         for ((f, comp), (&k, &alpha)) in blocks.zip(self.k.iter().zip(&self.alpha)) {
@@ -204,20 +203,13 @@ impl<const N: usize> FrictionModel for Gms<N> {
                 let inc = k * dx - *comp;
                 let g = fi + inc;
                 if g * sign > w_abs {
-                    *comp = 0.0;
                     w_abs * sign
                 } else {
                     *comp = (g - fi) - inc;
                     g
                 }
             } else {
-                *comp = 0.0;
-                // Slipping: exact relaxation towards W for a step of constant velocity.
-                if relax < 0.0 {
-                    relax = math::exp(-relax_arg);
-                }
-                let w = w_abs * sign;
-                w + (fi - w) * relax
+                fi * relax + alpha * pull
             };
             *f = new;
             sum += new;

@@ -26,13 +26,16 @@ pub trait FrictionModel {
 /// Returns `Some((v, sign))` with `sign = ±1` for a moving step; `v` is infinite for `dt = 0`.
 #[inline]
 pub(crate) fn step_velocity(dx: f32, dt: f32) -> Step {
-    if !(dx.is_finite() && dt.is_finite() && dt >= 0.0) {
+    // One comparison each: |dx| < inf excludes NaN and infinities, as does dt in [0, inf).
+    let adx = f32::from_bits(dx.to_bits() & 0x7fff_ffff);
+    if !(adx < f32::INFINITY && dt >= 0.0 && dt < f32::INFINITY) {
         return Step::Ignore;
     }
-    if dx == 0.0 {
+    if adx == 0.0 {
         return Step::Hold;
     }
-    let sign = if dx > 0.0 { 1.0 } else { -1.0 };
+    // ±1 with the sign of dx, from its sign bit.
+    let sign = f32::from_bits(0x3f80_0000 | (dx.to_bits() & 0x8000_0000));
     Step::Move { v: dx / dt, sign }
 }
 

@@ -64,7 +64,7 @@ impl Branch {
     }
 
     /// |s(v)| for a speed `speed = |v|` >= 0 (may be +inf).
-    #[inline]
+    #[inline(always)]
     fn magnitude(&self, speed: f32) -> f32 {
         let r = speed / self.vs;
         let decay = if self.delta_is_one {
@@ -117,11 +117,12 @@ impl Stribeck {
     /// At `v = 0` this is Fs of the positive branch.
     #[inline]
     pub fn magnitude(&self, v: f32) -> f32 {
-        if v < 0.0 {
-            self.neg.magnitude(-v)
+        let (branch, speed) = if v < 0.0 {
+            (&self.neg, -v)
         } else {
-            self.pos.magnitude(v)
-        }
+            (&self.pos, v)
+        };
+        branch.magnitude(speed)
     }
 
     /// The signed Stribeck force s(v) [N or N·m]; 0 at v = 0.
