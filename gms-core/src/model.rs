@@ -28,7 +28,7 @@ pub trait FrictionModel {
 pub(crate) fn step_velocity(dx: f32, dt: f32) -> Step {
     // One comparison each: |dx| < inf excludes NaN and infinities, as does dt in [0, inf).
     let adx = f32::from_bits(dx.to_bits() & 0x7fff_ffff);
-    if !(adx < f32::INFINITY && dt >= 0.0 && dt < f32::INFINITY) {
+    if !(adx < f32::INFINITY && (0.0..f32::INFINITY).contains(&dt)) {
         return Step::Ignore;
     }
     if adx == 0.0 {
