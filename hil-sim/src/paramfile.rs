@@ -152,25 +152,39 @@ pub fn line_col(text: &str, pos: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// Reads a text file; returns its name (as given) and text, or a one-line error.
+pub fn read_text(path: &Path) -> Result<(String, String), FileError> {
+    let file = path.display().to_string();
+    match std::fs::read_to_string(path) {
+        Ok(text) => Ok((file, text)),
+        Err(e) => Err(FileError {
+            file,
+            at: None,
+            reason: format!("cannot read: {e}"),
+        }),
+    }
+}
+
+/// Parses TOML `text` of `file` into `T`; a syntax or type error becomes one line with its
+/// position.
+pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &str) -> Result<T, FileError> {
+    toml::from_str(text).map_err(|e| FileError {
+        file: file.to_string(),
+        at: e.span().map(|s| line_col(text, s.start)),
+        reason: e.message().replace('\n', " ").trim().to_string(),
+    })
+}
+
 impl ParamFile {
     /// Reads and parses `path` (no model is built yet).
     pub fn load(path: &Path) -> Result<ParamFile, FileError> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| FileError {
-            file: file.clone(),
-            at: None,
-            reason: format!("cannot read: {e}"),
-        })?;
+        let (file, text) = read_text(path)?;
         Self::parse(&text, &file)
     }
 
     /// Parses the text of a parameter file; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<ParamFile, FileError> {
-        toml::from_str(text).map_err(|e| FileError {
-            file: file.to_string(),
-            at: e.span().map(|s| line_col(text, s.start)),
-            reason: e.message().replace('\n', " ").trim().to_string(),
-        })
+        parse_toml(text, file)
     }
 
     /// The file's text.

@@ -13,7 +13,7 @@ use gms_core::controller::{
 use gms_core::reference::Segment;
 use serde::{Deserialize, Serialize};
 
-use crate::paramfile::{FileError, FrictionSpec, line_col};
+use crate::paramfile::{FileError, FrictionSpec, parse_toml, read_text};
 
 /// The default scenario, with a comment on every key.
 pub const DEFAULT_SCENARIO: &str = include_str!("default_scenario.toml");
@@ -258,22 +258,13 @@ pub const MAX_SEGMENTS: usize = 64;
 impl Scenario {
     /// Reads and checks a scenario file; errors are one line naming file, position and key.
     pub fn load(path: &Path) -> Result<Scenario, FileError> {
-        let file = path.display().to_string();
-        let text = std::fs::read_to_string(path).map_err(|e| FileError {
-            file: file.clone(),
-            at: None,
-            reason: format!("cannot read: {e}"),
-        })?;
+        let (file, text) = read_text(path)?;
         Self::parse(&text, &file)
     }
 
     /// Parses and checks scenario text; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<Scenario, FileError> {
-        let user: toml::Table = toml::from_str(text).map_err(|e| FileError {
-            file: file.to_string(),
-            at: e.span().map(|s| line_col(text, s.start)),
-            reason: e.message().replace('\n', " ").trim().to_string(),
-        })?;
+        let user: toml::Table = parse_toml(text, file)?;
         let mut merged = default_table().clone();
         merge(&mut merged, user);
         let sc: Scenario =
