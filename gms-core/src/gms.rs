@@ -153,13 +153,20 @@ impl<const N: usize> FrictionModel for Gms<N> {
         // Fast path: when every block sticks and stays below alpha_i Fc, the least that
         // alpha_i |s(v)| can be, the Stribeck curve is not needed (the common case in fine
         // positioning). The result is bit for bit that of the full path below.
-        let afc = &self.alpha_fc[if sign < 0.0 { 1 } else { 0 }];
+        let neg = sign < 0.0;
+        let afc = &self.alpha_fc[neg as usize];
         let mut trial = [0.0f32; N];
         let mut fast = true;
         for i in 0..N {
             let fi = self.f[i];
+            // A block at or above alpha_i Fc may slip: leave at once (while sliding, the first
+            // block already is).
+            if !(fi * sign < afc[i]) {
+                fast = false;
+                break;
+            }
             let g = fi + (self.k[i] * dx - self.comp[i]);
-            if !(fi * sign < afc[i] && g * sign <= afc[i]) {
+            if !(g * sign <= afc[i]) {
                 fast = false;
                 break;
             }
@@ -180,7 +187,7 @@ impl<const N: usize> FrictionModel for Gms<N> {
         }
         // |s(v)| and the argument of the slip relaxation.
         let (s_abs, relax_arg) = if v_finite {
-            let s_abs = self.stribeck.magnitude(v);
+            let s_abs = self.stribeck.magnitude_dir(v, neg);
             // dt > 0 here; s_abs = 0 (Fs = Fc = 0) gives +inf, i.e. immediate relaxation.
             (s_abs, self.params.c * dt / s_abs)
         } else {

@@ -26,12 +26,12 @@ pub trait FrictionModel {
 /// Returns `Some((v, sign))` with `sign = ±1` for a moving step; `v` is infinite for `dt = 0`.
 #[inline]
 pub(crate) fn step_velocity(dx: f32, dt: f32) -> Step {
-    // One comparison each: |dx| < inf excludes NaN and infinities, as does dt in [0, inf).
-    let adx = f32::from_bits(dx.to_bits() & 0x7fff_ffff);
-    if !(adx < f32::INFINITY && (0.0..f32::INFINITY).contains(&dt)) {
+    // On the bits: dx finite (exponent not all ones); dt a finite number >= 0 (or -0).
+    let (dxb, dtb) = (dx.to_bits() & 0x7fff_ffff, dt.to_bits());
+    if dxb >= 0x7f80_0000 || (dtb >= 0x7f80_0000 && dtb != 0x8000_0000) {
         return Step::Ignore;
     }
-    if adx == 0.0 {
+    if dxb == 0 {
         return Step::Hold;
     }
     // ±1 with the sign of dx, from its sign bit.

@@ -125,6 +125,17 @@ impl Stribeck {
         branch.magnitude(speed)
     }
 
+    /// |s(v)| for a finite `v` whose direction is already known (`neg` = v < 0).
+    #[inline(always)]
+    pub(crate) fn magnitude_dir(&self, v: f32, neg: bool) -> f32 {
+        let speed = f32::from_bits(v.to_bits() & 0x7fff_ffff);
+        if neg {
+            self.neg.magnitude(speed)
+        } else {
+            self.pos.magnitude(speed)
+        }
+    }
+
     /// The signed Stribeck force s(v) [N or N·m]; 0 at v = 0.
     #[inline]
     pub fn value(&self, v: f32) -> f32 {
