@@ -160,13 +160,14 @@ impl<const N: usize> FrictionModel for Gms<N> {
         for i in 0..N {
             let fi = self.f[i];
             // A block at or above alpha_i Fc may slip: leave at once (while sliding, the first
-            // block already is).
-            if !(fi * sign < afc[i]) {
+            // block already is). No NaN can occur here: forces and increments are finite or
+            // infinite, never NaN.
+            if fi * sign >= afc[i] {
                 fast = false;
                 break;
             }
             let g = fi + (self.k[i] * dx - self.comp[i]);
-            if !(g * sign <= afc[i]) {
+            if g * sign > afc[i] {
                 fast = false;
                 break;
             }
