@@ -28,6 +28,7 @@ pub mod lugre;
 pub mod math;
 pub mod model;
 pub mod presets;
+pub mod protocol;
 pub mod reference;
 pub mod selftest;
 #[cfg(feature = "serde")]

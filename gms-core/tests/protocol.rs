@@ -1,0 +1,255 @@
+//! The bench protocol: parsing, the parameter table, replies, and robustness to anything on
+//! the wire.
+
+use core::fmt::Write;
+
+use gms_core::controller::FfMode;
+use gms_core::protocol::{self, Access, Device, Line, LineReader, PARAMS, Settings};
+use gms_core::selftest;
+use proptest::prelude::*;
+
+/// A device that records what was asked of it.
+struct Mock {
+    s: Settings,
+    saved: Option<Settings>,
+    enabled: bool,
+    moves: Vec<(f32, Option<f32>)>,
+    stream: Option<(String, f32)>,
+}
+
+impl Mock {
+    fn new() -> Self {
+        Mock {
+            s: selftest::controller_params(),
+            saved: None,
+            enabled: false,
+            moves: Vec::new(),
+            stream: None,
+        }
+    }
+}
+
+impl Device for Mock {
+    fn settings(&self) -> &Settings {
+        &self.s
+    }
+    fn apply(&mut self, new: Settings) {
+        self.s = new;
+    }
+    fn save(&mut self) -> Result<(), &'static str> {
+        if self.enabled {
+            return Err("disable first");
+        }
+        self.saved = Some(self.s);
+        Ok(())
+    }
+    fn load(&mut self) -> Result<(), &'static str> {
+        self.s = self.saved.ok_or("nothing saved")?;
+        Ok(())
+    }
+    fn defaults(&mut self) {
+        self.s = selftest::controller_params();
+    }
+    fn enable(&mut self) -> Result<(), &'static str> {
+        self.enabled = true;
+        Ok(())
+    }
+    fn disable(&mut self) {
+        self.enabled = false;
+    }
+    fn status(&self, out: &mut dyn Write) -> core::fmt::Result {
+        write!(out, "enabled={}", self.enabled)
+    }
+    fn clear(&mut self) {}
+    fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
+        self.moves.push((pos, vel));
+        Ok(())
+    }
+    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
+        self.stream = Some((fields.to_string(), rate_hz));
+        Ok(())
+    }
+    fn stream_off(&mut self) {
+        self.stream = None;
+    }
+}
+
+/// Sends one line; returns the reply.
+fn ask(dev: &mut Mock, line: &str) -> String {
+    let mut out = String::new();
+    let mut rd = LineReader::default();
+    for &b in line.as_bytes().iter().chain(b"\n") {
+        if let Some(l) = rd.push(b) {
+            protocol::execute(dev, l, &mut out).unwrap();
+        }
+    }
+    out
+}
+
+#[test]
+fn get_and_set_every_parameter() {
+    let mut d = Mock::new();
+    for p in PARAMS {
+        let reply = ask(&mut d, &format!("get {}", p.path));
+        assert!(reply.starts_with("ok ") && reply.ends_with('\n'), "{reply}");
+        let value = reply[3..].trim().to_string();
+        // Setting the current value back is accepted and changes nothing.
+        let before = d.s;
+        assert_eq!(
+            ask(&mut d, &format!("set {} {value}", p.path)),
+            "ok\n",
+            "{}",
+            p.path
+        );
+        assert_eq!(d.s, before, "{}", p.path);
+        if let Access::Number { get, min, max, .. } = p.access {
+            assert_eq!(value.parse::<f32>().unwrap(), get(&d.s));
+            // Outside the range: err 6 and nothing changes.
+            for bad in [
+                format!("{}", max * 2.0 + 1.0),
+                "nan".into(),
+                "inf".into(),
+                "x".into(),
+            ] {
+                let r = ask(&mut d, &format!("set {} {bad}", p.path));
+                assert!(r.starts_with("err 6 "), "{} {bad}: {r}", p.path);
+                assert_eq!(d.s, before);
+            }
+            if min > 0.0 {
+                assert!(ask(&mut d, &format!("set {} {}", p.path, -min)).starts_with("err 6 "));
+            }
+        }
+    }
+}
+
+#[test]
+fn set_changes_what_get_reads_and_invalid_sets_change_nothing() {
+    let mut d = Mock::new();
+    assert_eq!(ask(&mut d, "set pos.kp 0.125"), "ok\n");
+    assert_eq!(ask(&mut d, "get pos.kp"), "ok 0.125\n");
+    assert_eq!(d.s.pid.kp, 0.125);
+    assert_eq!(ask(&mut d, "set ff.mode static"), "ok\n");
+    assert_eq!(d.s.ff.mode, FfMode::Static);
+    assert_eq!(ask(&mut d, "get ff.mode"), "ok static\n");
+    assert!(ask(&mut d, "set ff.mode fast").starts_with("err 6 "));
+    // fs below fc makes the set invalid: err 7, nothing changes.
+    let before = d.s;
+    assert!(ask(&mut d, "set gms.fs 100e-6").starts_with("err 7 "));
+    assert_eq!(d.s, before);
+    // A block weight that breaks sum(alpha) = 1 ± 0.01.
+    assert!(ask(&mut d, "set gms.a1 0.5").starts_with("err 7 "));
+    // Rates that are not integer multiples.
+    assert!(ask(&mut d, "set rate.cur_hz 15000").starts_with("err 7 "));
+    assert_eq!(d.s, before);
+    assert!(ask(&mut d, "set no.such 1").starts_with("err 5 "));
+    assert!(ask(&mut d, "get no.such").starts_with("err 5 "));
+}
+
+#[test]
+fn list_help_and_device_commands() {
+    let mut d = Mock::new();
+    let list = ask(&mut d, "list");
+    let lines: Vec<&str> = list.lines().collect();
+    assert_eq!(lines.len(), PARAMS.len() + 1);
+    assert_eq!(*lines.last().unwrap(), "ok");
+    for (l, p) in lines.iter().zip(PARAMS) {
+        let w: Vec<&str> = l.split(' ').collect();
+        assert_eq!(w[0], p.path);
+        assert!(l.contains('[') && l.ends_with(']'), "{l}");
+    }
+    assert!(ask(&mut d, "help").ends_with("\nok\n"));
+    assert_eq!(ask(&mut d, "save"), "ok\n");
+    assert_eq!(ask(&mut d, "set pos.kp 0.3"), "ok\n");
+    assert_eq!(ask(&mut d, "load"), "ok\n");
+    assert_eq!(d.s.pid.kp, 0.2);
+    assert_eq!(ask(&mut d, "enable"), "ok\n");
+    assert!(ask(&mut d, "save").starts_with("err 8 disable first"));
+    assert_eq!(ask(&mut d, "status"), "ok enabled=true\n");
+    assert_eq!(ask(&mut d, "move 0.5"), "ok\n");
+    assert_eq!(ask(&mut d, "move -1e-3 0.2"), "ok\n");
+    assert_eq!(d.moves, vec![(0.5, None), (-1e-3, Some(0.2))]);
+    assert!(ask(&mut d, "move").starts_with("err 2 "));
+    assert!(ask(&mut d, "move 1 -2").starts_with("err 2 "));
+    assert!(ask(&mut d, "move 1 2 3").starts_with("err 2 "));
+    assert_eq!(ask(&mut d, "stream error,ff 500"), "ok\n");
+    assert_eq!(d.stream, Some(("error,ff".to_string(), 500.0)));
+    assert_eq!(ask(&mut d, "stream off"), "ok\n");
+    assert_eq!(d.stream, None);
+    assert!(ask(&mut d, "stream error").starts_with("err 2 "));
+    assert!(ask(&mut d, "frobnicate").starts_with("err 1 "));
+    assert_eq!(ask(&mut d, ""), "");
+    assert_eq!(ask(&mut d, "   "), "");
+    assert_eq!(ask(&mut d, "get pos.kp\r"), "ok 0.2\n");
+}
+
+#[test]
+fn line_reader_handles_crlf_partial_long_and_binary_lines() {
+    let mut rd = LineReader::default();
+    let mut lines = Vec::new();
+    let feed = |rd: &mut LineReader, bytes: &[u8], lines: &mut Vec<String>| {
+        for &b in bytes {
+            if let Some(l) = rd.push(b) {
+                lines.push(match l {
+                    Line::Text(t) => format!("T:{t}"),
+                    Line::TooLong => "LONG".into(),
+                    Line::NotText => "BIN".into(),
+                });
+            }
+        }
+    };
+    feed(&mut rd, b"get po", &mut lines);
+    assert!(lines.is_empty());
+    feed(&mut rd, b"s.kp\r\n", &mut lines);
+    feed(&mut rd, &[b'a'; 500], &mut lines);
+    feed(&mut rd, b"\nhelp\n\x00\xff\x1b[A\nlist\n", &mut lines);
+    assert_eq!(lines, ["T:get pos.kp", "LONG", "T:help", "BIN", "T:list"]);
+    // Exactly MAX_LINE bytes fit; one more does not.
+    let mut lines = Vec::new();
+    feed(&mut rd, &[b'x'; protocol::MAX_LINE], &mut lines);
+    feed(&mut rd, b"\n", &mut lines);
+    feed(&mut rd, &[b'x'; protocol::MAX_LINE + 1], &mut lines);
+    feed(&mut rd, b"\n", &mut lines);
+    assert_eq!(lines.len(), 2);
+    assert!(lines[0].starts_with("T:xxx"));
+    assert_eq!(lines[1], "LONG");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    /// Anything on the wire: no panic; every complete non-empty line gets exactly one final
+    /// line starting with `ok` or `err`; the settings stay valid.
+    #[test]
+    fn any_bytes_are_handled(
+        chunks in prop::collection::vec(
+            prop_oneof![
+                prop::collection::vec(any::<u8>(), 0..300),
+                "(get|set|list|help|move|stream|save|load|enable|status)( [a-z0-9.,+-]{0,12}){0,4}\r?\n"
+                    .prop_map(|s| s.into_bytes()),
+                Just(b"set pos.kp 1e39\n".to_vec()),
+                Just(b"set gms.k1 -0\n".to_vec()),
+            ],
+            1..20,
+        ),
+    ) {
+        let mut d = Mock::new();
+        let mut rd = LineReader::default();
+        for chunk in chunks {
+            for b in chunk {
+                if let Some(line) = rd.push(b) {
+                    let empty = matches!(line, Line::Text(t) if t.trim().is_empty());
+                    let mut out = String::new();
+                    protocol::execute(&mut d, line, &mut out).unwrap();
+                    if empty {
+                        prop_assert!(out.is_empty());
+                    } else {
+                        let last = out.lines().last().unwrap_or("");
+                        prop_assert!(last.starts_with("ok") || last.starts_with("err "), "{out:?}");
+                        prop_assert!(out.lines().all(|l| !l.starts_with('#')));
+                    }
+                    prop_assert!(d.s.validate().is_ok());
+                }
+            }
+        }
+    }
+}
