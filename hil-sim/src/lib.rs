@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod commands;
+pub mod device;
 pub mod friction_cmd;
 pub mod paramfile;
 pub mod plant;

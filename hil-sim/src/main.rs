@@ -65,6 +65,18 @@ enum Cmd {
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
         threads: Option<u32>,
     },
+    /// The virtual device: the simulated axis in real time behind the bench protocol.
+    Serve {
+        /// Listen on this TCP address, e.g. 127.0.0.1:7878 (port 0: any free port).
+        #[arg(long, value_name = "ADDR")]
+        tcp: String,
+        /// The device's "flash": `save` writes the settings here, a restart reads them.
+        #[arg(long, value_name = "FILE")]
+        store: Option<PathBuf>,
+        /// Scenario file for the plant (its reference is not used); default scenario without.
+        #[arg(long, value_name = "SCENARIO.toml")]
+        scenario: Option<PathBuf>,
+    },
     /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
     /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
     Demo {
@@ -178,6 +190,22 @@ fn main() -> ExitCode {
             threads: t,
         } => load_scenario(scenario.as_deref())
             .and_then(|sc| compare_and_write(&sc, runs, seed, &json, threads(t))),
+        Cmd::Serve {
+            tcp,
+            store,
+            scenario,
+        } => load_scenario(scenario.as_deref()).and_then(|sc| {
+            let listener = std::net::TcpListener::bind(&tcp)
+                .map_err(|e| format!("--tcp {tcp}: cannot listen: {e}"))?;
+            hil_sim::device::serve(sc, listener, store, |addr, fault| {
+                if let Some(f) = fault {
+                    eprintln!("warning: store unusable, starting from defaults (fault 1): {f}");
+                }
+                println!("listening on {addr}");
+                use std::io::Write as _;
+                let _ = std::io::stdout().flush();
+            })
+        }),
         Cmd::Demo { out, runs } => (|| {
             let sc = Scenario::default();
             std::fs::create_dir_all(&out)

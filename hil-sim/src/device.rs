@@ -1,0 +1,460 @@
+//! The virtual device: the simulated axis running in real time behind the same protocol
+//! handler as the firmware (`gms_core::protocol`), served over TCP (`hil-sim serve --tcp`).
+//!
+//! Clients are served one after another; a client that drops does not stop the device. With
+//! `--store FILE`, `save` writes the settings there atomically (temporary file + rename, so a
+//! crash leaves the old or the new set) and a restart starts from them.
+
+use std::fmt::Write as _;
+use std::io::{ErrorKind, Read, Write};
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use gms_core::controller::{Controller, FfMode};
+use gms_core::protocol::{self, Access, Device, LineReader, PARAMS, Settings};
+use gms_core::reference::{RefSample, Reference, SUB_PER_COUNT, Segment, SubCounts};
+
+use crate::commands::write_atomic;
+use crate::plant::Plant;
+use crate::scenario::{FF_BLOCKS, Scenario};
+
+/// Telemetry fields `stream` accepts.
+pub const FIELDS: [&str; 7] = ["t", "pos", "ref", "error", "ff", "current", "friction"];
+
+/// The latest values of the axis, for `status` and telemetry.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Sample {
+    /// Time since start [s].
+    pub t: f64,
+    /// Encoder position [rad].
+    pub pos: f64,
+    /// Reference position [rad].
+    pub reference: f64,
+    /// Position error [rad].
+    pub error: f64,
+    /// Friction feedforward [N·m].
+    pub ff: f64,
+    /// Motor current [A].
+    pub current: f64,
+    /// True friction [N·m].
+    pub friction: f64,
+}
+
+/// The simulated axis with its controller.
+pub struct Axis {
+    sc: Scenario,
+    plant: Plant,
+    ctrl: Controller<FF_BLOCKS>,
+    settings: Settings,
+    enabled: bool,
+    faults: u32,
+    hold: SubCounts,
+    motion: Option<Reference<2>>,
+    t: f64,
+    last: Sample,
+}
+
+impl Axis {
+    /// A device at rest with `settings`.
+    pub fn new(sc: Scenario, settings: Settings, faults: u32) -> Result<Axis, String> {
+        let plant = Plant::new(&sc.plant, sc.plant.seed)?;
+        let ctrl = Controller::try_new(settings).map_err(|e| e.to_string())?;
+        Ok(Axis {
+            sc,
+            plant,
+            ctrl,
+            settings,
+            enabled: false,
+            faults,
+            hold: 0,
+            motion: None,
+            t: 0.0,
+            last: Sample::default(),
+        })
+    }
+
+    fn rpc(&self) -> f64 {
+        self.sc.plant.rad_per_count
+    }
+
+    /// One position-loop period of the device.
+    pub fn tick(&mut self) {
+        let dt = self.ctrl.dt_pos();
+        let r = match &mut self.motion {
+            Some(m) if !m.done() => m.next(dt),
+            Some(m) => {
+                self.hold = m.last().pos;
+                self.motion = None;
+                RefSample {
+                    pos: self.hold,
+                    vel: 0.0,
+                    acc: 0.0,
+                }
+            }
+            None => RefSample {
+                pos: self.hold,
+                vel: 0.0,
+                acc: 0.0,
+            },
+        };
+        let count = self.plant.encoder();
+        let out = if self.enabled {
+            self.ctrl.position_step(count, &r)
+        } else {
+            Default::default()
+        };
+        let n = self.settings.ratio();
+        let dt_plant = self.ctrl.dt_cur() as f64 / self.sc.plant.substeps as f64;
+        for _ in 0..n {
+            let i = self.plant.adc();
+            let duty = if self.enabled {
+                self.ctrl.current_step(i).duty
+            } else {
+                0.0
+            };
+            self.plant.set_duty(duty);
+            for _ in 0..self.sc.plant.substeps {
+                self.plant.step(dt_plant);
+            }
+        }
+        self.t += dt as f64;
+        let rpc = self.rpc();
+        let reference = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
+        let pos = count as f64 * rpc;
+        self.last = Sample {
+            t: self.t,
+            pos,
+            reference,
+            error: reference - pos,
+            ff: out.ff_friction as f64,
+            current: self.plant.i,
+            friction: self.plant.friction,
+        };
+    }
+
+    /// Applies a validated parameter set (between two control steps); the controller keeps
+    /// no state across it.
+    pub fn apply(&mut self, s: Settings) -> Result<(), String> {
+        self.ctrl = Controller::try_new(s).map_err(|e| e.to_string())?;
+        self.settings = s;
+        Ok(())
+    }
+}
+
+/// The device shared by the real-time thread and the client sessions.
+pub struct Shared {
+    axis: Mutex<Axis>,
+    store: Option<PathBuf>,
+    defaults: Settings,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Axis> {
+        self.axis.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}
+
+/// The settings as TOML: one protocol path per key.
+pub fn settings_toml(s: &Settings) -> String {
+    let mut out = String::from("# gms device settings: protocol paths and values (SI units)\n");
+    for p in PARAMS {
+        let _ = match p.access {
+            Access::Number { get, .. } => writeln!(out, "\"{}\" = {}", p.path, get(s)),
+            Access::Mode => {
+                let mut v = String::new();
+                let _ = protocol::write_value(p, s, &mut v);
+                writeln!(out, "\"{}\" = \"{v}\"", p.path)
+            }
+        };
+    }
+    out
+}
+
+/// Reads settings written by [`settings_toml`] (keys may be missing: `base` fills them).
+pub fn settings_from_toml(text: &str, base: &Settings) -> Result<Settings, String> {
+    let table: toml::Table = toml::from_str(text).map_err(|e| e.message().to_string())?;
+    let mut s = *base;
+    for (k, v) in &table {
+        let value = match v {
+            toml::Value::Float(f) => format!("{f}"),
+            toml::Value::Integer(i) => format!("{i}"),
+            toml::Value::String(t) => t.clone(),
+            _ => return Err(format!("`{k}`: not a number or a name")),
+        };
+        let p = protocol::find(k).ok_or_else(|| format!("unknown parameter `{k}`"))?;
+        // Set without validating the intermediate sets; the whole set is validated below.
+        match p.access {
+            Access::Number { set, min, max, .. } => {
+                let x = protocol::parse_f32(&value)
+                    .filter(|x| *x >= min && *x <= max)
+                    .ok_or_else(|| format!("`{k}` = {value} is out of range"))?;
+                set(&mut s, x);
+            }
+            Access::Mode => {
+                s.ff.mode = match value.as_str() {
+                    "none" => FfMode::None,
+                    "static" => FfMode::Static,
+                    "gms" => FfMode::Gms,
+                    _ => return Err(format!("`{k}` = {value} is not none, static or gms")),
+                }
+            }
+        }
+    }
+    s.validate().map_err(|e| e.to_string())?;
+    Ok(s)
+}
+
+/// The start-up settings: the store's when it is valid, else the defaults and a fault flag.
+fn startup(store: Option<&Path>, defaults: &Settings) -> (Settings, u32, Option<String>) {
+    let Some(path) = store else {
+        return (*defaults, 0, None);
+    };
+    match std::fs::read_to_string(path) {
+        Err(e) if e.kind() == ErrorKind::NotFound => (*defaults, 0, None),
+        Err(e) => (*defaults, 1, Some(format!("{}: {e}", path.display()))),
+        Ok(text) => match settings_from_toml(&text, defaults) {
+            Ok(s) => (s, 0, None),
+            Err(e) => (*defaults, 1, Some(format!("{}: {e}", path.display()))),
+        },
+    }
+}
+
+/// One client's view of the device.
+struct Session<'a> {
+    shared: &'a Shared,
+    snapshot: Settings,
+    stream: Option<(Vec<usize>, f64)>,
+}
+
+impl Device for Session<'_> {
+    fn settings(&self) -> &Settings {
+        &self.snapshot
+    }
+    fn apply(&mut self, new: Settings) {
+        if self.shared.lock().apply(new).is_ok() {
+            self.snapshot = new;
+        }
+    }
+    fn save(&mut self) -> Result<(), &'static str> {
+        let axis = self.shared.lock();
+        if axis.enabled {
+            return Err("disable before save");
+        }
+        let path = self
+            .shared
+            .store
+            .as_ref()
+            .ok_or("no store (start with --store FILE)")?;
+        write_atomic(path, settings_toml(&axis.settings).as_bytes())
+            .map_err(|_| "store write failed")
+    }
+    fn load(&mut self) -> Result<(), &'static str> {
+        let path = self
+            .shared
+            .store
+            .as_ref()
+            .ok_or("no store (start with --store FILE)")?;
+        let text = std::fs::read_to_string(path).map_err(|_| "nothing saved")?;
+        let s = settings_from_toml(&text, &self.shared.defaults).map_err(|_| "store invalid")?;
+        let mut axis = self.shared.lock();
+        if axis.enabled {
+            return Err("disable before load");
+        }
+        axis.apply(s).map_err(|_| "store invalid")?;
+        self.snapshot = s;
+        Ok(())
+    }
+    fn defaults(&mut self) {
+        let d = self.shared.defaults;
+        if self.shared.lock().apply(d).is_ok() {
+            self.snapshot = d;
+        }
+    }
+    fn enable(&mut self) -> Result<(), &'static str> {
+        let mut axis = self.shared.lock();
+        if axis.faults != 0 {
+            return Err("fault latched (clear first)");
+        }
+        let s = axis.settings;
+        axis.apply(s).map_err(|_| "invalid settings")?;
+        axis.hold = axis.plant.encoder() * SUB_PER_COUNT as i64;
+        axis.motion = None;
+        axis.enabled = true;
+        Ok(())
+    }
+    fn disable(&mut self) {
+        let mut axis = self.shared.lock();
+        axis.enabled = false;
+        axis.motion = None;
+    }
+    fn status(&self, out: &mut dyn std::fmt::Write) -> std::fmt::Result {
+        let axis = self.shared.lock();
+        let l = axis.last;
+        let rpc = axis.rpc();
+        write!(
+            out,
+            "mode={} enabled={} faults={} t={:.3} pos={:.9} error_counts={:.1} moving={}",
+            match axis.settings.ff.mode {
+                FfMode::None => "none",
+                FfMode::Static => "static",
+                FfMode::Gms => "gms",
+            },
+            axis.enabled as u8,
+            axis.faults,
+            l.t,
+            l.pos,
+            l.error / rpc,
+            axis.motion.is_some() as u8
+        )
+    }
+    fn clear(&mut self) {
+        self.shared.lock().faults = 0;
+    }
+    fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
+        let mut axis = self.shared.lock();
+        if !axis.enabled {
+            return Err("disabled (enable first)");
+        }
+        let rpc = axis.rpc();
+        let from = axis.hold as f64 / SUB_PER_COUNT as f64 * rpc;
+        let seg = Segment::Move {
+            distance: (pos as f64 - from) as f32,
+            vmax: vel.unwrap_or(0.5),
+            amax: 50.0,
+            jmax: 1e4,
+            dwell: 1e-3,
+        };
+        let r = Reference::try_new(&[seg], rpc as f32, axis.hold).map_err(|_| "bad move")?;
+        axis.motion = Some(r);
+        Ok(())
+    }
+    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
+        let idx: Option<Vec<usize>> = fields
+            .split(',')
+            .map(|f| FIELDS.iter().position(|x| *x == f))
+            .collect();
+        let idx = idx.ok_or("unknown field (t, pos, ref, error, ff, current, friction)")?;
+        if rate_hz > 1000.0 {
+            return Err("rate above 1000 Hz");
+        }
+        self.stream = Some((idx, rate_hz as f64));
+        Ok(())
+    }
+    fn stream_off(&mut self) {
+        self.stream = None;
+    }
+}
+
+fn telemetry(s: &Sample, fields: &[usize]) -> String {
+    let mut line = String::from("#");
+    for &f in fields {
+        let v = match f {
+            0 => s.t,
+            1 => s.pos,
+            2 => s.reference,
+            3 => s.error,
+            4 => s.ff,
+            5 => s.current,
+            _ => s.friction,
+        };
+        let _ = write!(line, " {}={v:e}", FIELDS[f]);
+    }
+    line.push('\n');
+    line
+}
+
+/// Serves one client until it disconnects.
+fn serve_client(shared: &Shared, mut conn: TcpStream) {
+    let _ = conn.set_read_timeout(Some(Duration::from_millis(5)));
+    let _ = conn.set_nodelay(true);
+    let mut session = Session {
+        shared,
+        snapshot: shared.lock().settings,
+        stream: None,
+    };
+    let mut reader = LineReader::default();
+    let mut buf = [0u8; 512];
+    let mut next_sample = Instant::now();
+    loop {
+        match conn.read(&mut buf) {
+            Ok(0) => return,
+            Ok(n) => {
+                let mut reply = String::new();
+                for &b in &buf[..n] {
+                    if let Some(line) = reader.push(b) {
+                        session.snapshot = shared.lock().settings;
+                        let _ = protocol::execute(&mut session, line, &mut reply);
+                    }
+                }
+                if conn.write_all(reply.as_bytes()).is_err() {
+                    return;
+                }
+            }
+            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(_) => return,
+        }
+        if let Some((fields, rate)) = &session.stream {
+            let now = Instant::now();
+            if now >= next_sample {
+                next_sample = now + Duration::from_secs_f64(1.0 / rate);
+                let line = telemetry(&shared.lock().last, fields);
+                if conn.write_all(line.as_bytes()).is_err() {
+                    return;
+                }
+            }
+        }
+    }
+}
+
+/// Runs the device: the axis in real time on its own thread, clients on `listener` in turn.
+/// `on_ready` receives the address and any start-up fault before the first client.
+pub fn serve(
+    sc: Scenario,
+    listener: TcpListener,
+    store: Option<PathBuf>,
+    on_ready: impl FnOnce(&str, Option<&str>),
+) -> Result<(), String> {
+    let defaults = sc.controller_params()?;
+    let (settings, faults, why) = startup(store.as_deref(), &defaults);
+    let axis = Axis::new(sc, settings, faults)?;
+    let shared = Arc::new(Shared {
+        axis: Mutex::new(axis),
+        store,
+        defaults,
+    });
+    let rt = Arc::clone(&shared);
+    std::thread::spawn(move || {
+        // Real time: advance by as many position periods as wall time allows.
+        let start = Instant::now();
+        loop {
+            let mut axis = rt.lock();
+            let dt = axis.ctrl.dt_pos() as f64;
+            let due = start.elapsed().as_secs_f64();
+            let mut n = 0;
+            while axis.t + dt <= due && n < 200 {
+                axis.tick();
+                n += 1;
+            }
+            if n == 200 {
+                // Cannot keep up: skip ahead rather than fall ever further behind.
+                axis.t = due;
+            }
+            drop(axis);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    });
+    let addr = listener
+        .local_addr()
+        .map_err(|e| e.to_string())?
+        .to_string();
+    on_ready(&addr, why.as_deref());
+    for conn in listener.incoming() {
+        match conn {
+            Ok(c) => serve_client(&shared, c),
+            Err(_) => continue,
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,193 @@
+//! The virtual device end to end over TCP: a real `hil-sim serve` process and raw sockets.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
+
+/// A running `hil-sim serve`, killed on drop.
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Server {
+    fn start(store: &Path) -> Server {
+        let mut child = Command::new(BIN)
+            .args(["serve", "--tcp", "127.0.0.1:0", "--store"])
+            .arg(store)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let addr = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap()
+            .to_string();
+        Server { child, addr }
+    }
+
+    fn connect(&self) -> Client {
+        let s = TcpStream::connect(&self.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+        Client {
+            s,
+            pending: String::new(),
+        }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+struct Client {
+    s: TcpStream,
+    pending: String,
+}
+
+impl Client {
+    /// Reads until a line that starts with `ok` or `err` arrives (5 s at most); returns all
+    /// lines up to and including it.
+    fn reply(&mut self) -> Vec<String> {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        let mut buf = [0u8; 4096];
+        loop {
+            if let Some(pos) = self
+                .pending
+                .lines()
+                .position(|l| l.starts_with("ok") || l.starts_with("err "))
+            {
+                let lines: Vec<String> = self.pending.lines().map(String::from).collect();
+                if self.pending.matches('\n').count() > pos {
+                    let rest: Vec<String> = lines[pos + 1..].to_vec();
+                    self.pending = rest.iter().map(|l| format!("{l}\n")).collect();
+                    return lines[..=pos].to_vec();
+                }
+            }
+            assert!(
+                Instant::now() < deadline,
+                "no reply; got {:?}",
+                self.pending
+            );
+            match self.s.read(&mut buf) {
+                Ok(0) => panic!("server closed"),
+                Ok(n) => self.pending.push_str(&String::from_utf8_lossy(&buf[..n])),
+                Err(_) => {}
+            }
+        }
+    }
+
+    fn ask(&mut self, line: &str) -> String {
+        self.s.write_all(format!("{line}\n").as_bytes()).unwrap();
+        self.reply().pop().unwrap()
+    }
+}
+
+#[test]
+fn set_save_restart_and_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("flash.toml");
+    {
+        let srv = Server::start(&store);
+        let mut c = srv.connect();
+        assert_eq!(c.ask("get pos.kp"), "ok 0.2");
+        assert_eq!(c.ask("set pos.kp 0.31"), "ok");
+        assert_eq!(c.ask("set ff.mode static"), "ok");
+        assert!(c.ask("set gms.fs 1e-6").starts_with("err 7 "));
+        assert_eq!(c.ask("enable"), "ok");
+        assert!(
+            c.ask("save").starts_with("err 8 "),
+            "save while enabled is refused"
+        );
+        assert_eq!(c.ask("disable"), "ok");
+        assert_eq!(c.ask("save"), "ok");
+        assert_eq!(c.ask("set pos.kp 0.5"), "ok");
+    }
+    let srv = Server::start(&store);
+    let mut c = srv.connect();
+    assert_eq!(c.ask("get pos.kp"), "ok 0.31");
+    assert_eq!(c.ask("get ff.mode"), "ok static");
+    assert!(c.ask("status").contains("faults=0"));
+    assert_eq!(c.ask("defaults"), "ok");
+    assert_eq!(c.ask("get pos.kp"), "ok 0.2");
+    assert_eq!(c.ask("load"), "ok");
+    assert_eq!(c.ask("get pos.kp"), "ok 0.31");
+}
+
+#[test]
+fn a_corrupt_store_means_defaults_and_a_fault() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("flash.toml");
+    std::fs::write(&store, "\"pos.kp\" = \"half\"\n").unwrap();
+    let srv = Server::start(&store);
+    let mut c = srv.connect();
+    assert_eq!(c.ask("get pos.kp"), "ok 0.2");
+    assert!(c.ask("status").contains("faults=1"));
+    assert!(c.ask("enable").starts_with("err 8 "));
+    assert_eq!(c.ask("clear"), "ok");
+    assert_eq!(c.ask("enable"), "ok");
+}
+
+#[test]
+fn garbage_floods_and_dropped_clients_leave_the_device_running() {
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start(&dir.path().join("flash.toml"));
+    let mut c = srv.connect();
+    c.s.write_all(b"\x00\x01\xfe\xff\x1b[2J\n").unwrap();
+    assert!(c.reply().pop().unwrap().starts_with("err 4 "));
+    c.s.write_all(&[b'z'; 10_000]).unwrap();
+    c.s.write_all(b"\n").unwrap();
+    assert!(c.reply().pop().unwrap().starts_with("err 3 "));
+    // A flood of valid requests: one reply each, in order.
+    let mut flood = String::new();
+    for i in 0..200 {
+        flood += &format!("set pos.ki {}\n", 50 + i);
+    }
+    c.s.write_all(flood.as_bytes()).unwrap();
+    for _ in 0..200 {
+        assert_eq!(c.reply().pop().unwrap(), "ok");
+    }
+    assert_eq!(c.ask("get pos.ki"), "ok 249");
+    // Disconnect in the middle of a line; the next client is served.
+    c.s.write_all(b"set pos.k").unwrap();
+    drop(c);
+    let mut c2 = srv.connect();
+    assert_eq!(c2.ask("get pos.ki"), "ok 249");
+    assert_eq!(c2.ask("get pos.kp"), "ok 0.2");
+}
+
+#[test]
+fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start(&dir.path().join("flash.toml"));
+    let mut c = srv.connect();
+    assert_eq!(c.ask("enable"), "ok");
+    assert_eq!(c.ask("stream t,error,ff 200"), "ok");
+    assert_eq!(c.ask("move 0.002"), "ok");
+    std::thread::sleep(Duration::from_millis(300));
+    let lines = {
+        c.s.write_all(b"get pos.kp\n").unwrap();
+        c.reply()
+    };
+    assert_eq!(lines.last().unwrap(), "ok 0.2");
+    let telemetry: Vec<&String> = lines.iter().filter(|l| l.starts_with('#')).collect();
+    assert!(telemetry.len() >= 20, "{} telemetry lines", telemetry.len());
+    for l in &lines[..lines.len() - 1] {
+        assert!(l.starts_with("# t="), "{l}");
+        assert_eq!(l.split_whitespace().count(), 4, "{l}");
+    }
+    assert!(c.ask("stream bogus 10").starts_with("err 8 "));
+    assert_eq!(c.ask("stream off"), "ok");
+}
