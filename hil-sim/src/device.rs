@@ -54,7 +54,12 @@ pub struct Axis {
     motion: Option<Reference<2>>,
     t: f64,
     last: Sample,
+    /// The last [`HISTORY`] samples, one per position period, for telemetry.
+    history: std::collections::VecDeque<Sample>,
 }
+
+/// Samples kept for telemetry (0.2 s at 10 kHz).
+pub const HISTORY: usize = 2000;
 
 impl Axis {
     /// A device at rest with `settings`.
@@ -72,6 +77,7 @@ impl Axis {
             motion: None,
             t: 0.0,
             last: Sample::default(),
+            history: std::collections::VecDeque::with_capacity(HISTORY),
         })
     }
 
@@ -132,6 +138,10 @@ impl Axis {
             current: self.plant.i,
             friction: self.plant.friction,
         };
+        if self.history.len() == HISTORY {
+            self.history.pop_front();
+        }
+        self.history.push_back(self.last);
     }
 
     /// Applies a validated parameter set (between two control steps); the controller keeps
@@ -367,7 +377,7 @@ fn telemetry(s: &Sample, fields: &[usize]) -> String {
 
 /// Serves one client until it disconnects.
 fn serve_client(shared: &Shared, mut conn: TcpStream) {
-    let _ = conn.set_read_timeout(Some(Duration::from_millis(5)));
+    let _ = conn.set_read_timeout(Some(Duration::from_millis(2)));
     let _ = conn.set_nodelay(true);
     let mut session = Session {
         shared,
@@ -376,7 +386,9 @@ fn serve_client(shared: &Shared, mut conn: TcpStream) {
     };
     let mut reader = LineReader::default();
     let mut buf = [0u8; 512];
-    let mut next_sample = Instant::now();
+    // Telemetry: the device's own samples, decimated to the requested rate, from the time
+    // the stream started.
+    let mut next_t = f64::NEG_INFINITY;
     loop {
         match conn.read(&mut buf) {
             Ok(0) => return,
@@ -395,15 +407,26 @@ fn serve_client(shared: &Shared, mut conn: TcpStream) {
             Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
             Err(_) => return,
         }
-        if let Some((fields, rate)) = &session.stream {
-            let now = Instant::now();
-            if now >= next_sample {
-                next_sample = now + Duration::from_secs_f64(1.0 / rate);
-                let line = telemetry(&shared.lock().last, fields);
-                if conn.write_all(line.as_bytes()).is_err() {
+        match &session.stream {
+            Some((fields, rate)) => {
+                let mut lines = String::new();
+                {
+                    let axis = shared.lock();
+                    if next_t == f64::NEG_INFINITY {
+                        next_t = axis.last.t;
+                    }
+                    for smp in axis.history.iter() {
+                        if smp.t >= next_t {
+                            lines += &telemetry(smp, fields);
+                            next_t = smp.t + 1.0 / rate - 1e-9;
+                        }
+                    }
+                }
+                if !lines.is_empty() && conn.write_all(lines.as_bytes()).is_err() {
                     return;
                 }
             }
+            None => next_t = f64::NEG_INFINITY,
         }
     }
 }

@@ -14,3 +14,4 @@ pub mod plant;
 pub mod plot;
 pub mod scenario;
 pub mod sim;
+pub mod tune;

@@ -37,6 +37,10 @@ pub const MAX_BLOCKS: usize = 32;
 pub struct ParamFile {
     /// The `[friction]` table.
     pub friction: FrictionSpec,
+    /// Optional `[device]` table: other device settings by protocol path (`gms-tune params`);
+    /// not used by the friction command.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<toml::Table>,
 }
 
 /// Which friction model a `[friction]` table describes.

@@ -1,0 +1,391 @@
+//! `gms-tune`: the bench tool. Talks the gms command protocol to the firmware over a serial
+//! port (USB CDC-ACM) or to `hil-sim serve` over TCP.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+use hil_sim::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
+use hil_sim::tune::{Link, LinkError, parse_telemetry};
+
+/// The gms bench tool.
+#[derive(Parser)]
+#[command(name = "gms-tune", version, about)]
+struct Cli {
+    /// Serial port of the device, e.g. /dev/ttyACM0.
+    #[arg(long, conflicts_with = "tcp", required_unless_present = "tcp")]
+    port: Option<String>,
+    /// TCP address of a virtual device (`hil-sim serve --tcp`).
+    #[arg(long)]
+    tcp: Option<String>,
+    /// Reply timeout [ms].
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=600_000))]
+    timeout_ms: u64,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Print a parameter.
+    Get {
+        /// Parameter path (see `list`).
+        path: String,
+    },
+    /// Set a parameter (nothing changes if the device refuses).
+    Set {
+        /// Parameter path (see `list`).
+        path: String,
+        /// New value.
+        #[arg(allow_negative_numbers = true)]
+        value: String,
+    },
+    /// Every parameter with value, unit and range.
+    List,
+    /// Persist the device's parameters (device disabled).
+    Save,
+    /// Parameter files: `dump` prints them as TOML, `load FILE` sends them.
+    Params {
+        #[command(subcommand)]
+        action: ParamsCmd,
+    },
+    /// Record telemetry fields for a while into a CSV file.
+    Record {
+        /// Comma-separated fields: t, pos, ref, error, ff, current, friction.
+        #[arg(long, default_value = "t,pos,ref,error,ff")]
+        fields: String,
+        /// Duration [s].
+        #[arg(long, default_value_t = 1.0)]
+        seconds: f64,
+        /// Telemetry rate [Hz].
+        #[arg(long, default_value_t = 500.0)]
+        rate: f64,
+        /// Output CSV.
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Enable, command a step, record it, print its figures, write trace.csv and plot.svg.
+    StepTest {
+        /// Step size [rad].
+        #[arg(long, allow_negative_numbers = true)]
+        distance: f64,
+        /// Recording time [s].
+        #[arg(long, default_value_t = 0.5)]
+        seconds: f64,
+        /// Output directory.
+        #[arg(long, default_value = "step-test")]
+        out: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum ParamsCmd {
+    /// Print the device's parameters: a [friction] table (the compensator's GMS model, the
+    /// parameter-file format) and a [device] table (everything else, by protocol path).
+    Dump,
+    /// Send a file written by `dump` (or any parameter file with a 6-block GMS [friction]).
+    Load {
+        /// The parameter file.
+        file: PathBuf,
+    },
+}
+
+/// Exit 1: the device refused or did not answer; exit 2: bad arguments or no link.
+enum Fail {
+    Device(String),
+    Usage(String),
+}
+
+impl From<LinkError> for Fail {
+    fn from(e: LinkError) -> Fail {
+        Fail::Device(e.to_string())
+    }
+}
+
+fn list(link: &mut Link) -> Result<Vec<(String, String)>, Fail> {
+    let (lines, _) = link.request("list")?;
+    Ok(lines
+        .iter()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            Some((w.next()?.to_string(), w.next()?.to_string()))
+        })
+        .collect())
+}
+
+fn dump(link: &mut Link) -> Result<String, Fail> {
+    let params = list(link)?;
+    let num = |k: &str| {
+        params
+            .iter()
+            .find(|p| p.0 == k)
+            .and_then(|p| p.1.parse::<f64>().ok())
+    };
+    let mut blocks = Vec::new();
+    for i in 1..=6 {
+        match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
+            (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
+            _ => return Err(Fail::Device(format!("list has no gms.k{i}/gms.a{i}"))),
+        }
+    }
+    let friction = FrictionSpec {
+        model: ModelKind::Gms,
+        fs: num("gms.fs"),
+        fc: num("gms.fc"),
+        vs: num("gms.vs"),
+        delta: num("gms.delta"),
+        sigma: num("gms.sigma"),
+        c: num("gms.c"),
+        blocks: Some(blocks),
+        ..FrictionSpec::default()
+    };
+    let mut device = toml::Table::new();
+    for (k, v) in &params {
+        if k.starts_with("gms.") {
+            continue;
+        }
+        let value = match v.parse::<f64>() {
+            Ok(x) => toml::Value::Float(x),
+            Err(_) => toml::Value::String(v.clone()),
+        };
+        device.insert(k.clone(), value);
+    }
+    let file = ParamFile {
+        friction,
+        device: Some(device),
+    };
+    Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
+}
+
+fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
+    let pf = ParamFile::load(file).map_err(|e| Fail::Usage(e.to_string()))?;
+    let f = &pf.friction;
+    if f.model != ModelKind::Gms || f.blocks.as_ref().map_or(0, Vec::len) != 6 {
+        return Err(Fail::Usage(format!(
+            "{}: [friction] must be a 6-block gms model for the device's compensator",
+            file.display()
+        )));
+    }
+    f.gms_params::<6>()
+        .and_then(|p| p.validate().map_err(|e| e.to_string()))
+        .map_err(|e| Fail::Usage(format!("{}: [friction] {e}", file.display())))?;
+    let mut sets: Vec<(String, String)> = Vec::new();
+    for (k, v) in [
+        ("fs", f.fs),
+        ("fc", f.fc),
+        ("vs", f.vs),
+        ("delta", f.delta.or(Some(1.0))),
+        ("sigma", f.sigma.or(Some(0.0))),
+        ("c", f.c),
+    ] {
+        if let Some(v) = v {
+            sets.push((format!("gms.{k}"), format!("{v}")));
+        }
+    }
+    for (i, b) in f.blocks.iter().flatten().enumerate() {
+        sets.push((format!("gms.k{}", i + 1), format!("{}", b.k)));
+        sets.push((format!("gms.a{}", i + 1), format!("{}", b.alpha)));
+    }
+    for (k, v) in pf.device.iter().flatten() {
+        let v = match v {
+            toml::Value::Float(x) => format!("{x}"),
+            toml::Value::Integer(x) => format!("{x}"),
+            toml::Value::String(s) => s.clone(),
+            _ => {
+                return Err(Fail::Usage(format!(
+                    "{}: [device] `{k}` is not a value",
+                    file.display()
+                )));
+            }
+        };
+        sets.push((k.clone(), v));
+    }
+    // A set may be refused while others are pending (fs below the old fc, say): retry until
+    // no progress.
+    let n = sets.len();
+    let mut last_err = String::new();
+    while !sets.is_empty() {
+        let before = sets.len();
+        let mut rest = Vec::new();
+        for (k, v) in sets {
+            match link.request(&format!("set {k} {v}")) {
+                Ok(_) => {}
+                Err(LinkError::Device(e)) => {
+                    last_err = format!("set {k} {v}: {e}");
+                    rest.push((k, v));
+                }
+                Err(e) => return Err(e.into()),
+            }
+        }
+        if rest.len() == before {
+            return Err(Fail::Device(last_err));
+        }
+        sets = rest;
+    }
+    Ok(n)
+}
+
+fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<Vec<f64>>, Fail> {
+    link.telemetry.clear();
+    link.request(&format!("stream {fields} {rate}"))?;
+    link.listen(Duration::from_secs_f64(seconds))?;
+    link.request("stream off")?;
+    let names: Vec<&str> = fields.split(',').collect();
+    Ok(link
+        .telemetry
+        .iter()
+        .map(|(_, l)| {
+            let kv = parse_telemetry(l);
+            names
+                .iter()
+                .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
+                .collect()
+        })
+        .collect())
+}
+
+fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
+    let mut text = format!("{fields}\n");
+    for r in rows {
+        let cells: Vec<String> = r.iter().map(|v| format!("{v}")).collect();
+        text += &cells.join(",");
+        text.push('\n');
+    }
+    hil_sim::commands::write_atomic(path, text.as_bytes()).map_err(Fail::Usage)
+}
+
+fn run(cli: Cli) -> Result<(), Fail> {
+    let timeout = Duration::from_millis(cli.timeout_ms);
+    let mut link = match (&cli.port, &cli.tcp) {
+        (Some(p), _) => Link::serial(p, timeout),
+        (None, Some(a)) => Link::tcp(a, timeout),
+        (None, None) => Err("give --port or --tcp".into()),
+    }
+    .map_err(Fail::Usage)?;
+    match cli.cmd {
+        Cmd::Get { path } => println!("{}", link.request(&format!("get {path}"))?.1),
+        Cmd::Set { path, value } => {
+            link.request(&format!("set {path} {value}"))?;
+        }
+        Cmd::List => {
+            for l in link.request("list")?.0 {
+                println!("{l}");
+            }
+        }
+        Cmd::Save => {
+            link.request("save")?;
+        }
+        Cmd::Params {
+            action: ParamsCmd::Dump,
+        } => print!("{}", dump(&mut link)?),
+        Cmd::Params {
+            action: ParamsCmd::Load { file },
+        } => {
+            let n = load(&mut link, &file)?;
+            eprintln!("sent {n} parameters");
+        }
+        Cmd::Record {
+            fields,
+            seconds,
+            rate,
+            out,
+        } => {
+            if !(seconds > 0.0 && seconds <= 3600.0 && rate > 0.0 && rate <= 1000.0) {
+                return Err(Fail::Usage(
+                    "--seconds in (0, 3600], --rate in (0, 1000]".into(),
+                ));
+            }
+            let rows = record(&mut link, &fields, rate, seconds)?;
+            write_csv(&out, &fields, &rows)?;
+            eprintln!("{} samples to {}", rows.len(), out.display());
+        }
+        Cmd::StepTest {
+            distance,
+            seconds,
+            out,
+        } => {
+            if !(distance.is_finite() && seconds > 0.0 && seconds <= 60.0) {
+                return Err(Fail::Usage(
+                    "--distance finite, --seconds in (0, 60]".into(),
+                ));
+            }
+            std::fs::create_dir_all(&out)
+                .map_err(|e| Fail::Usage(format!("{}: {e}", out.display())))?;
+            link.request("enable")?;
+            let fields = "t,ref,pos,error,ff,friction";
+            let pos0 = record(&mut link, "pos", 100.0, 0.05)?
+                .last()
+                .and_then(|r| r.first().copied())
+                .unwrap_or(0.0);
+            link.telemetry.clear();
+            link.request(&format!("stream {fields} 1000"))?;
+            link.request(&format!("move {}", pos0 + distance))?;
+            link.listen(Duration::from_secs_f64(seconds))?;
+            link.request("stream off")?;
+            let names: Vec<&str> = fields.split(',').collect();
+            let rows: Vec<Vec<f64>> = link
+                .telemetry
+                .iter()
+                .map(|(_, l)| {
+                    let kv = parse_telemetry(l);
+                    names
+                        .iter()
+                        .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
+                        .collect()
+                })
+                .collect();
+            write_csv(&out.join("trace.csv"), fields, &rows)?;
+            let trace: Vec<hil_sim::sim::TraceRow> = rows
+                .iter()
+                .map(|r| hil_sim::sim::TraceRow {
+                    t: r[0],
+                    reference: r[1],
+                    position: r[2],
+                    error: r[3],
+                    current: 0.0,
+                    current_cmd: 0.0,
+                    voltage: 0.0,
+                    friction: r[5],
+                    feedforward: r[4],
+                    ref_velocity: 0.0,
+                    segment: 0,
+                })
+                .collect();
+            let rpc = 3.8e-6;
+            let max_err = trace.iter().map(|r| r.error.abs()).fold(0.0, f64::max);
+            let tail = &trace[trace.len() * 4 / 5..];
+            let sse = tail.iter().map(|r| r.error.abs()).sum::<f64>() / tail.len().max(1) as f64;
+            let t0 = trace.first().map_or(0.0, |r| r.t);
+            let settle = trace
+                .iter()
+                .rposition(|r| r.error.abs() > rpc * 1.01)
+                .and_then(|i| trace.get(i + 1))
+                .map_or(0.0, |r| r.t - t0);
+            println!(
+                "samples {} max_error {:.3e} rad settle_time {:.4} s steady_state_error {:.3e} rad",
+                trace.len(),
+                max_err,
+                settle,
+                sse
+            );
+            hil_sim::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
+                .map_err(Fail::Usage)?;
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(Fail::Device(e)) => {
+            eprintln!("error: {e}");
+            ExitCode::from(1)
+        }
+        Err(Fail::Usage(e)) => {
+            eprintln!("error: {e}");
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,140 @@
+//! The bench tool's link to a device (`gms-tune`): a serial port or TCP, one request line at
+//! a time, replies read up to their `ok`/`err` line, telemetry (`#` lines) set aside.
+
+use std::io::{ErrorKind, Read, Write};
+use std::time::{Duration, Instant};
+
+/// A byte stream to the device.
+pub trait Stream: Read + Write + Send {}
+impl<T: Read + Write + Send> Stream for T {}
+
+/// The link: a stream, what has been read but not used, and the reply timeout.
+pub struct Link {
+    io: Box<dyn Stream>,
+    pending: Vec<u8>,
+    timeout: Duration,
+    /// Telemetry lines received while waiting for replies (without the `#`).
+    pub telemetry: Vec<(Instant, String)>,
+}
+
+/// What went wrong talking to the device.
+#[derive(Debug)]
+pub enum LinkError {
+    /// No reply within the timeout.
+    Timeout(Duration),
+    /// The device answered `err …` (the whole line).
+    Device(String),
+    /// The connection failed or closed.
+    Io(String),
+}
+
+impl std::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LinkError::Timeout(d) => write!(f, "timeout: no reply within {} ms", d.as_millis()),
+            LinkError::Device(l) => write!(f, "device answered: {l}"),
+            LinkError::Io(e) => write!(f, "link: {e}"),
+        }
+    }
+}
+
+impl Link {
+    /// Opens `--tcp HOST:PORT`.
+    pub fn tcp(addr: &str, timeout: Duration) -> Result<Link, String> {
+        let s = std::net::TcpStream::connect(addr).map_err(|e| format!("--tcp {addr}: {e}"))?;
+        s.set_read_timeout(Some(Duration::from_millis(10)))
+            .map_err(|e| e.to_string())?;
+        let _ = s.set_nodelay(true);
+        Ok(Self::new(Box::new(s), timeout))
+    }
+
+    /// Opens a serial port (USB CDC-ACM or a PTY) at 115200 baud.
+    pub fn serial(path: &str, timeout: Duration) -> Result<Link, String> {
+        let p = serialport::new(path, 115_200)
+            .timeout(Duration::from_millis(10))
+            .open()
+            .map_err(|e| format!("--port {path}: cannot open: {e}"))?;
+        Ok(Self::new(Box::new(p), timeout))
+    }
+
+    /// A link over any stream.
+    pub fn new(io: Box<dyn Stream>, timeout: Duration) -> Link {
+        Link {
+            io,
+            pending: Vec::new(),
+            timeout,
+            telemetry: Vec::new(),
+        }
+    }
+
+    /// Sends one request line.
+    pub fn send(&mut self, line: &str) -> Result<(), LinkError> {
+        self.io
+            .write_all(format!("{line}\n").as_bytes())
+            .and_then(|_| self.io.flush())
+            .map_err(|e| LinkError::Io(e.to_string()))
+    }
+
+    /// The next complete line (telemetry is collected, not returned), or `None` at the
+    /// deadline.
+    fn next_line(&mut self, deadline: Instant) -> Result<Option<String>, LinkError> {
+        let mut buf = [0u8; 4096];
+        loop {
+            if let Some(pos) = self.pending.iter().position(|&b| b == b'\n') {
+                let raw: Vec<u8> = self.pending.drain(..=pos).collect();
+                let line = String::from_utf8_lossy(&raw).trim_end().to_string();
+                if let Some(t) = line.strip_prefix('#') {
+                    self.telemetry.push((Instant::now(), t.trim().to_string()));
+                    continue;
+                }
+                return Ok(Some(line));
+            }
+            if Instant::now() >= deadline {
+                return Ok(None);
+            }
+            match self.io.read(&mut buf) {
+                Ok(0) => return Err(LinkError::Io("the device closed the connection".into())),
+                Ok(n) => self.pending.extend_from_slice(&buf[..n]),
+                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                Err(e) => return Err(LinkError::Io(e.to_string())),
+            }
+        }
+    }
+
+    /// Sends `line` and returns the reply's lines before `ok` and the text after `ok`.
+    pub fn request(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
+        self.send(line)?;
+        let deadline = Instant::now() + self.timeout;
+        let mut body = Vec::new();
+        loop {
+            match self.next_line(deadline)? {
+                None => return Err(LinkError::Timeout(self.timeout)),
+                Some(l) if l == "ok" || l.starts_with("ok ") => {
+                    return Ok((body, l.get(3..).unwrap_or("").to_string()));
+                }
+                Some(l) if l.starts_with("err") => return Err(LinkError::Device(l)),
+                Some(l) => body.push(l),
+            }
+        }
+    }
+
+    /// Collects telemetry for `d`.
+    pub fn listen(&mut self, d: Duration) -> Result<(), LinkError> {
+        let deadline = Instant::now() + d;
+        while let Some(l) = self.next_line(deadline)? {
+            // A stray reply line while listening: ignore it.
+            let _ = l;
+        }
+        Ok(())
+    }
+}
+
+/// Parses a telemetry line `name=value name=value …`.
+pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
+    line.split_whitespace()
+        .filter_map(|kv| {
+            let (k, v) = kv.split_once('=')?;
+            Some((k.to_string(), v.parse().ok()?))
+        })
+        .collect()
+}

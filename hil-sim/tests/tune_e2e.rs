@@ -1,0 +1,194 @@
+//! `gms-tune` against a real `hil-sim serve` over TCP, end to end.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+const SIM: &str = env!("CARGO_BIN_EXE_hil-sim");
+const TUNE: &str = env!("CARGO_BIN_EXE_gms-tune");
+
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Server {
+    fn start(store: &Path) -> Server {
+        let mut child = Command::new(SIM)
+            .args(["serve", "--tcp", "127.0.0.1:0", "--store"])
+            .arg(store)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let addr = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap()
+            .to_string();
+        Server { child, addr }
+    }
+
+    /// Runs gms-tune; returns (exit code, stdout, stderr).
+    fn tune(&self, args: &[&str], cwd: &Path) -> (i32, String, String) {
+        let out = Command::new(TUNE)
+            .args(["--tcp", &self.addr])
+            .args(args)
+            .current_dir(cwd)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn set_save_restart_dump_and_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let store = d.join("flash.toml");
+    {
+        let srv = Server::start(&store);
+        assert_eq!(srv.tune(&["set", "pos.kd", "2.2e-4"], d).0, 0);
+        assert_eq!(srv.tune(&["set", "ff.gain", "0.9"], d).0, 0);
+        let (code, _, err) = srv.tune(&["set", "ff.gain", "-1"], d);
+        assert_eq!(code, 1);
+        assert!(err.starts_with("error: device answered: err 6"), "{err}");
+        assert_eq!(err.lines().count(), 1);
+        assert_eq!(srv.tune(&["save"], d).0, 0);
+    }
+    let srv = Server::start(&store);
+    assert_eq!(srv.tune(&["get", "pos.kd"], d).1, "0.00022\n");
+    assert_eq!(srv.tune(&["get", "ff.gain"], d).1, "0.9\n");
+    let (code, list, _) = srv.tune(&["list"], d);
+    assert_eq!(code, 0);
+    assert!(list.lines().count() >= 36 && list.contains("gms.k6"));
+    // dump → a parameter file the friction command accepts as it is.
+    let (code, dump, _) = srv.tune(&["params", "dump"], d);
+    assert_eq!(code, 0);
+    std::fs::write(d.join("p.toml"), &dump).unwrap();
+    let fr = Command::new(SIM)
+        .args(["friction", "--params", "p.toml", "--input"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/trajectory.csv"))
+        .args(["--output", "o.csv"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        fr.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fr.stderr)
+    );
+    // Change things, load the dump back, and read the old values.
+    assert_eq!(srv.tune(&["set", "gms.fs", "300e-6"], d).0, 0);
+    assert_eq!(srv.tune(&["set", "pos.kd", "1e-4"], d).0, 0);
+    assert_eq!(srv.tune(&["params", "load", "p.toml"], d).0, 0);
+    assert_eq!(srv.tune(&["get", "gms.fs"], d).1, "0.00022\n");
+    assert_eq!(srv.tune(&["get", "pos.kd"], d).1, "0.00022\n");
+}
+
+#[test]
+fn record_and_step_test_write_their_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start(&d.join("flash.toml"));
+    let (code, _, err) = srv.tune(
+        &[
+            "record",
+            "--fields",
+            "t,error",
+            "--seconds",
+            "0.2",
+            "--rate",
+            "500",
+            "--out",
+            "r.csv",
+        ],
+        d,
+    );
+    assert_eq!(code, 0, "{err}");
+    let rec = std::fs::read_to_string(d.join("r.csv")).unwrap();
+    assert_eq!(rec.lines().next(), Some("t,error"));
+    // 0.2 s at 500 Hz: about 100 samples (fewer if the machine is loaded), never closer
+    // than 2 ms in device time, and mostly exactly 2 ms apart.
+    let t: Vec<f64> = rec
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    assert!(t.len() >= 30 && t.len() <= 110, "{} samples", t.len());
+    let gaps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(gaps.iter().all(|g| *g > 2e-3 - 2e-4), "{gaps:?}");
+    let exact = gaps.iter().filter(|g| (**g - 2e-3).abs() < 2e-4).count();
+    assert!(exact * 10 >= gaps.len() * 8, "{gaps:?}");
+    let (code, out, err) = srv.tune(
+        &[
+            "step-test",
+            "--distance",
+            "1e-3",
+            "--seconds",
+            "0.3",
+            "--out",
+            "st",
+        ],
+        d,
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("settle_time"), "{out}");
+    assert!(d.join("st/trace.csv").exists() && d.join("st/plot.svg").exists());
+    // The axis followed: the last recorded position is within a few counts of the target.
+    let trace = std::fs::read_to_string(d.join("st/trace.csv")).unwrap();
+    let last: Vec<f64> = trace
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!(
+        (last[1] - last[2]).abs() < 10.0 * 3.8e-6,
+        "ref {} pos {}",
+        last[1],
+        last[2]
+    );
+}
+
+#[test]
+fn clear_errors_for_no_device_and_silence() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = Command::new(TUNE)
+        .args(["--port", "/dev/does-not-exist", "get", "pos.kp"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("/dev/does-not-exist") && err.lines().count() == 1,
+        "{err}"
+    );
+    // A device that never answers: a timeout, exit 1.
+    let silent = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = silent.local_addr().unwrap().to_string();
+    let out = Command::new(TUNE)
+        .args(["--tcp", &addr, "--timeout-ms", "200", "get", "pos.kp"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("timeout"));
+}
