@@ -7,7 +7,7 @@
 
 use std::fmt::Write as _;
 use std::io::{ErrorKind, Read, Write};
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -375,10 +375,9 @@ fn telemetry(s: &Sample, fields: &[usize]) -> String {
     line
 }
 
-/// Serves one client until it disconnects.
-fn serve_client(shared: &Shared, mut conn: TcpStream) {
-    let _ = conn.set_read_timeout(Some(Duration::from_millis(2)));
-    let _ = conn.set_nodelay(true);
+/// Serves one client until it disconnects. `conn` reads must not block for long: a TCP
+/// socket with a read timeout, or a non-blocking PTY master.
+fn serve_client<C: Read + Write>(shared: &Shared, mut conn: C) {
     let mut session = Session {
         shared,
         snapshot: shared.lock().settings,
@@ -404,7 +403,10 @@ fn serve_client(shared: &Shared, mut conn: TcpStream) {
                     return;
                 }
             }
-            Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+            Err(e) if e.kind() == ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(2))
+            }
+            Err(e) if e.kind() == ErrorKind::TimedOut => {}
             Err(_) => return,
         }
         match &session.stream {
@@ -431,11 +433,22 @@ fn serve_client(shared: &Shared, mut conn: TcpStream) {
     }
 }
 
-/// Runs the device: the axis in real time on its own thread, clients on `listener` in turn.
-/// `on_ready` receives the address and any start-up fault before the first client.
+/// Where the device listens.
+pub enum Endpoint {
+    /// TCP: clients connect one after another.
+    Tcp(TcpListener),
+    /// A pseudo-terminal: the device holds the master; clients open the slave path (like a
+    /// USB CDC-ACM port) one after another.
+    #[cfg(unix)]
+    Pty,
+}
+
+/// Runs the device: the axis in real time on its own thread, clients in turn. `on_ready`
+/// receives the address (TCP address or PTY path) and any start-up fault before the first
+/// client.
 pub fn serve(
     sc: Scenario,
-    listener: TcpListener,
+    endpoint: Endpoint,
     store: Option<PathBuf>,
     on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), String> {
@@ -468,16 +481,45 @@ pub fn serve(
             std::thread::sleep(Duration::from_millis(1));
         }
     });
-    let addr = listener
-        .local_addr()
-        .map_err(|e| e.to_string())?
-        .to_string();
-    on_ready(&addr, why.as_deref());
-    for conn in listener.incoming() {
-        match conn {
-            Ok(c) => serve_client(&shared, c),
-            Err(_) => continue,
+    match endpoint {
+        Endpoint::Tcp(listener) => {
+            let addr = listener
+                .local_addr()
+                .map_err(|e| e.to_string())?
+                .to_string();
+            on_ready(&addr, why.as_deref());
+            for conn in listener.incoming() {
+                let Ok(c) = conn else { continue };
+                let _ = c.set_read_timeout(Some(Duration::from_millis(2)));
+                let _ = c.set_nodelay(true);
+                serve_client(&shared, c);
+            }
+            Ok(())
         }
+        #[cfg(unix)]
+        Endpoint::Pty => serve_pty(&shared, |path| on_ready(path, why.as_deref())),
     }
-    Ok(())
+}
+
+/// Serves the protocol on a pseudo-terminal. The device keeps the slave open too, so a client
+/// that closes it does not end the session: the next one finds the device where it was.
+#[cfg(unix)]
+fn serve_pty(shared: &Shared, on_ready: impl FnOnce(&str)) -> Result<(), String> {
+    use nix::fcntl::{FcntlArg, OFlag, fcntl};
+    use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
+
+    let pty = nix::pty::openpty(None, None).map_err(|e| format!("openpty: {e}"))?;
+    let mut t = tcgetattr(&pty.slave).map_err(|e| format!("tcgetattr: {e}"))?;
+    cfmakeraw(&mut t);
+    tcsetattr(&pty.slave, SetArg::TCSANOW, &t).map_err(|e| format!("tcsetattr: {e}"))?;
+    let path = nix::unistd::ttyname(&pty.slave).map_err(|e| format!("ttyname: {e}"))?;
+    fcntl(&pty.master, FcntlArg::F_SETFL(OFlag::O_NONBLOCK)).map_err(|e| format!("fcntl: {e}"))?;
+    on_ready(&path.display().to_string());
+    let master = std::fs::File::from(pty.master);
+    let _slave = pty.slave;
+    loop {
+        // serve_client returns only on an I/O error; start over after a pause.
+        serve_client(shared, &master);
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }

@@ -68,8 +68,16 @@ enum Cmd {
     /// The virtual device: the simulated axis in real time behind the bench protocol.
     Serve {
         /// Listen on this TCP address, e.g. 127.0.0.1:7878 (port 0: any free port).
-        #[arg(long, value_name = "ADDR")]
-        tcp: String,
+        #[arg(
+            long,
+            value_name = "ADDR",
+            required_unless_present = "pty",
+            conflicts_with = "pty"
+        )]
+        tcp: Option<String>,
+        /// Serve on a new pseudo-terminal instead; prints its path (open it like a serial port).
+        #[arg(long)]
+        pty: bool,
         /// The device's "flash": `save` writes the settings here, a restart reads them.
         #[arg(long, value_name = "FILE")]
         store: Option<PathBuf>,
@@ -192,12 +200,20 @@ fn main() -> ExitCode {
             .and_then(|sc| compare_and_write(&sc, runs, seed, &json, threads(t))),
         Cmd::Serve {
             tcp,
+            pty,
             store,
             scenario,
         } => load_scenario(scenario.as_deref()).and_then(|sc| {
-            let listener = std::net::TcpListener::bind(&tcp)
-                .map_err(|e| format!("--tcp {tcp}: cannot listen: {e}"))?;
-            hil_sim::device::serve(sc, listener, store, |addr, fault| {
+            let endpoint = match (tcp, pty) {
+                (Some(tcp), _) => hil_sim::device::Endpoint::Tcp(
+                    std::net::TcpListener::bind(&tcp)
+                        .map_err(|e| format!("--tcp {tcp}: cannot listen: {e}"))?,
+                ),
+                #[cfg(unix)]
+                (None, true) => hil_sim::device::Endpoint::Pty,
+                _ => return Err("give --tcp ADDR or --pty".into()),
+            };
+            hil_sim::device::serve(sc, endpoint, store, |addr, fault| {
                 if let Some(f) = fault {
                     eprintln!("warning: store unusable, starting from defaults (fault 1): {f}");
                 }

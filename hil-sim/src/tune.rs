@@ -57,14 +57,21 @@ impl Link {
         Ok(Self::new(Box::new(p), timeout))
     }
 
-    /// A link over any stream.
-    pub fn new(io: Box<dyn Stream>, timeout: Duration) -> Link {
-        Link {
+    /// A link over any stream. An empty line goes out first: it ends whatever half line an
+    /// earlier client left in the device (an empty line has no reply).
+    pub fn new(mut io: Box<dyn Stream>, timeout: Duration) -> Link {
+        let _ = io.write_all(b"\n").and_then(|_| io.flush());
+        let mut link = Link {
             io,
             pending: Vec::new(),
             timeout,
             telemetry: Vec::new(),
-        }
+        };
+        // Whatever that provokes (an `err` for the half line) is not ours: discard it.
+        let _ = link.listen(Duration::from_millis(30));
+        link.pending.clear();
+        link.telemetry.clear();
+        link
     }
 
     /// Sends one request line.

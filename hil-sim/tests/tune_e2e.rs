@@ -192,3 +192,63 @@ fn clear_errors_for_no_device_and_silence() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("timeout"));
 }
+
+/// The same over a pseudo-terminal (`hil-sim serve --pty`), as the tool talks to the USB
+/// CDC-ACM port of the firmware.
+#[cfg(unix)]
+#[test]
+fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let store = d.join("flash.toml");
+    let start = || {
+        let mut child = Command::new(SIM)
+            .args(["serve", "--pty", "--store"])
+            .arg(&store)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let path = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap()
+            .to_string();
+        Server { child, addr: path }
+    };
+    let tune = |srv: &Server, args: &[&str]| {
+        let out = Command::new(TUNE)
+            .args(["--port", &srv.addr])
+            .args(args)
+            .current_dir(d)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+        )
+    };
+    {
+        let srv = start();
+        assert_eq!(tune(&srv, &["set", "pos.kp", "0.27"]), (0, String::new()));
+        // A client that writes half a line and goes away.
+        {
+            use std::io::Write;
+            let mut f = std::fs::OpenOptions::new()
+                .write(true)
+                .open(&srv.addr)
+                .unwrap();
+            f.write_all(b"set pos.k").unwrap();
+        }
+        // gms-tune starts with an empty line, which ends the half line (answered with an
+        // error it skips); its own request is then answered normally.
+        assert_eq!(tune(&srv, &["get", "pos.kp"]), (0, "0.27\n".into()));
+        assert_eq!(tune(&srv, &["save"]).0, 0);
+    }
+    let srv = start();
+    assert_eq!(tune(&srv, &["get", "pos.kp"]), (0, "0.27\n".into()));
+}
