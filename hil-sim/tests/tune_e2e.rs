@@ -168,6 +168,26 @@ fn record_and_step_test_write_their_files() {
 }
 
 #[test]
+fn send_and_watch() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start(&d.join("flash.toml"));
+    assert_eq!(srv.tune(&["send", "enable"], d).0, 0);
+    assert_eq!(srv.tune(&["send", "move", "-0.002"], d).0, 0);
+    let (code, status, _) = srv.tune(&["send", "status"], d);
+    assert_eq!(code, 0);
+    assert!(status.contains("enabled=1"), "{status}");
+    let (code, out, err) = srv.tune(&["watch", "--seconds", "0.5", "--refresh-ms", "100"], d);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.starts_with("  t [s]"), "{out}");
+    // Refreshes: carriage return + clear line, at least three in 0.5 s.
+    assert!(out.matches("\r\x1b[K").count() >= 3, "{out:?}");
+    let (code, _, err) = srv.tune(&["send", "frobnicate"], d);
+    assert_eq!(code, 1);
+    assert!(err.contains("err 1"), "{err}");
+}
+
+#[test]
 fn clear_errors_for_no_device_and_silence() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

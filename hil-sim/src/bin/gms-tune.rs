@@ -45,6 +45,13 @@ enum Cmd {
     List,
     /// Persist the device's parameters (device disabled).
     Save,
+    /// Send any request (e.g. `send enable`, `send move 0.01`, `send status`) and print the
+    /// reply.
+    Send {
+        /// The request's words.
+        #[arg(required = true, num_args = 1.., allow_negative_numbers = true)]
+        words: Vec<String>,
+    },
     /// Parameter files: `dump` prints them as TOML, `load FILE` sends them.
     Params {
         #[command(subcommand)]
@@ -76,6 +83,15 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "step-test")]
         out: PathBuf,
+    },
+    /// A live view of the position error and the friction feedforward (Ctrl-C to stop).
+    Watch {
+        /// Stop after this many seconds (default: run until interrupted).
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Refresh period [ms].
+        #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(20..=10_000))]
+        refresh_ms: u64,
     },
 }
 
@@ -276,6 +292,15 @@ fn run(cli: Cli) -> Result<(), Fail> {
         Cmd::Save => {
             link.request("save")?;
         }
+        Cmd::Send { words } => {
+            let (body, rest) = link.request(&words.join(" "))?;
+            for l in body {
+                println!("{l}");
+            }
+            if !rest.is_empty() {
+                println!("{rest}");
+            }
+        }
         Cmd::Params {
             action: ParamsCmd::Dump,
         } => print!("{}", dump(&mut link)?),
@@ -372,8 +397,61 @@ fn run(cli: Cli) -> Result<(), Fail> {
             hil_sim::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
                 .map_err(Fail::Usage)?;
         }
+        Cmd::Watch {
+            seconds,
+            refresh_ms,
+        } => watch(&mut link, seconds, Duration::from_millis(refresh_ms))?,
     }
     Ok(())
+}
+
+/// One refresh of the live view: the error over the last period as a bar around zero, with
+/// its extremes, and the feedforward.
+fn watch(link: &mut Link, seconds: Option<f64>, refresh: Duration) -> Result<(), Fail> {
+    use std::io::Write;
+    const RPC: f64 = 3.8e-6;
+    let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
+    link.request("stream t,error,ff 200")?;
+    println!("  t [s]   error [counts]: last   min    max   |-50 .. 0 .. +50|   ff [uN·m]");
+    loop {
+        link.telemetry.clear();
+        link.listen(refresh)?;
+        let samples: Vec<Vec<(String, f64)>> = link
+            .telemetry
+            .iter()
+            .map(|(_, l)| parse_telemetry(l))
+            .collect();
+        let get = |kv: &Vec<(String, f64)>, n: &str| kv.iter().find(|(k, _)| k == n).map(|x| x.1);
+        let errs: Vec<f64> = samples
+            .iter()
+            .filter_map(|kv| get(kv, "error"))
+            .map(|e| e / RPC)
+            .collect();
+        if let (Some(last), Some(kv)) = (errs.last(), samples.last()) {
+            let (lo, hi) = errs
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), e| (a.min(*e), b.max(*e)));
+            let mut bar = [b' '; 21];
+            bar[10] = b'|';
+            let col = ((last / 5.0).round() as i64 + 10).clamp(0, 20) as usize;
+            bar[col] = b'*';
+            print!(
+                "\r\x1b[K{:8.3}   {:6.1} {:6.1} {:6.1}   {}   {:8.2}",
+                get(kv, "t").unwrap_or(0.0),
+                last,
+                lo,
+                hi,
+                String::from_utf8_lossy(&bar),
+                get(kv, "ff").unwrap_or(0.0) * 1e6
+            );
+            let _ = std::io::stdout().flush();
+        }
+        if end.is_some_and(|e| std::time::Instant::now() >= e) {
+            println!();
+            link.request("stream off")?;
+            return Ok(());
+        }
+    }
 }
 
 fn main() -> ExitCode {
