@@ -148,8 +148,16 @@ fn record_and_step_test_write_their_files() {
         d,
     );
     assert_eq!(code, 0, "{err}");
-    assert!(out.contains("settle_time"), "{out}");
+    for k in [
+        "rms_error",
+        "max_error",
+        "settle_time",
+        "steady_state_error",
+    ] {
+        assert!(out.lines().any(|l| l.starts_with(k)), "{k} missing: {out}");
+    }
     assert!(d.join("st/trace.csv").exists() && d.join("st/plot.svg").exists());
+    assert!(d.join("st/metrics.json").exists());
     // The axis followed: the last recorded position is within a few counts of the target.
     let trace = std::fs::read_to_string(d.join("st/trace.csv")).unwrap();
     let last: Vec<f64> = trace

@@ -377,23 +377,26 @@ fn run(cli: Cli) -> Result<(), Fail> {
                     segment: 0,
                 })
                 .collect();
+            // hil-sim's own figures, for the one move the device made (its profile limits
+            // are the device's defaults for `move`).
             let rpc = 3.8e-6;
-            let max_err = trace.iter().map(|r| r.error.abs()).fold(0.0, f64::max);
-            let tail = &trace[trace.len() * 4 / 5..];
-            let sse = tail.iter().map(|r| r.error.abs()).sum::<f64>() / tail.len().max(1) as f64;
-            let t0 = trace.first().map_or(0.0, |r| r.t);
-            let settle = trace
-                .iter()
-                .rposition(|r| r.error.abs() > rpc * 1.01)
-                .and_then(|i| trace.get(i + 1))
-                .map_or(0.0, |r| r.t - t0);
-            println!(
-                "samples {} max_error {:.3e} rad settle_time {:.4} s steady_state_error {:.3e} rad",
-                trace.len(),
-                max_err,
-                settle,
-                sse
-            );
+            let seg = gms_core::reference::Segment::Move {
+                distance: distance as f32,
+                vmax: 0.5,
+                amax: 50.0,
+                jmax: 1e4,
+                dwell: seconds as f32,
+            };
+            let m = hil_sim::sim::metrics(&trace, &[seg], rpc);
+            for (name, v) in m.named() {
+                if name != "sine_rms_error" {
+                    println!("{name} {v:e}");
+                }
+            }
+            println!("samples {}", trace.len());
+            let json = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
+            hil_sim::commands::write_atomic(&out.join("metrics.json"), json.as_bytes())
+                .map_err(Fail::Usage)?;
             hil_sim::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
                 .map_err(Fail::Usage)?;
         }
