@@ -9,6 +9,7 @@
 pub mod commands;
 pub mod device;
 pub mod friction_cmd;
+pub mod identify;
 pub mod paramfile;
 pub mod plant;
 pub mod plot;

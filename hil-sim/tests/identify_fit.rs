@@ -1,0 +1,126 @@
+//! The identification fits recover known parameters from exact and noisy synthetic data.
+
+use gms_core::presets;
+use hil_sim::identify::{fit_stribeck, fit_virgin};
+
+/// Deterministic noise in [-1, 1).
+fn noise(i: usize) -> f64 {
+    let x = ((i as u64)
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407)
+        >> 33) as f64;
+    x / (1u64 << 30) as f64 - 1.0
+}
+
+#[test]
+fn virgin_fit_recovers_table1() {
+    let p = presets::table1();
+    let fs = p.stribeck.fs as f64;
+    let virgin = |x: f64| -> f64 {
+        p.blocks
+            .iter()
+            .map(|b| (b.k as f64 * x).min(b.alpha as f64 * fs))
+            .sum()
+    };
+    // Encoder-resolution steps, log-spaced out to 1.5x the last breakpoint, 1 % noise.
+    let xs: Vec<f64> = (0..200)
+        .map(|i| 3.8e-6 * (12e-3 / 3.8e-6f64).powf(i as f64 / 199.0))
+        .collect();
+    let fsn: Vec<f64> = xs
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| virgin(x) + 0.01 * fs * noise(i))
+        .collect();
+    let fit = fit_virgin(&xs, &fsn, 6).unwrap();
+    eprintln!(
+        "virgin fit: Fs {:.4e}, breakpoints {:?}",
+        fit.fs, fit.breakpoints
+    );
+    assert!((fit.fs / fs - 1.0).abs() < 0.02, "Fs {} vs {fs}", fit.fs);
+    // The fitted curve within 2 % of Fs RMS of the true one over the data.
+    let model = |x: f64| -> f64 {
+        fit.blocks
+            .iter()
+            .zip(&fit.breakpoints)
+            .map(|(b, d)| b.k * x.min(*d))
+            .sum()
+    };
+    let rms = (xs
+        .iter()
+        .map(|&x| (model(x) - virgin(x)).powi(2))
+        .sum::<f64>()
+        / xs.len() as f64)
+        .sqrt();
+    eprintln!("virgin curve RMS {:.3} % of Fs", 100.0 * rms / fs);
+    assert!(
+        rms < 0.02 * fs,
+        "virgin curve RMS {:.3} % of Fs",
+        100.0 * rms / fs
+    );
+    let asum: f64 = fit.blocks.iter().map(|b| b.alpha).sum();
+    assert!((asum - 1.0).abs() < 1e-9);
+    assert!(fit.blocks.iter().all(|b| b.k > 0.0 && b.alpha > 0.0));
+}
+
+#[test]
+fn virgin_fit_rejects_bad_data() {
+    let xs: Vec<f64> = (1..40).map(|i| i as f64 * 1e-6).collect();
+    let mut f: Vec<f64> = xs.iter().map(|x| (x * 1e5).min(1.0)).collect();
+    assert!(
+        fit_virgin(&xs[..5], &f[..5], 6)
+            .unwrap_err()
+            .contains("too few")
+    );
+    f[20] = f64::NAN;
+    assert!(fit_virgin(&xs, &f, 3).unwrap_err().contains("non-finite"));
+    let falling: Vec<f64> = xs.iter().map(|x| 1.0 - x * 1e4).collect();
+    assert!(
+        fit_virgin(&xs, &falling, 3)
+            .unwrap_err()
+            .contains("not monotonic")
+    );
+    let mut back = xs.clone();
+    back.swap(3, 4);
+    let f: Vec<f64> = xs.iter().map(|x| (x * 1e5).min(1.0)).collect();
+    assert!(fit_virgin(&back, &f, 3).unwrap_err().contains("increase"));
+}
+
+#[test]
+fn stribeck_fit_recovers_table1_within_the_issue_tolerances() {
+    let p = presets::table1();
+    let (fs, fc, vs, d, sg) = (
+        p.stribeck.fs as f64,
+        p.stribeck.fc as f64,
+        p.stribeck.vs as f64,
+        p.stribeck.delta as f64,
+        p.sigma as f64,
+    );
+    let s = |v: f64| fc + (fs - fc) * (-(v / vs).powf(d)).exp() + sg * v;
+    // Log-spaced 0.002 .. 20 rad/s, 0.5 % noise.
+    let v: Vec<f64> = (0..40)
+        .map(|i| 2e-3 * 1e4f64.powf(i as f64 / 39.0))
+        .collect();
+    let f: Vec<f64> = v
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| s(v) * (1.0 + 0.005 * noise(i + 7)))
+        .collect();
+    let fit = fit_stribeck(&v, &f).unwrap();
+    eprintln!("stribeck fit: {fit:?}");
+    assert!((fit.fs / fs - 1.0).abs() < 0.03, "fs {}", fit.fs);
+    assert!((fit.fc / fc - 1.0).abs() < 0.03, "fc {}", fit.fc);
+    assert!((fit.vs / vs - 1.0).abs() < 0.10, "vs {}", fit.vs);
+    assert!((fit.delta / d - 1.0).abs() < 0.10, "delta {}", fit.delta);
+    assert!((fit.sigma / sg - 1.0).abs() < 0.10, "sigma {}", fit.sigma);
+    let se = fit.std_err.unwrap();
+    assert!(se.iter().all(|e| e.is_finite() && *e > 0.0));
+    // Bad data: no speed above Vs.
+    let slow: Vec<f64> = (0..20).map(|i| 1e-3 * (1.0 + i as f64 * 0.5)).collect();
+    let fslow: Vec<f64> = slow.iter().map(|&v| s(v)).collect();
+    assert!(fit_stribeck(&slow, &fslow).is_err());
+    assert!(
+        fit_stribeck(&v[..5], &f[..5])
+            .unwrap_err()
+            .contains("too few")
+    );
+}
