@@ -32,11 +32,13 @@ fn chord_sse(x: &[f64], f: &[f64], a: usize, b: usize) -> f64 {
 }
 
 /// Fits `n` Maxwell-slip blocks to a measured virgin curve: `x` increasing from rest (the
-/// origin is added), `f` the friction at each `x`. The breakpoints are chosen by dynamic
-/// programming over the sample positions (least squares of the chord interpolation through
-/// the knots, with the last knot the plateau), then the stiffnesses are refined by linear
-/// least squares on the basis `min(x, D_i)`. Errors: too few points, non-finite values,
+/// origin is added), `f` the friction at each `x`, up to breakaway. The breakpoints are
+/// chosen by dynamic programming over the sample positions: least squares of the chord
+/// interpolation through the knots, each chord less steep than the one before (concave), the
+/// last knot the last point; then the stiffnesses are refined by linear least squares on the
+/// basis `min(x, D_i)` (kept from the chords when that would break concavity). Errors: too few points, non-finite values,
 /// x not increasing, a curve that falls, a fit that is not concave.
+#[allow(clippy::needless_range_loop)] // the dynamic programme reads best as indices
 pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
     if x.len() != f.len() {
         return Err("x and F have different lengths".into());
@@ -94,50 +96,76 @@ pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
                 .collect()
         })
         .collect();
-    // Plateau after the last knot b: the points beyond it against F[b].
-    let plateau: Vec<f64> = (0..m)
-        .map(|b| (b + 1..m).map(|j| (fs[j] - fs[b]).powi(2)).sum())
-        .collect();
-    // best[k][b]: least SSE with k segments from knot 0 to knot b; from[k][b]: previous knot.
-    let mut best = vec![vec![f64::INFINITY; m]; n + 1];
-    let mut from = vec![vec![0usize; m]; n + 1];
-    best[0][0] = 0.0;
-    for k in 1..=n {
-        for b in k..m {
-            for a in (k - 1)..b {
-                let c = best[k - 1][a] + cost[a][b];
-                if c < best[k][b] {
-                    best[k][b] = c;
-                    from[k][b] = a;
+    // Concave chords: best[k][a][b] is the least SSE of k chords from the origin to knot b
+    // whose last chord starts at knot a, each chord less steep than the one before.
+    let slope = |a: usize, b: usize| (fs[b] - fs[a]) / (xs[b] - xs[a]);
+    let inf = f64::INFINITY;
+    let mut best = vec![vec![vec![inf; m]; m]; n + 1];
+    let mut from = vec![vec![vec![0usize; m]; m]; n + 1];
+    for b in 1..m {
+        if slope(0, b) > 0.0 {
+            best[1][0][b] = cost[0][b];
+        }
+    }
+    for k in 2..=n {
+        for a in (k - 1)..m {
+            for b in a + 1..m {
+                let s_ab = slope(a, b);
+                if s_ab <= 0.0 {
+                    continue;
+                }
+                let mut bc = inf;
+                let mut bp = 0;
+                for p in (k - 2)..a {
+                    let c = best[k - 1][p][a];
+                    if c < bc && slope(p, a) > s_ab {
+                        bc = c;
+                        bp = p;
+                    }
+                }
+                if bc < inf {
+                    best[k][a][b] = bc + cost[a][b];
+                    from[k][a][b] = bp;
                 }
             }
         }
     }
-    let (last, _) =
-        (n..m)
-            .map(|b| (b, best[n][b] + plateau[b]))
-            .fold(
-                (n, f64::INFINITY),
-                |acc, (b, c)| if c < acc.1 { (b, c) } else { acc },
-            );
-    let mut knots = vec![last];
-    let mut b = last;
+    // A measured virgin curve stops at breakaway, so its last point is the last knot (the
+    // plateau beyond it is Fs).
+    let last = m - 1;
+    let end = best[n]
+        .iter()
+        .enumerate()
+        .filter(|(_, row)| row[last] < inf)
+        .min_by(|x, y| x.1[last].total_cmp(&y.1[last]))
+        .map(|(a, _)| (a, last));
+    let (mut a, mut b) =
+        end.ok_or("the virgin curve admits no concave fit with that many blocks")?;
+    let mut knots = vec![b];
     for k in (1..=n).rev() {
-        b = from[k][b];
-        knots.push(b);
+        knots.push(a);
+        let p = from[k][a][b];
+        b = a;
+        a = p;
     }
-    knots.reverse(); // knots[0] = 0 (origin), knots[n] = last
+    knots.reverse(); // knots[0] = 0 (origin), knots[n] = the plateau's start
     let d: Vec<f64> = knots[1..].iter().map(|&i| xs[i]).collect();
-    // Linear least squares for k on the basis phi_i(x) = min(x, D_i).
+    // Chord slopes s_1 > … > s_n > 0 give k_i = s_i - s_(i+1) > 0.
+    let slopes: Vec<f64> = knots.windows(2).map(|w| slope(w[0], w[1])).collect();
+    let chord_k: Vec<f64> = (0..n)
+        .map(|i| slopes[i] - slopes.get(i + 1).copied().unwrap_or(0.0))
+        .collect();
+    // Refine by linear least squares on the basis min(x, D_i); keep the chords' stiffnesses
+    // when that would break concavity.
     let rows = m;
-    let a = OMatrix::<f64, Dyn, Dyn>::from_fn(rows, n, |r, c| xs[r].min(d[c]));
+    let a_mat = OMatrix::<f64, Dyn, Dyn>::from_fn(rows, n, |r, c| xs[r].min(d[c]));
     let y = OVector::<f64, Dyn>::from_column_slice(&fs);
-    let ata = a.transpose() * &a;
-    let aty = a.transpose() * &y;
-    let k = ata
-        .lu()
-        .solve(&aty)
-        .ok_or("the pre-sliding fit is singular (breakpoints too close)")?;
+    let ata = a_mat.transpose() * &a_mat;
+    let aty = a_mat.transpose() * &y;
+    let k = match ata.lu().solve(&aty) {
+        Some(k) if k.iter().all(|v| *v > 0.0) => k,
+        _ => OVector::<f64, Dyn>::from_vec(chord_k),
+    };
     if let Some(i) = k.iter().position(|v| v.is_nan() || *v <= 0.0) {
         return Err(format!(
             "the virgin curve is not concave near breakpoint {} ({:.3e}): no positive stiffness fits",
@@ -146,7 +174,7 @@ pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
         ));
     }
     let fs_plateau: f64 = k.iter().zip(&d).map(|(k, d)| k * d).sum();
-    let resid = &a * &k - &y;
+    let resid = &a_mat * &k - &y;
     let rms = (resid.norm_squared() / rows as f64).sqrt();
     let blocks = k
         .iter()
@@ -336,4 +364,214 @@ pub fn fit_stribeck(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
         ));
     }
     Ok(fit)
+}
+
+/// Reads a CSV with a header; returns the named columns (missing optional ones as `None`).
+fn read_columns(
+    path: &std::path::Path,
+    names: &[&str],
+    optional: &[&str],
+) -> Result<Vec<Vec<f64>>, String> {
+    let file = path.display().to_string();
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| format!("{file}: cannot read: {e}"))?;
+    let headers = rdr
+        .headers()
+        .map_err(|e| format!("{file}: bad header: {e}"))?
+        .clone();
+    let mut idx = Vec::new();
+    for n in names.iter().chain(optional) {
+        let i = headers.iter().position(|h| h == *n);
+        if i.is_none() && names.contains(n) {
+            return Err(format!("{file}: the header has no `{n}` column"));
+        }
+        idx.push(i);
+    }
+    let mut cols = vec![Vec::new(); idx.len()];
+    for (row, rec) in rdr.records().enumerate() {
+        let rec = rec.map_err(|e| format!("{file}: row {}: {e}", row + 2))?;
+        for (c, i) in idx.iter().enumerate() {
+            if let Some(i) = i {
+                let s = rec
+                    .get(*i)
+                    .ok_or(format!("{file}:{}: short row", row + 2))?;
+                let v: f64 = s
+                    .parse()
+                    .map_err(|_| format!("{file}:{}: not a number: {s:?}", row + 2))?;
+                if !v.is_finite() {
+                    return Err(format!("{file}:{}: non-finite value", row + 2));
+                }
+                cols[c].push(v);
+            }
+        }
+    }
+    Ok(cols)
+}
+
+/// The outcome of `identify`: the friction table and a text report.
+pub struct Identified {
+    /// The identified `[friction]` table.
+    pub spec: crate::paramfile::FrictionSpec,
+    /// Parameters, uncertainties, residuals and assumptions, one per line.
+    pub report: Vec<String>,
+    /// The virgin-curve fit, if pre-sliding data was given.
+    pub virgin: Option<VirginFit>,
+    /// The sliding fit, if sliding data was given.
+    pub stribeck: Option<StribeckFit>,
+}
+
+/// `hil-sim identify`: fits the pre-sliding data (`x,f[,dir]`: the virgin curves, averaged
+/// over both directions as the paper does) and the sliding data (`v,f`, both directions
+/// pooled by magnitude) into a parameter table. With pre-sliding data only, the sliding
+/// values are placeholders (fc = fs: no Stribeck drop), with sliding only, a static map.
+/// C follows the paper's rule C = 1/Vs (in mN·m/s, DESIGN §3), printed as an assumption.
+pub fn identify(
+    pre: Option<&std::path::Path>,
+    slide: Option<&std::path::Path>,
+    blocks: usize,
+) -> Result<Identified, String> {
+    use crate::paramfile::{FrictionSpec, ModelKind};
+    if pre.is_none() && slide.is_none() {
+        return Err("give --presliding and/or --sliding data".into());
+    }
+    let mut report = Vec::new();
+    let virgin = match pre {
+        None => None,
+        Some(p) => {
+            let cols = read_columns(p, &["x", "f"], &["dir"])?;
+            let (x, f) = (&cols[0], &cols[1]);
+            let dir = cols.get(2).filter(|d| !d.is_empty());
+            let side = |want: f64| -> (Vec<f64>, Vec<f64>) {
+                x.iter()
+                    .zip(f)
+                    .enumerate()
+                    .filter(|(i, _)| dir.is_none_or(|d| d[*i] * want > 0.0))
+                    .map(|(_, (x, f))| (x.abs(), f.abs()))
+                    .unzip()
+            };
+            let (xp, fp) = side(1.0);
+            let (xn, fn_) = side(-1.0);
+            // The paper's average of both directions, point by point (same load steps).
+            let (xa, fa): (Vec<f64>, Vec<f64>) = if dir.is_some() && !xn.is_empty() {
+                let n = xp.len().min(xn.len());
+                (0..n)
+                    .map(|i| ((xp[i] + xn[i]) / 2.0, (fp[i] + fn_[i]) / 2.0))
+                    .unzip()
+            } else {
+                (xp, fp)
+            };
+            // The encoder reads the same count for several small loads: one point per
+            // count (mean load); rest (x = 0) is the origin the fit adds itself.
+            let mut xm: Vec<f64> = Vec::new();
+            let mut fm: Vec<f64> = Vec::new();
+            let mut nm: Vec<f64> = Vec::new();
+            for (&x, &f) in xa.iter().zip(&fa) {
+                if x <= 0.0 {
+                    continue;
+                }
+                match xm.last() {
+                    Some(&last) if x == last => {
+                        let i = xm.len() - 1;
+                        fm[i] += f;
+                        nm[i] += 1.0;
+                    }
+                    _ => {
+                        xm.push(x);
+                        fm.push(f);
+                        nm.push(1.0);
+                    }
+                }
+            }
+            for (f, n) in fm.iter_mut().zip(&nm) {
+                *f /= n;
+            }
+            let (xa, fa) = (xm, fm);
+            let fit = fit_virgin(&xa, &fa, blocks).map_err(|e| format!("{}: {e}", p.display()))?;
+            report.push(format!(
+                "pre-sliding: {} points, {} blocks, plateau Fs {:.4e}, RMS residual {:.3e} ({:.2} % of Fs)",
+                xa.len(),
+                blocks,
+                fit.fs,
+                fit.rms,
+                100.0 * fit.rms / fit.fs
+            ));
+            for (i, (b, d)) in fit.blocks.iter().zip(&fit.breakpoints).enumerate() {
+                report.push(format!(
+                    "  block {}: k {:.4e}, alpha {:.4}, D {:.4e}",
+                    i + 1,
+                    b.k,
+                    b.alpha,
+                    d
+                ));
+            }
+            Some(fit)
+        }
+    };
+    let stribeck = match slide {
+        None => None,
+        Some(p) => {
+            let cols = read_columns(p, &["v", "f"], &[])?;
+            let v: Vec<f64> = cols[0].iter().map(|v| v.abs()).collect();
+            let f: Vec<f64> = cols[1].iter().map(|f| f.abs()).collect();
+            let keep: Vec<usize> = (0..v.len()).filter(|&i| v[i] > 0.0).collect();
+            let v: Vec<f64> = keep.iter().map(|&i| v[i]).collect();
+            let f: Vec<f64> = keep.iter().map(|&i| f[i]).collect();
+            let fit = fit_stribeck(&v, &f).map_err(|e| format!("{}: {e}", p.display()))?;
+            let se = fit.std_err.unwrap_or([f64::NAN; 5]);
+            report.push(format!(
+                "sliding: {} points, RMS residual {:.3e}; fs {:.4e} ± {:.1e}, fc {:.4e} ± {:.1e}, vs {:.4e} ± {:.1e}, delta {:.4} ± {:.1e}, sigma {:.4e} ± {:.1e} (one sigma)",
+                v.len(), fit.rms, fit.fs, se[0], fit.fc, se[1], fit.vs, se[2], fit.delta, se[3], fit.sigma, se[4]
+            ));
+            Some(fit)
+        }
+    };
+    let spec = match (&virgin, &stribeck) {
+        (Some(vf), s) => {
+            let (fs, fc, vs, delta, sigma) = match s {
+                Some(s) => (s.fs, s.fc, s.vs, s.delta, s.sigma),
+                None => {
+                    report.push("assumed: no sliding data, so fc = fs (no Stribeck drop), vs = 1, delta = 1, sigma = 0".into());
+                    (vf.fs, vf.fs, 1.0, 1.0, 0.0)
+                }
+            };
+            let c = 1e-3 / vs;
+            report.push(format!(
+                "assumed: C = 1/Vs in mN·m/s (paper, DESIGN §3): c = {c:.4e}"
+            ));
+            FrictionSpec {
+                model: ModelKind::Gms,
+                fs: Some(fs),
+                fc: Some(fc),
+                vs: Some(vs),
+                delta: Some(delta),
+                sigma: Some(sigma),
+                c: Some(c),
+                blocks: Some(vf.blocks.clone()),
+                ..FrictionSpec::default()
+            }
+        }
+        (None, Some(s)) => {
+            report.push("no pre-sliding data: a static map (Stribeck + Coulomb + viscous)".into());
+            FrictionSpec {
+                model: ModelKind::Static,
+                fs: Some(s.fs),
+                fc: Some(s.fc),
+                vs: Some(s.vs),
+                delta: Some(s.delta),
+                sigma: Some(s.sigma),
+                ..FrictionSpec::default()
+            }
+        }
+        (None, None) => return Err("give --presliding and/or --sliding data".into()),
+    };
+    spec.build()
+        .map_err(|e| format!("the identified set is invalid: {e}"))?;
+    Ok(Identified {
+        spec,
+        report,
+        virgin,
+        stribeck,
+    })
 }

@@ -8,6 +8,7 @@
 
 pub mod commands;
 pub mod device;
+pub mod experiment;
 pub mod friction_cmd;
 pub mod identify;
 pub mod paramfile;

@@ -85,6 +85,39 @@ enum Cmd {
         #[arg(long, value_name = "SCENARIO.toml")]
         scenario: Option<PathBuf>,
     },
+    /// Simulate an identification experiment of the paper on the friction in P.toml.
+    Experiment {
+        /// presliding, sliding or guideway.
+        #[arg(value_parser = ["presliding", "sliding", "guideway"])]
+        kind: String,
+        /// Parameter file whose [friction] is the friction measured.
+        #[arg(long, value_name = "P.toml")]
+        params: PathBuf,
+        /// Output CSV.
+        #[arg(long, value_name = "DATA.csv")]
+        out: PathBuf,
+        /// Seed of the friction draw and the noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Friction variability per run, ± fraction (the paper saw 0.15).
+        #[arg(long, default_value_t = 0.0)]
+        variability: f64,
+    },
+    /// Identify GMS parameters from experiment data; writes a parameter file.
+    Identify {
+        /// Pre-sliding data (x,f[,dir]).
+        #[arg(long, value_name = "PRE.csv")]
+        presliding: Option<PathBuf>,
+        /// Sliding data (v,f).
+        #[arg(long, value_name = "SLIDE.csv")]
+        sliding: Option<PathBuf>,
+        /// Number of Maxwell-slip blocks.
+        #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=32))]
+        blocks: u32,
+        /// Output parameter file.
+        #[arg(long, value_name = "P.toml")]
+        out: PathBuf,
+    },
     /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
     /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
     Demo {
@@ -222,6 +255,62 @@ fn main() -> ExitCode {
                 let _ = std::io::stdout().flush();
             })
         }),
+        Cmd::Experiment {
+            kind,
+            params,
+            out,
+            seed,
+            variability,
+        } => (|| {
+            use hil_sim::experiment::{Kind, Setup, run};
+            if !(0.0..0.9).contains(&variability) {
+                return Err("--variability must be in [0, 0.9)".to_string());
+            }
+            let pf = hil_sim::paramfile::ParamFile::load(&params).map_err(|e| e.to_string())?;
+            pf.friction
+                .build()
+                .map_err(|e| format!("{}: {e}", params.display()))?;
+            let k = match kind.as_str() {
+                "presliding" => Kind::Presliding,
+                "sliding" => Kind::Sliding,
+                _ => Kind::Guideway,
+            };
+            let setup = Setup::paper(k, &pf.friction, variability);
+            let text = run(k, &pf.friction, &setup, seed)?;
+            commands::write_atomic(&out, text.as_bytes())?;
+            println!("{} rows to {}", text.lines().count() - 1, out.display());
+            Ok(())
+        })(),
+        Cmd::Identify {
+            presliding,
+            sliding,
+            blocks,
+            out,
+        } => (|| {
+            let id = hil_sim::identify::identify(
+                presliding.as_deref(),
+                sliding.as_deref(),
+                blocks as usize,
+            )?;
+            for l in &id.report {
+                println!("{l}");
+            }
+            let file = hil_sim::paramfile::ParamFile {
+                friction: id.spec,
+                device: None,
+            };
+            let text = format!(
+                "# identified by hil-sim identify\n{}",
+                id.report
+                    .iter()
+                    .map(|l| format!("# {l}\n"))
+                    .collect::<String>()
+                    + &file.to_toml()
+            );
+            commands::write_atomic(&out, text.as_bytes())?;
+            println!("wrote {}", out.display());
+            Ok(())
+        })(),
         Cmd::Demo { out, runs } => (|| {
             let sc = Scenario::default();
             std::fs::create_dir_all(&out)
