@@ -410,8 +410,12 @@ fn read_columns(
     Ok(cols)
 }
 
-/// The outcome of `identify`: the friction table and a text report.
+/// The outcome of `identify`: the friction table, a text report and the data used.
 pub struct Identified {
+    /// The averaged virgin-curve points that were fitted (x, F).
+    pub virgin_data: Vec<(f64, f64)>,
+    /// The sliding points that were fitted (|v|, |F|).
+    pub sliding_data: Vec<(f64, f64)>,
     /// The identified `[friction]` table.
     pub spec: crate::paramfile::FrictionSpec,
     /// Parameters, uncertainties, residuals and assumptions, one per line.
@@ -437,6 +441,8 @@ pub fn identify(
         return Err("give --presliding and/or --sliding data".into());
     }
     let mut report = Vec::new();
+    let mut virgin_data = Vec::new();
+    let mut sliding_data = Vec::new();
     let virgin = match pre {
         None => None,
         Some(p) => {
@@ -488,6 +494,7 @@ pub fn identify(
                 *f /= n;
             }
             let (xa, fa) = (xm, fm);
+            virgin_data = xa.iter().copied().zip(fa.iter().copied()).collect();
             let fit = fit_virgin(&xa, &fa, blocks).map_err(|e| format!("{}: {e}", p.display()))?;
             report.push(format!(
                 "pre-sliding: {} points, {} blocks, plateau Fs {:.4e}, RMS residual {:.3e} ({:.2} % of Fs)",
@@ -518,6 +525,7 @@ pub fn identify(
             let keep: Vec<usize> = (0..v.len()).filter(|&i| v[i] > 0.0).collect();
             let v: Vec<f64> = keep.iter().map(|&i| v[i]).collect();
             let f: Vec<f64> = keep.iter().map(|&i| f[i]).collect();
+            sliding_data = v.iter().copied().zip(f.iter().copied()).collect();
             let fit = fit_stribeck(&v, &f).map_err(|e| format!("{}: {e}", p.display()))?;
             let se = fit.std_err.unwrap_or([f64::NAN; 5]);
             report.push(format!(
@@ -569,9 +577,80 @@ pub fn identify(
     spec.build()
         .map_err(|e| format!("the identified set is invalid: {e}"))?;
     Ok(Identified {
+        virgin_data,
+        sliding_data,
         spec,
         report,
         virgin,
         stribeck,
     })
+}
+
+/// Writes `report.txt`, `virgin.svg` (the averaged virgin curve against the identified
+/// blocks, as the paper's Fig. 1 right and Fig. 2) and `stribeck.svg` (the sliding data against
+/// the fitted curve, over log10 of the speed) into `dir`.
+pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let text: String = id.report.iter().map(|l| format!("{l}\n")).collect();
+    crate::commands::write_atomic(&dir.join("report.txt"), text.as_bytes())?;
+    if let Some(v) = &id.virgin {
+        let xmax = id.virgin_data.last().map_or(1.0, |p| p.0) * 1.2;
+        let curve: Vec<(f64, f64)> = (0..=400)
+            .map(|i| {
+                let x = xmax * i as f64 / 400.0;
+                let f: f64 = v
+                    .blocks
+                    .iter()
+                    .zip(&v.breakpoints)
+                    .map(|(b, d)| b.k * x.min(*d))
+                    .sum();
+                (x, f)
+            })
+            .collect();
+        let mut pts = vec![(0.0, 0.0)];
+        pts.extend_from_slice(&id.virgin_data);
+        crate::plot::fit_plot(
+            &dir.join("virgin.svg"),
+            &format!(
+                "pre-sliding virgin curve, {} blocks (RMS residual {:.2} % of Fs)",
+                v.blocks.len(),
+                100.0 * v.rms / v.fs
+            ),
+            ("displacement [m or rad]", "friction [N or N·m]"),
+            &pts,
+            &curve,
+        )?;
+    }
+    if let Some(s) = &id.stribeck {
+        let (lo, hi) = id
+            .sliding_data
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+        let curve: Vec<(f64, f64)> = (0..=400)
+            .map(|i| {
+                let lv = lo.log10() + (hi.log10() - lo.log10()) * i as f64 / 400.0;
+                let v = 10f64.powf(lv);
+                (
+                    lv,
+                    s.fc + (s.fs - s.fc) * (-(v / s.vs).powf(s.delta)).exp() + s.sigma * v,
+                )
+            })
+            .collect();
+        let pts: Vec<(f64, f64)> = id
+            .sliding_data
+            .iter()
+            .map(|&(v, f)| (v.log10(), f))
+            .collect();
+        crate::plot::fit_plot(
+            &dir.join("stribeck.svg"),
+            &format!(
+                "sliding: Stribeck + viscous fit (Vs {:.3e}, delta {:.3})",
+                s.vs, s.delta
+            ),
+            ("log10 speed [m/s or rad/s]", "friction [N or N·m]"),
+            &pts,
+            &curve,
+        )?;
+    }
+    Ok(())
 }

@@ -117,6 +117,9 @@ enum Cmd {
         /// Output parameter file.
         #[arg(long, value_name = "P.toml")]
         out: PathBuf,
+        /// Directory for report.txt, virgin.svg and stribeck.svg.
+        #[arg(long, value_name = "DIR")]
+        report: Option<PathBuf>,
     },
     /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
     /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
@@ -286,6 +289,7 @@ fn main() -> ExitCode {
             sliding,
             blocks,
             out,
+            report,
         } => (|| {
             let id = hil_sim::identify::identify(
                 presliding.as_deref(),
@@ -294,6 +298,10 @@ fn main() -> ExitCode {
             )?;
             for l in &id.report {
                 println!("{l}");
+            }
+            if let Some(dir) = &report {
+                hil_sim::identify::write_report(&id, dir)?;
+                println!("report in {}", dir.display());
             }
             let file = hil_sim::paramfile::ParamFile {
                 friction: id.spec,

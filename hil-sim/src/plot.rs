@@ -192,3 +192,50 @@ pub fn compare_plot(
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
+
+/// Identification plots: data against model. `points` are measured (x, y); `curve` the
+/// model sampled densely; axis names with units.
+pub fn fit_plot(
+    path: &Path,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    points: &[(f64, f64)],
+    curve: &[(f64, f64)],
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (900, 650)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let e = |msg: &dyn std::fmt::Display| msg.to_string();
+    let (x0, x1) = range(points.iter().chain(curve).map(|p| p.0));
+    let (y0, y1) = range(points.iter().chain(curve).map(|p| p.1));
+    let mut c = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(80)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .x_desc(x_label)
+        .y_desc(y_label)
+        .draw()
+        .map_err(|x| e(&x))?;
+    c.draw_series(
+        points
+            .iter()
+            .map(|&(x, y)| Circle::new((x, y), 3, BLUE.filled())),
+    )
+    .map_err(|x| e(&x))?
+    .label("measured")
+    .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
+    c.draw_series(LineSeries::new(curve.iter().copied(), RED.stroke_width(2)))
+        .map_err(|x| e(&x))?
+        .label("identified model")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

@@ -1,0 +1,162 @@
+//! `hil-sim experiment` and `hil-sim identify` from the command line: files, report, and bad
+//! data (exit 2, one line, nothing written).
+
+use std::path::Path;
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
+
+fn hil(args: &[&str], cwd: &Path) -> (i32, String) {
+    let out = Command::new(BIN)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn experiments_to_an_accepted_parameter_file_and_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/table1.toml");
+    let p = p.to_str().unwrap();
+    assert_eq!(
+        hil(
+            &[
+                "experiment",
+                "presliding",
+                "--params",
+                p,
+                "--out",
+                "pre.csv"
+            ],
+            d
+        )
+        .0,
+        0
+    );
+    assert_eq!(
+        hil(
+            &[
+                "experiment",
+                "sliding",
+                "--params",
+                p,
+                "--out",
+                "sl.csv",
+                "--seed",
+                "4"
+            ],
+            d
+        )
+        .0,
+        0
+    );
+    let (code, err) = hil(
+        &[
+            "identify",
+            "--presliding",
+            "pre.csv",
+            "--sliding",
+            "sl.csv",
+            "--out",
+            "id.toml",
+            "--report",
+            "rep",
+        ],
+        d,
+    );
+    assert_eq!(code, 0, "{err}");
+    for f in ["rep/report.txt", "rep/virgin.svg", "rep/stribeck.svg"] {
+        assert!(d.join(f).exists(), "{f}");
+    }
+    let traj = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/trajectory.csv");
+    let (code, err) = hil(
+        &[
+            "friction",
+            "--params",
+            "id.toml",
+            "--input",
+            traj.to_str().unwrap(),
+            "--output",
+            "o.csv",
+        ],
+        d,
+    );
+    assert_eq!(code, 0, "the identified file is accepted as it is: {err}");
+}
+
+#[test]
+fn bad_data_exits_2_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let w = |name: &str, text: &str| std::fs::write(d.join(name), text).unwrap();
+    w("few.csv", "x,f\n1e-6,1e-6\n2e-6,2e-6\n");
+    w("nan.csv", "v,f\n0.1,NaN\n");
+    w(
+        "slow.csv",
+        &(1..20)
+            .map(|i| format!("{},{}\n", 1e-3 * i as f64, 2e-4))
+            .fold(String::from("v,f\n"), |a, l| a + &l),
+    );
+    w(
+        "falling.csv",
+        &(1..30)
+            .map(|i| format!("{},{}\n", 1e-5 * i as f64, 1.0 - 0.03 * i as f64))
+            .fold(String::from("x,f\n"), |a, l| a + &l),
+    );
+    w("nocol.csv", "a,b\n1,2\n");
+    let cases: [(&[&str], &str); 6] = [
+        (
+            &["identify", "--presliding", "missing.csv", "--out", "o.toml"],
+            "missing.csv",
+        ),
+        (
+            &["identify", "--presliding", "few.csv", "--out", "o.toml"],
+            "too few",
+        ),
+        (
+            &["identify", "--sliding", "nan.csv", "--out", "o.toml"],
+            "nan.csv",
+        ),
+        (
+            &["identify", "--sliding", "slow.csv", "--out", "o.toml"],
+            "slow.csv",
+        ),
+        (
+            &["identify", "--presliding", "falling.csv", "--out", "o.toml"],
+            "not monotonic",
+        ),
+        (
+            &["identify", "--presliding", "nocol.csv", "--out", "o.toml"],
+            "`x`",
+        ),
+    ];
+    for (args, want) in cases {
+        let (code, err) = hil(args, d);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(want), "{err:?} should contain {want:?}");
+        assert!(!d.join("o.toml").exists());
+    }
+    assert_eq!(hil(&["identify", "--out", "o.toml"], d).0, 2);
+    assert_eq!(
+        hil(
+            &[
+                "experiment",
+                "presliding",
+                "--params",
+                "missing.toml",
+                "--out",
+                "x.csv"
+            ],
+            d
+        )
+        .0,
+        2
+    );
+}
