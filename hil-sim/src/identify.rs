@@ -436,6 +436,19 @@ pub fn identify(
     slide: Option<&std::path::Path>,
     blocks: usize,
 ) -> Result<Identified, String> {
+    identify_with(pre, slide, blocks, false)
+}
+
+/// [`identify`], with `asymmetric`: the sliding data of each direction fitted separately, the
+/// negative one written as `[friction.negative]` (fs, fc, vs, delta; sigma is the positive
+/// fit's).
+pub fn identify_with(
+    pre: Option<&std::path::Path>,
+    slide: Option<&std::path::Path>,
+    blocks: usize,
+    asymmetric: bool,
+) -> Result<Identified, String> {
+    let mut negative_fit: Option<StribeckFit> = None;
     use crate::paramfile::{FrictionSpec, ModelKind};
     if pre.is_none() && slide.is_none() {
         return Err("give --presliding and/or --sliding data".into());
@@ -520,8 +533,27 @@ pub fn identify(
         None => None,
         Some(p) => {
             let cols = read_columns(p, &["v", "f"], &[])?;
-            let v: Vec<f64> = cols[0].iter().map(|v| v.abs()).collect();
-            let f: Vec<f64> = cols[1].iter().map(|f| f.abs()).collect();
+            if asymmetric {
+                let (vn, fn_): (Vec<f64>, Vec<f64>) = cols[0]
+                    .iter()
+                    .zip(&cols[1])
+                    .filter(|(v, _)| **v < 0.0)
+                    .map(|(v, f)| (-v, f.abs()))
+                    .unzip();
+                let fit = fit_stribeck(&vn, &fn_)
+                    .map_err(|e| format!("{} (negative direction): {e}", p.display()))?;
+                report.push(format!(
+                    "sliding, v < 0: {} points; fs {:.4e}, fc {:.4e}, vs {:.4e}, delta {:.4}, sigma {:.4e}",
+                    vn.len(), fit.fs, fit.fc, fit.vs, fit.delta, fit.sigma
+                ));
+                negative_fit = Some(fit);
+            }
+            let (v, f): (Vec<f64>, Vec<f64>) = cols[0]
+                .iter()
+                .zip(&cols[1])
+                .filter(|(v, _)| !asymmetric || **v > 0.0)
+                .map(|(v, f)| (v.abs(), f.abs()))
+                .unzip();
             let keep: Vec<usize> = (0..v.len()).filter(|&i| v[i] > 0.0).collect();
             let v: Vec<f64> = keep.iter().map(|&i| v[i]).collect();
             let f: Vec<f64> = keep.iter().map(|&i| f[i]).collect();
@@ -574,6 +606,15 @@ pub fn identify(
         }
         (None, None) => return Err("give --presliding and/or --sliding data".into()),
     };
+    let mut spec = spec;
+    if let Some(n) = &negative_fit {
+        spec.negative = Some(crate::paramfile::NegativeSpec {
+            fs: Some(n.fs),
+            fc: Some(n.fc),
+            vs: Some(n.vs),
+            delta: Some(n.delta),
+        });
+    }
     spec.build()
         .map_err(|e| format!("the identified set is invalid: {e}"))?;
     Ok(Identified {

@@ -120,6 +120,9 @@ enum Cmd {
         /// Directory for report.txt, virgin.svg and stribeck.svg.
         #[arg(long, value_name = "DIR")]
         report: Option<PathBuf>,
+        /// Fit each sliding direction separately ([friction.negative] for v < 0).
+        #[arg(long)]
+        asymmetric: bool,
     },
     /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
     /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
@@ -290,11 +293,13 @@ fn main() -> ExitCode {
             blocks,
             out,
             report,
+            asymmetric,
         } => (|| {
-            let id = hil_sim::identify::identify(
+            let id = hil_sim::identify::identify_with(
                 presliding.as_deref(),
                 sliding.as_deref(),
                 blocks as usize,
+                asymmetric,
             )?;
             for l in &id.report {
                 println!("{l}");

@@ -86,3 +86,30 @@ fn the_guideway_presliding_is_identified_back() {
         assert!(r < 0.02, "virgin curve RMS {:.3} % of Fs", 100.0 * r);
     }
 }
+
+/// `--asymmetric`: a friction with its own negative branch is identified per direction.
+#[test]
+fn the_direction_asymmetry_is_identified_per_direction() {
+    let mut truth = ParamFile::load(&example("table1.toml")).unwrap().friction;
+    truth.negative = Some(hil_sim::paramfile::NegativeSpec {
+        fs: Some(250e-6),
+        fc: Some(140e-6),
+        vs: None,
+        delta: None,
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let mut paths = Vec::new();
+    for (i, k) in [Kind::Presliding, Kind::Sliding].iter().enumerate() {
+        let text = run(*k, &truth, &Setup::paper(*k, &truth, 0.0), 7 + i as u64).unwrap();
+        let p = dir.path().join(format!("{i}.csv"));
+        std::fs::write(&p, text).unwrap();
+        paths.push(p);
+    }
+    let id = hil_sim::identify::identify_with(Some(&paths[0]), Some(&paths[1]), 6, true).unwrap();
+    let n = id.spec.negative.unwrap();
+    assert!((n.fs.unwrap() / 250e-6 - 1.0).abs() < 0.03, "{n:?}");
+    assert!((n.fc.unwrap() / 140e-6 - 1.0).abs() < 0.03, "{n:?}");
+    assert!((id.spec.fs.unwrap() / 220e-6 - 1.0).abs() < 0.03);
+    assert!((id.spec.fc.unwrap() / 125e-6 - 1.0).abs() < 0.03);
+    assert!(id.spec.build().is_ok());
+}
