@@ -247,9 +247,13 @@ fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<
     link.request(&format!("stream {fields} {rate}"))?;
     link.listen(Duration::from_secs_f64(seconds))?;
     link.request("stream off")?;
+    Ok(telemetry_rows(link, fields))
+}
+
+/// The telemetry collected so far as rows of `fields` (comma-separated; NaN where missing).
+fn telemetry_rows(link: &Link, fields: &str) -> Vec<Vec<f64>> {
     let names: Vec<&str> = fields.split(',').collect();
-    Ok(link
-        .telemetry
+    link.telemetry
         .iter()
         .map(|(_, l)| {
             let kv = parse_telemetry(l);
@@ -258,7 +262,7 @@ fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<
                 .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
                 .collect()
         })
-        .collect())
+        .collect()
 }
 
 fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
@@ -348,18 +352,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             link.request(&format!("move {}", pos0 + distance))?;
             link.listen(Duration::from_secs_f64(seconds))?;
             link.request("stream off")?;
-            let names: Vec<&str> = fields.split(',').collect();
-            let rows: Vec<Vec<f64>> = link
-                .telemetry
-                .iter()
-                .map(|(_, l)| {
-                    let kv = parse_telemetry(l);
-                    names
-                        .iter()
-                        .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
-                        .collect()
-                })
-                .collect();
+            let rows = telemetry_rows(&link, fields);
             write_csv(&out.join("trace.csv"), fields, &rows)?;
             let trace: Vec<hil_sim::sim::TraceRow> = rows
                 .iter()
