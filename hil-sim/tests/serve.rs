@@ -1,54 +1,19 @@
 //! The virtual device end to end over TCP: a real `hil-sim serve` process and raw sockets.
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
+mod common;
+use common::Server;
 
-/// A running `hil-sim serve`, killed on drop.
-struct Server {
-    child: Child,
-    addr: String,
-}
-
-impl Server {
-    fn start(store: &Path) -> Server {
-        let mut child = Command::new(BIN)
-            .args(["serve", "--tcp", "127.0.0.1:0", "--store"])
-            .arg(store)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let addr = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap()
-            .to_string();
-        Server { child, addr }
-    }
-
-    fn connect(&self) -> Client {
-        let s = TcpStream::connect(&self.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
-        Client {
-            s,
-            pending: String::new(),
-        }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+/// A raw TCP client of the device.
+fn connect(srv: &Server) -> Client {
+    let s = TcpStream::connect(&srv.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+    Client {
+        s,
+        pending: String::new(),
     }
 }
 
@@ -100,8 +65,8 @@ fn set_save_restart_and_read_back() {
     let dir = tempfile::tempdir().unwrap();
     let store = dir.path().join("flash.toml");
     {
-        let srv = Server::start(&store);
-        let mut c = srv.connect();
+        let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+        let mut c = connect(&srv);
         assert_eq!(c.ask("get pos.kp"), "ok 0.2");
         assert_eq!(c.ask("set pos.kp 0.31"), "ok");
         assert_eq!(c.ask("set ff.mode static"), "ok");
@@ -115,8 +80,8 @@ fn set_save_restart_and_read_back() {
         assert_eq!(c.ask("save"), "ok");
         assert_eq!(c.ask("set pos.kp 0.5"), "ok");
     }
-    let srv = Server::start(&store);
-    let mut c = srv.connect();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    let mut c = connect(&srv);
     assert_eq!(c.ask("get pos.kp"), "ok 0.31");
     assert_eq!(c.ask("get ff.mode"), "ok static");
     assert!(c.ask("status").contains("faults=0"));
@@ -131,8 +96,8 @@ fn a_corrupt_store_means_defaults_and_a_fault() {
     let dir = tempfile::tempdir().unwrap();
     let store = dir.path().join("flash.toml");
     std::fs::write(&store, "\"pos.kp\" = \"half\"\n").unwrap();
-    let srv = Server::start(&store);
-    let mut c = srv.connect();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    let mut c = connect(&srv);
     assert_eq!(c.ask("get pos.kp"), "ok 0.2");
     assert!(c.ask("status").contains("faults=1"));
     assert!(c.ask("enable").starts_with("err 8 "));
@@ -143,8 +108,8 @@ fn a_corrupt_store_means_defaults_and_a_fault() {
 #[test]
 fn garbage_floods_and_dropped_clients_leave_the_device_running() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&dir.path().join("flash.toml"));
-    let mut c = srv.connect();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let mut c = connect(&srv);
     c.s.write_all(b"\x00\x01\xfe\xff\x1b[2J\n").unwrap();
     assert!(c.reply().pop().unwrap().starts_with("err 4 "));
     c.s.write_all(&[b'z'; 10_000]).unwrap();
@@ -163,7 +128,7 @@ fn garbage_floods_and_dropped_clients_leave_the_device_running() {
     // Disconnect in the middle of a line; the next client is served.
     c.s.write_all(b"set pos.k").unwrap();
     drop(c);
-    let mut c2 = srv.connect();
+    let mut c2 = connect(&srv);
     assert_eq!(c2.ask("get pos.ki"), "ok 249");
     assert_eq!(c2.ask("get pos.kp"), "ok 0.2");
 }
@@ -171,8 +136,8 @@ fn garbage_floods_and_dropped_clients_leave_the_device_running() {
 #[test]
 fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&dir.path().join("flash.toml"));
-    let mut c = srv.connect();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let mut c = connect(&srv);
     assert_eq!(c.ask("enable"), "ok");
     assert_eq!(c.ask("stream t,error,ff 200"), "ok");
     assert_eq!(c.ask("move 0.002"), "ok");

@@ -1,59 +1,33 @@
 //! `gms-tune` against a real `hil-sim serve` over TCP, end to end.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 
 const SIM: &str = env!("CARGO_BIN_EXE_hil-sim");
 const TUNE: &str = env!("CARGO_BIN_EXE_gms-tune");
 
-struct Server {
-    child: Child,
-    addr: String,
+mod common;
+use common::Server;
+
+/// Runs gms-tune on `link` (`--tcp` or `--port`) to `srv`; returns (exit code, stdout,
+/// stderr).
+fn tune_on(srv: &Server, link: &str, args: &[&str], cwd: &Path) -> (i32, String, String) {
+    let out = Command::new(TUNE)
+        .args([link, &srv.addr])
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
 }
 
-impl Server {
-    fn start(store: &Path) -> Server {
-        let mut child = Command::new(SIM)
-            .args(["serve", "--tcp", "127.0.0.1:0", "--store"])
-            .arg(store)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let addr = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap()
-            .to_string();
-        Server { child, addr }
-    }
-
-    /// Runs gms-tune; returns (exit code, stdout, stderr).
-    fn tune(&self, args: &[&str], cwd: &Path) -> (i32, String, String) {
-        let out = Command::new(TUNE)
-            .args(["--tcp", &self.addr])
-            .args(args)
-            .current_dir(cwd)
-            .output()
-            .unwrap();
-        (
-            out.status.code().unwrap_or(-1),
-            String::from_utf8_lossy(&out.stdout).into_owned(),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// gms-tune over TCP.
+fn tune(srv: &Server, args: &[&str], cwd: &Path) -> (i32, String, String) {
+    tune_on(srv, "--tcp", args, cwd)
 }
 
 #[test]
@@ -62,23 +36,23 @@ fn set_save_restart_dump_and_load() {
     let d = dir.path();
     let store = d.join("flash.toml");
     {
-        let srv = Server::start(&store);
-        assert_eq!(srv.tune(&["set", "pos.kd", "2.2e-4"], d).0, 0);
-        assert_eq!(srv.tune(&["set", "ff.gain", "0.9"], d).0, 0);
-        let (code, _, err) = srv.tune(&["set", "ff.gain", "-1"], d);
+        let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+        assert_eq!(tune(&srv, &["set", "pos.kd", "2.2e-4"], d).0, 0);
+        assert_eq!(tune(&srv, &["set", "ff.gain", "0.9"], d).0, 0);
+        let (code, _, err) = tune(&srv, &["set", "ff.gain", "-1"], d);
         assert_eq!(code, 1);
         assert!(err.starts_with("error: device answered: err 6"), "{err}");
         assert_eq!(err.lines().count(), 1);
-        assert_eq!(srv.tune(&["save"], d).0, 0);
+        assert_eq!(tune(&srv, &["save"], d).0, 0);
     }
-    let srv = Server::start(&store);
-    assert_eq!(srv.tune(&["get", "pos.kd"], d).1, "0.00022\n");
-    assert_eq!(srv.tune(&["get", "ff.gain"], d).1, "0.9\n");
-    let (code, list, _) = srv.tune(&["list"], d);
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    assert_eq!(tune(&srv, &["get", "pos.kd"], d).1, "0.00022\n");
+    assert_eq!(tune(&srv, &["get", "ff.gain"], d).1, "0.9\n");
+    let (code, list, _) = tune(&srv, &["list"], d);
     assert_eq!(code, 0);
     assert!(list.lines().count() >= 36 && list.contains("gms.k6"));
     // dump → a parameter file the friction command accepts as it is.
-    let (code, dump, _) = srv.tune(&["params", "dump"], d);
+    let (code, dump, _) = tune(&srv, &["params", "dump"], d);
     assert_eq!(code, 0);
     std::fs::write(d.join("p.toml"), &dump).unwrap();
     let fr = Command::new(SIM)
@@ -94,19 +68,20 @@ fn set_save_restart_dump_and_load() {
         String::from_utf8_lossy(&fr.stderr)
     );
     // Change things, load the dump back, and read the old values.
-    assert_eq!(srv.tune(&["set", "gms.fs", "300e-6"], d).0, 0);
-    assert_eq!(srv.tune(&["set", "pos.kd", "1e-4"], d).0, 0);
-    assert_eq!(srv.tune(&["params", "load", "p.toml"], d).0, 0);
-    assert_eq!(srv.tune(&["get", "gms.fs"], d).1, "0.00022\n");
-    assert_eq!(srv.tune(&["get", "pos.kd"], d).1, "0.00022\n");
+    assert_eq!(tune(&srv, &["set", "gms.fs", "300e-6"], d).0, 0);
+    assert_eq!(tune(&srv, &["set", "pos.kd", "1e-4"], d).0, 0);
+    assert_eq!(tune(&srv, &["params", "load", "p.toml"], d).0, 0);
+    assert_eq!(tune(&srv, &["get", "gms.fs"], d).1, "0.00022\n");
+    assert_eq!(tune(&srv, &["get", "pos.kd"], d).1, "0.00022\n");
 }
 
 #[test]
 fn record_and_step_test_write_their_files() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let srv = Server::start(&d.join("flash.toml"));
-    let (code, _, err) = srv.tune(
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &d.join("flash.toml"));
+    let (code, _, err) = tune(
+        &srv,
         &[
             "record",
             "--fields",
@@ -135,7 +110,8 @@ fn record_and_step_test_write_their_files() {
     assert!(gaps.iter().all(|g| *g > 2e-3 - 2e-4), "{gaps:?}");
     let exact = gaps.iter().filter(|g| (**g - 2e-3).abs() < 2e-4).count();
     assert!(exact * 10 >= gaps.len() * 8, "{gaps:?}");
-    let (code, out, err) = srv.tune(
+    let (code, out, err) = tune(
+        &srv,
         &[
             "step-test",
             "--distance",
@@ -179,18 +155,22 @@ fn record_and_step_test_write_their_files() {
 fn send_and_watch() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let srv = Server::start(&d.join("flash.toml"));
-    assert_eq!(srv.tune(&["send", "enable"], d).0, 0);
-    assert_eq!(srv.tune(&["send", "move", "-0.002"], d).0, 0);
-    let (code, status, _) = srv.tune(&["send", "status"], d);
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &d.join("flash.toml"));
+    assert_eq!(tune(&srv, &["send", "enable"], d).0, 0);
+    assert_eq!(tune(&srv, &["send", "move", "-0.002"], d).0, 0);
+    let (code, status, _) = tune(&srv, &["send", "status"], d);
     assert_eq!(code, 0);
     assert!(status.contains("enabled=1"), "{status}");
-    let (code, out, err) = srv.tune(&["watch", "--seconds", "0.5", "--refresh-ms", "100"], d);
+    let (code, out, err) = tune(
+        &srv,
+        &["watch", "--seconds", "0.5", "--refresh-ms", "100"],
+        d,
+    );
     assert_eq!(code, 0, "{err}");
     assert!(out.starts_with("  t [s]"), "{out}");
     // Refreshes: carriage return + clear line, at least three in 0.5 s.
     assert!(out.matches("\r\x1b[K").count() >= 3, "{out:?}");
-    let (code, _, err) = srv.tune(&["send", "frobnicate"], d);
+    let (code, _, err) = tune(&srv, &["send", "frobnicate"], d);
     assert_eq!(code, 1);
     assert!(err.contains("err 1"), "{err}");
 }
@@ -229,36 +209,10 @@ fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let store = d.join("flash.toml");
-    let start = || {
-        let mut child = Command::new(SIM)
-            .args(["serve", "--pty", "--store"])
-            .arg(&store)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let path = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap()
-            .to_string();
-        Server { child, addr: path }
-    };
+    let start = || Server::start(&["--pty"], &store);
     let tune = |srv: &Server, args: &[&str]| {
-        let out = Command::new(TUNE)
-            .args(["--port", &srv.addr])
-            .args(args)
-            .current_dir(d)
-            .output()
-            .unwrap();
-        (
-            out.status.code().unwrap_or(-1),
-            String::from_utf8_lossy(&out.stdout).into_owned(),
-        )
+        let (code, out, _) = tune_on(srv, "--port", args, d);
+        (code, out)
     };
     {
         let srv = start();

@@ -1,0 +1,45 @@
+//! Shared by the end-to-end tests: a running `hil-sim serve`, killed on drop.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+/// A running `hil-sim serve`.
+pub struct Server {
+    child: Child,
+    /// What it listens on: a TCP address or a PTY path.
+    pub addr: String,
+}
+
+impl Server {
+    /// Starts `hil-sim serve ENDPOINT… --store STORE` (`["--tcp", "127.0.0.1:0"]` or
+    /// `["--pty"]`) and waits for the address it prints.
+    pub fn start(endpoint: &[&str], store: &Path) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+            .arg("serve")
+            .args(endpoint)
+            .arg("--store")
+            .arg(store)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let addr = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap()
+            .to_string();
+        Server { child, addr }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
