@@ -3,11 +3,16 @@
 //!
 //! - `presliding`: the motor torque is raised in small increments from rest, waiting at each
 //!   until the motion settles; recorded: the encoder angle (3.8 urad counts) and the torque
-//!   (current × k_M, with current-sense noise). Then the same from rest in the other direction.
+//!   (current × k_M, with current-sense noise, averaged over 100 samples of the settled
+//!   dwell). Then the same from rest in the other direction.
 //! - `sliding`: constant-velocity runs at log-spaced speeds in both directions, from 1/30 to
 //!   30 × Vs; recorded: the mean velocity from the encoder and the mean torque.
 //! - `guideway`: a tangential force raised in 10 mN increments through a compliant fibre;
 //!   displacement from a 1 nm interferometer; a new increment once the slide is almost at rest.
+//! - `lag`: frictional lag: a velocity-controlled run in sliding whose speed swings between
+//!   0.3 and 2.7 × Vs at a frequency swept from 0.2 to 20 Hz; recorded at 1 kHz: time, the
+//!   encoder angle and the torque. The friction lags the speed by the slip time constant
+//!   |s(v)|/C, which is what identifies C.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -24,6 +29,8 @@ pub enum Kind {
     Sliding,
     /// Guideway pre-sliding (force increments through a fibre, interferometer).
     Guideway,
+    /// Frictional lag in sliding (speed swept sinusoidally, encoder and torque over time).
+    Lag,
 }
 
 /// The measurement set-up.
@@ -57,7 +64,7 @@ impl Setup {
             .sum::<f64>()
             .max(1e-12);
         match kind {
-            Kind::Presliding | Kind::Sliding => Setup {
+            Kind::Presliding | Kind::Sliding | Kind::Lag => Setup {
                 resolution: 3.8e-6,
                 increment: fs / 100.0,
                 noise: 0.5e-3 * 6.6e-3,
@@ -83,6 +90,10 @@ fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     let u2: f64 = rng.random_range(0.0..1.0);
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
+
+/// Samples of the load sensor averaged at each settled increment of a pre-sliding run (the
+/// current over 5 ms at 20 kHz; the load cell likewise).
+pub const PRESLIDING_AVERAGE: usize = 100;
 
 /// Raises the load from rest in `dir` until the displacement passes `x_max` or the load
 /// reaches `f_max`, recording the settled (x, load) pairs.
@@ -114,7 +125,7 @@ fn load_steps(
         // ramp), so that the slide creeps rather than jumps.
         let ramp = 20.0 * settle_time;
         let mut settled = false;
-        while t < 40.0 * settle_time {
+        while t < 400.0 * settle_time {
             let applied = start + (load - start) * (t / ramp).min(1.0);
             let a = (dir * applied - friction - damping * v) / s.inertia;
             v += a * dt;
@@ -141,7 +152,9 @@ fn load_steps(
             break;
         }
         let measured_x = (x / s.resolution).round() * s.resolution;
-        out.push((measured_x, dir * load + s.noise * gauss(rng)));
+        // The load is read as the mean of PRESLIDING_AVERAGE samples over the settled dwell.
+        let noise = s.noise / (PRESLIDING_AVERAGE as f64).sqrt();
+        out.push((measured_x, dir * load + noise * gauss(rng)));
     }
     out
 }
@@ -212,5 +225,45 @@ pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<
             }
             Ok(text)
         }
+        Kind::Lag => {
+            let vs = spec.vs.ok_or("the parameter file has no vs")?;
+            Ok(lag_run(&mut model, vs, setup, &mut rng))
+        }
     }
+}
+
+/// Length of the frictional-lag run [s].
+pub const LAG_DURATION: f64 = 8.0;
+/// Sample period of the frictional-lag record [s].
+pub const LAG_SAMPLE: f64 = 1e-3;
+
+/// The frictional-lag run: speed `vs (1.5 + 1.2 sin φ(t))` with the frequency swept
+/// logarithmically from 0.2 to 20 Hz over [`LAG_DURATION`], integrated at 10 kHz, recorded at
+/// 1 kHz as `t,x,f` (angle quantised to the encoder, torque with its noise).
+fn lag_run(model: &mut AnyModel, vs: f64, s: &Setup, rng: &mut ChaCha8Rng) -> String {
+    model.reset();
+    let (f0, f1) = (0.2f64, 20.0f64);
+    let rate = (f1 / f0).ln() / LAG_DURATION;
+    // Phase of a logarithmic sweep: φ(t) = 2π f0 (e^{rate t} - 1) / rate.
+    let phase = |t: f64| 2.0 * std::f64::consts::PI * f0 * ((rate * t).exp() - 1.0) / rate;
+    // Position: the integral of the speed, exact at every sub-step (no drift in x).
+    let sub = 10;
+    let dt = LAG_SAMPLE / sub as f64;
+    let mut text = String::from("t,x,f\n");
+    let (mut x, mut f) = (0.0f64, 0.0f64);
+    let n = (LAG_DURATION / LAG_SAMPLE).round() as usize;
+    text += "0,0,0\n";
+    for i in 1..=n {
+        for j in 0..sub {
+            let t = (i - 1) as f64 * LAG_SAMPLE + (j as f64 + 0.5) * dt;
+            let v = vs * (1.5 + 1.2 * phase(t).sin());
+            let dx = v * dt;
+            x += dx;
+            f = model.advance(dx as f32, dt as f32) as f64;
+        }
+        let t = i as f64 * LAG_SAMPLE;
+        let xm = (x / s.resolution).round() * s.resolution;
+        text += &format!("{t},{xm},{}\n", f + s.noise * gauss(rng));
+    }
+    text
 }

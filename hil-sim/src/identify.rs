@@ -34,8 +34,9 @@ fn chord_sse(x: &[f64], f: &[f64], a: usize, b: usize) -> f64 {
 /// Fits `n` Maxwell-slip blocks to a measured virgin curve: `x` increasing from rest (the
 /// origin is added), `f` the friction at each `x`, up to breakaway. The breakpoints are
 /// chosen by dynamic programming over the sample positions: least squares of the chord
-/// interpolation through the knots, each chord less steep than the one before (concave), the
-/// last knot the last point; then the stiffnesses are refined by linear least squares on the
+/// interpolation through the knots, each chord less steep than the one before (concave); the
+/// last point is taken as breakaway (its level is Fs, the last block saturates where the last
+/// chord reaches it); then the stiffnesses are refined by linear least squares on the
 /// basis `min(x, D_i)` (kept from the chords when that would break concavity). Errors: too few points, non-finite values,
 /// x not increasing, a curve that falls, a fit that is not concave.
 #[allow(clippy::needless_range_loop)] // the dynamic programme reads best as indices
@@ -130,9 +131,12 @@ pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
             }
         }
     }
-    // A measured virgin curve stops at breakaway, so its last point is the last knot (the
-    // plateau beyond it is Fs).
-    let last = m - 1;
+    // A measured virgin curve stops at breakaway: its last point gives the plateau's level,
+    // Fs, but not where the plateau starts (at breakaway the slide creeps on by an amount
+    // set by how long one waits). So the chords run to the last-but-one point, and the
+    // last block saturates where the last chord's line reaches the last point's level.
+    let last = m - 2;
+    let top = fs[m - 1];
     let end = best[n]
         .iter()
         .enumerate()
@@ -148,17 +152,24 @@ pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
         b = a;
         a = p;
     }
-    knots.reverse(); // knots[0] = 0 (origin), knots[n] = the plateau's start
-    let d: Vec<f64> = knots[1..].iter().map(|&i| xs[i]).collect();
+    knots.reverse(); // knots[0] = 0 (origin), knots[n] = the last-but-one point
+    let mut d: Vec<f64> = knots[1..].iter().map(|&i| xs[i]).collect();
+    let (ka, kb) = (knots[n - 1], knots[n]);
+    let reach = xs[ka] + (top - fs[ka]) / slope(ka, kb);
+    d[n - 1] = reach.max(xs[kb]);
     // Chord slopes s_1 > … > s_n > 0 give k_i = s_i - s_(i+1) > 0.
     let slopes: Vec<f64> = knots.windows(2).map(|w| slope(w[0], w[1])).collect();
     let chord_k: Vec<f64> = (0..n)
         .map(|i| slopes[i] - slopes.get(i + 1).copied().unwrap_or(0.0))
         .collect();
-    // Refine by linear least squares on the basis min(x, D_i); keep the chords' stiffnesses
-    // when that would break concavity.
+    // Refine by linear least squares on the basis min(x, D_i) over the points up to the
+    // last-but-one and the plateau level at the last breakpoint; keep the chords'
+    // stiffnesses when that would break concavity.
     let rows = m;
-    let a_mat = OMatrix::<f64, Dyn, Dyn>::from_fn(rows, n, |r, c| xs[r].min(d[c]));
+    let a_mat = OMatrix::<f64, Dyn, Dyn>::from_fn(rows, n, |r, c| {
+        let x = if r == m - 1 { d[n - 1] } else { xs[r] };
+        x.min(d[c])
+    });
     let y = OVector::<f64, Dyn>::from_column_slice(&fs);
     let ata = a_mat.transpose() * &a_mat;
     let aty = a_mat.transpose() * &y;
@@ -366,6 +377,176 @@ pub fn fit_stribeck(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
     Ok(fit)
 }
 
+/// The frictional-lag fit of C.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LagFit {
+    /// The fitted slip rate C [N/s or N·m/s].
+    pub c: f64,
+    /// One-sigma relative uncertainty of C [-], from the curvature of the residual sum at
+    /// the optimum (in ln C); `None` when the curvature is not positive.
+    pub rel_err: Option<f64>,
+    /// RMS residual of the fitted model over the record [N or N·m].
+    pub rms: f64,
+    /// RMS residual with the paper's rule C = 1/Vs (mN scale) instead, for comparison.
+    pub rms_rule: f64,
+    /// Samples used (after the first second, which is skipped as the start-up).
+    pub samples: usize,
+    /// For the plot: (t [s], measured, fitted model) over the half second where the lag
+    /// matters most (the fitted model farthest from a lag-free one, C × 10^4).
+    pub window: Vec<(f64, f64, f64)>,
+}
+
+/// The model's output with slip rate `c` along the record (0 at the first sample).
+fn lag_trace(
+    spec: &crate::paramfile::FrictionSpec,
+    c: f64,
+    t: &[f64],
+    x: &[f64],
+) -> Result<Vec<f64>, String> {
+    let mut s = spec.clone();
+    s.c = Some(c);
+    let mut m = s.build()?;
+    let mut out = vec![0.0];
+    for i in 1..t.len() {
+        out.push(m.advance((x[i] - x[i - 1]) as f32, (t[i] - t[i - 1]) as f32) as f64);
+    }
+    Ok(out)
+}
+
+/// Residual sum of squares of the friction `spec` with slip rate `c` driven by the recorded
+/// angle `x` over the times `t`, against the recorded friction `f` from `skip` on.
+fn lag_sse(
+    spec: &crate::paramfile::FrictionSpec,
+    c: f64,
+    t: &[f64],
+    x: &[f64],
+    f: &[f64],
+    skip: usize,
+) -> Result<f64, String> {
+    let out = lag_trace(spec, c, t, x)?;
+    Ok(out[skip..]
+        .iter()
+        .zip(&f[skip..])
+        .map(|(o, f)| (o - f).powi(2))
+        .sum())
+}
+
+/// Fits C to a frictional-lag record (`t,x,f`: time [s], position, friction) with every
+/// other parameter of `spec` fixed: the model is driven by the recorded positions and C
+/// minimises the squared difference to the recorded friction (golden-section search over
+/// ln C, from 10^-4 to 10^4 × the paper's rule). The first second is the start-up and is
+/// not compared.
+pub fn fit_lag(
+    spec: &crate::paramfile::FrictionSpec,
+    t: &[f64],
+    x: &[f64],
+    f: &[f64],
+) -> Result<LagFit, String> {
+    if t.len() != x.len() || t.len() != f.len() {
+        return Err("columns of unequal length".into());
+    }
+    if t.windows(2).any(|w| w[1] <= w[0]) {
+        return Err("t must strictly increase".into());
+    }
+    let skip = t.iter().position(|&ti| ti - t[0] >= 1.0).unwrap_or(t.len());
+    let samples = t.len() - skip;
+    if samples < 100 {
+        return Err(format!(
+            "{} samples after the first second: at least 100 are needed",
+            samples
+        ));
+    }
+    let travel = (x[t.len() - 1] - x[skip]).abs();
+    let dmax = spec
+        .blocks
+        .iter()
+        .flatten()
+        .map(|b| b.alpha * spec.fs.unwrap_or(0.0) / b.k)
+        .fold(0.0, f64::max);
+    if travel < 10.0 * dmax {
+        return Err(
+            "the record hardly moves beyond the pre-sliding range: it shows no sliding lag".into(),
+        );
+    }
+    let vs = spec.vs.ok_or("no vs to start from")?;
+    let rule = 1e-3 / vs;
+    let sse = |lc: f64| lag_sse(spec, lc.exp(), t, x, f, skip);
+    // Coarse scan (a decade apart), then golden section around the best.
+    let (lo, hi) = (
+        rule.ln() - 4.0 * std::f64::consts::LN_10,
+        rule.ln() + 4.0 * std::f64::consts::LN_10,
+    );
+    let n = 17;
+    let mut best = (f64::INFINITY, lo);
+    for i in 0..n {
+        let lc = lo + (hi - lo) * i as f64 / (n - 1) as f64;
+        let e = sse(lc)?;
+        if e < best.0 {
+            best = (e, lc);
+        }
+    }
+    let step = (hi - lo) / (n - 1) as f64;
+    let (mut a, mut b) = (best.1 - step, best.1 + step);
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut c1, mut c2) = (b - g * (b - a), a + g * (b - a));
+    let (mut e1, mut e2) = (sse(c1)?, sse(c2)?);
+    while b - a > 1e-5 {
+        if e1 < e2 {
+            b = c2;
+            (c2, e2) = (c1, e1);
+            c1 = b - g * (b - a);
+            e1 = sse(c1)?;
+        } else {
+            a = c1;
+            (c1, e1) = (c2, e2);
+            c2 = a + g * (b - a);
+            e2 = sse(c2)?;
+        }
+    }
+    let lc = (a + b) / 2.0;
+    let e0 = sse(lc)?;
+    if lc <= lo + 1e-3 || lc >= hi - 1e-3 {
+        return Err(format!(
+            "C runs to the edge of its range ({:.3e}): the record does not show the lag",
+            lc.exp()
+        ));
+    }
+    // Curvature in ln C: SSE ≈ e0 + H/2 (p - p*)^2, var(p) = 2 sigma^2 / H.
+    let h = 0.02;
+    let curv = (sse(lc + h)? - 2.0 * e0 + sse(lc - h)?) / (h * h);
+    let var = e0 / (samples as f64 - 1.0);
+    let rel_err = (curv > 0.0).then(|| (2.0 * var / curv).sqrt());
+    // The plot window: the half second where the fitted lag differs most from no lag.
+    let fitted = lag_trace(spec, lc.exp(), t, x)?;
+    let no_lag = lag_trace(spec, lc.exp() * 1e4, t, x)?;
+    let half = t[skip..]
+        .iter()
+        .position(|&ti| ti - t[skip] >= 0.5)
+        .unwrap_or(samples - 1)
+        .max(1);
+    let mut acc: f64 = (skip..skip + half)
+        .map(|i| (fitted[i] - no_lag[i]).powi(2))
+        .sum();
+    let mut best_start = (acc, skip);
+    for i in skip + 1..t.len() - half + 1 {
+        acc += (fitted[i + half - 1] - no_lag[i + half - 1]).powi(2)
+            - (fitted[i - 1] - no_lag[i - 1]).powi(2);
+        if acc > best_start.0 {
+            best_start = (acc, i);
+        }
+    }
+    let w0 = best_start.1;
+    let window = (w0..w0 + half).map(|i| (t[i], f[i], fitted[i])).collect();
+    Ok(LagFit {
+        window,
+        c: lc.exp(),
+        rel_err,
+        rms: (e0 / samples as f64).sqrt(),
+        rms_rule: (sse(rule.ln())? / samples as f64).sqrt(),
+        samples,
+    })
+}
+
 /// Reads a CSV with a header; returns the named columns (missing optional ones as `None`).
 fn read_columns(
     path: &std::path::Path,
@@ -424,6 +605,8 @@ pub struct Identified {
     pub virgin: Option<VirginFit>,
     /// The sliding fit, if sliding data was given.
     pub stribeck: Option<StribeckFit>,
+    /// The frictional-lag fit of C, if a lag record was given.
+    pub lag: Option<LagFit>,
 }
 
 /// `hil-sim identify`: fits the pre-sliding data (`x,f[,dir]`: the virgin curves, averaged
@@ -448,6 +631,41 @@ pub fn identify_with(
     blocks: usize,
     asymmetric: bool,
 ) -> Result<Identified, String> {
+    identify_from(&Inputs {
+        presliding: pre,
+        sliding: slide,
+        lag: None,
+        blocks,
+        asymmetric,
+    })
+}
+
+/// What `hil-sim identify` is given.
+#[derive(Debug, Clone, Copy)]
+pub struct Inputs<'a> {
+    /// Pre-sliding data (`x,f[,dir]`).
+    pub presliding: Option<&'a std::path::Path>,
+    /// Sliding data (`v,f`).
+    pub sliding: Option<&'a std::path::Path>,
+    /// A frictional-lag record (`t,x,f`): C is fitted to it (needs both of the above).
+    pub lag: Option<&'a std::path::Path>,
+    /// Number of Maxwell-slip blocks (1..=32).
+    pub blocks: usize,
+    /// Fit each sliding direction separately.
+    pub asymmetric: bool,
+}
+
+/// The whole identification: [`identify_with`] plus, when a frictional-lag record is given,
+/// C fitted to it by [`fit_lag`] (else the paper's rule, printed as an assumption).
+pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, String> {
+    let (pre, slide, blocks, asymmetric) =
+        (inp.presliding, inp.sliding, inp.blocks, inp.asymmetric);
+    if inp.lag.is_some() && (pre.is_none() || slide.is_none()) {
+        return Err(
+            "--lag needs --presliding and --sliding: C is fitted with the other parameters fixed"
+                .into(),
+        );
+    }
     let mut negative_fit: Option<StribeckFit> = None;
     use crate::paramfile::{FrictionSpec, ModelKind};
     if pre.is_none() && slide.is_none() {
@@ -570,7 +788,15 @@ pub fn identify_with(
     let spec = match (&virgin, &stribeck) {
         (Some(vf), s) => {
             let (fs, fc, vs, delta, sigma) = match s {
-                Some(s) => (s.fs, s.fc, s.vs, s.delta, s.sigma),
+                Some(s) => {
+                    if vf.fs < 0.95 * s.fs {
+                        report.push(format!(
+                            "warning: the virgin curve ends at {:.0} % of the sliding Fs: the pre-sliding run broke away early (stick-slip; a steep Stribeck drop needs a stiffer or better damped set-up); the blocks beyond it are unknown",
+                            100.0 * vf.fs / s.fs
+                        ));
+                    }
+                    (s.fs, s.fc, s.vs, s.delta, s.sigma)
+                }
                 None => {
                     report.push("assumed: no sliding data, so fc = fs (no Stribeck drop), vs = 1, delta = 1, sigma = 0".into());
                     (vf.fs, vf.fs, 1.0, 1.0, 0.0)
@@ -617,7 +843,27 @@ pub fn identify_with(
     }
     spec.build()
         .map_err(|e| format!("the identified set is invalid: {e}"))?;
+    let mut lag = None;
+    if let Some(p) = inp.lag {
+        let cols = read_columns(p, &["t", "x", "f"], &[])?;
+        let fit = fit_lag(&spec, &cols[0], &cols[1], &cols[2])
+            .map_err(|e| format!("{}: {e}", p.display()))?;
+        // Replace the rule's line.
+        report.retain(|l| !l.starts_with("assumed: C = "));
+        report.push(format!(
+            "frictional lag: {} samples; c {:.4e} ± {:.1} % (one sigma), RMS residual {:.3e} (with the paper's rule c = {:.4e}: {:.3e})",
+            fit.samples,
+            fit.c,
+            100.0 * fit.rel_err.unwrap_or(f64::NAN),
+            fit.rms,
+            spec.c.unwrap_or(f64::NAN),
+            fit.rms_rule
+        ));
+        spec.c = Some(fit.c);
+        lag = Some(fit);
+    }
     Ok(Identified {
+        lag,
         virgin_data,
         sliding_data,
         spec,
@@ -629,7 +875,8 @@ pub fn identify_with(
 
 /// Writes `report.txt`, `virgin.svg` (the averaged virgin curve against the identified
 /// blocks, as the paper's Fig. 1 right and Fig. 2) and `stribeck.svg` (the sliding data against
-/// the fitted curve, over log10 of the speed) into `dir`.
+/// the fitted curve, over log10 of the speed) into `dir`; with a lag fit, `lag.svg` (the
+/// recorded friction against the fitted model over time).
 pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let text: String = id.report.iter().map(|l| format!("{l}\n")).collect();
@@ -689,6 +936,17 @@ pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), String
                 s.vs, s.delta
             ),
             ("log10 speed [m/s or rad/s]", "friction [N or N·m]"),
+            &pts,
+            &curve,
+        )?;
+    }
+    if let Some(l) = &id.lag {
+        let pts: Vec<(f64, f64)> = l.window.iter().map(|w| (w.0, w.1)).collect();
+        let curve: Vec<(f64, f64)> = l.window.iter().map(|w| (w.0, w.2)).collect();
+        crate::plot::fit_plot(
+            &dir.join("lag.svg"),
+            &format!("frictional lag: C {:.3e} (RMS residual {:.2e})", l.c, l.rms),
+            ("time [s]", "friction [N or N·m]"),
             &pts,
             &curve,
         )?;

@@ -87,8 +87,8 @@ enum Cmd {
     },
     /// Simulate an identification experiment of the paper on the friction in P.toml.
     Experiment {
-        /// presliding, sliding or guideway.
-        #[arg(value_parser = ["presliding", "sliding", "guideway"])]
+        /// presliding, sliding, guideway or lag (frictional lag: speed swept in sliding).
+        #[arg(value_parser = ["presliding", "sliding", "guideway", "lag"])]
         kind: String,
         /// Parameter file whose [friction] is the friction measured.
         #[arg(long, value_name = "P.toml")]
@@ -111,6 +111,10 @@ enum Cmd {
         /// Sliding data (v,f).
         #[arg(long, value_name = "SLIDE.csv")]
         sliding: Option<PathBuf>,
+        /// Frictional-lag run (t,x,f; needs --presliding and --sliding): C is fitted to it;
+        /// without it, C follows the paper's rule.
+        #[arg(long, value_name = "LAG.csv")]
+        lag: Option<PathBuf>,
         /// Number of Maxwell-slip blocks.
         #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=32))]
         blocks: u32,
@@ -279,6 +283,7 @@ fn main() -> ExitCode {
             let k = match kind.as_str() {
                 "presliding" => Kind::Presliding,
                 "sliding" => Kind::Sliding,
+                "lag" => Kind::Lag,
                 _ => Kind::Guideway,
             };
             let setup = Setup::paper(k, &pf.friction, variability);
@@ -290,17 +295,19 @@ fn main() -> ExitCode {
         Cmd::Identify {
             presliding,
             sliding,
+            lag,
             blocks,
             out,
             report,
             asymmetric,
         } => (|| {
-            let id = hil_sim::identify::identify_with(
-                presliding.as_deref(),
-                sliding.as_deref(),
-                blocks as usize,
+            let id = hil_sim::identify::identify_from(&hil_sim::identify::Inputs {
+                presliding: presliding.as_deref(),
+                sliding: sliding.as_deref(),
+                lag: lag.as_deref(),
+                blocks: blocks as usize,
                 asymmetric,
-            )?;
+            })?;
             for l in &id.report {
                 println!("{l}");
             }

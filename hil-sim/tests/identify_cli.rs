@@ -56,6 +56,72 @@ fn experiments_to_an_accepted_parameter_file_and_a_report() {
         .0,
         0
     );
+    assert_eq!(
+        hil(&["experiment", "lag", "--params", p, "--out", "lag.csv"], d).0,
+        0
+    );
+    // A lag record that never leaves pre-sliding, and one with time running backwards.
+    std::fs::write(
+        d.join("still.csv"),
+        (0..3000).fold(String::from("t,x,f\n"), |a, i| {
+            a + &format!("{},{},1e-4\n", i as f64 * 1e-3, 1e-6 * (i % 3) as f64)
+        }),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("back.csv"),
+        "t,x,f\n0,0,0\n0.002,1e-3,1e-4\n0.001,2e-3,1e-4\n",
+    )
+    .unwrap();
+    let bad: [(&[&str], &str); 3] = [
+        (
+            &[
+                "identify",
+                "--presliding",
+                "pre.csv",
+                "--lag",
+                "lag.csv",
+                "--out",
+                "o.toml",
+            ],
+            "--lag needs",
+        ),
+        (
+            &[
+                "identify",
+                "--presliding",
+                "pre.csv",
+                "--sliding",
+                "sl.csv",
+                "--lag",
+                "still.csv",
+                "--out",
+                "o.toml",
+            ],
+            "pre-sliding range",
+        ),
+        (
+            &[
+                "identify",
+                "--presliding",
+                "pre.csv",
+                "--sliding",
+                "sl.csv",
+                "--lag",
+                "back.csv",
+                "--out",
+                "o.toml",
+            ],
+            "strictly increase",
+        ),
+    ];
+    for (args, want) in bad {
+        let (code, err) = hil(args, d);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(want), "{err:?} should contain {want:?}");
+        assert!(!d.join("o.toml").exists());
+    }
     let (code, err) = hil(
         &[
             "identify",
@@ -63,6 +129,8 @@ fn experiments_to_an_accepted_parameter_file_and_a_report() {
             "pre.csv",
             "--sliding",
             "sl.csv",
+            "--lag",
+            "lag.csv",
             "--out",
             "id.toml",
             "--report",
@@ -71,9 +139,20 @@ fn experiments_to_an_accepted_parameter_file_and_a_report() {
         d,
     );
     assert_eq!(code, 0, "{err}");
-    for f in ["rep/report.txt", "rep/virgin.svg", "rep/stribeck.svg"] {
+    for f in [
+        "rep/report.txt",
+        "rep/virgin.svg",
+        "rep/stribeck.svg",
+        "rep/lag.svg",
+    ] {
         assert!(d.join(f).exists(), "{f}");
     }
+    let report = std::fs::read_to_string(d.join("rep/report.txt")).unwrap();
+    assert!(report.contains("frictional lag"), "{report}");
+    assert!(
+        !report.contains("assumed: C"),
+        "C is fitted, not assumed: {report}"
+    );
     let traj = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/trajectory.csv");
     let (code, err) = hil(
         &[
