@@ -5,6 +5,7 @@
 //! 10 kHz) and the current loop at `cur_rate_hz` (default 20 kHz, an integer multiple).
 //! Torques are motor-side [N·m], angles those of the encoder [rad], currents [A], volts [V].
 
+use crate::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use crate::error::ParamError;
 use crate::gms::{Gms, GmsParams};
 use crate::math;
@@ -25,6 +26,10 @@ pub enum FfMode {
     /// The GMS model driven by the reference trajectory's position increments.
     #[default]
     Gms,
+    /// The GMS model scaled by an on-line estimate of the friction level
+    /// ([`crate::adaptive`]).
+    #[cfg_attr(feature = "serde", serde(rename = "gms-adaptive"))]
+    GmsAdaptive,
 }
 
 /// Position-loop PID gains (on the position error in rad, output torque in N·m).
@@ -88,6 +93,8 @@ pub struct FeedforwardParams<const N: usize> {
     /// Velocity band of the static map [rad/s], `>= 0`: below it the map's output is scaled
     /// by |v| / band, so that it does not jump by 2 Fs at a reversal (0: no band).
     pub static_band: f32,
+    /// Adaptation of the GMS feedforward's level (mode `gms-adaptive`).
+    pub adapt: AdaptiveParams,
 }
 
 /// Everything the controller needs.
@@ -175,6 +182,7 @@ impl<const N: usize> ControllerParams<N> {
         if !(self.ff.static_band.is_finite() && self.ff.static_band >= 0.0) {
             return Err(ControllerError::Invalid("ff.static_band"));
         }
+        self.ff.adapt.validate().map_err(ControllerError::Invalid)?;
         let r = self.cur_rate_hz / self.pos_rate_hz;
         let n = self.ratio();
         if !(1..=16).contains(&n) || (r - n as f32) > 1e-3 * r || (n as f32 - r) > 1e-3 * r {
@@ -203,8 +211,10 @@ pub struct PositionOutput {
     pub i: f32,
     /// Derivative torque [N·m].
     pub d: f32,
-    /// Friction feedforward torque, after the gain [N·m].
+    /// Friction feedforward torque, after the gain and the adaptive scale [N·m].
     pub ff_friction: f32,
+    /// The adaptive scale applied to the friction feedforward [-] (1 unless `gms-adaptive`).
+    pub ff_scale: f32,
     /// Inertia feedforward torque [N·m].
     pub ff_inertia: f32,
     /// Current command after limiting [A].
@@ -241,6 +251,7 @@ pub struct Controller<const N: usize> {
     i_cmd: f32,
     w_ref: f32,
     cur_integ: f32,
+    adapt: Adaptive,
     out: PositionOutput,
 }
 
@@ -277,7 +288,16 @@ impl<const N: usize> Controller<N> {
             ),
             None => (None, None),
         };
+        // The nominal friction level the adaptation normalises by: both sources' Fs.
+        let f_norm = p.ff.actuator.stribeck.fs
+            + p.ff
+                .guideway
+                .as_ref()
+                .map_or(0.0, |g| p.ff.ratio * g.stribeck.fs);
+        let mut adapt = Adaptive::new(f_norm);
+        adapt.reset(&p.ff.adapt);
         Ok(Controller {
+            adapt,
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
             d_alpha: 1.0 - math::exp(-2.0 * core::f32::consts::PI * p.pid.d_filter_hz * dt_pos),
@@ -310,6 +330,17 @@ impl<const N: usize> Controller<N> {
     /// Current-loop period [s].
     pub fn dt_cur(&self) -> f32 {
         self.dt_cur
+    }
+
+    /// The adaptive scale on the friction feedforward [-] (mode `gms-adaptive`).
+    pub fn adaptive_scale(&self) -> f32 {
+        self.adapt.scale()
+    }
+
+    /// Carries a learned scale over (e.g. into a controller rebuilt with new settings),
+    /// clamped into the adaptation's bounds; a non-finite value resets it to 1.
+    pub fn set_adaptive_scale(&mut self, scale: f32) {
+        self.adapt.set_scale(scale, &self.p.ff.adapt);
     }
 
     /// The last position-loop output.
@@ -357,7 +388,7 @@ impl<const N: usize> Controller<N> {
                 .map_or(0.0, |g| ratio * g.advance(ratio * dx, dt));
         match self.p.ff.mode {
             FfMode::None => 0.0,
-            FfMode::Gms => gms,
+            FfMode::Gms | FfMode::GmsAdaptive => gms,
             FfMode::Static => {
                 let band = self.p.ff.static_band;
                 let speed = if vel < 0.0 { -vel } else { vel };
@@ -394,7 +425,10 @@ impl<const N: usize> Controller<N> {
         let pid = self.p.pid;
         let p_term = pid.kp * error;
         let d_term = pid.kd * self.d_filt;
-        let ff_fric = self.p.ff.gain * self.friction_ff(dx_ref, r.vel);
+        let ff_model = self.p.ff.gain * self.friction_ff(dx_ref, r.vel);
+        let adaptive = self.p.ff.mode == FfMode::GmsAdaptive;
+        let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
+        let ff_fric = ff_scale * ff_model;
         let ff_inertia = self.p.motor.inertia * r.acc;
         // Conditional integration: the integrator stops when the command is saturated in the
         // direction the error would push it further.
@@ -406,6 +440,15 @@ impl<const N: usize> Controller<N> {
         if !saturated || (error > 0.0) != (i_unsat > 0.0) {
             self.integ = integ_new;
         }
+        if adaptive {
+            let input = AdaptInput {
+                feedback: p_term + self.integ + d_term,
+                model: ff_model,
+                v_ref: r.vel,
+                saturated,
+            };
+            self.adapt.update(&self.p.ff.adapt, &input, self.dt_pos);
+        }
         self.i_cmd = i_cmd;
         self.w_ref = r.vel;
         self.out = PositionOutput {
@@ -414,6 +457,7 @@ impl<const N: usize> Controller<N> {
             i: self.integ,
             d: d_term,
             ff_friction: ff_fric,
+            ff_scale,
             ff_inertia,
             i_cmd,
             saturated,

@@ -260,8 +260,17 @@ pub enum Access {
         /// Largest allowed value.
         max: f32,
     },
-    /// The feedforward mode: `none`, `static` or `gms`.
+    /// The feedforward mode: `none`, `static`, `gms` or `gms-adaptive`.
     Mode,
+    /// A read-only estimate of the device's state (see [`Device::estimate`]).
+    Estimate(Estimate),
+}
+
+/// The device's on-line estimates, readable with `get` (not settable).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Estimate {
+    /// The adaptive scale on the friction feedforward [-].
+    AdaptScale,
 }
 
 /// One parameter of the table: its path, unit and access.
@@ -315,6 +324,19 @@ pub const PARAMS: &[Param] = &[
     num!("ff.gain", "-", 0.0, 2.0, |s| s.ff.gain),
     num!("ff.inertia", "kg·m^2", 0.0, 1.0, |s| s.motor.inertia),
     num!("ff.static_band", "rad/s", 0.0, 1e3, |s| s.ff.static_band),
+    num!("ff.adapt.gain", "1/s", 0.0, 1e4, |s| s.ff.adapt.gain),
+    num!("ff.adapt.min", "-", 0.0, 10.0, |s| s.ff.adapt.min),
+    num!("ff.adapt.max", "-", 0.0, 10.0, |s| s.ff.adapt.max),
+    num!("ff.adapt.deadzone", "N·m", 0.0, 1e3, |s| s
+        .ff
+        .adapt
+        .deadzone),
+    num!("ff.adapt.vmin", "rad/s", 0.0, 1e4, |s| s.ff.adapt.v_min),
+    Param {
+        path: "ff.adapt.scale",
+        unit: "-",
+        access: Access::Estimate(Estimate::AdaptScale),
+    },
     num!("gms.fs", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fs),
     num!("gms.fc", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fc),
     num!("gms.vs", "rad/s", 1e-9, 1e4, |s| s.ff.actuator.stribeck.vs),
@@ -364,14 +386,25 @@ fn mode_name(m: FfMode) -> &'static str {
         FfMode::None => "none",
         FfMode::Static => "static",
         FfMode::Gms => "gms",
+        FfMode::GmsAdaptive => "gms-adaptive",
     }
 }
 
-/// Writes a parameter's value.
+/// Writes a parameter's value (an estimate reads as 1 here: use [`write_param`] for the
+/// device's own).
 pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result {
     match p.access {
         Access::Number { get, .. } => write!(out, "{}", get(s)),
         Access::Mode => out.write_str(mode_name(s.ff.mode)),
+        Access::Estimate(_) => write!(out, "{}", 1.0f32),
+    }
+}
+
+/// Writes a parameter's value as `dev` has it (settings and estimates).
+pub fn write_param<D: Device + ?Sized>(p: &Param, dev: &D, out: &mut impl Write) -> fmt::Result {
+    match p.access {
+        Access::Estimate(e) => write!(out, "{}", dev.estimate(e)),
+        _ => write_value(p, dev.settings(), out),
     }
 }
 
@@ -398,13 +431,20 @@ pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, Par
                 "none" => FfMode::None,
                 "static" => FfMode::Static,
                 "gms" => FfMode::Gms,
+                "gms-adaptive" => FfMode::GmsAdaptive,
                 _ => {
                     return Err(ParseError {
                         code: ErrorCode::OutOfRange,
-                        reason: "ff.mode is none, static or gms",
+                        reason: "ff.mode is none, static, gms or gms-adaptive",
                     });
                 }
             }
+        }
+        Access::Estimate(_) => {
+            return Err(ParseError {
+                code: ErrorCode::Refused,
+                reason: "read-only: an estimate of the device",
+            });
         }
     }
     new.validate().map_err(|_| ParseError {
@@ -440,6 +480,13 @@ pub trait Device {
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
     /// Stops telemetry.
     fn stream_off(&mut self);
+    /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
+    /// without adaptation.
+    fn estimate(&self, which: Estimate) -> f32 {
+        match which {
+            Estimate::AdaptScale => 1.0,
+        }
+    }
 }
 
 /// The `help` text.
@@ -478,12 +525,16 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             let s = dev.settings();
             for p in PARAMS {
                 write!(out, "{} ", p.path)?;
-                write_value(p, s, out)?;
                 match p.access {
                     Access::Number { min, max, .. } => {
+                        write_value(p, s, out)?;
                         writeln!(out, " {} [{}, {}]", p.unit, min, max)?
                     }
-                    Access::Mode => writeln!(out, " - [none, static, gms]")?,
+                    Access::Mode => {
+                        write_value(p, s, out)?;
+                        writeln!(out, " - [none, static, gms, gms-adaptive]")?
+                    }
+                    Access::Estimate(e) => writeln!(out, "{} - [read-only]", dev.estimate(e))?,
                 }
             }
             writeln!(out, "ok")
@@ -491,7 +542,7 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::Get(path) => match find(path) {
             Some(p) => {
                 out.write_str("ok ")?;
-                write_value(p, dev.settings(), out)?;
+                write_param(p, dev, out)?;
                 writeln!(out)
             }
             None => err(out, ErrorCode::UnknownPath, "unknown parameter (try list)"),

@@ -143,6 +143,7 @@ pub fn controller_params() -> ControllerParams<6> {
             guideway: Some(presets::guideway()),
             ratio: 18.1e-6,
             static_band: 0.05,
+            adapt: crate::adaptive::AdaptiveParams::default(),
         },
     }
 }

@@ -14,11 +14,12 @@ use crate::plot;
 use crate::scenario::Scenario;
 use crate::sim::{self, Metrics, RunResult, TraceRow};
 
-/// The three feedforward modes, in table order.
-pub const MODES: [(FfMode, &str); 3] = [
+/// The feedforward modes, in table order.
+pub const MODES: [(FfMode, &str); 4] = [
     (FfMode::None, "none"),
     (FfMode::Static, "static"),
     (FfMode::Gms, "gms"),
+    (FfMode::GmsAdaptive, "gms-adaptive"),
 ];
 
 /// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
@@ -38,11 +39,11 @@ pub fn write_atomic(path: &Path, text: &[u8]) -> Result<(), String> {
 /// The trace as CSV text.
 pub fn trace_csv(trace: &[TraceRow]) -> String {
     let mut s = String::from(
-        "t,reference,position,error,current,current_cmd,voltage,friction,feedforward,ref_velocity,segment\n",
+        "t,reference,position,error,current,current_cmd,voltage,friction,feedforward,ref_velocity,segment,ff_scale,drift\n",
     );
     for r in trace {
         s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             r.t,
             r.reference,
             r.position,
@@ -53,7 +54,9 @@ pub fn trace_csv(trace: &[TraceRow]) -> String {
             r.friction,
             r.feedforward,
             r.ref_velocity,
-            r.segment
+            r.segment,
+            r.ff_scale,
+            r.drift
         );
     }
     s
@@ -269,6 +272,11 @@ pub fn table(c: &Comparison, rad_per_count: f64) -> String {
         ratio("sine_rms_error", "static", "gms"),
         ratio("reversal_error", "none", "gms"),
         ratio("reversal_error", "static", "gms"),
+    );
+    s += &format!(
+        "adaptation: RMS ratio gms/gms-adaptive {}, sine RMS ratio {}\n",
+        ratio("rms_error", "gms", "gms-adaptive"),
+        ratio("sine_rms_error", "gms", "gms-adaptive"),
     );
     s
 }

@@ -147,7 +147,10 @@ impl Axis {
     /// Applies a validated parameter set (between two control steps); the controller keeps
     /// no state across it.
     pub fn apply(&mut self, s: Settings) -> Result<(), String> {
+        let scale = self.ctrl.adaptive_scale();
         self.ctrl = Controller::try_new(s).map_err(|e| e.to_string())?;
+        // What the adaptation learned is about the axis, not the settings: keep it.
+        self.ctrl.set_adaptive_scale(scale);
         self.settings = s;
         Ok(())
     }
@@ -177,6 +180,8 @@ pub fn settings_toml(s: &Settings) -> String {
                 let _ = protocol::write_value(p, s, &mut v);
                 writeln!(out, "\"{}\" = \"{v}\"", p.path)
             }
+            // Estimates are the device's state, not settings.
+            Access::Estimate(_) => Ok(()),
         };
     }
     out
@@ -207,9 +212,15 @@ pub fn settings_from_toml(text: &str, base: &Settings) -> Result<Settings, Strin
                     "none" => FfMode::None,
                     "static" => FfMode::Static,
                     "gms" => FfMode::Gms,
-                    _ => return Err(format!("`{k}` = {value} is not none, static or gms")),
+                    "gms-adaptive" => FfMode::GmsAdaptive,
+                    _ => {
+                        return Err(format!(
+                            "`{k}` = {value} is not none, static, gms or gms-adaptive"
+                        ));
+                    }
                 }
             }
+            Access::Estimate(_) => return Err(format!("`{k}` is read-only")),
         }
     }
     s.validate().map_err(|e| e.to_string())?;
@@ -310,6 +321,7 @@ impl Device for Session<'_> {
                 FfMode::None => "none",
                 FfMode::Static => "static",
                 FfMode::Gms => "gms",
+                FfMode::GmsAdaptive => "gms-adaptive",
             },
             axis.enabled as u8,
             axis.faults,
@@ -354,6 +366,11 @@ impl Device for Session<'_> {
     }
     fn stream_off(&mut self) {
         self.stream = None;
+    }
+    fn estimate(&self, which: protocol::Estimate) -> f32 {
+        match which {
+            protocol::Estimate::AdaptScale => self.shared.lock().ctrl.adaptive_scale(),
+        }
     }
 }
 

@@ -68,6 +68,9 @@ pub struct Plant {
     rng: ChaCha8Rng,
     actuator: AnyModel,
     guideway: AnyModel,
+    drift: crate::scenario::Drift,
+    /// Time since the start [s].
+    pub t: f64,
     /// Current [A].
     pub i: f64,
     /// Motor speed [rad/s].
@@ -135,6 +138,8 @@ impl Plant {
             rng,
             actuator,
             guideway,
+            drift: spec.drift.clone(),
+            t: 0.0,
             i: 0.0,
             omega: 0.0,
             theta: 0.0,
@@ -143,6 +148,11 @@ impl Plant {
             pending_duty: 0.0,
             energy: Energy::default(),
         })
+    }
+
+    /// The friction drift factor now [-].
+    pub fn drift_factor(&self) -> f64 {
+        self.drift.factor(self.t, self.theta)
     }
 
     /// The encoder count now (floor of angle / resolution).
@@ -194,7 +204,8 @@ impl Plant {
         let fg = self
             .guideway
             .advance((self.ratio * dtheta) as f32, dt as f32) as f64;
-        self.friction = ta + self.ratio * fg;
+        self.t += dt;
+        self.friction = self.drift.factor(self.t, self.theta) * (ta + self.ratio * fg);
         self.energy.kinetic = 0.5 * self.j * self.omega * self.omega;
     }
 }

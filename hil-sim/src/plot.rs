@@ -6,8 +6,13 @@ use plotters::prelude::*;
 
 use crate::sim::TraceRow;
 
-/// Colours of the three feedforward modes: none, static, gms.
-pub const MODE_COLOURS: [RGBColor; 3] = [RGBColor(200, 60, 60), RGBColor(230, 150, 20), BLUE];
+/// Colours of the feedforward modes: none, static, gms, gms-adaptive.
+pub const MODE_COLOURS: [RGBColor; 4] = [
+    RGBColor(200, 60, 60),
+    RGBColor(230, 150, 20),
+    BLUE,
+    RGBColor(30, 160, 90),
+];
 
 fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);

@@ -100,6 +100,61 @@ pub struct Plant {
     pub actuator: FrictionSpec,
     /// Guideway friction (slide, N, m).
     pub guideway: FrictionSpec,
+    /// How the friction drifts during the run.
+    pub drift: Drift,
+}
+
+/// How the plant's friction drifts during a run: a factor on both sources' friction torque
+/// (equivalently fs, fc, sigma, every k and c scaled together).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriftKind {
+    /// Stationary: factor 1.
+    None,
+    /// Slow drift: the factor moves linearly from 1 to 1 + amount over `time` seconds, then
+    /// stays.
+    Ramp,
+    /// Steps: 1 until `time`, then 1 + amount, 1 - amount, 1 + amount, … every `time` s.
+    Steps,
+    /// Along the stroke: 1 + amount sin(2 pi angle / period) (angle of the motor, rad).
+    Position,
+}
+
+/// The friction drift of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drift {
+    /// Which drift.
+    pub kind: DriftKind,
+    /// Its size, ± fraction [-], in [0, 0.9).
+    pub amount: f64,
+    /// Ramp duration or step interval [s], `> 0`.
+    pub time: f64,
+    /// Spatial period of the position-dependent drift [rad of motor angle], `> 0`.
+    pub period: f64,
+}
+
+impl Drift {
+    /// The friction factor at time `t` [s] and motor angle `theta` [rad].
+    pub fn factor(&self, t: f64, theta: f64) -> f64 {
+        match self.kind {
+            DriftKind::None => 1.0,
+            DriftKind::Ramp => 1.0 + self.amount * (t / self.time).clamp(0.0, 1.0),
+            DriftKind::Steps => {
+                let n = (t / self.time).floor();
+                if n < 1.0 {
+                    1.0
+                } else if n % 2.0 == 1.0 {
+                    1.0 + self.amount
+                } else {
+                    1.0 - self.amount
+                }
+            }
+            DriftKind::Position => {
+                1.0 + self.amount * (2.0 * std::f64::consts::PI * theta / self.period).sin()
+            }
+        }
+    }
 }
 
 impl Plant {
@@ -167,6 +222,24 @@ pub struct Ff {
     pub guideway: bool,
     /// Velocity band of the static map [rad/s].
     pub static_band: f32,
+    /// Adaptation (mode `gms-adaptive`).
+    pub adapt: Adapt,
+}
+
+/// Adaptation settings of the `gms-adaptive` feedforward.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Adapt {
+    /// Rate [1/s].
+    pub gain: f32,
+    /// Lower bound of the scale [-].
+    pub min: f32,
+    /// Upper bound of the scale [-].
+    pub max: f32,
+    /// Dead zone on the feedback torque [N·m].
+    pub deadzone: f32,
+    /// Slowest reference speed that adapts [rad/s].
+    pub v_min: f32,
 }
 
 /// The reference trajectory.
@@ -316,6 +389,17 @@ impl Scenario {
         if !(p.variability.is_finite() && (0.0..0.9).contains(&p.variability)) {
             return Err("plant.variability must be in [0, 0.9)".into());
         }
+        if !(p.drift.amount.is_finite() && (0.0..0.9).contains(&p.drift.amount)) {
+            return Err("plant.drift.amount must be in [0, 0.9)".into());
+        }
+        for (name, v) in [
+            ("plant.drift.time", p.drift.time),
+            ("plant.drift.period", p.drift.period),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("{name} must be a finite number > 0"));
+            }
+        }
         if !(2..=24).contains(&p.adc_bits) {
             return Err("plant.adc_bits must be in 2..=24".into());
         }
@@ -385,6 +469,13 @@ impl Scenario {
                 },
                 ratio: p.ratio() as f32,
                 static_band: c.ff.static_band,
+                adapt: gms_core::adaptive::AdaptiveParams {
+                    gain: c.ff.adapt.gain,
+                    min: c.ff.adapt.min,
+                    max: c.ff.adapt.max,
+                    deadzone: c.ff.adapt.deadzone,
+                    v_min: c.ff.adapt.v_min,
+                },
             },
         };
         params

@@ -28,6 +28,10 @@ pub struct TraceRow {
     pub friction: f64,
     /// Friction feedforward torque [N·m].
     pub feedforward: f64,
+    /// Scale on the friction feedforward (the adaptation's estimate; 1 unless gms-adaptive) [-].
+    pub ff_scale: f64,
+    /// True friction level relative to the nominal (the plant's drift factor) [-].
+    pub drift: f64,
     /// Reference velocity [rad/s].
     pub ref_velocity: f64,
     /// Index of the reference segment.
@@ -109,6 +113,7 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
         let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
         let position = count as f64 * rpc;
         let (current, voltage, friction) = (plant.i, plant.voltage, plant.friction);
+        let drift = plant.drift_factor();
         for _ in 0..n_cur {
             let i_meas = plant.adc();
             let c = ctrl.current_step(i_meas);
@@ -127,6 +132,8 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
             voltage,
             friction,
             feedforward: out.ff_friction as f64,
+            ff_scale: out.ff_scale as f64,
+            drift,
             ref_velocity: r.vel as f64,
             segment: seg,
         });

@@ -119,10 +119,12 @@ impl From<LinkError> for Fail {
     }
 }
 
+/// The device's settable parameters and their values (read-only estimates left out).
 fn list(link: &mut Link) -> Result<Vec<(String, String)>, Fail> {
     let (lines, _) = link.request("list")?;
     Ok(lines
         .iter()
+        .filter(|l| !l.ends_with("[read-only]"))
         .filter_map(|l| {
             let mut w = l.split_whitespace();
             Some((w.next()?.to_string(), w.next()?.to_string()))
@@ -366,6 +368,8 @@ fn run(cli: Cli) -> Result<(), Fail> {
                     voltage: 0.0,
                     friction: r[5],
                     feedforward: r[4],
+                    ff_scale: 1.0,
+                    drift: 1.0,
                     ref_velocity: 0.0,
                     segment: 0,
                 })
