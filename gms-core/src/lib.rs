@@ -27,6 +27,7 @@ pub mod gms;
 pub mod lugre;
 pub mod math;
 pub mod model;
+pub mod numtext;
 pub mod presets;
 pub mod protocol;
 pub mod reference;

@@ -177,7 +177,7 @@ fn bad(reason: &'static str) -> ParseError {
 
 /// A finite f32 from text, or `None`.
 pub fn parse_f32(s: &str) -> Option<f32> {
-    s.parse::<f32>().ok().filter(|v| v.is_finite())
+    crate::numtext::parse_f32(s)
 }
 
 /// Parses one request line.
@@ -370,7 +370,7 @@ fn mode_name(m: FfMode) -> &'static str {
 /// Writes a parameter's value.
 pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result {
     match p.access {
-        Access::Number { get, .. } => write!(out, "{}", get(s)),
+        Access::Number { get, .. } => write!(out, "{}", crate::numtext::Num(get(s))),
         Access::Mode => out.write_str(mode_name(s.ff.mode)),
     }
 }
@@ -481,7 +481,8 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
                 write_value(p, s, out)?;
                 match p.access {
                     Access::Number { min, max, .. } => {
-                        writeln!(out, " {} [{}, {}]", p.unit, min, max)?
+                        use crate::numtext::Num;
+                        writeln!(out, " {} [{}, {}]", p.unit, Num(min), Num(max))?
                     }
                     Access::Mode => writeln!(out, " - [none, static, gms]")?,
                 }
