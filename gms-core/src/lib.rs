@@ -22,6 +22,7 @@
 #![deny(missing_docs)]
 
 pub mod controller;
+pub mod drive;
 pub mod error;
 pub mod gms;
 pub mod lugre;
