@@ -244,6 +244,44 @@ pub struct Limits {
     pub budget_cycles: u32,
 }
 
+/// What the board allows: the inputs of [`limits_for`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BoardLimits {
+    /// Over-current trip as a multiple of the current limit `i_max` [-] (e.g. 1.5).
+    pub trip_factor: f32,
+    /// Largest current the sense chain can show [A]; the trip stays below 95 % of it.
+    pub sense_range: f32,
+    /// Following-error limit [rad].
+    pub max_error: f32,
+    /// Highest plausible speed [rad/s]: a faster encoder step is a jump.
+    pub max_speed: f32,
+    /// Soft limits: this far either side of the power-on position [rad].
+    pub travel: f32,
+    /// CPU clock [Hz] (DWT cycles).
+    pub clock_hz: u32,
+    /// Share of the current-loop period one control step may take [-], in (0, 1].
+    pub budget_fraction: f32,
+}
+
+/// The limits the control step checks for the settings `s` on a board `b`.
+pub fn limits_for(s: &Settings, b: &BoardLimits) -> Limits {
+    let trip = b.trip_factor * s.i_max;
+    let cap = 0.95 * b.sense_range;
+    let rpc = s.rad_per_count;
+    let per_step = b.max_speed / rpc / s.pos_rate_hz;
+    let travel = b.travel / rpc;
+    Limits {
+        i_trip: if trip < cap { trip } else { cap },
+        max_error: b.max_error,
+        // Float to int casts saturate (NaN gives 0).
+        max_step_counts: (libm_ceil(per_step as f64) as i64).max(1),
+        pos_min: -(travel as i64),
+        pos_max: travel as i64,
+        budget_cycles: (b.clock_hz as f32 / s.cur_rate_hz * b.budget_fraction) as u32,
+    }
+}
+
 /// Over-current: |`i`| [A] above `trip` [A], or `i` not finite.
 pub fn over_current(i: f32, trip: f32) -> bool {
     abs(i) > trip || i.is_nan()

@@ -311,3 +311,32 @@ fn pwm_timer_settings() {
     assert_eq!(pwm_timing(168_000_000, 0.0, 65_535), None);
     assert_eq!(pwm_timing(168_000_000, f32::NAN, 65_535), None);
 }
+
+#[test]
+fn limits_from_settings_and_board() {
+    let s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
+    let b = drive::BoardLimits {
+        trip_factor: 1.5,
+        sense_range: 0.48,
+        max_error: 0.01,
+        max_speed: 100.0,
+        travel: 38.0,
+        clock_hz: 168_000_000,
+        budget_fraction: 0.8,
+    };
+    let l = drive::limits_for(&s, &b);
+    // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
+    assert!((l.i_trip - 0.456).abs() < 1e-6);
+    assert_eq!(l.max_error, 0.01);
+    // 100 rad/s over 0.1 ms is 0.01 rad = 2631.6 counts: 2632.
+    assert_eq!(l.max_step_counts, 2632);
+    // 38 rad / 3.8 urad = 1e7 counts (f32 rounding of 3.8e-6 allows ±1).
+    assert!((l.pos_max - 10_000_000).abs() <= 1 && l.pos_min == -l.pos_max);
+    // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
+    assert_eq!(l.budget_cycles, 6720);
+    let roomy = drive::BoardLimits {
+        sense_range: 10.0,
+        ..b
+    };
+    assert!((drive::limits_for(&s, &roomy).i_trip - 0.75).abs() < 1e-6);
+}
