@@ -357,6 +357,16 @@ pub struct StepStats {
 }
 
 impl StepStats {
+    /// No step recorded.
+    pub const fn new() -> Self {
+        StepStats {
+            worst: 0,
+            last: 0,
+            sum: 0,
+            n: 0,
+        }
+    }
+
     /// Records one step of `cycles`.
     pub fn record(&mut self, cycles: u32) {
         self.last = cycles;
