@@ -2,8 +2,9 @@
 //!
 //! This binary runs every function of the control path (the friction models, the controller's
 //! position and current steps, the reference generator) and the bench protocol (line reader,
-//! parser, `execute` with every command, the number parser and formatter) on inputs the
-//! optimiser cannot see,
+//! parser, `execute` with every command, the number parser and formatter) and the firmware's
+//! pure control-step logic (`gms_core::drive`: count extension, current scaling, fault checks,
+//! step statistics, bridge compare values) on inputs the optimiser cannot see,
 //! with `panic-never` as its panic handler: that handler refers to a symbol that does not
 //! exist, so the release build links only if no panic (bounds check, overflow, unwrap, …)
 //! is reachable from this code. `cargo build -p target-bench --bin no-panic --release
@@ -118,6 +119,22 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
+    let limits = drive::limits_for(
+        &selftest::controller_params(),
+        black_box(&drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            travel: 50.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.8,
+        }),
+    );
+    let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
+    let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
+    let mut stats = drive::StepStats::new();
+    let mut faults = drive::Faults::NONE;
     let mut dev = Nop(selftest::controller_params());
     let mut reader = LineReader::default();
     let mut sink = Sink(0);
@@ -128,6 +145,25 @@ fn main() -> ! {
             let _ = protocol::execute(&mut dev, line, &mut sink);
         }
         black_box(gms_core::numtext::parse_f32(black_box("1.5e-3")));
+        // The firmware's control-step logic.
+        let delta = enc.update(black_box(7u32));
+        let amps = sense.map_or(0.0, |s| s.amps_sum(black_box(8192), black_box(4)));
+        let m = drive::Measured {
+            current: amps,
+            error: black_box(1e-4),
+            delta,
+            pos: enc.count(),
+            cycles: black_box(3000),
+        };
+        faults.latch(drive::check(&m, &limits, black_box(true)));
+        stats.record(black_box(3000));
+        black_box((stats.worst(), stats.mean(), faults));
+        black_box(drive::bridge_compare(
+            black_box(0.3),
+            black_box(4200),
+            black_box(true),
+        ));
+        black_box(drive::pwm_timing(168_000_000, black_box(20_000.0), 65_534));
         let dx: f32 = black_box(1e-6);
         let dt: f32 = black_box(1e-4);
         black_box(gms.advance(dx, dt));
