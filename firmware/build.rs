@@ -1,4 +1,6 @@
-//! Puts the root `memory.x` where the linker finds it (cortex-m-rt's `link.x` includes it).
+//! Puts the root `memory.x` where the linker finds it (cortex-m-rt's `link.x` includes it) and
+//! adds defmt's linker script for this binary only (the workspace's other thumb binaries do
+//! not use defmt).
 use std::{env, fs, path::PathBuf};
 
 fn main() {
@@ -7,4 +9,5 @@ fn main() {
     fs::copy(&memory, out.join("memory.x")).expect("copy memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed={}", memory.display());
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

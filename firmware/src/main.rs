@@ -1,29 +1,221 @@
-//! gms firmware for the STM32F405 motor driver.
+//! gms firmware for the STM32F405 motor driver: a thin embassy shell around gms-core.
 //!
-//! Status: skeleton. It links the friction model into a Cortex-M4F image so that the target
-//! build is checked from the start; the embassy shell (encoder, PWM, USB, flash) comes with
-//! the firmware issue.
+//! - `board`: pins, peripherals, clocks (the only file to change for another board).
+//! - `control`: the control loop in the PWM timer's update interrupt (current loop at the PWM
+//!   rate, position loop every `ratio`-th period, faults, step timing).
+//! - `comms`: USB CDC-ACM and the bench protocol in the thread executor.
+//! - `storage`: the parameter record in flash (sequential-storage).
+//!
+//! Start-up: clocks and peripherals; the stored parameters (defaults and a latched
+//! `invalid_params` fault when missing or invalid); the current-sense zero measured with the
+//! bridge off (a latched `current_sense` fault when out of the board's window); the control
+//! interrupt; the watchdog; USB.
 #![no_std]
 #![no_main]
 
-use cortex_m_rt::entry;
-use gms_core::{FrictionModel, Gms, presets};
-use panic_halt as _;
+mod board;
+mod comms;
+mod control;
+mod storage;
 
-#[entry]
-fn main() -> ! {
-    let mut model = match Gms::try_new(presets::table1()) {
-        Ok(m) => m,
-        Err(_) => loop {
-            cortex_m::asm::wfi();
+use defmt::{error, info, unwrap, warn};
+use embassy_executor::Spawner;
+use embassy_stm32::peripherals::USB_OTG_FS;
+use embassy_stm32::usb::Driver;
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{gpio::Output, peripherals::IWDG};
+use embassy_time::Timer;
+use embassy_usb::UsbDevice;
+use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
+use gms_core::drive::{self, CurrentSense, Faults, OffsetCalibration};
+use gms_core::protocol::Settings;
+use gms_core::selftest;
+use static_cell::StaticCell;
+use {defmt_rtt as _, panic_probe as _};
+
+use crate::control::Loop;
+
+/// The built-in parameter set: gms-core's reference controller (Table 1 compensation, 10 kHz
+/// position loop, 20 kHz current loop; the simulator's defaults).
+fn defaults() -> Settings {
+    selftest::controller_params()
+}
+
+/// Samples of the current-sense zero taken at start-up (bridge off).
+const OFFSET_SAMPLES: u32 = 256;
+
+#[embassy_executor::main]
+async fn main(spawner: Spawner) {
+    static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
+    let (mut hw, rest) = board::init(EP_OUT.init([0; 256]));
+    info!("gms firmware {}", env!("CARGO_PKG_VERSION"));
+
+    // The DWT cycle counter times the control step.
+    // SAFETY: only the DCB and DWT are touched, here, before the control interrupt starts;
+    // nothing else in the firmware uses them.
+    let mut cp = unsafe { cortex_m::Peripherals::steal() };
+    cp.DCB.enable_trace();
+    cp.DWT.enable_cycle_counter();
+
+    let mut faults = Faults::NONE;
+    if rest.watchdog_reset {
+        warn!("reset by the watchdog");
+        faults.latch(Faults::WATCHDOG_RESET);
+    }
+
+    // Parameters: the stored set, or the defaults and a fault; never a mix.
+    let mut store = storage::Store::new(rest.flash);
+    let settings = match store.load() {
+        Ok(Some(rec)) => match drive::decode_settings(&rec, &defaults()) {
+            Ok(s) => {
+                info!("parameters loaded from flash");
+                s
+            }
+            Err(e) => {
+                warn!("{}: running the defaults", e);
+                faults.latch(Faults::INVALID_PARAMS);
+                defaults()
+            }
         },
+        Ok(None) => {
+            warn!("no stored parameters: running the defaults");
+            faults.latch(Faults::INVALID_PARAMS);
+            defaults()
+        }
+        Err(e) => {
+            warn!("parameter store unreadable ({}): running the defaults", e);
+            faults.latch(Faults::INVALID_PARAMS);
+            defaults()
+        }
     };
-    let mut x = 0.0f32;
+    let (settings, applied) = match comms::prepare(&settings) {
+        Some(a) => (settings, a),
+        None => {
+            faults.latch(Faults::INVALID_PARAMS);
+            let d = defaults();
+            match comms::prepare(&d) {
+                Some(a) => (d, a),
+                None => {
+                    // The built-in set always passes; stop rather than run without one.
+                    error!("the built-in parameters are invalid");
+                    loop {
+                        cortex_m::asm::wfi();
+                    }
+                }
+            }
+        }
+    };
+
+    // Current-sense zero, with the bridge off.
+    let mut cal = OffsetCalibration::default();
+    for _ in 0..OFFSET_SAMPLES {
+        let sum = hw.current_codes();
+        cal.push((sum / board::SENSE_OVERSAMPLE) as u16);
+    }
+    let offset = match cal.finish(board::SENSE_OFFSET_EXPECTED, board::SENSE_OFFSET_TOLERANCE) {
+        Some(o) => {
+            info!("current-sense zero at {} codes", o);
+            o
+        }
+        None => {
+            warn!("current-sense zero out of the board's window: check the amplifier");
+            faults.latch(Faults::CURRENT_SENSE);
+            board::SENSE_OFFSET_EXPECTED
+        }
+    };
+    let sense = CurrentSense::new(
+        board::ADC_VREF,
+        board::ADC_FULL_SCALE,
+        board::SENSE_V_PER_A,
+        offset,
+    );
+    let Some(sense) = sense else {
+        error!("the board's current-sense constants are invalid");
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
+
+    Loop::new(hw, applied, sense, faults).hand_over();
+    board::start_control();
+    info!("control loop running");
+
+    // USB CDC-ACM.
+    let mut usb_cfg = embassy_usb::Config::new(0x1209, 0x0001);
+    usb_cfg.manufacturer = Some("gms");
+    usb_cfg.product = Some("gms motor driver");
+    usb_cfg.serial_number = Some("gms-f405");
+    usb_cfg.max_power = 100;
+    usb_cfg.max_packet_size_0 = 64;
+    static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+    static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
+    static STATE: StaticCell<State> = StaticCell::new();
+    let mut builder = embassy_usb::Builder::new(
+        rest.usb,
+        usb_cfg,
+        CONFIG_DESC.init([0; 256]),
+        BOS_DESC.init([0; 256]),
+        &mut [],
+        CONTROL_BUF.init([0; 64]),
+    );
+    let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
+    let usb = builder.build();
+
+    let dev = comms::Dev::new(settings, defaults(), store);
+    spawner.spawn(unwrap!(usb_task(usb)));
+    spawner.spawn(unwrap!(comms_task(class, dev)));
+    spawner.spawn(unwrap!(supervisor(
+        rest.watchdog,
+        rest.led_run,
+        rest.led_fault
+    )));
+}
+
+#[embassy_executor::task]
+async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB_OTG_FS>>) -> ! {
+    usb.run().await
+}
+
+#[embassy_executor::task]
+async fn comms_task(
+    class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
+    dev: comms::Dev,
+) -> ! {
+    comms::serve(class, dev).await
+}
+
+/// Watchdog, LEDs and fault logs, every 250 ms. The watchdog is fed only while the control
+/// interrupt keeps running (its step counter advances): a stuck loop resets the MCU.
+#[embassy_executor::task]
+async fn supervisor(
+    mut wdg: IndependentWatchdog<'static, IWDG>,
+    mut led_run: Output<'static>,
+    mut led_fault: Output<'static>,
+) -> ! {
+    wdg.unleash();
+    let mut last_steps = 0u64;
+    let mut last_faults = Faults::NONE;
+    let mut tick = 0u32;
     loop {
-        // Placeholder load: a slow triangle wave through the model, 10 kHz steps.
-        let dx = if (x as u32 / 4) % 2 == 0 { 1e-6 } else { -1e-6 };
-        x += 1.0;
-        let f = model.advance(dx, 1e-4);
-        cortex_m::asm::delay(f.to_bits() & 1);
+        Timer::after_millis(250).await;
+        tick = tick.wrapping_add(1);
+        let st = comms::status();
+        if st.steps != last_steps {
+            wdg.pet();
+            last_steps = st.steps;
+        } else {
+            error!("control loop stalled: the watchdog will reset");
+        }
+        if st.faults != last_faults {
+            if !st.faults.is_empty() {
+                warn!("faults latched: {=u16:#x}", st.faults.0);
+            }
+            last_faults = st.faults;
+        }
+        led_fault.set_level((!st.faults.is_empty()).into());
+        // Run LED: steady while enabled, 1 Hz blink while disabled.
+        let blink = (tick / 2).is_multiple_of(2);
+        led_run.set_level((st.enabled || blink).into());
     }
 }

@@ -23,11 +23,13 @@
 
 pub mod adaptive;
 pub mod controller;
+pub mod drive;
 pub mod error;
 pub mod gms;
 pub mod lugre;
 pub mod math;
 pub mod model;
+pub mod numtext;
 pub mod presets;
 pub mod protocol;
 pub mod reference;

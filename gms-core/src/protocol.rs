@@ -18,6 +18,7 @@
 use core::fmt::{self, Write};
 
 use crate::controller::{ControllerParams, FfMode};
+use crate::numtext::Num;
 
 /// The longest request line [bytes], without its line ending.
 pub const MAX_LINE: usize = 120;
@@ -177,7 +178,7 @@ fn bad(reason: &'static str) -> ParseError {
 
 /// A finite f32 from text, or `None`.
 pub fn parse_f32(s: &str) -> Option<f32> {
-    s.parse::<f32>().ok().filter(|v| v.is_finite())
+    crate::numtext::parse_f32(s)
 }
 
 /// Parses one request line.
@@ -394,16 +395,16 @@ fn mode_name(m: FfMode) -> &'static str {
 /// device's own).
 pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result {
     match p.access {
-        Access::Number { get, .. } => write!(out, "{}", get(s)),
+        Access::Number { get, .. } => write!(out, "{}", Num(get(s))),
         Access::Mode => out.write_str(mode_name(s.ff.mode)),
-        Access::Estimate(_) => write!(out, "{}", 1.0f32),
+        Access::Estimate(_) => write!(out, "{}", Num(1.0)),
     }
 }
 
 /// Writes a parameter's value as `dev` has it (settings and estimates).
 pub fn write_param<D: Device + ?Sized>(p: &Param, dev: &D, out: &mut impl Write) -> fmt::Result {
     match p.access {
-        Access::Estimate(e) => write!(out, "{}", dev.estimate(e)),
+        Access::Estimate(e) => write!(out, "{}", Num(dev.estimate(e))),
         _ => write_value(p, dev.settings(), out),
     }
 }
@@ -528,13 +529,13 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
                 match p.access {
                     Access::Number { min, max, .. } => {
                         write_value(p, s, out)?;
-                        writeln!(out, " {} [{}, {}]", p.unit, min, max)?
+                        writeln!(out, " {} [{}, {}]", p.unit, Num(min), Num(max))?
                     }
                     Access::Mode => {
                         write_value(p, s, out)?;
                         writeln!(out, " - [none, static, gms, gms-adaptive]")?
                     }
-                    Access::Estimate(e) => writeln!(out, "{} - [read-only]", dev.estimate(e))?,
+                    Access::Estimate(e) => writeln!(out, "{} - [read-only]", Num(dev.estimate(e)))?,
                 }
             }
             writeln!(out, "ok")

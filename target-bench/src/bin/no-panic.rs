@@ -1,7 +1,10 @@
 //! Link-time proof that the control path cannot panic on the target.
 //!
 //! This binary runs every function of the control path (the friction models, the controller's
-//! position and current steps, the reference generator) on inputs the optimiser cannot see,
+//! position and current steps, the reference generator) and the bench protocol (line reader,
+//! parser, `execute` with every command, the number parser and formatter) and the firmware's
+//! pure control-step logic (`gms_core::drive`: count extension, current scaling, fault checks,
+//! step statistics, bridge compare values) on inputs the optimiser cannot see,
 //! with `panic-never` as its panic handler: that handler refers to a symbol that does not
 //! exist, so the release build links only if no panic (bounds check, overflow, unwrap, …)
 //! is reachable from this code. `cargo build -p target-bench --bin no-panic --release
@@ -9,15 +12,69 @@
 #![no_std]
 #![no_main]
 
+use core::fmt::{self, Write};
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use gms_core::controller::Controller;
+use gms_core::drive;
+use gms_core::protocol::{self, Device, LineReader, Settings};
 use gms_core::reference::{Reference, Segment};
 use gms_core::{
     FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
 };
 use panic_never as _;
+
+/// A device that does nothing but keep the settings (the protocol's own paths are the point).
+struct Nop(Settings);
+
+impl Device for Nop {
+    fn settings(&self) -> &Settings {
+        &self.0
+    }
+    fn apply(&mut self, new: Settings) {
+        self.0 = new;
+    }
+    fn save(&mut self) -> Result<(), &'static str> {
+        black_box(drive::encode_settings(&self.0));
+        Ok(())
+    }
+    fn load(&mut self) -> Result<(), &'static str> {
+        let rec = black_box(drive::encode_settings(&self.0));
+        self.0 = drive::decode_settings(&rec, &self.0).map_err(|_| "invalid")?;
+        Ok(())
+    }
+    fn defaults(&mut self) {}
+    fn enable(&mut self) -> Result<(), &'static str> {
+        Err("no")
+    }
+    fn disable(&mut self) {}
+    fn status(&self, out: &mut dyn Write) -> fmt::Result {
+        gms_core::numtext::write_f32(out, black_box(self.0.i_max))
+    }
+    fn clear(&mut self) {}
+    fn move_to(&mut self, pos: f32, _vel: Option<f32>) -> Result<(), &'static str> {
+        black_box(pos);
+        Ok(())
+    }
+    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
+        black_box((fields, rate_hz));
+        Ok(())
+    }
+    fn stream_off(&mut self) {}
+}
+
+/// A sink that keeps the last byte written.
+struct Sink(u8);
+
+impl Write for Sink {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        for b in s.bytes() {
+            self.0 = black_box(b);
+        }
+        Ok(())
+    }
+}
 
 #[entry]
 fn main() -> ! {
@@ -62,7 +119,51 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
+    let limits = drive::limits_for(
+        &selftest::controller_params(),
+        black_box(&drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            travel: 50.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.8,
+        }),
+    );
+    let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
+    let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
+    let mut stats = drive::StepStats::new();
+    let mut faults = drive::Faults::NONE;
+    let mut dev = Nop(selftest::controller_params());
+    let mut reader = LineReader::default();
+    let mut sink = Sink(0);
     loop {
+        // The protocol: bytes the optimiser cannot see, through the reader into execute.
+        let byte: u8 = black_box(b'\n');
+        if let Some(line) = reader.push(byte) {
+            let _ = protocol::execute(&mut dev, line, &mut sink);
+        }
+        black_box(gms_core::numtext::parse_f32(black_box("1.5e-3")));
+        // The firmware's control-step logic.
+        let delta = enc.update(black_box(7u32));
+        let amps = sense.map_or(0.0, |s| s.amps_sum(black_box(8192), black_box(4)));
+        let m = drive::Measured {
+            current: amps,
+            error: black_box(1e-4),
+            delta,
+            pos: enc.count(),
+            cycles: black_box(3000),
+        };
+        faults.latch(drive::check(&m, &limits, black_box(true)));
+        stats.record(black_box(3000));
+        black_box((stats.worst(), stats.mean(), faults));
+        black_box(drive::bridge_compare(
+            black_box(0.3),
+            black_box(4200),
+            black_box(true),
+        ));
+        black_box(drive::pwm_timing(168_000_000, black_box(20_000.0), 65_534));
         let dx: f32 = black_box(1e-6);
         let dt: f32 = black_box(1e-4);
         black_box(gms.advance(dx, dt));

@@ -1,0 +1,342 @@
+//! The motor driver's pure logic (count extension, current scaling, faults, step statistics,
+//! bridge PWM, the flash record), against independent expectations.
+
+use gms_core::drive::{
+    self, CountExtender, CurrentSense, Faults, Limits, Measured, OffsetCalibration, RECORD_LEN,
+    RecordError, StepStats, bridge_compare, decode_settings, encode_settings, pwm_timing,
+    wrapping_delta,
+};
+use gms_core::protocol::{self, Access, PARAMS};
+use gms_core::selftest;
+use proptest::prelude::*;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    /// Any sequence of increments smaller than half the counter's range: the extended count
+    /// is the true sum, whatever the counter started at and however often it wrapped.
+    #[test]
+    fn extension_equals_true_sum(
+        bits in prop::sample::select(vec![16u32, 32]),
+        start in any::<u32>(),
+        steps in prop::collection::vec(any::<i64>(), 1..400),
+    ) {
+        let half = 1i64 << (bits - 1);
+        let mask = if bits == 32 { u32::MAX as u64 } else { (1u64 << bits) - 1 };
+        let mut truth: i64 = 0;
+        let raw_of = |t: i64| ((start as i64 + t) as u64 & mask) as u32;
+        let mut ext = CountExtender::new(bits, raw_of(0));
+        for s in steps {
+            let d = s % half; // |d| < half
+            truth += d;
+            let got = ext.update(raw_of(truth));
+            prop_assert_eq!(got, d);
+            prop_assert_eq!(ext.count(), truth);
+        }
+    }
+
+    /// The flash record of any valid set reads back as the same set.
+    #[test]
+    fn record_round_trips(idx in prop::collection::vec((0usize..64, 0.0f64..1.0), 0..20)) {
+        let base = selftest::controller_params();
+        let mut s = base;
+        for (i, u) in idx {
+            let p = &PARAMS[i % PARAMS.len()];
+            if let Access::Number { min, max, .. } = p.access {
+                // Log-uniform within the range where it is wide.
+                let v = if min > 0.0 && max / min > 100.0 {
+                    (min as f64 * (max as f64 / min as f64).powf(u)) as f32
+                } else {
+                    (min as f64 + (max - min) as f64 * u) as f32
+                };
+                if let Ok(n) = protocol::with_value(&s, p.path, &format!("{v:e}")) {
+                    s = n;
+                }
+            }
+        }
+        let rec = encode_settings(&s);
+        prop_assert_eq!(decode_settings(&rec, &base), Ok(s));
+    }
+
+    /// Any corrupted byte is caught (the CRC), never half applied.
+    #[test]
+    fn corrupted_record_is_rejected(pos in 0usize..RECORD_LEN, flip in 1u8..=255) {
+        let base = selftest::controller_params();
+        let mut rec = encode_settings(&base);
+        rec[pos] ^= flip;
+        prop_assert_eq!(decode_settings(&rec, &base), Err(RecordError::Checksum));
+    }
+}
+
+#[test]
+fn wrapping_delta_examples() {
+    assert_eq!(wrapping_delta(65_530, 5, 16), 11);
+    assert_eq!(wrapping_delta(5, 65_530, 16), -11);
+    assert_eq!(wrapping_delta(4_294_967_290, 5, 32), 11);
+    assert_eq!(wrapping_delta(100, 100, 32), 0);
+}
+
+/// Re-signs a record whose body was edited, so that the check behind the CRC is reached.
+fn resign(rec: &mut [u8; RECORD_LEN]) {
+    let crc = drive::crc32(&rec[..RECORD_LEN - 4]);
+    rec[RECORD_LEN - 4..].copy_from_slice(&crc.to_le_bytes());
+}
+
+#[test]
+fn crc32_is_zlibs() {
+    // The standard check value of CRC-32/ISO-HDLC.
+    assert_eq!(drive::crc32(b"123456789"), 0xCBF4_3926);
+}
+
+#[test]
+fn bad_records_name_why() {
+    let base = selftest::controller_params();
+    let good = encode_settings(&base);
+    assert_eq!(
+        decode_settings(&good[..10], &base),
+        Err(RecordError::Length)
+    );
+    assert_eq!(
+        decode_settings(&[0xff; RECORD_LEN], &base),
+        Err(RecordError::Checksum)
+    );
+    let mut v = good;
+    v[0] = 99;
+    resign(&mut v);
+    assert_eq!(decode_settings(&v, &base), Err(RecordError::Version));
+    let mut l = good;
+    l[1] ^= 1;
+    resign(&mut l);
+    assert_eq!(decode_settings(&l, &base), Err(RecordError::Layout));
+    let mut m = good;
+    m[5] = 7; // no such mode
+    resign(&mut m);
+    assert_eq!(decode_settings(&m, &base), Err(RecordError::Invalid));
+    // The first number is rate.pos_hz: NaN, then out of range, then a valid value that makes
+    // the set invalid (cur_hz no longer a multiple).
+    for v in [f32::NAN, 1e9, 7_777.0] {
+        let mut r = good;
+        r[6..10].copy_from_slice(&v.to_le_bytes());
+        resign(&mut r);
+        assert_eq!(decode_settings(&r, &base), Err(RecordError::Invalid), "{v}");
+    }
+}
+
+#[test]
+fn the_table_fits_a_record() {
+    let numbers = PARAMS
+        .iter()
+        .filter(|p| matches!(p.access, Access::Number { .. }))
+        .count();
+    assert!(numbers <= drive::MAX_NUMBERS, "{numbers} parameters");
+}
+
+#[test]
+fn current_scaling() {
+    // 3.3 V reference, 12 bits, 68 mohm shunt into a gain of 50 (3.4 V/A), offset at mid.
+    let cs = CurrentSense::new(3.3, 4095.0, 3.4, 2048.0).unwrap();
+    let per_code = 3.3 / 4095.0 / 3.4;
+    assert_eq!(cs.amps(2048), 0.0);
+    assert!((cs.amps(3048) - 1000.0 * per_code).abs() < 1e-6);
+    assert!((cs.amps(1048) + 1000.0 * per_code).abs() < 1e-6);
+    assert!((cs.amps_sum(4 * 2148, 4) - 100.0 * per_code).abs() < 1e-6);
+    assert_eq!(cs.amps_sum(123, 0), 0.0);
+    // Range: the nearer rail, 2047 codes down.
+    assert!((cs.range(4095.0) - 2047.0 * per_code).abs() < 1e-6);
+    assert!(CurrentSense::new(3.3, 4095.0, 0.0, 2048.0).is_none());
+    assert!(CurrentSense::new(f32::NAN, 4095.0, 3.4, 2048.0).is_none());
+    assert!(CurrentSense::new(3.3, 4095.0, 3.4, -1.0).is_none());
+}
+
+#[test]
+fn offset_calibration() {
+    let mut c = OffsetCalibration::default();
+    assert_eq!(c.finish(2048.0, 200.0), None);
+    for code in [2040u16, 2050, 2060, 2050] {
+        c.push(code);
+    }
+    assert_eq!(c.samples(), 4);
+    assert_eq!(c.finish(2048.0, 200.0), Some(2050.0));
+    // A disconnected amplifier reads 0: outside the window.
+    let mut d = OffsetCalibration::default();
+    d.push(0);
+    assert_eq!(d.finish(2048.0, 200.0), None);
+}
+
+fn limits() -> Limits {
+    Limits {
+        i_trip: 0.75,
+        max_error: 0.01,
+        max_step_counts: 2_000,
+        pos_min: -1_000_000,
+        pos_max: 1_000_000,
+        budget_cycles: 6_720,
+    }
+}
+
+#[test]
+fn each_fault_alone() {
+    let ok = Measured {
+        current: 0.1,
+        error: 1e-4,
+        delta: 10,
+        pos: 500,
+        cycles: 3_000,
+    };
+    let lim = limits();
+    assert_eq!(drive::check(&ok, &lim, true), Faults::NONE);
+    let cases = [
+        (
+            Measured {
+                current: -0.8,
+                ..ok
+            },
+            Faults::OVER_CURRENT,
+        ),
+        (
+            Measured {
+                current: f32::NAN,
+                ..ok
+            },
+            Faults::OVER_CURRENT,
+        ),
+        (Measured { error: 0.02, ..ok }, Faults::FOLLOWING_ERROR),
+        (Measured { error: -0.02, ..ok }, Faults::FOLLOWING_ERROR),
+        (
+            Measured {
+                delta: -2_001,
+                ..ok
+            },
+            Faults::ENCODER_JUMP,
+        ),
+        (
+            Measured {
+                pos: 1_000_001,
+                ..ok
+            },
+            Faults::POSITION_LIMIT,
+        ),
+        (
+            Measured {
+                pos: -1_000_001,
+                ..ok
+            },
+            Faults::POSITION_LIMIT,
+        ),
+        (
+            Measured {
+                cycles: 6_721,
+                ..ok
+            },
+            Faults::OVERRUN,
+        ),
+    ];
+    for (m, want) in cases {
+        assert_eq!(drive::check(&m, &lim, true), want, "{m:?}");
+    }
+    // Exactly at a limit is still fine.
+    let edge = Measured {
+        current: 0.75,
+        error: 0.01,
+        delta: 2_000,
+        pos: 1_000_000,
+        cycles: 6_720,
+    };
+    assert_eq!(drive::check(&edge, &lim, true), Faults::NONE);
+    // Bridge off: only the encoder is watched.
+    let bad = Measured {
+        current: 5.0,
+        error: 1.0,
+        delta: 5_000,
+        pos: i64::MAX,
+        cycles: u32::MAX,
+    };
+    assert_eq!(drive::check(&bad, &lim, false), Faults::ENCODER_JUMP);
+}
+
+#[test]
+fn faults_latch_until_cleared() {
+    let mut f = Faults::NONE;
+    f.latch(Faults::OVERRUN);
+    f.latch(Faults::NONE);
+    f.latch(Faults::ENCODER_JUMP);
+    assert!(f.contains(Faults::OVERRUN) && f.contains(Faults::ENCODER_JUMP));
+    assert!(!f.contains(Faults::OVER_CURRENT));
+    let mut names = String::new();
+    f.write_names(&mut names).unwrap();
+    assert_eq!(names, "encoder_jump,overrun");
+    let mut names = String::new();
+    Faults(0x8101).write_names(&mut names).unwrap();
+    assert_eq!(names, "over_current,unknown");
+}
+
+#[test]
+fn step_statistics() {
+    let mut s = StepStats::default();
+    assert_eq!((s.worst(), s.mean(), s.count()), (0, 0.0, 0));
+    let xs = [1200u32, 4000, 800, 2000];
+    for x in xs {
+        s.record(x);
+    }
+    assert_eq!(s.worst(), 4000);
+    assert_eq!(s.last(), 2000);
+    assert_eq!(s.count(), 4);
+    assert_eq!(s.mean(), 2000.0);
+    assert!((drive::cycles_to_us(8400.0, 168_000_000) - 50.0).abs() < 1e-4);
+}
+
+#[test]
+fn bridge_outputs() {
+    // Forward: IN1 high throughout (compare above the period), IN2 low for |duty|.
+    assert_eq!(bridge_compare(0.25, 4200, true), (4201, 3150));
+    assert_eq!(bridge_compare(-0.25, 4200, true), (3150, 4201));
+    // Full scale and beyond: the PWM side low throughout.
+    assert_eq!(bridge_compare(1.5, 4200, true), (4201, 0));
+    assert_eq!(bridge_compare(-1.0, 4200, true), (0, 4201));
+    // Zero and NaN: both high (brake); disabled: both low (coast).
+    assert_eq!(bridge_compare(0.0, 4200, true), (4201, 4200));
+    assert_eq!(bridge_compare(f32::NAN, 4200, true), (4201, 4200));
+    assert_eq!(bridge_compare(0.5, 4200, false), (0, 0));
+}
+
+#[test]
+fn pwm_timer_settings() {
+    // 168 MHz, center-aligned, 20 kHz: 4200 counts up and down, no prescaler.
+    assert_eq!(pwm_timing(168_000_000, 20_000.0, 65_535), Some((0, 4200)));
+    assert_eq!(pwm_timing(168_000_000, 10_000.0, 65_535), Some((0, 8400)));
+    // 100 Hz needs the prescaler: 13 × 64615 × 2 ticks.
+    assert_eq!(pwm_timing(168_000_000, 100.0, 65_535), Some((12, 64_615)));
+    // Too fast for a useful resolution, nonsense rates.
+    assert_eq!(pwm_timing(168_000_000, 1e6, 65_535), None);
+    assert_eq!(pwm_timing(168_000_000, 0.0, 65_535), None);
+    assert_eq!(pwm_timing(168_000_000, f32::NAN, 65_535), None);
+}
+
+#[test]
+fn limits_from_settings_and_board() {
+    let s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
+    let b = drive::BoardLimits {
+        trip_factor: 1.5,
+        sense_range: 0.48,
+        max_error: 0.01,
+        max_speed: 100.0,
+        travel: 38.0,
+        clock_hz: 168_000_000,
+        budget_fraction: 0.8,
+    };
+    let l = drive::limits_for(&s, &b);
+    // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
+    assert!((l.i_trip - 0.456).abs() < 1e-6);
+    assert_eq!(l.max_error, 0.01);
+    // 100 rad/s over 0.1 ms is 0.01 rad = 2631.6 counts: 2632.
+    assert_eq!(l.max_step_counts, 2632);
+    // 38 rad / 3.8 urad = 1e7 counts (f32 rounding of 3.8e-6 allows ±1).
+    assert!((l.pos_max - 10_000_000).abs() <= 1 && l.pos_min == -l.pos_max);
+    // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
+    assert_eq!(l.budget_cycles, 6720);
+    let roomy = drive::BoardLimits {
+        sense_range: 10.0,
+        ..b
+    };
+    assert!((drive::limits_for(&s, &roomy).i_trip - 0.75).abs() < 1e-6);
+}
