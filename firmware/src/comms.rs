@@ -15,7 +15,7 @@ use gms_core::controller::{Controller, FfMode};
 use gms_core::drive::{self, Faults};
 use gms_core::numtext::Num;
 use gms_core::protocol::{self, Device, LineReader, Settings};
-use gms_core::reference::{Reference, SUB_PER_COUNT, Segment};
+use gms_core::reference::{Motion, SUB_PER_COUNT};
 
 use crate::board;
 use crate::control::{Applied, Requests, SHARED, Sample, Status, TELEMETRY};
@@ -222,16 +222,8 @@ impl Device for Dev {
         if !(target >= limits.pos_min as f32 && target <= limits.pos_max as f32) {
             return Err("beyond the soft limits");
         }
-        // From the current reference (f64: the fixed-point position can be large).
-        let from = st.reference as f64 / SUB_PER_COUNT as f64 * rpc as f64;
-        let seg = Segment::Move {
-            distance: (pos as f64 - from) as f32,
-            vmax: vel.unwrap_or(0.5),
-            amax: 50.0,
-            jmax: 1e4,
-            dwell: 1e-3,
-        };
-        let r = Reference::try_new(&[seg], rpc, st.reference).map_err(|_| "bad move")?;
+        // From the current reference.
+        let r = Motion::plan(st.reference, pos, vel, rpc).map_err(|_| "bad move")?;
         post(|q| q.motion = Some(r));
         Ok(())
     }

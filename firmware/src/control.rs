@@ -17,7 +17,7 @@ use gms_core::controller::{Controller, PositionOutput};
 use gms_core::drive::{
     self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats, bridge_compare,
 };
-use gms_core::reference::{RefSample, Reference, SUB_PER_COUNT, SubCounts};
+use gms_core::reference::{Motion, RefSample, Reference, SUB_PER_COUNT, SubCounts};
 
 use crate::board::{self, ControlHw};
 
@@ -179,8 +179,7 @@ pub struct Loop {
     sense: CurrentSense,
     faults: Faults,
     enabled: bool,
-    hold: SubCounts,
-    motion: Option<Reference<1>>,
+    motion: Motion,
     r: RefSample,
     out: PositionOutput,
     current: f32,
@@ -212,8 +211,7 @@ impl Loop {
             sense,
             faults,
             enabled: false,
-            hold: 0,
-            motion: None,
+            motion: Motion::holding(0),
             r: RefSample::default(),
             out: PositionOutput::default(),
             current: 0.0,
@@ -233,7 +231,7 @@ impl Loop {
 
     fn switch_off(&mut self) {
         self.enabled = false;
-        self.motion = None;
+        self.motion.stop();
         self.duty = 0.0;
         self.hw.set_bridge(0, 0);
     }
@@ -251,7 +249,7 @@ impl Loop {
             duty: self.duty,
             faults: self.faults,
             enabled: self.enabled,
-            moving: self.motion.is_some(),
+            moving: self.motion.is_moving(),
             stats: self.stats,
             sense_offset: self.sense.offset,
         };
@@ -297,38 +295,22 @@ impl Loop {
         }
         if req.enable && self.faults.is_empty() {
             self.ctrl.reset();
-            self.hold = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
+            self.motion
+                .hold_at(self.enc.count().saturating_mul(SUB_PER_COUNT as i64));
             self.last_pos = self.enc.count();
-            self.motion = None;
             self.enabled = true;
         }
         if let Some(m) = req.motion
             && self.enabled
         {
-            self.motion = Some(m);
+            self.motion.start(m);
         }
     }
 
     /// The reference for this position step.
     fn reference(&mut self) -> RefSample {
         let dt = self.ctrl.dt_pos();
-        match &mut self.motion {
-            Some(m) if !m.done() => m.next(dt),
-            Some(m) => {
-                self.hold = m.last().pos;
-                self.motion = None;
-                RefSample {
-                    pos: self.hold,
-                    vel: 0.0,
-                    acc: 0.0,
-                }
-            }
-            None => RefSample {
-                pos: self.hold,
-                vel: 0.0,
-                acc: 0.0,
-            },
-        }
+        self.motion.next(dt)
     }
 
     /// One PWM period.

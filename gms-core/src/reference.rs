@@ -314,6 +314,98 @@ impl<const S: usize> Reference<S> {
     }
 }
 
+/// Speed limit of the protocol's `move` when none is given [rad/s].
+pub const MOVE_VMAX: f32 = 0.5;
+/// Acceleration limit of the protocol's `move` [rad/s^2].
+pub const MOVE_AMAX: f32 = 50.0;
+/// Jerk limit of the protocol's `move` [rad/s^3].
+pub const MOVE_JMAX: f32 = 1e4;
+
+/// The reference of a device driven by point-to-point commands: a move's samples while one
+/// plays, then holding where it ended (or where the axis was enabled).
+#[derive(Debug, Clone)]
+pub struct Motion {
+    hold: SubCounts,
+    moving: Option<Reference<1>>,
+}
+
+impl Motion {
+    /// Holding at `pos` [1/65536 count], no move.
+    pub const fn holding(pos: SubCounts) -> Self {
+        Motion {
+            hold: pos,
+            moving: None,
+        }
+    }
+
+    /// The jerk-limited move of the protocol's `move` from `from` [1/65536 count] to `pos`
+    /// [rad] at up to `vel` [rad/s] ([`MOVE_VMAX`] when `None`), for an encoder of
+    /// `rad_per_count` [rad].
+    pub fn plan(
+        from: SubCounts,
+        pos: f32,
+        vel: Option<f32>,
+        rad_per_count: f32,
+    ) -> Result<Reference<1>, SegmentError> {
+        // The start in f64: the fixed-point position can be large.
+        let start = from as f64 / SUB_PER_COUNT as f64 * rad_per_count as f64;
+        let seg = Segment::Move {
+            distance: (pos as f64 - start) as f32,
+            vmax: match vel {
+                Some(v) => v,
+                None => MOVE_VMAX,
+            },
+            amax: MOVE_AMAX,
+            jmax: MOVE_JMAX,
+            dwell: 1e-3,
+        };
+        Reference::try_new(&[seg], rad_per_count, from)
+    }
+
+    /// Plays `r` from now on (replacing any move under way).
+    pub fn start(&mut self, r: Reference<1>) {
+        self.moving = Some(r);
+    }
+
+    /// Drops any move under way and holds at `pos`.
+    pub fn hold_at(&mut self, pos: SubCounts) {
+        self.hold = pos;
+        self.moving = None;
+    }
+
+    /// Drops any move under way; the hold position stays where it was.
+    pub fn stop(&mut self) {
+        self.moving = None;
+    }
+
+    /// The hold position [1/65536 count] (where the last move ended, or was set).
+    pub fn hold(&self) -> SubCounts {
+        self.hold
+    }
+
+    /// True while a move plays.
+    pub fn is_moving(&self) -> bool {
+        self.moving.is_some()
+    }
+
+    /// The reference for this step; advances a move by `dt` [s]. A finished move becomes
+    /// the hold position.
+    pub fn next(&mut self, dt: f32) -> RefSample {
+        if let Some(m) = &mut self.moving {
+            if !m.done() {
+                return m.next(dt);
+            }
+            self.hold = m.last().pos;
+            self.moving = None;
+        }
+        RefSample {
+            pos: self.hold,
+            vel: 0.0,
+            acc: 0.0,
+        }
+    }
+}
+
 fn abs(x: f32) -> f32 {
     if x < 0.0 { -x } else { x }
 }

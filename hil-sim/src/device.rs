@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use gms_core::controller::{Controller, FfMode};
 use gms_core::protocol::{self, Access, Device, LineReader, PARAMS, Settings};
-use gms_core::reference::{RefSample, Reference, SUB_PER_COUNT, Segment, SubCounts};
+use gms_core::reference::{Motion, SUB_PER_COUNT};
 
 use crate::commands::write_atomic;
 use crate::plant::Plant;
@@ -50,8 +50,7 @@ pub struct Axis {
     settings: Settings,
     enabled: bool,
     faults: u32,
-    hold: SubCounts,
-    motion: Option<Reference<2>>,
+    motion: Motion,
     t: f64,
     last: Sample,
     /// The last [`HISTORY`] samples, one per position period, for telemetry.
@@ -73,8 +72,7 @@ impl Axis {
             settings,
             enabled: false,
             faults,
-            hold: 0,
-            motion: None,
+            motion: Motion::holding(0),
             t: 0.0,
             last: Sample::default(),
             history: std::collections::VecDeque::with_capacity(HISTORY),
@@ -88,23 +86,7 @@ impl Axis {
     /// One position-loop period of the device.
     pub fn tick(&mut self) {
         let dt = self.ctrl.dt_pos();
-        let r = match &mut self.motion {
-            Some(m) if !m.done() => m.next(dt),
-            Some(m) => {
-                self.hold = m.last().pos;
-                self.motion = None;
-                RefSample {
-                    pos: self.hold,
-                    vel: 0.0,
-                    acc: 0.0,
-                }
-            }
-            None => RefSample {
-                pos: self.hold,
-                vel: 0.0,
-                acc: 0.0,
-            },
-        };
+        let r = self.motion.next(dt);
         let count = self.plant.encoder();
         let out = if self.enabled {
             self.ctrl.position_step(count, &r)
@@ -300,15 +282,15 @@ impl Device for Session<'_> {
         }
         let s = axis.settings;
         axis.apply(s).map_err(|_| "invalid settings")?;
-        axis.hold = axis.plant.encoder() * SUB_PER_COUNT as i64;
-        axis.motion = None;
+        let here = axis.plant.encoder() * SUB_PER_COUNT as i64;
+        axis.motion.hold_at(here);
         axis.enabled = true;
         Ok(())
     }
     fn disable(&mut self) {
         let mut axis = self.shared.lock();
         axis.enabled = false;
-        axis.motion = None;
+        axis.motion.stop();
     }
     fn status(&self, out: &mut dyn std::fmt::Write) -> std::fmt::Result {
         let axis = self.shared.lock();
@@ -328,7 +310,7 @@ impl Device for Session<'_> {
             l.t,
             l.pos,
             l.error / rpc,
-            axis.motion.is_some() as u8
+            axis.motion.is_moving() as u8
         )
     }
     fn clear(&mut self) {
@@ -339,17 +321,9 @@ impl Device for Session<'_> {
         if !axis.enabled {
             return Err("disabled (enable first)");
         }
-        let rpc = axis.rpc();
-        let from = axis.hold as f64 / SUB_PER_COUNT as f64 * rpc;
-        let seg = Segment::Move {
-            distance: (pos as f64 - from) as f32,
-            vmax: vel.unwrap_or(0.5),
-            amax: 50.0,
-            jmax: 1e4,
-            dwell: 1e-3,
-        };
-        let r = Reference::try_new(&[seg], rpc as f32, axis.hold).map_err(|_| "bad move")?;
-        axis.motion = Some(r);
+        let r = Motion::plan(axis.motion.hold(), pos, vel, axis.rpc() as f32)
+            .map_err(|_| "bad move")?;
+        axis.motion.start(r);
         Ok(())
     }
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {

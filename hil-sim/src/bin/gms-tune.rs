@@ -377,11 +377,12 @@ fn run(cli: Cli) -> Result<(), Fail> {
             // hil-sim's own figures, for the one move the device made (its profile limits
             // are the device's defaults for `move`).
             let rpc = 3.8e-6;
+            use gms_core::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
             let seg = gms_core::reference::Segment::Move {
                 distance: distance as f32,
-                vmax: 0.5,
-                amax: 50.0,
-                jmax: 1e4,
+                vmax: MOVE_VMAX,
+                amax: MOVE_AMAX,
+                jmax: MOVE_JMAX,
                 dwell: seconds as f32,
             };
             let m = hil_sim::sim::metrics(&trace, &[seg], rpc);
