@@ -169,12 +169,7 @@ pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<
     match kind {
         Kind::Presliding | Kind::Guideway => {
             // Out to 3 × the largest breakpoint (saturation), or just beyond Fs.
-            let dmax = spec
-                .blocks
-                .iter()
-                .flatten()
-                .map(|b| b.alpha * fs / b.k)
-                .fold(0.0, f64::max);
+            let dmax = spec.largest_breakpoint();
             let mut text = String::from("x,f,dir\n");
             for dir in [1.0, -1.0] {
                 let pts = load_steps(
@@ -194,6 +189,7 @@ pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<
         Kind::Sliding => {
             let vs = spec.vs.ok_or("the parameter file has no vs")?;
             let c = spec.c.unwrap_or(fs / 0.03);
+            let dmax = spec.largest_breakpoint();
             let mut text = String::from("v,f\n");
             for dir in [1.0, -1.0] {
                 for i in 0..25 {
@@ -201,12 +197,6 @@ pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<
                     model.reset();
                     // Run through the pre-sliding range and 20 slip time constants, then
                     // average over a measurement window.
-                    let dmax = spec
-                        .blocks
-                        .iter()
-                        .flatten()
-                        .map(|b| b.alpha * fs / b.k)
-                        .fold(0.0, f64::max);
                     let settle = (5.0 * dmax / v.abs()).max(20.0 * fs / c);
                     model.advance((v * settle) as f32, settle as f32);
                     let n = 200;

@@ -457,12 +457,7 @@ pub fn fit_lag(
         ));
     }
     let travel = (x[t.len() - 1] - x[skip]).abs();
-    let dmax = spec
-        .blocks
-        .iter()
-        .flatten()
-        .map(|b| b.alpha * spec.fs.unwrap_or(0.0) / b.k)
-        .fold(0.0, f64::max);
+    let dmax = spec.largest_breakpoint();
     if travel < 10.0 * dmax {
         return Err(
             "the record hardly moves beyond the pre-sliding range: it shows no sliding lag".into(),

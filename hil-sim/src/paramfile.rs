@@ -262,6 +262,17 @@ impl FrictionSpec {
         })
     }
 
+    /// The end of the pre-sliding range: the largest block breakpoint alpha_i Fs / k_i
+    /// [m or rad] (0 without blocks or fs).
+    pub fn largest_breakpoint(&self) -> f64 {
+        let fs = self.fs.unwrap_or(0.0);
+        self.blocks
+            .iter()
+            .flatten()
+            .map(|b| b.alpha * fs / b.k)
+            .fold(0.0, f64::max)
+    }
+
     /// Builds and validates the model; the error names the offending key.
     pub fn build(&self) -> Result<AnyModel, String> {
         let invalid = |e: gms_core::ParamError| format!("[friction] {e}");

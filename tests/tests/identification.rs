@@ -225,7 +225,7 @@ proptest! {
         let s = &id.spec;
         let rel = |a: Option<f64>, b: Option<f64>| (a.unwrap() / b.unwrap() - 1.0).abs();
         let fs = truth.fs.unwrap();
-        let xmax = truth.blocks.iter().flatten().map(|b| b.alpha * fs / b.k).fold(0.0, f64::max);
+        let xmax = truth.largest_breakpoint();
         let vr = virgin_rms(&truth, s, 1.2 * xmax);
         eprintln!(
             "fs {:+.2} % fc {:+.2} % vs {:+.2} % delta {:+.2} % sigma {:+.2} % c {:+.2} % virgin {:.2} %",
