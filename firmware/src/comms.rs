@@ -11,7 +11,7 @@ use embassy_stm32::usb::Driver;
 use embassy_time::{Duration, Instant};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
-use gms_core::controller::{Controller, FfMode};
+use gms_core::controller::Controller;
 use gms_core::drive::{self, Faults};
 use gms_core::numtext::Num;
 use gms_core::protocol::{self, Device, LineReader, Settings};
@@ -171,12 +171,7 @@ impl Device for Dev {
     fn status(&self, out: &mut dyn Write) -> fmt::Result {
         let st = status();
         let rpc = self.settings.rad_per_count;
-        let mode = match self.settings.ff.mode {
-            FfMode::None => "none",
-            FfMode::Static => "static",
-            FfMode::Gms => "gms",
-            FfMode::GmsAdaptive => "gms-adaptive",
-        };
+        let mode = self.settings.ff.mode.name();
         let t = st.steps as f32 / st.pos_rate_hz.max(1.0);
         let error_counts = st.error / rpc;
         write!(

@@ -32,6 +32,30 @@ pub enum FfMode {
     GmsAdaptive,
 }
 
+impl FfMode {
+    /// Every mode, in table order.
+    pub const ALL: [FfMode; 4] = [
+        FfMode::None,
+        FfMode::Static,
+        FfMode::Gms,
+        FfMode::GmsAdaptive,
+    ];
+    /// The mode's name: `none`, `static`, `gms` or `gms-adaptive`.
+    pub fn name(self) -> &'static str {
+        match self {
+            FfMode::None => "none",
+            FfMode::Static => "static",
+            FfMode::Gms => "gms",
+            FfMode::GmsAdaptive => "gms-adaptive",
+        }
+    }
+
+    /// The mode with this name, if any.
+    pub fn from_name(name: &str) -> Option<FfMode> {
+        FfMode::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
 /// Position-loop PID gains (on the position error in rad, output torque in N·m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

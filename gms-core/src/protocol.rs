@@ -382,21 +382,12 @@ pub fn find(path: &str) -> Option<&'static Param> {
     PARAMS.iter().find(|p| p.path == path)
 }
 
-fn mode_name(m: FfMode) -> &'static str {
-    match m {
-        FfMode::None => "none",
-        FfMode::Static => "static",
-        FfMode::Gms => "gms",
-        FfMode::GmsAdaptive => "gms-adaptive",
-    }
-}
-
 /// Writes a parameter's value (an estimate reads as 1 here: use [`write_param`] for the
 /// device's own).
 pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result {
     match p.access {
         Access::Number { get, .. } => write!(out, "{}", Num(get(s))),
-        Access::Mode => out.write_str(mode_name(s.ff.mode)),
+        Access::Mode => out.write_str(s.ff.mode.name()),
         Access::Estimate(_) => write!(out, "{}", Num(1.0)),
     }
 }
@@ -428,18 +419,10 @@ pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, Par
             set(&mut new, v);
         }
         Access::Mode => {
-            new.ff.mode = match value {
-                "none" => FfMode::None,
-                "static" => FfMode::Static,
-                "gms" => FfMode::Gms,
-                "gms-adaptive" => FfMode::GmsAdaptive,
-                _ => {
-                    return Err(ParseError {
-                        code: ErrorCode::OutOfRange,
-                        reason: "ff.mode is none, static, gms or gms-adaptive",
-                    });
-                }
-            }
+            new.ff.mode = FfMode::from_name(value).ok_or(ParseError {
+                code: ErrorCode::OutOfRange,
+                reason: "ff.mode is none, static, gms or gms-adaptive",
+            })?;
         }
         Access::Estimate(_) => {
             return Err(ParseError {

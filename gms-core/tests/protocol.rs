@@ -260,3 +260,19 @@ proptest! {
         }
     }
 }
+
+/// Every feedforward mode is set and read back by its name, and no other name is a mode.
+#[test]
+fn every_mode_round_trips_by_name() {
+    let mut d = Mock::new();
+    for m in FfMode::ALL {
+        assert_eq!(FfMode::from_name(m.name()), Some(m));
+        assert_eq!(ask(&mut d, &format!("set ff.mode {}", m.name())), "ok\n");
+        assert_eq!(d.s.ff.mode, m);
+        assert_eq!(ask(&mut d, "get ff.mode"), format!("ok {}\n", m.name()));
+    }
+    for bad in ["GMS", "adaptive", "gms_adaptive", ""] {
+        assert_eq!(FfMode::from_name(bad), None);
+    }
+    assert!(ask(&mut d, "set ff.mode lugre").starts_with("err 6 "));
+}

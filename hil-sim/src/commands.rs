@@ -14,14 +14,6 @@ use crate::plot;
 use crate::scenario::Scenario;
 use crate::sim::{self, Metrics, RunResult, TraceRow};
 
-/// The feedforward modes, in table order.
-pub const MODES: [(FfMode, &str); 4] = [
-    (FfMode::None, "none"),
-    (FfMode::Static, "static"),
-    (FfMode::Gms, "gms"),
-    (FfMode::GmsAdaptive, "gms-adaptive"),
-];
-
 /// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
 pub fn write_atomic(path: &Path, text: &[u8]) -> Result<(), String> {
     let dir = match path.parent() {
@@ -74,10 +66,7 @@ pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
         metrics: &'a Metrics,
         energy_balance: EnergyOut,
     }
-    let mode = MODES
-        .iter()
-        .find(|m| m.0 == sc.controller.ff.mode)
-        .map_or("?", |m| m.1);
+    let mode = sc.controller.ff.mode.name();
     let e = res.energy;
     let json = serde_json::to_string_pretty(&Out {
         mode,
@@ -170,7 +159,7 @@ pub fn compare(
     progress: bool,
 ) -> Result<(Comparison, Vec<Vec<TraceRow>>), String> {
     let jobs: Vec<(usize, usize)> = (0..runs)
-        .flat_map(|r| (0..MODES.len()).map(move |m| (r, m)))
+        .flat_map(|r| (0..FfMode::ALL.len()).map(move |m| (r, m)))
         .collect();
     let bar = if progress {
         let b = ProgressBar::new(jobs.len() as u64);
@@ -192,7 +181,7 @@ pub fn compare(
                 loop {
                     let j = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&(r, m)) = jobs.get(j) else { break };
-                    let res = sim::run(sc, MODES[m].0, seed.wrapping_add(r as u64))
+                    let res = sim::run(sc, FfMode::ALL[m], seed.wrapping_add(r as u64))
                         .map(|res| (res.metrics, (r == 0).then_some(res.trace)));
                     if let Ok(mut g) = results.lock() {
                         g[j] = Some(res);
@@ -206,8 +195,8 @@ pub fn compare(
     let results = results
         .into_inner()
         .map_err(|_| "a run panicked".to_string())?;
-    let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); MODES.len()];
-    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); MODES.len()];
+    let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); FfMode::ALL.len()];
+    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); FfMode::ALL.len()];
     for (j, res) in results.into_iter().enumerate() {
         let (metrics, trace) = res.ok_or("a run did not finish")??;
         let m = jobs[j].1;
@@ -217,13 +206,13 @@ pub fn compare(
         }
     }
     let mut modes = BTreeMap::new();
-    for (m, (_, name)) in MODES.iter().enumerate() {
+    for (m, mode) in FfMode::ALL.iter().enumerate() {
         let mut table = BTreeMap::new();
         for (k, (metric, _)) in Metrics::default().named().iter().enumerate() {
             let vals = per_mode[m].iter().map(|x| x.named()[k].1).collect();
             table.insert(metric.to_string(), summarize(vals));
         }
-        modes.insert(name.to_string(), table);
+        modes.insert(mode.name().to_string(), table);
     }
     Ok((Comparison { modes, runs, seed }, traces))
 }
@@ -241,14 +230,14 @@ pub fn table(c: &Comparison, rad_per_count: f64) -> String {
         ("hunting_crossings", "", 1.0),
     ];
     let mut s = format!("{} friction draws, median [p95]\n{:<28}", c.runs, "metric");
-    for (_, name) in MODES {
-        s += &format!("{name:>22}");
+    for mode in FfMode::ALL {
+        s += &format!("{:>22}", mode.name());
     }
     s.push('\n');
     for (metric, unit, scale) in rows {
         s += &format!("{:<28}", format!("{metric} [{unit}]").replace(" []", ""));
-        for (_, name) in MODES {
-            let v = c.modes.get(name).and_then(|t| t.get(metric));
+        for mode in FfMode::ALL {
+            let v = c.modes.get(mode.name()).and_then(|t| t.get(metric));
             s += &match v {
                 Some(v) => format!(
                     "{:>22}",

@@ -190,17 +190,9 @@ pub fn settings_from_toml(text: &str, base: &Settings) -> Result<Settings, Strin
                 set(&mut s, x);
             }
             Access::Mode => {
-                s.ff.mode = match value.as_str() {
-                    "none" => FfMode::None,
-                    "static" => FfMode::Static,
-                    "gms" => FfMode::Gms,
-                    "gms-adaptive" => FfMode::GmsAdaptive,
-                    _ => {
-                        return Err(format!(
-                            "`{k}` = {value} is not none, static, gms or gms-adaptive"
-                        ));
-                    }
-                }
+                s.ff.mode = FfMode::from_name(&value).ok_or_else(|| {
+                    format!("`{k}` = {value} is not none, static, gms or gms-adaptive")
+                })?;
             }
             Access::Estimate(_) => return Err(format!("`{k}` is read-only")),
         }
@@ -299,12 +291,7 @@ impl Device for Session<'_> {
         write!(
             out,
             "mode={} enabled={} faults={} t={:.3} pos={:.9} error_counts={:.1} moving={}",
-            match axis.settings.ff.mode {
-                FfMode::None => "none",
-                FfMode::Static => "static",
-                FfMode::Gms => "gms",
-                FfMode::GmsAdaptive => "gms-adaptive",
-            },
+            axis.settings.ff.mode.name(),
             axis.enabled as u8,
             axis.faults,
             l.t,

@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
+use gms_core::controller::FfMode;
 use hil_sim::commands;
 use hil_sim::friction_cmd;
 use hil_sim::scenario::{DEFAULT_SCENARIO, Scenario};
@@ -178,10 +179,10 @@ fn compare_and_write(
         }
         t += s.duration() as f64;
     }
-    let named: Vec<(&str, &[hil_sim::sim::TraceRow])> = commands::MODES
+    let named: Vec<(&str, &[hil_sim::sim::TraceRow])> = FfMode::ALL
         .iter()
         .zip(&traces)
-        .map(|((_, n), t)| (*n, t.as_slice()))
+        .map(|(m, t)| (m.name(), t.as_slice()))
         .collect();
     hil_sim::plot::compare_plot(
         &svg,
@@ -336,14 +337,18 @@ fn main() -> ExitCode {
             std::fs::create_dir_all(&out)
                 .map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
             compare_and_write(&sc, runs, 1, &out.join("compare.json"), threads(None))?;
-            for (mode, name) in commands::MODES {
+            for mode in FfMode::ALL {
                 let mut one = sc.clone();
                 one.controller.ff.mode = mode;
-                commands::run(&one, &out.join(format!("run-{name}")))?;
+                commands::run(&one, &out.join(format!("run-{}", mode.name())))?;
             }
+            let dirs: Vec<String> = FfMode::ALL
+                .iter()
+                .map(|m| format!("{}/run-{}/", out.display(), m.name()))
+                .collect();
             println!(
-                "wrote {0}/run-none/, {0}/run-static/, {0}/run-gms/ (trace.csv, metrics.json, plot.svg)",
-                out.display()
+                "wrote {} (trace.csv, metrics.json, plot.svg)",
+                dirs.join(", ")
             );
             Ok(())
         })(),
