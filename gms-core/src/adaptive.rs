@@ -22,6 +22,7 @@
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
 pub struct AdaptiveParams {
     /// Adaptation rate [1/s], in [0, 1e4]: the inverse time constant of the scale's
     /// convergence while the friction is fully excited (0 freezes it).
@@ -145,14 +146,7 @@ impl Adaptive {
         };
         let step = p.gain * dt * excess * x.model * self.inv_norm2;
         if active && step.is_finite() {
-            let s = self.scale + step;
-            self.scale = if s < p.min {
-                p.min
-            } else if s > p.max {
-                p.max
-            } else {
-                s
-            };
+            self.set_scale(self.scale + step, p);
         }
         self.scale
     }

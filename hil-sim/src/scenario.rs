@@ -223,23 +223,7 @@ pub struct Ff {
     /// Velocity band of the static map [rad/s].
     pub static_band: f32,
     /// Adaptation (mode `gms-adaptive`).
-    pub adapt: Adapt,
-}
-
-/// Adaptation settings of the `gms-adaptive` feedforward.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Adapt {
-    /// Rate [1/s].
-    pub gain: f32,
-    /// Lower bound of the scale [-].
-    pub min: f32,
-    /// Upper bound of the scale [-].
-    pub max: f32,
-    /// Dead zone on the feedback torque [N·m].
-    pub deadzone: f32,
-    /// Slowest reference speed that adapts [rad/s].
-    pub v_min: f32,
+    pub adapt: gms_core::adaptive::AdaptiveParams,
 }
 
 /// The reference trajectory.
@@ -469,13 +453,7 @@ impl Scenario {
                 },
                 ratio: p.ratio() as f32,
                 static_band: c.ff.static_band,
-                adapt: gms_core::adaptive::AdaptiveParams {
-                    gain: c.ff.adapt.gain,
-                    min: c.ff.adapt.min,
-                    max: c.ff.adapt.max,
-                    deadzone: c.ff.adapt.deadzone,
-                    v_min: c.ff.adapt.v_min,
-                },
+                adapt: c.ff.adapt,
             },
         };
         params
