@@ -5,26 +5,25 @@ use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
 
+mod common;
+
 fn examples() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples")
 }
 
 /// Runs `hil-sim friction`; returns (exit code, stderr).
 fn friction(params: &Path, input: &Path, output: &Path) -> (i32, String) {
-    let out = Command::new(BIN)
-        .arg("friction")
-        .arg("--params")
-        .arg(params)
-        .arg("--input")
-        .arg(input)
-        .arg("--output")
-        .arg(output)
-        .output()
-        .expect("run hil-sim");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, _, err) = common::run(
+        Command::new(BIN)
+            .arg("friction")
+            .arg("--params")
+            .arg(params)
+            .arg("--input")
+            .arg(input)
+            .arg("--output")
+            .arg(output),
+    );
+    (code, err)
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

@@ -2,20 +2,13 @@
 //! data (exit 2, one line, nothing written).
 
 use std::path::Path;
-use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_hil-sim");
+mod common;
 
+/// Runs `hil-sim ARGS…` in `cwd`; returns (exit code, stderr).
 fn hil(args: &[&str], cwd: &Path) -> (i32, String) {
-    let out = Command::new(BIN)
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, _, err) = common::hil(args, cwd);
+    (code, err)
 }
 
 #[test]

@@ -12,16 +12,11 @@ use common::Server;
 /// Runs gms-tune on `link` (`--tcp` or `--port`) to `srv`; returns (exit code, stdout,
 /// stderr).
 fn tune_on(srv: &Server, link: &str, args: &[&str], cwd: &Path) -> (i32, String, String) {
-    let out = Command::new(TUNE)
-        .args([link, &srv.addr])
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
+    common::run(
+        Command::new(TUNE)
+            .args([link, &srv.addr])
+            .args(args)
+            .current_dir(cwd),
     )
 }
 

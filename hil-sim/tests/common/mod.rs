@@ -1,8 +1,27 @@
-//! Shared by the end-to-end tests: a running `hil-sim serve`, killed on drop.
+//! Shared by the end-to-end tests: running a command for its exit code and output, and a
+//! running `hil-sim serve`, killed on drop. (Each test binary uses a part of it.)
+#![allow(dead_code)]
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
+
+/// Runs `cmd` to its end; returns (exit code, stdout, stderr).
+pub fn run(cmd: &mut Command) -> (i32, String, String) {
+    let out = cmd.output().expect("the command runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Runs `hil-sim ARGS…` in `cwd`; returns (exit code, stdout, stderr).
+pub fn hil(args: &[&str], cwd: &Path) -> (i32, String, String) {
+    run(Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+        .args(args)
+        .current_dir(cwd))
+}
 
 /// A running `hil-sim serve`.
 pub struct Server {
