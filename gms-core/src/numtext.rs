@@ -254,10 +254,9 @@ impl Decimal {
     }
 }
 
-/// A finite f32 from decimal text (see the module doc), or `None`.
-pub fn parse_f32(s: &str) -> Option<f32> {
-    let mut bytes = s.as_bytes().iter().copied().peekable();
-    let negative = match bytes.peek() {
+/// Consumes an optional `+` or `-`; true for `-`.
+fn take_sign(bytes: &mut core::iter::Peekable<impl Iterator<Item = u8>>) -> bool {
+    match bytes.peek() {
         Some(b'-') => {
             bytes.next();
             true
@@ -267,7 +266,13 @@ pub fn parse_f32(s: &str) -> Option<f32> {
             false
         }
         _ => false,
-    };
+    }
+}
+
+/// A finite f32 from decimal text (see the module doc), or `None`.
+pub fn parse_f32(s: &str) -> Option<f32> {
+    let mut bytes = s.as_bytes().iter().copied().peekable();
+    let negative = take_sign(&mut bytes);
     let mut dec = Decimal::new();
     let mut any_digit = false;
     let mut after_point = false;
@@ -307,17 +312,7 @@ pub fn parse_f32(s: &str) -> Option<f32> {
     let mut exp: i64 = 0;
     if let Some(b'e' | b'E') = bytes.peek() {
         bytes.next();
-        let neg_exp = match bytes.peek() {
-            Some(b'-') => {
-                bytes.next();
-                true
-            }
-            Some(b'+') => {
-                bytes.next();
-                false
-            }
-            _ => false,
-        };
+        let neg_exp = take_sign(&mut bytes);
         let mut any = false;
         while let Some(c @ b'0'..=b'9') = bytes.peek().copied() {
             bytes.next();
