@@ -249,6 +249,12 @@ impl Device for Dev {
         post(|r| r.stream_every = Some(0));
         self.nfields = 0;
     }
+
+    fn estimate(&self, which: protocol::Estimate) -> f32 {
+        match which {
+            protocol::Estimate::AdaptScale => status().adapt_scale,
+        }
+    }
 }
 
 /// A fixed buffer that `fmt::Write` fills; past its end it reports an error.

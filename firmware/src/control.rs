@@ -99,6 +99,8 @@ pub struct Status {
     pub stats: StepStats,
     /// Current-sense zero [code].
     pub sense_offset: f32,
+    /// The adaptive scale on the friction feedforward (`ff.adapt.scale`) [-].
+    pub adapt_scale: f32,
 }
 
 /// One telemetry sample.
@@ -155,6 +157,7 @@ pub static SHARED: Mutex<CriticalSectionRawMutex, RefCell<Shared>> =
             moving: false,
             stats: StepStats::new(),
             sense_offset: 0.0,
+            adapt_scale: 1.0,
         },
     }));
 
@@ -252,6 +255,7 @@ impl Loop {
             moving: self.motion.is_moving(),
             stats: self.stats,
             sense_offset: self.sense.offset,
+            adapt_scale: self.ctrl.adaptive_scale(),
         };
         let req = SHARED.lock(|s| {
             let mut s = s.borrow_mut();
@@ -287,7 +291,10 @@ impl Loop {
             }
             // Same rates: the new controller (at rest) takes over at the same reference, as
             // the simulator's device does; gains can be tuned while running.
+            // What the adaptation learned is about the axis, not the settings: keep it.
+            let scale = self.ctrl.adaptive_scale();
             self.ctrl = a.ctrl;
+            self.ctrl.set_adaptive_scale(scale);
             self.limits = a.limits;
         }
         if req.disable {

@@ -156,3 +156,33 @@ fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
     assert!(c.ask("stream bogus 10").starts_with("err 8 "));
     assert_eq!(c.ask("stream off"), "ok");
 }
+
+/// `gms-adaptive` on the device: moving adapts the scale, `get ff.adapt.scale` reads it, a
+/// new parameter set keeps it (it is about the axis, not the settings), and it cannot be set.
+#[test]
+fn the_adaptive_scale_is_read_kept_across_sets_and_read_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let mut c = connect(&srv);
+    assert_eq!(c.ask("get ff.adapt.scale"), "ok 1");
+    assert_eq!(c.ask("set ff.mode gms-adaptive"), "ok");
+    assert_eq!(c.ask("enable"), "ok");
+    let wait_still = |c: &mut Client| {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while c.ask("status").contains("moving=1") {
+            assert!(Instant::now() < deadline, "the move never ended");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    for target in ["0.2", "0", "0.2", "0"] {
+        assert_eq!(c.ask(&format!("move {target}")), "ok");
+        wait_still(&mut c);
+    }
+    let scale: f32 = c.ask("get ff.adapt.scale")[3..].parse().unwrap();
+    assert!(scale != 1.0 && (0.5..=1.5).contains(&scale), "{scale}");
+    // At rest the adaptation is frozen: a new set finds the same scale.
+    assert_eq!(c.ask("set pos.kp 0.21"), "ok");
+    assert_eq!(c.ask("get ff.adapt.scale"), format!("ok {scale}"));
+    assert!(c.ask("set ff.adapt.scale 1").starts_with("err 8 "));
+    assert_eq!(c.ask("get ff.adapt.scale"), format!("ok {scale}"));
+}
