@@ -121,3 +121,30 @@ segments = [
         gms.rms_error
     );
 }
+
+/// The adversarial cases of the issue in closed loop: at rest (sensor noise only, no motion)
+/// the scale does not move at all; with the current limit far below the friction (saturated
+/// except near the reversals, where the adaptation may act) and with an absurd adaptation gain
+/// it stays within its bounds.
+#[test]
+fn the_adaptive_scale_stays_put_at_rest_and_in_saturation() {
+    let run = |extra: &str, segments: &str| {
+        let text = format!(
+            "{extra}\n[controller.ff]\nmode = \"gms-adaptive\"\n[reference]\nsegments = [{segments}]\n"
+        );
+        let sc = Scenario::parse(&text, "test").unwrap();
+        sim::run(&sc, FfMode::GmsAdaptive, 7).unwrap().trace
+    };
+    let rest = run("", "{ kind = \"hold\", duration = 2.0 }");
+    assert!(rest.iter().all(|r| r.ff_scale == 1.0));
+    // 1 mA of current limit: the sine saturates the command throughout.
+    let sine = "{ kind = \"sine\", amplitude = 0.05, freq = 1.0, cycles = 2.0 }";
+    let sat = run("[controller]\ni_max = 1e-3", sine);
+    assert!(sat.iter().all(|r| (0.5..=1.5).contains(&r.ff_scale)));
+    let wild = run("[controller.ff.adapt]\ngain = 1e4", sine);
+    assert!(wild.iter().any(|r| r.ff_scale != 1.0));
+    assert!(
+        wild.iter().all(|r| (0.5..=1.5).contains(&r.ff_scale)),
+        "scale left [0.5, 1.5]"
+    );
+}
