@@ -449,10 +449,10 @@ impl<const N: usize> Controller<N> {
         let pid = self.p.pid;
         let p_term = pid.kp * error;
         let d_term = pid.kd * self.d_filt;
-        let ff_model = self.p.ff.gain * self.friction_ff(dx_ref, r.vel);
+        let ff_model = self.friction_ff(dx_ref, r.vel);
         let adaptive = self.p.ff.mode == FfMode::GmsAdaptive;
         let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
-        let ff_fric = ff_scale * ff_model;
+        let ff_fric = self.p.ff.gain * ff_scale * ff_model;
         let ff_inertia = self.p.motor.inertia * r.acc;
         // Conditional integration: the integrator stops when the command is saturated in the
         // direction the error would push it further.
@@ -467,6 +467,7 @@ impl<const N: usize> Controller<N> {
         if adaptive {
             let input = AdaptInput {
                 feedback: p_term + self.integ + d_term,
+                applied: ff_fric,
                 model: ff_model,
                 v_ref: r.vel,
                 saturated,

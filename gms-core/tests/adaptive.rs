@@ -29,6 +29,7 @@ fn the_scale_converges_at_the_analytic_rate() {
         let model = f_n * (w * t).sin();
         let x = AdaptInput {
             feedback: (theta - a.scale()) * model,
+            applied: a.scale() * model,
             model,
             v_ref: 0.3,
             saturated: false,
@@ -52,6 +53,7 @@ fn dead_zone_rest_and_saturation_freeze_it() {
     let mut a = Adaptive::new(1e-4);
     let base = AdaptInput {
         feedback: 5e-5,
+        applied: 1e-4,
         model: 1e-4,
         v_ref: 0.3,
         saturated: false,
@@ -106,7 +108,10 @@ proptest! {
     /// stays finite and within its bounds.
     #[test]
     fn the_scale_stays_within_its_bounds(
-        inputs in prop::collection::vec((any_f32(), any_f32(), any_f32(), any::<bool>()), 1..400),
+        inputs in prop::collection::vec(
+            (any_f32(), any_f32(), any_f32(), any_f32(), any::<bool>()),
+            1..400,
+        ),
         gain in 0.0f32..1e4,
         lo in 0.0f32..1.0,
         width in 0.0f32..2.0,
@@ -115,8 +120,9 @@ proptest! {
         let p = AdaptiveParams { gain, min: lo, max: lo + width, deadzone: 0.0, v_min: 0.0 };
         let mut a = Adaptive::new(f_n);
         a.reset(&p);
-        for (feedback, model, v_ref, saturated) in inputs {
-            let s = a.update(&p, &AdaptInput { feedback, model, v_ref, saturated }, 1e-4);
+        for (feedback, applied, model, v_ref, saturated) in inputs {
+            let x = AdaptInput { feedback, applied, model, v_ref, saturated };
+            let s = a.update(&p, &x, 1e-4);
             prop_assert!(s.is_finite() && s >= p.min && s <= p.max, "{s}");
         }
     }
