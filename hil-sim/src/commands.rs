@@ -11,7 +11,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 use crate::plot;
-use crate::scenario::Scenario;
+use crate::scenario::{DriftKind, Scenario};
 use crate::sim::{self, Metrics, RunResult, TraceRow};
 
 /// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
@@ -146,6 +146,10 @@ pub struct Comparison {
     pub runs: usize,
     /// First seed (draw i uses seed + i).
     pub seed: u64,
+    /// The level oracle's figures (metric → summary), when the scenario's friction drifts
+    /// ([`sim::run_oracle`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub oracle: Option<BTreeMap<String, Summary>>,
 }
 
 /// `hil-sim compare`: every mode over `runs` friction draws (seeds `seed`, `seed+1`, …),
@@ -158,8 +162,11 @@ pub fn compare(
     threads: usize,
     progress: bool,
 ) -> Result<(Comparison, Vec<Vec<TraceRow>>), String> {
+    // Job (draw, column): columns are the modes, then the level oracle if the friction drifts.
+    let oracle = sc.plant.drift.kind != DriftKind::None;
+    let columns = FfMode::ALL.len() + usize::from(oracle);
     let jobs: Vec<(usize, usize)> = (0..runs)
-        .flat_map(|r| (0..FfMode::ALL.len()).map(move |m| (r, m)))
+        .flat_map(|r| (0..columns).map(move |m| (r, m)))
         .collect();
     let bar = if progress {
         let b = ProgressBar::new(jobs.len() as u64);
@@ -181,8 +188,12 @@ pub fn compare(
                 loop {
                     let j = next.fetch_add(1, Ordering::Relaxed);
                     let Some(&(r, m)) = jobs.get(j) else { break };
-                    let res = sim::run(sc, FfMode::ALL[m], seed.wrapping_add(r as u64))
-                        .map(|res| (res.metrics, (r == 0).then_some(res.trace)));
+                    let seed = seed.wrapping_add(r as u64);
+                    let res = match FfMode::ALL.get(m) {
+                        Some(&mode) => sim::run(sc, mode, seed),
+                        None => sim::run_oracle(sc, seed),
+                    }
+                    .map(|res| (res.metrics, (r == 0).then_some(res.trace)));
                     if let Ok(mut g) = results.lock() {
                         g[j] = Some(res);
                     }
@@ -195,8 +206,8 @@ pub fn compare(
     let results = results
         .into_inner()
         .map_err(|_| "a run panicked".to_string())?;
-    let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); FfMode::ALL.len()];
-    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); FfMode::ALL.len()];
+    let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); columns];
+    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); columns];
     for (j, res) in results.into_iter().enumerate() {
         let (metrics, trace) = res.ok_or("a run did not finish")??;
         let m = jobs[j].1;
@@ -205,16 +216,29 @@ pub fn compare(
             traces[m] = t;
         }
     }
-    let mut modes = BTreeMap::new();
-    for (m, mode) in FfMode::ALL.iter().enumerate() {
+    let column = |m: usize| {
         let mut table = BTreeMap::new();
         for (k, (metric, _)) in Metrics::default().named().iter().enumerate() {
             let vals = per_mode[m].iter().map(|x| x.named()[k].1).collect();
             table.insert(metric.to_string(), summarize(vals));
         }
-        modes.insert(mode.name().to_string(), table);
+        table
+    };
+    let mut modes = BTreeMap::new();
+    for (m, mode) in FfMode::ALL.iter().enumerate() {
+        modes.insert(mode.name().to_string(), column(m));
     }
-    Ok((Comparison { modes, runs, seed }, traces))
+    let oracle = oracle.then(|| column(FfMode::ALL.len()));
+    traces.truncate(FfMode::ALL.len());
+    Ok((
+        Comparison {
+            modes,
+            runs,
+            seed,
+            oracle,
+        },
+        traces,
+    ))
 }
 
 /// The comparison as a text table (medians, p95 in brackets), in readable units.
@@ -267,5 +291,22 @@ pub fn table(c: &Comparison, rad_per_count: f64) -> String {
         ratio("rms_error", "gms", "gms-adaptive"),
         ratio("sine_rms_error", "gms", "gms-adaptive"),
     );
+    if let Some(o) = &c.oracle {
+        let rms = |m: Option<&BTreeMap<String, Summary>>| {
+            m.and_then(|t| t.get("rms_error")).map(|v| v.median)
+        };
+        let scaled = |v: Option<f64>| v.map_or("-".into(), |v| format!("{:.3}", v / rad_per_count));
+        let over = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(x), Some(y)) if y > 0.0 => format!("{:.2}", x / y),
+            _ => "-".into(),
+        };
+        let (oracle, gms) = (rms(Some(o)), rms(c.modes.get("gms")));
+        s += &format!(
+            "level oracle (feedforward scaled by the true drift, simulation only): RMS {} counts, \
+             RMS ratio gms/oracle {}\n",
+            scaled(oracle),
+            over(gms, oracle),
+        );
+    }
     s
 }

@@ -129,7 +129,7 @@ enum Cmd {
         #[arg(long)]
         asymmetric: bool,
     },
-    /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all three
+    /// The showcase: sinusoid with reversals then fine steps of 1-1000 counts, all four
     /// feedforward modes over 50 friction draws; prints the table, writes plots to ./hil-out/.
     Demo {
         /// Output directory.

@@ -126,7 +126,7 @@ pub enum DriftKind {
 pub struct Drift {
     /// Which drift.
     pub kind: DriftKind,
-    /// Its size, ± fraction [-], in [0, 0.9).
+    /// Its size, a fraction [-], in (-0.9, 0.9); negative drifts the other way.
     pub amount: f64,
     /// Ramp duration or step interval [s], `> 0`.
     pub time: f64,
@@ -373,8 +373,8 @@ impl Scenario {
         if !(p.variability.is_finite() && (0.0..0.9).contains(&p.variability)) {
             return Err("plant.variability must be in [0, 0.9)".into());
         }
-        if !(p.drift.amount.is_finite() && (0.0..0.9).contains(&p.drift.amount)) {
-            return Err("plant.drift.amount must be in [0, 0.9)".into());
+        if !(p.drift.amount.is_finite() && p.drift.amount.abs() < 0.9) {
+            return Err("plant.drift.amount must be in (-0.9, 0.9)".into());
         }
         for (name, v) in [
             ("plant.drift.time", p.drift.time),

@@ -91,8 +91,24 @@ pub struct RunResult {
 
 /// Runs `sc` with feedforward `mode` and the friction draw `seed`.
 pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> {
+    run_with(sc, mode, seed, false)
+}
+
+/// The level oracle, a yardstick for `gms-adaptive` that only a simulation has: the GMS
+/// feedforward scaled at every step by the plant's true drift factor (no estimation, no
+/// lag). What it cannot gain over `gms`, no estimate of the friction level can.
+pub fn run_oracle(sc: &Scenario, seed: u64) -> Result<RunResult, String> {
+    run_with(sc, FfMode::GmsAdaptive, seed, true)
+}
+
+fn run_with(sc: &Scenario, mode: FfMode, seed: u64, oracle: bool) -> Result<RunResult, String> {
     let mut cp = sc.controller_params()?;
     cp.ff.mode = mode;
+    if oracle {
+        cp.ff.adapt.gain = 0.0;
+        cp.ff.adapt.min = 0.0;
+        cp.ff.adapt.max = 10.0;
+    }
     let mut ctrl = Controller::<FF_BLOCKS>::try_new(cp).map_err(|e| e.to_string())?;
     let segments = sc.segments()?;
     let rpc = sc.plant.rad_per_count;
@@ -109,6 +125,9 @@ pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> 
         let r = reference.next(dt_pos);
         let seg = reference.segment_index();
         let count = plant.encoder();
+        if oracle {
+            ctrl.set_adaptive_scale(plant.drift_factor() as f32);
+        }
         let out = ctrl.position_step(count, &r);
         let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
         let position = count as f64 * rpc;

@@ -105,6 +105,42 @@ fn compare_writes_the_json_contract() {
     assert!(d.path().join("c.svg").exists());
 }
 
+/// A drifting scenario adds the level oracle to the table and the JSON.
+#[test]
+fn compare_reports_the_level_oracle_when_friction_drifts() {
+    let d = tempfile::tempdir().unwrap();
+    let drift = format!("[plant.drift]\nkind = \"ramp\"\namount = -0.15\ntime = 0.1\n{SHORT}");
+    for (text, oracle) in [(SHORT.to_string(), false), (drift, true)] {
+        std::fs::write(d.path().join("s.toml"), text).unwrap();
+        let (code, out, err) = hil(
+            &["compare", "s.toml", "--runs", "2", "--json", "c.json"],
+            d.path(),
+        );
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(out.contains("level oracle"), oracle, "{out}");
+        let c: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.path().join("c.json")).unwrap())
+                .unwrap();
+        assert_eq!(c["oracle"]["rms_error"]["median"].is_f64(), oracle, "{c}");
+    }
+}
+
+/// Every example scenario is a valid scenario file.
+#[test]
+fn the_example_scenarios_parse() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/scenarios");
+    let mut n = 0;
+    for e in std::fs::read_dir(&dir).unwrap() {
+        let path = e.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let sc = hil_sim::scenario::Scenario::parse(&text, &path.display().to_string())
+            .map_err(|e| e.to_string());
+        assert!(sc.is_ok(), "{:?}", sc.err());
+        n += 1;
+    }
+    assert!(n >= 5, "{n} scenarios");
+}
+
 #[test]
 fn bad_scenarios_and_arguments_exit_2_with_one_line() {
     let d = tempfile::tempdir().unwrap();

@@ -88,38 +88,85 @@ fn runs_are_reproducible() {
 
 /// `gms-adaptive` against a plant whose friction is 15 % above the compensator's nominal
 /// (no per-run draw): after 8 s of sine tracking the estimated scale is the plant's factor
-/// within 2 %, and the mode never falls behind plain gms by more than 5 % RMS.
+/// within 2 % whatever the feedforward gain (the estimator learns the friction level, not
+/// the gain's complement: with the feedback alone it would settle at 1.15 / gain). At the
+/// scenario's tuned gain (0.94) the mode is no worse than plain gms; at a mistuned 1.1 it
+/// keeps the mistuning relative to the true level, so that case is not compared.
 #[test]
 fn the_adaptive_scale_converges_to_the_plants_friction_level() {
-    let text = r#"
+    for gain in [0.9, 0.94, 1.1] {
+        let text = format!(
+            r#"
 [plant]
 variability = 0.0
 [plant.drift]
 kind = "ramp"
 amount = 0.15
 time = 0.001
+[controller.ff]
+gain = {gain}
 [reference]
 segments = [
-  { kind = "hold", duration = 0.05 },
-  { kind = "sine", amplitude = 0.05, freq = 1.0, cycles = 8.0 },
+  {{ kind = "hold", duration = 0.05 }},
+  {{ kind = "sine", amplitude = 0.05, freq = 1.0, cycles = 8.0 }},
 ]
-"#;
+"#
+        );
+        let sc = Scenario::parse(&text, "test").unwrap();
+        let res = sim::run(&sc, FfMode::GmsAdaptive, 5).unwrap();
+        let last = res.trace.last().unwrap();
+        assert!((last.drift - 1.15).abs() < 1e-9);
+        // The estimate over the last two cycles (it follows the level within 10 ms, so a
+        // single sample carries the cycle's ripple).
+        let tail: Vec<f64> = res
+            .trace
+            .iter()
+            .filter(|r| r.t >= last.t - 2.0)
+            .map(|r| r.ff_scale)
+            .collect();
+        let mean = tail.iter().sum::<f64>() / tail.len() as f64;
+        let (lo, hi) = tail
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        println!("ff.gain {gain}: scale mean {mean:.4}, range {lo:.4}-{hi:.4}");
+        assert!(
+            (mean / 1.15 - 1.0).abs() < 0.02,
+            "ff.gain {gain}: scale {mean}"
+        );
+        if gain != 0.94 {
+            continue;
+        }
+        let gms = sim::run(&sc, FfMode::Gms, 5).unwrap().metrics;
+        println!(
+            "ff.gain {gain}: RMS gms-adaptive {:.3e}, gms {:.3e} rad",
+            res.metrics.rms_error, gms.rms_error
+        );
+        assert!(
+            res.metrics.rms_error <= gms.rms_error,
+            "ff.gain {gain}: {} vs {}",
+            res.metrics.rms_error,
+            gms.rms_error
+        );
+    }
+}
+
+/// The level oracle (compare's yardstick for gms-adaptive) is gms with the feedforward
+/// scaled by the plant's drift factor: without drift it is gms to the bit, and on a drifting
+/// plant its scale is the drift factor at every step.
+#[test]
+fn the_level_oracle_is_gms_scaled_by_the_true_drift() {
+    let sc = Scenario::default();
+    let gms = sim::run(&sc, FfMode::Gms, 3).unwrap();
+    let oracle = sim::run_oracle(&sc, 3).unwrap();
+    assert_eq!(gms.metrics, oracle.metrics);
+    assert!(oracle.trace.iter().all(|r| r.ff_scale == 1.0));
+    let text = "[plant.drift]\nkind = \"steps\"\namount = 0.15\ntime = 0.05\n";
     let sc = Scenario::parse(text, "test").unwrap();
-    let res = sim::run(&sc, FfMode::GmsAdaptive, 5).unwrap();
-    let last = res.trace.last().unwrap();
-    assert!((last.drift - 1.15).abs() < 1e-9);
-    assert!(
-        (last.ff_scale / 1.15 - 1.0).abs() < 0.02,
-        "scale {}",
-        last.ff_scale
-    );
-    let gms = sim::run(&sc, FfMode::Gms, 5).unwrap().metrics;
-    assert!(
-        res.metrics.rms_error < 1.05 * gms.rms_error,
-        "{} vs {}",
-        res.metrics.rms_error,
-        gms.rms_error
-    );
+    let oracle = sim::run_oracle(&sc, 3).unwrap();
+    assert!(oracle.trace.iter().any(|r| r.drift != 1.0));
+    for r in &oracle.trace {
+        assert_eq!(r.ff_scale, r.drift as f32 as f64, "t {}", r.t);
+    }
 }
 
 /// The adversarial cases of the issue in closed loop: at rest (sensor noise only, no motion)
