@@ -149,34 +149,40 @@ pub fn controller_params() -> ControllerParams<6> {
 }
 
 /// Runs the controller for `n` position periods against a toy plant (pure inertia with
-/// Coulomb-like damping, integrated in f32); returns the hash of every command.
+/// Coulomb-like damping, integrated in f32), once with the `gms` feedforward and once with
+/// `gms-adaptive`; returns the hash of every command.
 pub fn controller_hash(n: u32) -> u64 {
-    let Ok(mut c) = Controller::try_new(controller_params()) else {
-        return 0;
-    };
     let mut h = Fnv::default();
-    let mut rng = Rng::new(777);
-    let (mut theta, mut omega, mut i) = (0.0f32, 0.0f32, 0.0f32);
-    let mut ref_pos: i64 = 0;
-    for k in 0..n {
-        let vel = 0.3 * if (k / 2000) % 2 == 0 { 1.0 } else { -1.0 };
-        ref_pos += (vel * 1e-4 / 3.8e-6 * 65536.0) as i64;
-        let r = RefSample {
-            pos: ref_pos,
-            vel,
-            acc: 0.0,
+    for mode in [FfMode::Gms, FfMode::GmsAdaptive] {
+        let mut p = controller_params();
+        p.ff.mode = mode;
+        let Ok(mut c) = Controller::try_new(p) else {
+            return 0;
         };
-        let count = (theta / 3.8e-6) as i64;
-        let out = c.position_step(count, &r);
-        h.add(out.i_cmd);
-        for _ in 0..2 {
-            let noise = (rng.uniform() - 0.5) * 1e-3;
-            let v = c.current_step(i + noise);
-            h.add(v.voltage);
-            i += (v.voltage - 10.0 * i) * 0.2;
-            let torque = 6.6e-3 * i - 150e-6 * if omega > 0.0 { 1.0 } else { -1.0 };
-            omega += torque / 6e-8 * 5e-5;
-            theta += omega * 5e-5;
+        let mut rng = Rng::new(777);
+        let (mut theta, mut omega, mut i) = (0.0f32, 0.0f32, 0.0f32);
+        let mut ref_pos: i64 = 0;
+        for k in 0..n {
+            let vel = 0.3 * if (k / 2000) % 2 == 0 { 1.0 } else { -1.0 };
+            ref_pos += (vel * 1e-4 / 3.8e-6 * 65536.0) as i64;
+            let r = RefSample {
+                pos: ref_pos,
+                vel,
+                acc: 0.0,
+            };
+            let count = (theta / 3.8e-6) as i64;
+            let out = c.position_step(count, &r);
+            h.add(out.i_cmd);
+            h.add(out.ff_scale);
+            for _ in 0..2 {
+                let noise = (rng.uniform() - 0.5) * 1e-3;
+                let v = c.current_step(i + noise);
+                h.add(v.voltage);
+                i += (v.voltage - 10.0 * i) * 0.2;
+                let torque = 6.6e-3 * i - 150e-6 * if omega > 0.0 { 1.0 } else { -1.0 };
+                omega += torque / 6e-8 * 5e-5;
+                theta += omega * 5e-5;
+            }
         }
     }
     h.value()

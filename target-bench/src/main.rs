@@ -17,7 +17,7 @@ use core::hint::black_box;
 use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hio};
-use gms_core::controller::Controller;
+use gms_core::controller::{Controller, FfMode};
 use gms_core::reference::RefSample;
 use gms_core::{
     FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
@@ -189,7 +189,15 @@ fn main() -> ! {
     }
     // One controller step: position loop (PID + GMS feedforward of both friction sources +
     // inertia feedforward) and one current-loop step, tracking a 0.3 rad/s ramp.
-    if let Ok(mut ctl) = Controller::try_new(selftest::controller_params()) {
+    for (name, mode) in [
+        ("controller_step", FfMode::Gms),
+        ("controller_step_adaptive", FfMode::GmsAdaptive),
+    ] {
+        let mut p = selftest::controller_params();
+        p.ff.mode = mode;
+        let Ok(mut ctl) = Controller::try_new(p) else {
+            continue;
+        };
         let inc = (0.3f32 * 1e-4 / 3.8e-6 * 65536.0) as i64;
         let c = cost(
             |i| {
@@ -215,7 +223,7 @@ fn main() -> ! {
                 black_box(black_box(0.02f32));
             },
         );
-        writeln!(out, "cost controller_step {c} {CALLS}").ok();
+        writeln!(out, "cost {name} {c} {CALLS}").ok();
     }
 
     {
