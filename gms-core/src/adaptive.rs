@@ -44,7 +44,7 @@ pub struct AdaptiveParams {
     pub min: f32,
     /// Upper bound of the scale [-], in [min, 10].
     pub max: f32,
-    /// Dead zone on the feedback torque [N·m], `>= 0`: smaller feedback does not adapt.
+    /// Dead zone on the residual torque `r` [N·m], `>= 0`: a smaller residual does not adapt.
     pub deadzone: f32,
     /// Slowest reference speed that adapts [rad/s], `>= 0`.
     pub v_min: f32,

@@ -241,6 +241,14 @@ pub fn compare(
     ))
 }
 
+/// The median of `a` over `b`, two decimals; `-` when either is missing or `b` is not positive.
+fn ratio_to(a: Option<&Summary>, b: f64) -> String {
+    match a {
+        Some(x) if b > 0.0 => format!("{:.2}", x.median / b),
+        _ => "-".into(),
+    }
+}
+
 /// The comparison as a text table (medians, p95 in brackets), in readable units.
 pub fn table(c: &Comparison, rad_per_count: f64) -> String {
     let rows: [(&str, &str, f64); 8] = [
@@ -273,11 +281,8 @@ pub fn table(c: &Comparison, rad_per_count: f64) -> String {
         s.push('\n');
     }
     let ratio = |metric: &str, a: &str, b: &str| {
-        let g = |m: &str| c.modes.get(m).and_then(|t| t.get(metric)).map(|v| v.median);
-        match (g(a), g(b)) {
-            (Some(x), Some(y)) if y > 0.0 => format!("{:.2}", x / y),
-            _ => "-".into(),
-        }
+        let g = |m: &str| c.modes.get(m).and_then(|t| t.get(metric));
+        g(b).map_or("-".into(), |y| ratio_to(g(a), y.median))
     };
     s += &format!(
         "sine RMS ratio none/gms {}, static/gms {}; reversal peak ratio none/gms {}, static/gms {}\n",
@@ -291,21 +296,15 @@ pub fn table(c: &Comparison, rad_per_count: f64) -> String {
         ratio("rms_error", "gms", "gms-adaptive"),
         ratio("sine_rms_error", "gms", "gms-adaptive"),
     );
-    if let Some(o) = &c.oracle {
-        let rms = |m: Option<&BTreeMap<String, Summary>>| {
-            m.and_then(|t| t.get("rms_error")).map(|v| v.median)
-        };
-        let scaled = |v: Option<f64>| v.map_or("-".into(), |v| format!("{:.3}", v / rad_per_count));
-        let over = |a: Option<f64>, b: Option<f64>| match (a, b) {
-            (Some(x), Some(y)) if y > 0.0 => format!("{:.2}", x / y),
-            _ => "-".into(),
-        };
-        let (oracle, gms) = (rms(Some(o)), rms(c.modes.get("gms")));
+    if let Some(o) = c.oracle.as_ref().and_then(|t| t.get("rms_error")) {
         s += &format!(
-            "level oracle (feedforward scaled by the true drift, simulation only): RMS {} counts, \
-             RMS ratio gms/oracle {}\n",
-            scaled(oracle),
-            over(gms, oracle),
+            "level oracle (feedforward scaled by the true drift, simulation only): RMS {:.3} \
+             counts, RMS ratio gms/oracle {}\n",
+            o.median / rad_per_count,
+            ratio_to(
+                c.modes.get("gms").and_then(|t| t.get("rms_error")),
+                o.median
+            ),
         );
     }
     s
