@@ -193,7 +193,11 @@ pub fn compare(
                         Some(&mode) => sim::run(sc, mode, seed),
                         None => sim::run_oracle(sc, seed),
                     }
-                    .map(|res| (res.metrics, (r == 0).then_some(res.trace)));
+                    .map(|res| {
+                        // The plot shows the modes' first draw; the oracle has no trace there.
+                        let keep = r == 0 && m < FfMode::ALL.len();
+                        (res.metrics, keep.then_some(res.trace))
+                    });
                     if let Ok(mut g) = results.lock() {
                         g[j] = Some(res);
                     }
@@ -207,13 +211,13 @@ pub fn compare(
         .into_inner()
         .map_err(|_| "a run panicked".to_string())?;
     let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); columns];
-    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); columns];
+    let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); FfMode::ALL.len()];
     for (j, res) in results.into_iter().enumerate() {
         let (metrics, trace) = res.ok_or("a run did not finish")??;
         let m = jobs[j].1;
         per_mode[m].push(metrics);
-        if let Some(t) = trace {
-            traces[m] = t;
+        if let (Some(t), Some(slot)) = (trace, traces.get_mut(m)) {
+            *slot = t;
         }
     }
     let column = |m: usize| {
@@ -229,7 +233,6 @@ pub fn compare(
         modes.insert(mode.name().to_string(), column(m));
     }
     let oracle = oracle.then(|| column(FfMode::ALL.len()));
-    traces.truncate(FfMode::ALL.len());
     Ok((
         Comparison {
             modes,
