@@ -57,7 +57,8 @@ enum Cmd {
         #[command(subcommand)]
         action: ParamsCmd,
     },
-    /// Record telemetry fields for a while into a CSV file.
+    /// Record telemetry fields into a CSV file: the first seconds × rate samples (fewer if
+    /// the device falls behind).
     Record {
         /// Comma-separated fields: t, pos, ref, error, ff, current, friction.
         #[arg(long, default_value = "t,pos,ref,error,ff")]
@@ -249,6 +250,9 @@ fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<
     link.request(&format!("stream {fields} {rate}"))?;
     link.listen(Duration::from_secs_f64(seconds))?;
     link.request("stream off")?;
+    // The samples that arrive until `stream off` is answered, or in a burst from a device
+    // catching up after a stall, would stretch the record past `seconds` of device time.
+    link.telemetry.truncate((seconds * rate).ceil() as usize);
     Ok(telemetry_rows(link, fields))
 }
 
