@@ -68,19 +68,24 @@ impl Default for AdaptiveParams {
 }
 
 impl AdaptiveParams {
-    /// Checks the ranges; the error names the field (its protocol path).
+    /// Checks the ranges (the protocol's table, [`crate::protocol::PARAMS`]) and that
+    /// `min <= max`; the error names the field by its protocol path.
     pub fn validate(&self) -> Result<(), &'static str> {
-        let ok = |v: f32, lo: f32, hi: f32| v.is_finite() && v >= lo && v <= hi;
-        if !ok(self.gain, 0.0, 1e4) {
+        use crate::protocol::range;
+        let ok = |v: f32, (lo, hi): (f32, f32)| v.is_finite() && v >= lo && v <= hi;
+        if !ok(self.gain, const { range("ff.adapt.gain") }) {
             return Err("ff.adapt.gain");
         }
-        if !ok(self.min, 0.0, 10.0) || !ok(self.max, 0.0, 10.0) || self.min > self.max {
+        if !ok(self.min, const { range("ff.adapt.min") }) || self.min > self.max {
             return Err("ff.adapt.min");
         }
-        if !ok(self.deadzone, 0.0, 1e3) {
+        if !ok(self.max, const { range("ff.adapt.max") }) {
+            return Err("ff.adapt.max");
+        }
+        if !ok(self.deadzone, const { range("ff.adapt.deadzone") }) {
             return Err("ff.adapt.deadzone");
         }
-        if !ok(self.v_min, 0.0, 1e4) {
+        if !ok(self.v_min, const { range("ff.adapt.vmin") }) {
             return Err("ff.adapt.vmin");
         }
         Ok(())

@@ -174,31 +174,57 @@ impl<const N: usize> ControllerParams<N> {
         (r + 0.5) as u32
     }
 
-    /// Checks every parameter; the error names the first offending one.
+    /// Checks every parameter; the error names the first offending one by its protocol path
+    /// (`pos.kp`, `gms.fs`, …). The ranges are the protocol's table ([`crate::protocol::PARAMS`]),
+    /// the one range table of the project: a set runs here exactly when the protocol accepts it.
     pub fn validate(&self) -> Result<(), ControllerError> {
-        let checks: [(&'static str, f32, f32, f32); 17] = [
-            ("pos_rate_hz", self.pos_rate_hz, 1.0, 1e6),
-            ("cur_rate_hz", self.cur_rate_hz, 1.0, 1e6),
-            ("rad_per_count", self.rad_per_count, 1e-12, 1.0),
-            ("pid.kp", self.pid.kp, 0.0, 1e6),
-            ("pid.ki", self.pid.ki, 0.0, 1e9),
-            ("pid.kd", self.pid.kd, 0.0, 1e6),
-            ("pid.d_filter_hz", self.pid.d_filter_hz, 1e-3, 1e6),
-            ("pid.i_limit", self.pid.i_limit, 0.0, 1e6),
-            ("current.kp", self.current.kp, 0.0, 1e6),
-            ("current.ki", self.current.ki, 0.0, 1e9),
-            ("motor.k_m", self.motor.k_m, 1e-9, 1e3),
-            ("motor.r", self.motor.r, 0.0, 1e6),
-            ("motor.k_e", self.motor.k_e, 0.0, 1e3),
-            ("motor.inertia", self.motor.inertia, 0.0, 1e3),
-            ("i_max", self.i_max, 1e-9, 1e3),
-            ("v_supply", self.v_supply, 1e-6, 1e4),
-            ("ff.gain", self.ff.gain, 0.0, 2.0),
+        use crate::protocol::range;
+        let a = &self.ff.actuator;
+        let scalars: [(&'static str, f32, (f32, f32)); 23] = [
+            ("rate.pos_hz", self.pos_rate_hz, const { range("rate.pos_hz") }),
+            ("rate.cur_hz", self.cur_rate_hz, const { range("rate.cur_hz") }),
+            ("pos.kp", self.pid.kp, const { range("pos.kp") }),
+            ("pos.ki", self.pid.ki, const { range("pos.ki") }),
+            ("pos.kd", self.pid.kd, const { range("pos.kd") }),
+            ("pos.d_filter_hz", self.pid.d_filter_hz, const { range("pos.d_filter_hz") }),
+            ("pos.i_limit", self.pid.i_limit, const { range("pos.i_limit") }),
+            ("cur.kp", self.current.kp, const { range("cur.kp") }),
+            ("cur.ki", self.current.ki, const { range("cur.ki") }),
+            ("motor.k_m", self.motor.k_m, const { range("motor.k_m") }),
+            ("motor.r", self.motor.r, const { range("motor.r") }),
+            ("motor.k_e", self.motor.k_e, const { range("motor.k_e") }),
+            ("lim.i_max", self.i_max, const { range("lim.i_max") }),
+            ("lim.v_supply", self.v_supply, const { range("lim.v_supply") }),
+            ("ff.gain", self.ff.gain, const { range("ff.gain") }),
+            ("ff.inertia", self.motor.inertia, const { range("ff.inertia") }),
+            ("ff.static_band", self.ff.static_band, const { range("ff.static_band") }),
+            ("gms.fs", a.stribeck.fs, const { range("gms.fs") }),
+            ("gms.fc", a.stribeck.fc, const { range("gms.fc") }),
+            ("gms.vs", a.stribeck.vs, const { range("gms.vs") }),
+            ("gms.delta", a.stribeck.delta, const { range("gms.delta") }),
+            ("gms.sigma", a.sigma, const { range("gms.sigma") }),
+            ("gms.c", a.c, const { range("gms.c") }),
         ];
-        for (name, v, lo, hi) in checks {
+        for (name, v, (lo, hi)) in scalars {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err(ControllerError::Invalid(name));
             }
+        }
+        const K: (f32, f32) = range("gms.k1");
+        const ALPHA: (f32, f32) = range("gms.a1");
+        for b in &a.blocks {
+            if !(b.k.is_finite() && b.k >= K.0 && b.k <= K.1) {
+                return Err(ControllerError::Invalid("gms.k"));
+            }
+            if !(b.alpha.is_finite() && b.alpha >= ALPHA.0 && b.alpha <= ALPHA.1) {
+                return Err(ControllerError::Invalid("gms.a"));
+            }
+        }
+        if !(self.rad_per_count.is_finite()
+            && self.rad_per_count >= 1e-12
+            && self.rad_per_count <= 1.0)
+        {
+            return Err(ControllerError::Invalid("rad_per_count"));
         }
         if !(self.ff.ratio.is_finite() && self.ff.ratio > 0.0) {
             return Err(ControllerError::Invalid("ff.ratio"));
@@ -210,7 +236,7 @@ impl<const N: usize> ControllerParams<N> {
         let r = self.cur_rate_hz / self.pos_rate_hz;
         let n = self.ratio();
         if !(1..=16).contains(&n) || (r - n as f32) > 1e-3 * r || (n as f32 - r) > 1e-3 * r {
-            return Err(ControllerError::Invalid("cur_rate_hz"));
+            return Err(ControllerError::Invalid("rate.cur_hz"));
         }
         self.ff
             .actuator
@@ -274,7 +300,9 @@ pub struct Controller<const N: usize> {
     map_guide: Option<StaticMap>,
     i_cmd: f32,
     w_ref: f32,
+    a_ref: f32,
     cur_integ: f32,
+    e_cur: f32,
     adapt: Adaptive,
     out: PositionOutput,
 }
@@ -336,7 +364,9 @@ impl<const N: usize> Controller<N> {
             map_guide,
             i_cmd: 0.0,
             w_ref: 0.0,
+            a_ref: 0.0,
             cur_integ: 0.0,
+            e_cur: 0.0,
             out: PositionOutput::default(),
         })
     }
@@ -395,8 +425,121 @@ impl<const N: usize> Controller<N> {
         }
         self.i_cmd = 0.0;
         self.w_ref = 0.0;
+        self.a_ref = 0.0;
         self.cur_integ = 0.0;
+        self.e_cur = 0.0;
         self.out = PositionOutput::default();
+    }
+
+    /// True when `p` runs at other loop rates than this controller (a change that cannot be
+    /// made while the bridge drives: the timer and the step ratio change).
+    pub fn rates_differ(&self, p: &ControllerParams<N>) -> bool {
+        p.pos_rate_hz != self.p.pos_rate_hz
+            || p.cur_rate_hz != self.p.cur_rate_hz
+            || p.rad_per_count != self.p.rad_per_count
+    }
+
+    /// Takes the parameter set `p` while running, without a bump (live tuning).
+    ///
+    /// At the same rates every state is kept: the integrators, the derivative filter, the
+    /// friction models' block forces (each clamped into its new limit, see [`Gms::retune`]),
+    /// the adaptive scale (clamped into its new bounds), the last reference. The position
+    /// loop's integrator is handed over so that its total torque at the last step's inputs
+    /// (error, filtered velocity error, friction model, reference acceleration) stays the
+    /// same, scaled by `k_M new / k_M old` so that the current command stays the same; the
+    /// current loop's integrator likewise keeps its voltage at the last current error. Both
+    /// stay within their new limits (`pos.i_limit`, `lim.v_supply`), so a change that needs
+    /// more than those limits allow is bumpless only up to them. A change of the loop rates
+    /// or of the encoder resolution ([`Controller::rates_differ`]) gives a controller at rest
+    /// ([`Controller::reset`]) keeping only the adaptive scale. On error nothing changes.
+    pub fn retune(&mut self, p: ControllerParams<N>) -> Result<(), ControllerError> {
+        let mut next = Controller::try_new(p)?;
+        next.take_state_from(self);
+        *self = next;
+        Ok(())
+    }
+
+    /// The hand-over of [`Controller::retune`]: this controller (new, validated, at rest)
+    /// takes the running state of `old`. Cheap (no validation, no transcendental function):
+    /// fit for a control step, so that the set is validated and built outside the loop.
+    pub fn take_state_from(&mut self, old: &Controller<N>) {
+        let scale = old.adapt.scale();
+        let ad = self.p.ff.adapt;
+        self.adapt.set_scale(scale, &ad);
+        if old.rates_differ(&self.p) {
+            return;
+        }
+        // The models with the old state.
+        self.gms_act.take_state_from(&old.gms_act);
+        if let (Some(new), Some(prev)) = (&mut self.gms_guide, &old.gms_guide) {
+            new.take_state_from(prev);
+        }
+        self.last_meas = old.last_meas;
+        self.last_ref = old.last_ref;
+        self.d_filt = old.d_filt;
+        self.i_cmd = old.i_cmd;
+        self.w_ref = old.w_ref;
+        self.a_ref = old.a_ref;
+        self.e_cur = old.e_cur;
+
+        // Position loop: the same torque (times k_M new / k_M old) at the last inputs.
+        let p = self.p;
+        let o = old.out;
+        let km = p.motor.k_m / old.p.motor.k_m;
+        let before = (o.p + o.i + o.d + o.ff_friction + o.ff_inertia) * km;
+        let adaptive = p.ff.mode == FfMode::GmsAdaptive;
+        let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
+        let p_term = p.pid.kp * o.error;
+        let d_term = p.pid.kd * self.d_filt;
+        let ff_fric = p.ff.gain * ff_scale * self.friction_now();
+        let ff_inertia = p.motor.inertia * self.a_ref;
+        let integ = before - (p_term + d_term + ff_fric + ff_inertia);
+        self.integ = clamp(if integ.is_finite() { integ } else { 0.0 }, p.pid.i_limit);
+        self.out = PositionOutput {
+            error: o.error,
+            p: p_term,
+            i: self.integ,
+            d: d_term,
+            ff_friction: ff_fric,
+            ff_scale,
+            ff_inertia,
+            i_cmd: o.i_cmd,
+            saturated: o.saturated,
+        };
+
+        // Current loop: the same voltage at the last current error.
+        let c0 = &old.p;
+        let v_old = c0.current.kp * old.e_cur
+            + old.cur_integ
+            + c0.motor.r * old.i_cmd
+            + c0.motor.k_e * old.w_ref;
+        let v_rest = p.current.kp * old.e_cur + p.motor.r * old.i_cmd + p.motor.k_e * old.w_ref;
+        let cur = v_old - v_rest;
+        self.cur_integ = clamp(if cur.is_finite() { cur } else { 0.0 }, p.v_supply);
+    }
+
+    /// The friction feedforward model's output now (before the gain and scale) for the mode
+    /// set, without advancing it [N·m].
+    fn friction_now(&self) -> f32 {
+        let ratio = self.p.ff.ratio;
+        match self.p.ff.mode {
+            FfMode::None => 0.0,
+            FfMode::Gms | FfMode::GmsAdaptive => {
+                self.gms_act.force() + self.gms_guide.as_ref().map_or(0.0, |g| ratio * g.force())
+            }
+            FfMode::Static => self.static_ff(self.w_ref),
+        }
+    }
+
+    /// The static map's feedforward at the reference velocity `vel` [rad/s] [N·m], ramped to
+    /// zero inside the velocity band.
+    fn static_ff(&self, vel: f32) -> f32 {
+        let ratio = self.p.ff.ratio;
+        let band = self.p.ff.static_band;
+        let speed = if vel < 0.0 { -vel } else { vel };
+        let scale = if speed < band { speed / band } else { 1.0 };
+        let guide = self.map_guide.as_ref();
+        scale * (self.map_act.force_at(vel) + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
     }
 
     /// The friction feedforward torque [N·m] (before the gain) for the reference moving by
@@ -413,15 +556,7 @@ impl<const N: usize> Controller<N> {
         match self.p.ff.mode {
             FfMode::None => 0.0,
             FfMode::Gms | FfMode::GmsAdaptive => gms,
-            FfMode::Static => {
-                let band = self.p.ff.static_band;
-                let speed = if vel < 0.0 { -vel } else { vel };
-                let scale = if speed < band { speed / band } else { 1.0 };
-                let guide = self.map_guide.as_ref();
-                scale
-                    * (self.map_act.force_at(vel)
-                        + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
-            }
+            FfMode::Static => self.static_ff(vel),
         }
     }
 
@@ -476,6 +611,7 @@ impl<const N: usize> Controller<N> {
         }
         self.i_cmd = i_cmd;
         self.w_ref = r.vel;
+        self.a_ref = r.acc;
         self.out = PositionOutput {
             error,
             p: p_term,
@@ -495,6 +631,7 @@ impl<const N: usize> Controller<N> {
     pub fn current_step(&mut self, i_meas: f32) -> CurrentOutput {
         let c = &self.p.current;
         let e = self.i_cmd - i_meas;
+        self.e_cur = e;
         let ff = self.p.motor.r * self.i_cmd + self.p.motor.k_e * self.w_ref;
         let integ_new = self.cur_integ + c.ki * e * self.dt_cur;
         let v_unsat = c.kp * e + integ_new + ff;

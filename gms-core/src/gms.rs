@@ -135,6 +135,47 @@ impl<const N: usize> Gms<N> {
     pub fn viscous_force(&self) -> f32 {
         self.viscous
     }
+
+    /// Takes new parameters without forgetting the state (live tuning): see
+    /// [`Gms::take_state_from`]. On error nothing changes.
+    pub fn retune(&mut self, params: GmsParams<N>) -> Result<(), ParamError> {
+        let mut next = Gms::try_new(params)?;
+        next.take_state_from(self);
+        *self = next;
+        Ok(())
+    }
+
+    /// Takes over the state of `old` (a model of other parameters): each block keeps its
+    /// force, clamped into its new limit `alpha_i` times the larger breakaway level (`Fs`, or
+    /// the larger of both directions' with `negative`); the viscous part of the last step is
+    /// rescaled to the new `sigma` (zero if the old `sigma` was 0). A few dozen operations: fit
+    /// for a control step.
+    pub fn take_state_from(&mut self, old: &Gms<N>) {
+        let fs = self.stribeck.max_magnitude();
+        let mut sum = 0.0f32;
+        for i in 0..N {
+            let lim = self.alpha[i] * fs;
+            let f = old.f[i];
+            let clamped = if f > lim {
+                lim
+            } else if f < -lim {
+                -lim
+            } else {
+                f
+            };
+            self.f[i] = clamped;
+            self.comp[i] = if clamped == f { old.comp[i] } else { 0.0 };
+            sum += clamped;
+        }
+        let old_sigma = old.params.sigma;
+        let viscous = if old_sigma > 0.0 {
+            old.viscous * (self.params.sigma / old_sigma)
+        } else {
+            0.0
+        };
+        self.viscous = if viscous.is_finite() { viscous } else { 0.0 };
+        self.force = sum + self.viscous;
+    }
 }
 
 impl<const N: usize> FrictionModel for Gms<N> {

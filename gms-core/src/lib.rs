@@ -23,6 +23,7 @@
 
 pub mod adaptive;
 pub mod controller;
+pub mod device;
 pub mod drive;
 pub mod error;
 pub mod gms;

@@ -377,6 +377,36 @@ pub const PARAMS: &[Param] = &[
     num!("gms.a6", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[5].alpha),
 ];
 
+const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// The range `(min, max)` of the numeric parameter `path` in [`PARAMS`], for use in constant
+/// context only (`const { range("pos.kp") }`): an unknown path fails the build.
+pub const fn range(path: &str) -> (f32, f32) {
+    let mut i = 0;
+    while i < PARAMS.len() {
+        if str_eq(PARAMS[i].path, path)
+            && let Access::Number { min, max, .. } = PARAMS[i].access
+        {
+            return (min, max);
+        }
+        i += 1;
+    }
+    panic!("not a numeric parameter of the table")
+}
+
 /// The parameter with this path.
 pub fn find(path: &str) -> Option<&'static Param> {
     PARAMS.iter().find(|p| p.path == path)
@@ -393,7 +423,7 @@ pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result
 }
 
 /// Writes a parameter's value as `dev` has it (settings and estimates).
-pub fn write_param<D: Device + ?Sized>(p: &Param, dev: &D, out: &mut impl Write) -> fmt::Result {
+pub fn write_param<D: Device + ?Sized>(p: &Param, dev: &mut D, out: &mut impl Write) -> fmt::Result {
     match p.access {
         Access::Estimate(e) => write!(out, "{}", Num(dev.estimate(e))),
         _ => write_value(p, dev.settings(), out),
@@ -438,35 +468,37 @@ pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, Par
     Ok(new)
 }
 
-/// What the device does for the commands that are not about parameters.
+/// What the device does for the commands that are not about parameters. Every command can
+/// be refused with a reason (the reply is then `err 8 <reason>` and nothing changed).
 pub trait Device {
     /// The current settings.
     fn settings(&self) -> &Settings;
-    /// Applies a validated set (between two control steps).
-    fn apply(&mut self, new: Settings);
+    /// Applies a validated set (between two control steps); refused when the device cannot
+    /// run it, and then nothing changes.
+    fn apply(&mut self, new: Settings) -> Result<(), &'static str>;
     /// Persists the current set.
     fn save(&mut self) -> Result<(), &'static str>;
     /// Restores the persisted set.
     fn load(&mut self) -> Result<(), &'static str>;
     /// Restores the built-in defaults.
-    fn defaults(&mut self);
+    fn defaults(&mut self) -> Result<(), &'static str>;
     /// Switches the bridge on (position control).
     fn enable(&mut self) -> Result<(), &'static str>;
     /// Switches the bridge off.
-    fn disable(&mut self);
+    fn disable(&mut self) -> Result<(), &'static str>;
     /// Writes the status (without the leading `ok `) on one line.
-    fn status(&self, out: &mut dyn Write) -> fmt::Result;
+    fn status(&mut self, out: &mut dyn Write) -> fmt::Result;
     /// Clears latched faults.
-    fn clear(&mut self);
+    fn clear(&mut self) -> Result<(), &'static str>;
     /// Moves to `pos` [rad] at up to `vel` [rad/s].
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str>;
     /// Starts telemetry of `fields` at `rate_hz`.
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
     /// Stops telemetry.
-    fn stream_off(&mut self);
+    fn stream_off(&mut self) -> Result<(), &'static str>;
     /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
     /// without adaptation.
-    fn estimate(&self, which: Estimate) -> f32 {
+    fn estimate(&mut self, which: Estimate) -> f32 {
         match which {
             Estimate::AdaptScale => 1.0,
         }
@@ -506,16 +538,16 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             writeln!(out, "ok")
         }
         Command::List => {
-            let s = dev.settings();
+            let s = *dev.settings();
             for p in PARAMS {
                 write!(out, "{} ", p.path)?;
                 match p.access {
                     Access::Number { min, max, .. } => {
-                        write_value(p, s, out)?;
+                        write_value(p, &s, out)?;
                         writeln!(out, " {} [{}, {}]", p.unit, Num(min), Num(max))?
                     }
                     Access::Mode => {
-                        write_value(p, s, out)?;
+                        write_value(p, &s, out)?;
                         writeln!(out, " - [none, static, gms, gms-adaptive]")?
                     }
                     Access::Estimate(e) => writeln!(out, "{} - [read-only]", Num(dev.estimate(e)))?,
@@ -532,37 +564,22 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             None => err(out, ErrorCode::UnknownPath, "unknown parameter (try list)"),
         },
         Command::Set(path, value) => match with_value(dev.settings(), path, value) {
-            Ok(new) => {
-                dev.apply(new);
-                writeln!(out, "ok")
-            }
+            Ok(new) => done(out, dev.apply(new)),
             Err(e) => err(out, e.code, e.reason),
         },
         Command::Save => done(out, dev.save()),
         Command::Load => done(out, dev.load()),
-        Command::Defaults => {
-            dev.defaults();
-            writeln!(out, "ok")
-        }
+        Command::Defaults => done(out, dev.defaults()),
         Command::Enable => done(out, dev.enable()),
-        Command::Disable => {
-            dev.disable();
-            writeln!(out, "ok")
-        }
+        Command::Disable => done(out, dev.disable()),
         Command::Status => {
             out.write_str("ok ")?;
             dev.status(out)?;
             writeln!(out)
         }
-        Command::Clear => {
-            dev.clear();
-            writeln!(out, "ok")
-        }
+        Command::Clear => done(out, dev.clear()),
         Command::Move { pos, vel } => done(out, dev.move_to(pos, vel)),
         Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
-        Command::StreamOff => {
-            dev.stream_off();
-            writeln!(out, "ok")
-        }
+        Command::StreamOff => done(out, dev.stream_off()),
     }
 }

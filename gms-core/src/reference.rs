@@ -321,12 +321,168 @@ pub const MOVE_AMAX: f32 = 50.0;
 /// Jerk limit of the protocol's `move` [rad/s^3].
 pub const MOVE_JMAX: f32 = 1e4;
 
-/// The reference of a device driven by point-to-point commands: a move's samples while one
-/// plays, then holding where it ended (or where the axis was enabled).
+/// A point-to-point move that starts from any state of the reference (position, velocity,
+/// acceleration) and ends at rest on the target: the quintic polynomial matching both ends'
+/// position, velocity and acceleration, with the shortest duration (searched in steps of 5 %
+/// from the minimum-jerk time of the distance) whose sampled speed, acceleration and jerk stay
+/// within the limits (or within the start's own speed and acceleration where those are higher).
+/// From rest it is the [`Segment::Move`] profile. A new move planned from the reference of a
+/// move under way therefore continues it without a jump in position, velocity or acceleration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MovePlan {
+    start: SubCounts,
+    target: SubCounts,
+    rad_per_count: f32,
+    v0: f32,
+    a0: f32,
+    c3: f32,
+    c4: f32,
+    c5: f32,
+    dur: f32,
+    t: f32,
+}
+
+/// Time at rest after a move before it counts as finished [s].
+const MOVE_DWELL: f32 = 1e-3;
+
+impl MovePlan {
+    /// A move from the reference sample `from` to `target` [rad] with the limits `vmax`
+    /// [rad/s], `amax` [rad/s^2], `jmax` [rad/s^3] (all `> 0`), for an encoder of
+    /// `rad_per_count` [rad]. Planning costs up to a few thousand polynomial evaluations:
+    /// plan outside the control step.
+    pub fn new(
+        from: RefSample,
+        target: f32,
+        vmax: f32,
+        amax: f32,
+        jmax: f32,
+        rad_per_count: f32,
+    ) -> Result<Self, SegmentError> {
+        let finite = [target, vmax, amax, jmax, rad_per_count, from.vel, from.acc];
+        if finite.iter().any(|v| !v.is_finite()) {
+            return Err(SegmentError::NonFinite(0));
+        }
+        if vmax <= 0.0 || amax <= 0.0 || jmax <= 0.0 || rad_per_count <= 0.0 {
+            return Err(SegmentError::NotPositive(0));
+        }
+        let target_sub = target as f64 / rad_per_count as f64 * SUB_PER_COUNT as f64;
+        if !(target_sub.abs() < 9.0e18) {
+            return Err(SegmentError::NonFinite(0));
+        }
+        let target_sub = if target_sub >= 0.0 {
+            (target_sub + 0.5) as i64
+        } else {
+            (target_sub - 0.5) as i64
+        };
+        let d = (target_sub.saturating_sub(from.pos)) as f64 / SUB_PER_COUNT as f64
+            * rad_per_count as f64;
+        let d = d as f32;
+        let (v0, a0) = (from.vel, from.acc);
+        let vlim = vmax.max(abs(v0)) * 1.0001;
+        let alim = amax.max(abs(a0)) * 1.0001;
+        let jlim = jmax * 1.0001;
+        let mut dur = Segment::move_time(d, vmax, amax, jmax);
+        let mut plan = MovePlan {
+            start: from.pos,
+            target: target_sub,
+            rad_per_count,
+            v0,
+            a0,
+            c3: 0.0,
+            c4: 0.0,
+            c5: 0.0,
+            dur,
+            t: 0.0,
+        };
+        for _ in 0..200 {
+            plan.set_duration(d, dur);
+            if plan.within(vlim, alim, jlim) {
+                return Ok(plan);
+            }
+            dur *= 1.05;
+        }
+        // No duration keeps every limit (a start far beyond them): the last one tried is
+        // still continuous.
+        Ok(plan)
+    }
+
+    fn set_duration(&mut self, d: f32, dur: f32) {
+        let (v0, a0) = (self.v0, self.a0);
+        let t = dur;
+        let (t2, t3) = (t * t, t * t * t);
+        self.dur = dur;
+        self.c3 = (20.0 * d - 12.0 * v0 * t - 3.0 * a0 * t2) / (2.0 * t3);
+        self.c4 = (-30.0 * d + 16.0 * v0 * t + 3.0 * a0 * t2) / (2.0 * t3 * t);
+        self.c5 = (12.0 * d - 6.0 * v0 * t - a0 * t2) / (2.0 * t3 * t2);
+    }
+
+    /// Offset [rad], velocity, acceleration and jerk at `t` in [0, duration].
+    fn eval(&self, t: f32) -> (f32, f32, f32, f32) {
+        let (c3, c4, c5) = (self.c3, self.c4, self.c5);
+        let x = t * (self.v0 + t * (0.5 * self.a0 + t * (c3 + t * (c4 + t * c5))));
+        let v = self.v0 + t * (self.a0 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)));
+        let a = self.a0 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5));
+        let j = 6.0 * c3 + t * (24.0 * c4 + t * 60.0 * c5);
+        (x, v, a, j)
+    }
+
+    fn within(&self, vlim: f32, alim: f32, jlim: f32) -> bool {
+        const N: u32 = 64;
+        (0..=N).all(|k| {
+            let (_, v, a, j) = self.eval(self.dur * k as f32 / N as f32);
+            abs(v) <= vlim && abs(a) <= alim && abs(j) <= jlim
+        })
+    }
+
+    /// Duration of the motion, without the final dwell [s].
+    pub fn duration(&self) -> f32 {
+        self.dur
+    }
+
+    /// The target [1/65536 count].
+    pub fn target(&self) -> SubCounts {
+        self.target
+    }
+
+    /// Moves the plan's clock on by `t` [s] (to join it at the step it is taken).
+    pub fn skip(&mut self, t: f32) {
+        if t.is_finite() && t > 0.0 {
+            self.t += t;
+        }
+    }
+
+    /// True once the motion and the dwell after it have played.
+    pub fn done(&self) -> bool {
+        self.t >= self.dur + MOVE_DWELL
+    }
+
+    /// The sample at the plan's time, then the time moves on by `dt` [s].
+    pub fn next(&mut self, dt: f32) -> RefSample {
+        let t = self.t;
+        self.t += dt;
+        if t >= self.dur {
+            return RefSample {
+                pos: self.target,
+                vel: 0.0,
+                acc: 0.0,
+            };
+        }
+        let (x, v, a, _) = self.eval(t);
+        let c = x / self.rad_per_count * SUB_PER_COUNT;
+        let off = (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64;
+        RefSample {
+            pos: self.start.saturating_add(off),
+            vel: v,
+            acc: a,
+        }
+    }
+}
+
+/// The reference of a device: holding a position, or playing a [`MovePlan`].
 #[derive(Debug, Clone)]
 pub struct Motion {
     hold: SubCounts,
-    moving: Option<Reference<1>>,
+    moving: Option<MovePlan>,
 }
 
 impl Motion {
@@ -338,33 +494,22 @@ impl Motion {
         }
     }
 
-    /// The jerk-limited move of the protocol's `move` from `from` [1/65536 count] to `pos`
-    /// [rad] at up to `vel` [rad/s] ([`MOVE_VMAX`] when `None`), for an encoder of
-    /// `rad_per_count` [rad].
+    /// The protocol's `move` from the reference sample `from` to `pos` [rad] at up to `vel`
+    /// [rad/s] ([`MOVE_VMAX`] when `None`), within [`MOVE_AMAX`] and [`MOVE_JMAX`], for an
+    /// encoder of `rad_per_count` [rad].
     pub fn plan(
-        from: SubCounts,
+        from: RefSample,
         pos: f32,
         vel: Option<f32>,
         rad_per_count: f32,
-    ) -> Result<Reference<1>, SegmentError> {
-        // The start in f64: the fixed-point position can be large.
-        let start = from as f64 / SUB_PER_COUNT as f64 * rad_per_count as f64;
-        let seg = Segment::Move {
-            distance: (pos as f64 - start) as f32,
-            vmax: match vel {
-                Some(v) => v,
-                None => MOVE_VMAX,
-            },
-            amax: MOVE_AMAX,
-            jmax: MOVE_JMAX,
-            dwell: 1e-3,
-        };
-        Reference::try_new(&[seg], rad_per_count, from)
+    ) -> Result<MovePlan, SegmentError> {
+        let vmax = vel.unwrap_or(MOVE_VMAX);
+        MovePlan::new(from, pos, vmax, MOVE_AMAX, MOVE_JMAX, rad_per_count)
     }
 
-    /// Plays `r` from now on (replacing any move under way).
-    pub fn start(&mut self, r: Reference<1>) {
-        self.moving = Some(r);
+    /// Plays `m` from now on (replacing any move under way).
+    pub fn start(&mut self, m: MovePlan) {
+        self.moving = Some(m);
     }
 
     /// Drops any move under way and holds at `pos`.
@@ -373,12 +518,13 @@ impl Motion {
         self.moving = None;
     }
 
-    /// Drops any move under way; the hold position stays where it was.
+    /// Drops any move under way; the reference holds where it last was.
     pub fn stop(&mut self) {
         self.moving = None;
     }
 
-    /// The hold position [1/65536 count] (where the last move ended, or was set).
+    /// The reference position [1/65536 count] of the last step (where a finished move
+    /// ended, or the hold position set).
     pub fn hold(&self) -> SubCounts {
         self.hold
     }
@@ -392,11 +538,12 @@ impl Motion {
     /// the hold position.
     pub fn next(&mut self, dt: f32) -> RefSample {
         if let Some(m) = &mut self.moving {
-            if !m.done() {
-                return m.next(dt);
+            let r = m.next(dt);
+            self.hold = r.pos;
+            if m.done() {
+                self.moving = None;
             }
-            self.hold = m.last().pos;
-            self.moving = None;
+            return r;
         }
         RefSample {
             pos: self.hold,

@@ -7,7 +7,7 @@
 //! FNV-1a hash.
 
 use crate::controller::{
-    Controller, ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
+    Controller, ControllerParams, FfMode,
 };
 use crate::gms::Gms;
 use crate::lugre::{LuGre, LugreParams};
@@ -113,39 +113,10 @@ pub fn friction_hash(n: u32) -> u64 {
     h.value()
 }
 
-/// The controller used by the workload and the benchmark: Table 1 compensation, default
-/// rates, a guideway model reflected through 18.1 um/rad.
+/// The controller's parameters of the workload: the device's defaults
+/// ([`crate::device::default_settings`]).
 pub fn controller_params() -> ControllerParams<6> {
-    ControllerParams {
-        pos_rate_hz: 10_000.0,
-        cur_rate_hz: 20_000.0,
-        rad_per_count: 3.8e-6,
-        pid: PidParams {
-            kp: 0.2,
-            ki: 100.0,
-            kd: 2.5e-4,
-            d_filter_hz: 2000.0,
-            i_limit: 1e-3,
-        },
-        current: CurrentParams { kp: 1.5, ki: 6e4 },
-        motor: MotorModel {
-            k_m: 6.6e-3,
-            r: 10.0,
-            k_e: 6.6e-3,
-            inertia: 6e-8,
-        },
-        i_max: 0.5,
-        v_supply: 12.0,
-        ff: FeedforwardParams {
-            mode: FfMode::Gms,
-            gain: 1.0,
-            actuator: presets::table1(),
-            guideway: Some(presets::guideway()),
-            ratio: 18.1e-6,
-            static_band: 0.05,
-            adapt: crate::adaptive::AdaptiveParams::default(),
-        },
-    }
+    crate::device::default_settings()
 }
 
 /// Runs the controller for `n` position periods against a toy plant (pure inertia with

@@ -1,0 +1,307 @@
+//! The loop half of the device core: one call per PWM period.
+
+use crate::controller::PositionOutput;
+use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
+use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
+
+use super::{Applied, Board, Ctrl, Requests, Sample, Status};
+
+/// What the hardware measured at the start of a PWM period.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Inputs {
+    /// The encoder counter's raw value [counts] (wrapping, [`Board::encoder_bits`] wide).
+    pub encoder: u32,
+    /// The sum of [`Board::sense_oversample`] current-sense ADC codes [code].
+    pub current_codes: u32,
+}
+
+/// What the shell writes to the hardware after a PWM period.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Outputs {
+    /// Bridge on: drive `compare`; off: both bridge inputs low.
+    pub enabled: bool,
+    /// Duty [-1, 1] (0 while off), for a simulated bridge.
+    pub duty: f32,
+    /// Compare values of the two bridge inputs ((0, 0) while off), see
+    /// [`drive::bridge_compare`].
+    pub compare: (u32, u32),
+    /// New PWM timer setting (prescaler, period) to write, after a change of loop rates.
+    pub timing: Option<(u32, u32)>,
+    /// A telemetry sample, when one is due.
+    pub sample: Option<Sample>,
+}
+
+/// The device's control loop and everything it owns.
+#[derive(Debug, Clone)]
+pub struct ControlLoop {
+    board: Board,
+    ctrl: Ctrl,
+    limits: Limits,
+    psc: u32,
+    arr: u32,
+    ratio: u32,
+    phase: u32,
+    enc: CountExtender,
+    last_pos: i64,
+    sense: CurrentSense,
+    faults: Faults,
+    enabled: bool,
+    motion: Motion,
+    r: RefSample,
+    out: PositionOutput,
+    current: f32,
+    duty: f32,
+    stats: StepStats,
+    last_cycles: u32,
+    steps: u64,
+    stream_every: u32,
+    stream_count: u32,
+}
+
+impl ControlLoop {
+    /// A loop at rest (bridge off) running the parameter set `a` on `board`, with the current
+    /// sense `sense`, the faults found at start-up and the encoder counter's value now.
+    pub fn new(board: Board, a: Applied, sense: CurrentSense, faults: Faults, encoder: u32) -> Self {
+        let ratio = a.ctrl.params().ratio().max(1);
+        ControlLoop {
+            board,
+            ratio,
+            ctrl: a.ctrl,
+            limits: a.limits,
+            psc: a.psc,
+            arr: a.arr,
+            phase: 0,
+            enc: CountExtender::new(board.encoder_bits, encoder),
+            last_pos: 0,
+            sense,
+            faults,
+            enabled: false,
+            motion: Motion::holding(0),
+            r: RefSample::default(),
+            out: PositionOutput::default(),
+            current: 0.0,
+            duty: 0.0,
+            stats: StepStats::new(),
+            last_cycles: 0,
+            steps: 0,
+            stream_every: 0,
+            stream_count: 0,
+        }
+    }
+
+    /// The PWM timer setting (prescaler, period) of the running set.
+    pub fn timing(&self) -> (u32, u32) {
+        (self.psc, self.arr)
+    }
+
+    /// The controller.
+    pub fn controller(&self) -> &Ctrl {
+        &self.ctrl
+    }
+
+    /// Current-loop steps per position step.
+    pub fn ratio(&self) -> u32 {
+        self.ratio
+    }
+
+    /// True while the bridge drives.
+    pub fn enabled(&self) -> bool {
+        self.enabled
+    }
+
+    /// The latched faults.
+    pub fn faults(&self) -> Faults {
+        self.faults
+    }
+
+    fn switch_off(&mut self) {
+        self.enabled = false;
+        self.motion.stop();
+        self.duty = 0.0;
+    }
+
+    /// The status as of the last position step.
+    pub fn status(&self) -> Status {
+        Status {
+            steps: self.steps,
+            pos_rate_hz: self.ctrl.params().pos_rate_hz,
+            pos: self.enc.count(),
+            reference: self.r,
+            error: self.out.error,
+            ff: self.out.ff_friction,
+            current: self.current,
+            duty: self.duty,
+            faults: self.faults,
+            enabled: self.enabled,
+            moving: self.motion.is_moving(),
+            stats: self.stats,
+            sense_offset: self.sense.offset,
+            adapt_scale: self.ctrl.adaptive_scale(),
+        }
+    }
+
+    /// Acts on the protocol side's requests (between two position steps). Returns a new PWM
+    /// timer setting when the loop rates changed.
+    fn take(&mut self, req: Requests) -> Option<(u32, u32)> {
+        let mut timing = None;
+        if req.reset_stats {
+            self.stats = StepStats::new();
+        }
+        if let Some(n) = req.stream_every {
+            self.stream_every = n;
+            self.stream_count = 0;
+        }
+        if req.clear {
+            self.faults = Faults::NONE;
+        }
+        self.faults.latch(req.latch);
+        if let Some(a) = req.apply {
+            let ratio = a.ctrl.params().ratio().max(1);
+            let rates = self.ctrl.rates_differ(a.ctrl.params())
+                || (a.psc, a.arr, ratio) != (self.psc, self.arr, self.ratio);
+            let mut next = a.ctrl;
+            if rates {
+                // New loop rates: the bridge goes off for the change, the new controller
+                // starts at rest (keeping what the adaptation learned about the axis).
+                self.switch_off();
+                next.set_adaptive_scale(self.ctrl.adaptive_scale());
+                self.ratio = ratio;
+                self.phase = 0;
+                self.psc = a.psc;
+                self.arr = a.arr;
+                timing = Some((a.psc, a.arr));
+            } else {
+                // Same rates: the running state is handed over (bumpless).
+                next.take_state_from(&self.ctrl);
+            }
+            self.ctrl = next;
+            self.limits = a.limits;
+        }
+        if req.disable {
+            self.switch_off();
+        }
+        if req.enable && self.faults.is_empty() && !self.enabled {
+            self.ctrl.reset();
+            let here = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
+            self.motion.hold_at(here);
+            self.r = RefSample {
+                pos: here,
+                vel: 0.0,
+                acc: 0.0,
+            };
+            self.last_pos = self.enc.count();
+            self.enabled = true;
+        }
+        if let Some(m) = req.motion
+            && self.enabled
+        {
+            let mut plan = m.plan;
+            // The plan starts at the reference of step `from_step`; this step is `steps + 1`.
+            let behind = self.steps.saturating_add(1).saturating_sub(m.from_step);
+            plan.skip(behind as f32 * self.ctrl.dt_pos());
+            self.motion.start(plan);
+        }
+        timing
+    }
+
+    /// One PWM period: `inp` as measured now, `exchange` the shell's access to the mailbox
+    /// (called once per position step with the status; returns the pending requests).
+    pub fn step(
+        &mut self,
+        inp: Inputs,
+        exchange: impl FnOnce(Status) -> Option<Requests>,
+    ) -> Outputs {
+        self.enc.update(inp.encoder);
+        self.current = self
+            .sense
+            .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
+        let mut timing = None;
+        let mut sample = None;
+        let mut new_faults = Faults::NONE;
+        if self.phase == 0 {
+            if let Some(req) = exchange(self.status()) {
+                timing = self.take(req);
+            }
+            self.steps = self.steps.wrapping_add(1);
+            let pos = self.enc.count();
+            let delta = pos.saturating_sub(self.last_pos);
+            self.last_pos = pos;
+            if self.enabled {
+                self.r = self.motion.next(self.ctrl.dt_pos());
+                self.out = self.ctrl.position_step(pos, &self.r);
+            } else {
+                self.r = RefSample {
+                    pos: pos.saturating_mul(SUB_PER_COUNT as i64),
+                    vel: 0.0,
+                    acc: 0.0,
+                };
+                self.out = PositionOutput::default();
+            }
+            let m = Measured {
+                current: self.current,
+                error: self.out.error,
+                delta,
+                pos,
+                cycles: self.last_cycles,
+            };
+            new_faults = drive::check(&m, &self.limits, self.enabled);
+            sample = self.telemetry(pos);
+        } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
+            // Over-current is checked at every current step.
+            new_faults = Faults::OVER_CURRENT;
+        }
+        self.phase += 1;
+        if self.phase >= self.ratio {
+            self.phase = 0;
+        }
+        self.faults.latch(new_faults);
+        if self.enabled && !self.faults.is_empty() {
+            self.switch_off();
+        }
+        if self.enabled {
+            self.duty = self.ctrl.current_step(self.current).duty;
+        }
+        Outputs {
+            enabled: self.enabled,
+            duty: if self.enabled { self.duty } else { 0.0 },
+            compare: drive::bridge_compare(self.duty, self.arr, self.enabled),
+            timing,
+            sample,
+        }
+    }
+
+    /// Records the duration of the step just run [cycles]; an overrun latches the fault and
+    /// switches the bridge off. Returns true when the bridge must be switched off now.
+    pub fn finish(&mut self, cycles: u32) -> bool {
+        self.stats.record(cycles);
+        self.last_cycles = cycles;
+        if self.enabled && drive::overrun(cycles, self.limits.budget_cycles) {
+            self.faults.latch(Faults::OVERRUN);
+            self.switch_off();
+            return true;
+        }
+        false
+    }
+
+    fn telemetry(&mut self, pos: i64) -> Option<Sample> {
+        if self.stream_every == 0 {
+            return None;
+        }
+        self.stream_count += 1;
+        if self.stream_count < self.stream_every {
+            return None;
+        }
+        self.stream_count = 0;
+        let p = self.ctrl.params();
+        Some(Sample {
+            steps: self.steps,
+            pos,
+            reference: self.r.pos,
+            error: self.out.error,
+            ff: self.out.ff_friction,
+            current: self.current,
+            friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
+            friction_true: f32::NAN,
+        })
+    }
+}

@@ -1,0 +1,369 @@
+//! The protocol half of the device core: what `set`, `move`, `save`, `status`, `stream` and
+//! the rest do, whatever carries the bytes.
+
+use core::fmt::{self, Write};
+
+use crate::drive::{self, Faults, RECORD_LEN};
+use crate::numtext::Num;
+use crate::protocol::{self, Device, Settings};
+use crate::reference::{Motion, SUB_PER_COUNT};
+
+use super::{Applied, Board, Ctrl, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status};
+
+/// How the protocol side reaches the loop.
+pub trait Link {
+    /// Runs `f` on the mailbox, atomically with respect to the loop (a critical section on a
+    /// board, a mutex on a host); `f` only copies.
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R;
+    /// A monotonic time [us], for waiting on the loop.
+    fn now_us(&self) -> u64;
+    /// Lets the loop run for a moment while waiting (nothing where the loop is an interrupt
+    /// that preempts the caller; a short sleep where it is a thread).
+    fn pause(&mut self);
+    /// How long to wait for the loop to take a request before giving up [us].
+    fn timeout_us(&self) -> u64 {
+        50_000
+    }
+}
+
+/// Why the parameter store failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StoreError {
+    /// The flash (or its file) or the storage layer reported an error.
+    Flash,
+    /// The stored item is not one record long.
+    Length,
+}
+
+/// Where the parameter record lives (the board's flash, a file that stands for it).
+pub trait ParamStore {
+    /// Stores a record, replacing the last (the old one stays valid until the new is whole).
+    fn save(&mut self, rec: &[u8; RECORD_LEN]) -> Result<(), StoreError>;
+    /// The last record stored, `None` if nothing was ever saved.
+    fn load(&mut self) -> Result<Option<[u8; RECORD_LEN]>, StoreError>;
+}
+
+/// The loop's parameter set for `s` on `board`: the controller, the limits and the PWM timing;
+/// the error says why the board cannot run it.
+pub fn prepare(s: &Settings, board: &Board) -> Result<Applied, &'static str> {
+    let ctrl = Ctrl::try_new(*s).map_err(|_| "the parameter set is invalid")?;
+    let (psc, arr) = drive::pwm_timing(board.pwm_timer_hz, s.cur_rate_hz, board.pwm_max_arr)
+        .ok_or("the board's PWM timer cannot run rate.cur_hz")?;
+    Ok(Applied {
+        ctrl,
+        limits: drive::limits_for(s, &board.limits),
+        psc,
+        arr,
+    })
+}
+
+/// What a device starts with.
+#[derive(Debug, Clone)]
+pub struct Startup {
+    /// The settings that run.
+    pub settings: Settings,
+    /// The loop's set for them.
+    pub applied: Applied,
+    /// Faults to latch (`invalid_params` when the stored set could not be used).
+    pub faults: Faults,
+    /// What happened, for the log.
+    pub note: &'static str,
+}
+
+/// The start-up decision: the stored set if it is valid and the board runs it; the defaults
+/// and a latched `invalid_params` fault if a stored set is unreadable, invalid or not
+/// runnable; the defaults without a fault if nothing was ever saved. `Err` only if the
+/// defaults themselves cannot run on `board`.
+pub fn startup(
+    stored: Result<Option<[u8; RECORD_LEN]>, StoreError>,
+    defaults: &Settings,
+    board: &Board,
+) -> Result<Startup, &'static str> {
+    let fallback = |faults: Faults, note: &'static str| -> Result<Startup, &'static str> {
+        Ok(Startup {
+            settings: *defaults,
+            applied: prepare(defaults, board)?,
+            faults,
+            note,
+        })
+    };
+    match stored {
+        Ok(None) => fallback(Faults::NONE, "nothing saved: running the defaults"),
+        Err(_) => fallback(
+            Faults::INVALID_PARAMS,
+            "parameter store unreadable: running the defaults",
+        ),
+        Ok(Some(rec)) => match drive::decode_settings(&rec, defaults) {
+            Err(_) => fallback(
+                Faults::INVALID_PARAMS,
+                "stored parameters invalid: running the defaults",
+            ),
+            Ok(s) => match prepare(&s, board) {
+                Ok(applied) => Ok(Startup {
+                    settings: s,
+                    applied,
+                    faults: Faults::NONE,
+                    note: "parameters loaded from the store",
+                }),
+                Err(_) => fallback(
+                    Faults::INVALID_PARAMS,
+                    "stored parameters not runnable on this board: running the defaults",
+                ),
+            },
+        },
+    }
+}
+
+/// The protocol side of a device: implements [`Device`] over a [`Link`] to the loop and a
+/// [`ParamStore`].
+pub struct Front<L: Link, S: ParamStore> {
+    link: L,
+    store: S,
+    board: Board,
+    settings: Settings,
+    defaults: Settings,
+    fields: [u8; FIELDS.len()],
+    nfields: usize,
+}
+
+impl<L: Link, S: ParamStore> Front<L, S> {
+    /// The protocol side of a device running `settings` (what [`startup`] chose), with
+    /// `defaults` for `defaults` and `load`.
+    pub fn new(link: L, store: S, board: Board, settings: Settings, defaults: Settings) -> Self {
+        Front {
+            link,
+            store,
+            board,
+            settings,
+            defaults,
+            fields: [0; FIELDS.len()],
+            nfields: 0,
+        }
+    }
+
+    /// The loop's latest status.
+    pub fn status_now(&mut self) -> Status {
+        self.link.with_mailbox(|m| m.status)
+    }
+
+    /// The link (for the shell's own use of the mailbox).
+    pub fn link_mut(&mut self) -> &mut L {
+        &mut self.link
+    }
+
+    /// The store.
+    pub fn store_mut(&mut self) -> &mut S {
+        &mut self.store
+    }
+
+    /// True while a telemetry stream is on.
+    pub fn streaming(&self) -> bool {
+        self.nfields > 0
+    }
+
+    /// The client went away: its stream ends (a new client starts without one).
+    pub fn disconnected(&mut self) {
+        let _ = self.stream_off();
+    }
+
+    /// Posts requests and waits until the loop has taken them and published a status after
+    /// them, so that a reply and the status after it agree. If the loop does not take them
+    /// within the link's timeout they are withdrawn and nothing changes.
+    fn post(&mut self, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
+        self.link.with_mailbox(|m| f(&mut m.requests));
+        let t0 = self.link.now_us();
+        let timeout = self.link.timeout_us();
+        loop {
+            let (pending, taken, steps) = self
+                .link
+                .with_mailbox(|m| (m.requests.pending(), m.taken_at, m.status.steps));
+            if !pending && steps > taken {
+                return Ok(());
+            }
+            if self.link.now_us().saturating_sub(t0) > timeout {
+                let withdrawn = self.link.with_mailbox(|m| {
+                    let p = m.requests.pending();
+                    if p {
+                        m.requests = Requests::default();
+                    }
+                    p
+                });
+                return if withdrawn {
+                    Err("control loop not responding")
+                } else {
+                    Ok(())
+                };
+            }
+            self.link.pause();
+        }
+    }
+
+    /// One telemetry line (`# t=… pos=…\n`) of the fields streamed, SI units.
+    pub fn telemetry_line(&self, out: &mut impl Write, s: &Sample) -> fmt::Result {
+        let rpc = self.settings.rad_per_count;
+        out.write_char('#')?;
+        for &f in self.fields.get(..self.nfields).unwrap_or(&[]) {
+            let v = match f {
+                0 => (s.steps as f64 / self.settings.pos_rate_hz as f64) as f32,
+                1 => (s.pos as f64 * rpc as f64) as f32,
+                2 => (s.reference as f64 / SUB_PER_COUNT as f64 * rpc as f64) as f32,
+                3 => s.error,
+                4 => s.ff,
+                5 => s.current,
+                6 => s.friction,
+                _ => s.friction_true,
+            };
+            let name = FIELDS.get(f as usize).copied().unwrap_or("?");
+            write!(out, " {name}={}", Num(v))?;
+        }
+        out.write_char('\n')
+    }
+}
+
+impl<L: Link, S: ParamStore> Device for Front<L, S> {
+    fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
+        let a = prepare(&new, &self.board)?;
+        self.post(|r| r.apply = Some(a))?;
+        self.settings = new;
+        Ok(())
+    }
+
+    fn save(&mut self) -> Result<(), &'static str> {
+        if self.status_now().enabled {
+            return Err("disable before save");
+        }
+        let rec = drive::encode_settings(&self.settings);
+        let r = self.store.save(&rec);
+        // A flash write stalls the CPU on a board: the statistics start afresh.
+        let _ = self.post(|r| r.reset_stats = true);
+        r.map_err(|_| "store write failed")
+    }
+
+    fn load(&mut self) -> Result<(), &'static str> {
+        if self.status_now().enabled {
+            return Err("disable before load");
+        }
+        let rec = match self.store.load() {
+            Ok(Some(rec)) => rec,
+            Ok(None) => return Err("nothing saved"),
+            Err(_) => return Err("store read failed"),
+        };
+        let s = drive::decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
+        self.apply(s)
+    }
+
+    fn defaults(&mut self) -> Result<(), &'static str> {
+        let d = self.defaults;
+        self.apply(d)
+    }
+
+    fn enable(&mut self) -> Result<(), &'static str> {
+        if !self.status_now().faults.is_empty() {
+            return Err("fault latched (clear first)");
+        }
+        self.post(|r| r.enable = true)?;
+        if self.status_now().enabled {
+            Ok(())
+        } else {
+            Err("not enabled (fault)")
+        }
+    }
+
+    fn disable(&mut self) -> Result<(), &'static str> {
+        self.post(|r| r.disable = true)
+    }
+
+    fn status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        let st = self.status_now();
+        let rpc = self.settings.rad_per_count;
+        let clock = self.board.limits.clock_hz;
+        let t = st.steps as f64 / st.pos_rate_hz.max(1.0) as f64;
+        write!(
+            out,
+            "mode={} enabled={} faults={} t={} pos={} error_counts={} moving={} current={} \
+             fault_names=",
+            self.settings.ff.mode.name(),
+            st.enabled as u8,
+            st.faults.0,
+            Num(t as f32),
+            Num((st.pos as f64 * rpc as f64) as f32),
+            Num(st.error / rpc),
+            st.moving as u8,
+            Num(st.current),
+        )?;
+        st.faults.write_names(out)?;
+        write!(
+            out,
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={}",
+            Num(st.ff),
+            Num(st.duty),
+            Num(drive::cycles_to_us(st.stats.worst() as f32, clock)),
+            Num(drive::cycles_to_us(st.stats.mean(), clock)),
+            Num(st.sense_offset),
+        )
+    }
+
+    fn clear(&mut self) -> Result<(), &'static str> {
+        self.post(|r| r.clear = true)
+    }
+
+    fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if !st.enabled {
+            return Err("disabled (enable first)");
+        }
+        let rpc = self.settings.rad_per_count;
+        let limits = drive::limits_for(&self.settings, &self.board.limits);
+        let target = pos / rpc;
+        if !(target >= limits.pos_min as f32 && target <= limits.pos_max as f32) {
+            return Err("beyond the soft limits");
+        }
+        // From the loop's reference now (position, velocity, acceleration): a move under
+        // way is continued, not restarted.
+        let plan = Motion::plan(st.reference, pos, vel, rpc).map_err(|_| "bad move")?;
+        let req = MoveRequest {
+            plan,
+            from_step: st.steps,
+        };
+        self.post(|r| r.motion = Some(req))
+    }
+
+    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
+        if rate_hz > MAX_STREAM_HZ {
+            return Err("rate above 1000 Hz");
+        }
+        let mut idx = [0u8; FIELDS.len()];
+        let mut n = 0;
+        for f in fields.split(',') {
+            let i = FIELDS
+                .iter()
+                .position(|x| *x == f)
+                .filter(|&i| self.board.has_truth || FIELDS.get(i) != Some(&"friction_true"))
+                .ok_or("unknown field (t, pos, ref, error, ff, current, friction)")?;
+            let slot = idx.get_mut(n).ok_or("too many fields")?;
+            *slot = i as u8;
+            n += 1;
+        }
+        let every = (self.settings.pos_rate_hz / rate_hz + 0.5).max(1.0) as u32;
+        self.post(|r| r.stream_every = Some(every))?;
+        self.fields = idx;
+        self.nfields = n;
+        Ok(())
+    }
+
+    fn stream_off(&mut self) -> Result<(), &'static str> {
+        self.nfields = 0;
+        self.post(|r| r.stream_every = Some(0))
+    }
+
+    fn estimate(&mut self, which: protocol::Estimate) -> f32 {
+        match which {
+            protocol::Estimate::AdaptScale => self.status_now().adapt_scale,
+        }
+    }
+}

@@ -1,0 +1,287 @@
+//! The device core: the whole behaviour of a gms motor driver behind the bench protocol,
+//! shared by the firmware (STM32F405) and the simulator's virtual device (`hil-sim serve`).
+//!
+//! A device is two halves that meet at a [`Mailbox`]:
+//!
+//! - [`ControlLoop`] runs once per PWM period (the current-loop rate; on the board in the
+//!   PWM timer's interrupt): encoder count extension, current sense, every `ratio`-th period a
+//!   position step (reference, controller, every fault check), the current step and the
+//!   bridge's compare values, the step statistics and the telemetry decimation. Once per
+//!   position step it publishes a [`Status`] and takes the pending [`Requests`].
+//! - [`Front`] is the protocol side ([`crate::protocol::Device`]): it validates and prepares
+//!   parameter sets (a set the board cannot run is refused with `err`), plans moves from the
+//!   loop's current reference, decides save/load/defaults, formats `status` and telemetry.
+//!
+//! The shells only move numbers: the firmware reads TIM2, the ADC and the DWT and writes TIM8;
+//! the virtual device runs the simulated plant between the steps. Hardware and time enter
+//! through [`Inputs`], the [`Link`] (how the front reaches the mailbox and waits) and the
+//! [`ParamStore`] (where the parameter record lives); what a board is comes as a [`Board`].
+
+mod control;
+mod front;
+
+pub use control::{ControlLoop, Inputs, Outputs};
+pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
+
+use crate::controller::Controller;
+use crate::drive::{BoardLimits, Faults, Limits, StepStats};
+use crate::protocol::Settings;
+use crate::reference::{MovePlan, RefSample};
+
+/// The controller type a device runs (6 GMS blocks, as the protocol's settings).
+pub type Ctrl = Controller<6>;
+
+/// What a board is, as far as the device core needs to know.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Board {
+    /// Clock of the PWM timer [Hz].
+    pub pwm_timer_hz: u32,
+    /// Largest period register value of the PWM timer [counts].
+    pub pwm_max_arr: u32,
+    /// Width of the encoder counter [bits].
+    pub encoder_bits: u32,
+    /// ADC conversions summed per current sample [-] (`>= 1`).
+    pub sense_oversample: u32,
+    /// Safety limits of the board (trip factor, sense range, travel, step budget).
+    pub limits: BoardLimits,
+    /// True on a simulator, whose telemetry also has the true friction (`friction_true`).
+    pub has_truth: bool,
+}
+
+/// A complete, validated parameter set prepared for the loop (built on the protocol side,
+/// taken by the loop between two steps).
+#[derive(Debug, Clone)]
+pub struct Applied {
+    /// The controller (at rest; the loop hands its running state over to it).
+    pub ctrl: Ctrl,
+    /// The safety limits that go with it.
+    pub limits: Limits,
+    /// PWM timer prescaler (register value).
+    pub psc: u32,
+    /// PWM period (register value) [timer counts].
+    pub arr: u32,
+}
+
+/// A move planned on the protocol side from the reference published at `from_step`.
+#[derive(Debug, Clone, Copy)]
+pub struct MoveRequest {
+    /// The plan; its time 0 is the reference of position step `from_step`.
+    pub plan: MovePlan,
+    /// The position step whose reference the plan starts from.
+    pub from_step: u64,
+}
+
+/// What the protocol side asks of the loop; taken whole at the start of a position step.
+#[derive(Debug, Clone, Default)]
+pub struct Requests {
+    /// A new parameter set: taken without a bump at the same loop rates; other rates switch
+    /// the bridge off for the change.
+    pub apply: Option<Applied>,
+    /// Switch the bridge on (ignored while a fault is latched).
+    pub enable: bool,
+    /// Switch the bridge off.
+    pub disable: bool,
+    /// Clear the latched faults.
+    pub clear: bool,
+    /// Latch these faults.
+    pub latch: Faults,
+    /// Start a move (ignored while disabled).
+    pub motion: Option<MoveRequest>,
+    /// Telemetry every N position steps (0: off).
+    pub stream_every: Option<u32>,
+    /// Reset the step statistics.
+    pub reset_stats: bool,
+}
+
+impl Requests {
+    /// True when anything is asked.
+    pub fn pending(&self) -> bool {
+        self.apply.is_some()
+            || self.enable
+            || self.disable
+            || self.clear
+            || !self.latch.is_empty()
+            || self.motion.is_some()
+            || self.stream_every.is_some()
+            || self.reset_stats
+    }
+}
+
+/// What the loop shows the protocol side, published every position step.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Status {
+    /// Position steps since start (the step whose values these are).
+    pub steps: u64,
+    /// Position-loop rate [Hz].
+    pub pos_rate_hz: f32,
+    /// Encoder position [counts].
+    pub pos: i64,
+    /// The reference of that step (position [1/65536 count], velocity, acceleration).
+    pub reference: RefSample,
+    /// Position error [rad] (0 while disabled).
+    pub error: f32,
+    /// Friction feedforward applied [N·m].
+    pub ff: f32,
+    /// Motor current [A].
+    pub current: f32,
+    /// Last duty [-1, 1].
+    pub duty: f32,
+    /// Latched faults.
+    pub faults: Faults,
+    /// Bridge on.
+    pub enabled: bool,
+    /// A move is being played.
+    pub moving: bool,
+    /// Control-step durations [cycles of `limits.clock_hz`].
+    pub stats: StepStats,
+    /// Current-sense zero [code].
+    pub sense_offset: f32,
+    /// The adaptive scale on the friction feedforward (`ff.adapt.scale`) [-].
+    pub adapt_scale: f32,
+}
+
+/// One telemetry sample (one position step).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Sample {
+    /// Position steps since start.
+    pub steps: u64,
+    /// Encoder position [counts].
+    pub pos: i64,
+    /// Reference [1/65536 count].
+    pub reference: i64,
+    /// Position error [rad].
+    pub error: f32,
+    /// Friction feedforward applied [N·m].
+    pub ff: f32,
+    /// Motor current [A].
+    pub current: f32,
+    /// Friction estimate: motor torque k_M i minus J a_ref [N·m] (what a board can know).
+    pub friction: f32,
+    /// The true friction [N·m]: filled in by a simulator ([`Board::has_truth`]), NaN on a
+    /// board.
+    pub friction_true: f32,
+}
+
+/// Telemetry fields `stream` accepts, in the order of [`Sample`]'s values. `friction_true`
+/// only on a board with [`Board::has_truth`].
+pub const FIELDS: [&str; 8] = [
+    "t",
+    "pos",
+    "ref",
+    "error",
+    "ff",
+    "current",
+    "friction",
+    "friction_true",
+];
+
+/// The highest telemetry rate [Hz].
+pub const MAX_STREAM_HZ: f32 = 1000.0;
+
+/// The exchange between the two halves: requests one way, the status the other. Held by the
+/// shell behind whatever makes it atomic (a critical section on the board, a mutex on a host),
+/// and only for a copy.
+#[derive(Debug, Default)]
+pub struct Mailbox {
+    /// Requests to the loop.
+    pub requests: Requests,
+    /// The loop's latest status.
+    pub status: Status,
+    /// The position step at which the loop last took requests.
+    pub taken_at: u64,
+}
+
+impl Mailbox {
+    /// An empty mailbox (for a `static`).
+    pub const fn new() -> Mailbox {
+        Mailbox {
+            requests: Requests {
+                apply: None,
+                enable: false,
+                disable: false,
+                clear: false,
+                latch: Faults::NONE,
+                motion: None,
+                stream_every: None,
+                reset_stats: false,
+            },
+            status: Status {
+                steps: 0,
+                pos_rate_hz: 0.0,
+                pos: 0,
+                reference: RefSample {
+                    pos: 0,
+                    vel: 0.0,
+                    acc: 0.0,
+                },
+                error: 0.0,
+                ff: 0.0,
+                current: 0.0,
+                duty: 0.0,
+                faults: Faults::NONE,
+                enabled: false,
+                moving: false,
+                stats: StepStats::new(),
+                sense_offset: 0.0,
+                adapt_scale: 1.0,
+            },
+            taken_at: 0,
+        }
+    }
+
+    /// The loop's side: publishes `status` and takes the pending requests, if any.
+    pub fn exchange(&mut self, status: Status) -> Option<Requests> {
+        self.status = status;
+        if self.requests.pending() {
+            self.taken_at = status.steps;
+            Some(core::mem::take(&mut self.requests))
+        } else {
+            None
+        }
+    }
+}
+
+/// The one default parameter set of a device (the firmware's built-in set, `defaults`, the
+/// simulator's controller before a scenario's `[controller]` table): the paper's motor and
+/// Table 1 compensation, 10 kHz position loop, 20 kHz current loop.
+///
+/// `ff.gain` is 0.94, not 1: in this loop the GMS model follows the reference while the axis
+/// lags it by a few counts, so a full feedforward turns over at a reversal before the real
+/// friction does. On the simulator's nominal plant an 8 s sine with reversals has an RMS error
+/// of 1.04 counts at 0.94 against 1.18 at 1.0 (reversal peak 5.9 against 15.8 counts; 0.85:
+/// 1.47, 1.15: 2.36). A board with another motor or other gains is tuned on the bench.
+pub fn default_settings() -> Settings {
+    use crate::controller::{
+        ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
+    };
+    ControllerParams {
+        pos_rate_hz: 10_000.0,
+        cur_rate_hz: 20_000.0,
+        rad_per_count: 3.8e-6,
+        pid: PidParams {
+            kp: 0.2,
+            ki: 100.0,
+            kd: 2.5e-4,
+            d_filter_hz: 2000.0,
+            i_limit: 1e-3,
+        },
+        current: CurrentParams { kp: 1.5, ki: 6e4 },
+        motor: MotorModel {
+            k_m: 6.6e-3,
+            r: 10.0,
+            k_e: 6.6e-3,
+            inertia: 6e-8,
+        },
+        i_max: 0.5,
+        v_supply: 12.0,
+        ff: FeedforwardParams {
+            mode: FfMode::Gms,
+            gain: 0.94,
+            actuator: crate::presets::table1(),
+            guideway: Some(crate::presets::guideway()),
+            ratio: 18.1e-6,
+            static_band: 0.05,
+            adapt: crate::adaptive::AdaptiveParams::default(),
+        },
+    }
+}
