@@ -39,6 +39,7 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
+use gms_core::device::Board;
 use gms_core::drive::BoardLimits;
 
 bind_interrupts!(struct Irqs {
@@ -79,13 +80,19 @@ pub const LIMITS: BoardLimits = BoardLimits {
     budget_fraction: 0.8,
 };
 
+/// The board as the device core sees it.
+pub const BOARD: Board = Board {
+    pwm_timer_hz: PWM_TIMER_HZ,
+    pwm_max_arr: PWM_MAX_ARR,
+    encoder_bits: ENCODER_BITS,
+    sense_oversample: SENSE_OVERSAMPLE,
+    limits: LIMITS,
+    has_truth: false,
+};
+
 /// Watchdog timeout [us]: above a 128 KiB sector erase (up to 2 s on the F405, during which
 /// nothing runs from flash).
 pub const WATCHDOG_US: u32 = 4_000_000;
-
-/// Flash range of the parameter store, as offsets from the start of flash: the last two
-/// 128 KiB sectors, which `memory.x` leaves out of FLASH.
-pub const STORE_RANGE: core::ops::Range<u32> = 0x000C_0000..0x0010_0000;
 
 /// Clocks: 8 MHz HSE, PLL to 168 MHz, 48 MHz for USB.
 pub fn config() -> embassy_stm32::Config {

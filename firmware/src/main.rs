@@ -27,19 +27,12 @@ use embassy_stm32::{gpio::Output, peripherals::IWDG};
 use embassy_time::Timer;
 use embassy_usb::UsbDevice;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
-use gms_core::drive::{self, CurrentSense, Faults, OffsetCalibration};
-use gms_core::protocol::Settings;
-use gms_core::selftest;
+use gms_core::device::{self, ControlLoop, ParamStore as _};
+use gms_core::drive::{CurrentSense, Faults, OffsetCalibration};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
 use crate::control::Loop;
-
-/// The built-in parameter set: gms-core's reference controller (Table 1 compensation, 10 kHz
-/// position loop, 20 kHz current loop; the simulator's defaults).
-fn defaults() -> Settings {
-    selftest::controller_params()
-}
 
 /// Samples of the current-sense zero taken at start-up (bridge off).
 const OFFSET_SAMPLES: u32 = 256;
@@ -63,48 +56,22 @@ async fn main(spawner: Spawner) {
         faults.latch(Faults::WATCHDOG_RESET);
     }
 
-    // Parameters: the stored set, or the defaults and a fault; never a mix.
-    let mut store = storage::Store::new(rest.flash);
-    let settings = match store.load() {
-        Ok(Some(rec)) => match drive::decode_settings(&rec, &defaults()) {
-            Ok(s) => {
-                info!("parameters loaded from flash");
-                s
-            }
-            Err(e) => {
-                warn!("{}: running the defaults", e);
-                faults.latch(Faults::INVALID_PARAMS);
-                defaults()
-            }
-        },
-        Ok(None) => {
-            warn!("no stored parameters: running the defaults");
-            faults.latch(Faults::INVALID_PARAMS);
-            defaults()
-        }
+    // Parameters: the stored set, or the defaults (and a fault if a stored set was unusable);
+    // never a mix. The decision is gms-core's.
+    let mut store = storage::new(rest.flash);
+    let defaults = device::default_settings();
+    let start = match device::startup(store.load(), &defaults, &board::BOARD) {
+        Ok(s) => s,
         Err(e) => {
-            warn!("parameter store unreadable ({}): running the defaults", e);
-            faults.latch(Faults::INVALID_PARAMS);
-            defaults()
-        }
-    };
-    let (settings, applied) = match comms::prepare(&settings) {
-        Some(a) => (settings, a),
-        None => {
-            faults.latch(Faults::INVALID_PARAMS);
-            let d = defaults();
-            match comms::prepare(&d) {
-                Some(a) => (d, a),
-                None => {
-                    // The built-in set always passes; stop rather than run without one.
-                    error!("the built-in parameters are invalid");
-                    loop {
-                        cortex_m::asm::wfi();
-                    }
-                }
+            // The built-in set always passes; stop rather than run without one.
+            error!("the built-in parameters cannot run: {}", e);
+            loop {
+                cortex_m::asm::wfi();
             }
         }
     };
+    info!("{}", start.note);
+    faults.latch(start.faults);
 
     // Current-sense zero, with the bridge off.
     let mut cal = OffsetCalibration::default();
@@ -136,7 +103,9 @@ async fn main(spawner: Spawner) {
         }
     };
 
-    Loop::new(hw, applied, sense, faults).hand_over();
+    let encoder = hw.encoder_raw();
+    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder);
+    Loop::new(hw, core).hand_over();
     board::start_control();
     info!("control loop running");
 
@@ -162,7 +131,7 @@ async fn main(spawner: Spawner) {
     let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
     let usb = builder.build();
 
-    let dev = comms::Dev::new(settings, defaults(), store);
+    let dev = comms::Dev::new(comms::IrqLink, store, board::BOARD, start.settings, defaults);
     spawner.spawn(unwrap!(usb_task(usb)));
     spawner.spawn(unwrap!(comms_task(class, dev)));
     spawner.spawn(unwrap!(supervisor(

@@ -39,6 +39,8 @@ pub mod selftest;
 mod serde_array;
 pub mod static_map;
 pub mod stribeck;
+#[cfg(feature = "store")]
+pub mod store;
 
 pub use error::{Field, ParamError, Side};
 pub use gms::{Block, Gms, GmsParams};
