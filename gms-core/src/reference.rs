@@ -322,22 +322,32 @@ pub const MOVE_AMAX: f32 = 50.0;
 pub const MOVE_JMAX: f32 = 1e4;
 
 /// A point-to-point move that starts from any state of the reference (position, velocity,
-/// acceleration) and ends at rest on the target: the quintic polynomial matching both ends'
-/// position, velocity and acceleration, with the shortest duration (searched in steps of 5 %
-/// from the minimum-jerk time of the distance) whose sampled speed, acceleration and jerk stay
-/// within the limits (or within the start's own speed and acceleration where those are higher).
-/// From rest it is the [`Segment::Move`] profile. A new move planned from the reference of a
-/// move under way therefore continues it without a jump in position, velocity or acceleration.
+/// acceleration) and ends at rest on the target. A start with an acceleration first brings it
+/// to zero at the jerk limit (a cubic piece: the speed changes by `a0² / 2 jmax`); from there a
+/// quintic polynomial matches both ends' position, velocity and acceleration, with the
+/// shortest duration (searched in steps of 5 % from the minimum-jerk time of the distance)
+/// whose sampled speed, acceleration and jerk stay within the limits, or within the start's
+/// own speed where that is higher. From rest it is the [`Segment::Move`] profile. A new move
+/// planned from the reference of a move under way therefore continues it without a jump in
+/// position, velocity or acceleration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MovePlan {
     start: SubCounts,
     target: SubCounts,
     rad_per_count: f32,
+    /// The start's velocity [rad/s] and acceleration [rad/s^2].
     v0: f32,
     a0: f32,
+    /// The jerk of the first piece [rad/s^3] and its duration [s].
+    jr: f32,
+    tr: f32,
+    /// Offset [rad] and velocity [rad/s] at the end of the first piece.
+    x1: f32,
+    v1: f32,
     c3: f32,
     c4: f32,
     c5: f32,
+    /// Duration of the quintic [s].
     dur: f32,
     t: f32,
 }
@@ -378,28 +388,45 @@ impl MovePlan {
             * rad_per_count as f64;
         let d = d as f32;
         let (v0, a0) = (from.vel, from.acc);
-        let vlim = vmax.max(abs(v0)) * 1.0001;
-        let alim = amax.max(abs(a0)) * 1.0001;
-        let jlim = jmax * 1.0001;
-        let mut dur = Segment::move_time(d, vmax, amax, jmax);
+        // First piece: the acceleration to zero at the jerk limit.
+        let jr = if a0 > 0.0 { -jmax } else { jmax };
+        let tr = abs(a0) / jmax;
+        let x1 = tr * (v0 + tr * (0.5 * a0 + tr * jr / 6.0));
+        let v1 = v0 + tr * (a0 + 0.5 * tr * jr);
+        // Limits with room for f32 rounding (the jerk at the ends is a difference of terms
+        // ten times its size).
+        let vlim = vmax.max(abs(v0)).max(abs(v1)) * 1.0001;
+        let alim = amax.max(abs(a0)) * 1.001;
+        let jlim = jmax * 1.01;
+        let t0 = Segment::move_time(d - x1, vmax, amax, jmax);
         let mut plan = MovePlan {
             start: from.pos,
             target: target_sub,
             rad_per_count,
             v0,
             a0,
+            jr,
+            tr,
+            x1,
+            v1,
             c3: 0.0,
             c4: 0.0,
             c5: 0.0,
-            dur,
+            dur: t0,
             t: 0.0,
         };
-        for _ in 0..200 {
-            plan.set_duration(d, dur);
-            if plan.within(vlim, alim, jlim) {
-                return Ok(plan);
+        // First a plan that never backs up (the speed keeps its sign towards the target);
+        // where the distance left is too short to stop in, one that overshoots and returns.
+        let dir = if d - x1 < 0.0 { -1.0 } else { 1.0 };
+        for monotonic in [true, false] {
+            let mut dur = t0;
+            for _ in 0..400 {
+                plan.set_duration(d - x1, dur);
+                if plan.within(vlim, alim, jlim, monotonic.then_some(dir)) {
+                    return Ok(plan);
+                }
+                dur *= 1.05;
             }
-            dur *= 1.05;
         }
         // No duration keeps every limit (a start far beyond them): the last one tried is
         // still continuous.
@@ -407,36 +434,48 @@ impl MovePlan {
     }
 
     fn set_duration(&mut self, d: f32, dur: f32) {
-        let (v0, a0) = (self.v0, self.a0);
+        let v = self.v1;
         let t = dur;
         let (t2, t3) = (t * t, t * t * t);
         self.dur = dur;
-        self.c3 = (20.0 * d - 12.0 * v0 * t - 3.0 * a0 * t2) / (2.0 * t3);
-        self.c4 = (-30.0 * d + 16.0 * v0 * t + 3.0 * a0 * t2) / (2.0 * t3 * t);
-        self.c5 = (12.0 * d - 6.0 * v0 * t - a0 * t2) / (2.0 * t3 * t2);
+        self.c3 = (20.0 * d - 12.0 * v * t) / (2.0 * t3);
+        self.c4 = (-30.0 * d + 16.0 * v * t) / (2.0 * t3 * t);
+        self.c5 = (12.0 * d - 6.0 * v * t) / (2.0 * t3 * t2);
     }
 
-    /// Offset [rad], velocity, acceleration and jerk at `t` in [0, duration].
+    /// Offset [rad], velocity, acceleration and jerk at `t` [s] from the start.
     fn eval(&self, t: f32) -> (f32, f32, f32, f32) {
+        if t < self.tr {
+            let (a0, jr) = (self.a0, self.jr);
+            let x = t * (self.v0 + t * (0.5 * a0 + t * jr / 6.0));
+            let v = self.v0 + t * (a0 + 0.5 * t * jr);
+            return (x, v, a0 + t * jr, jr);
+        }
+        let t = t - self.tr;
         let (c3, c4, c5) = (self.c3, self.c4, self.c5);
-        let x = t * (self.v0 + t * (0.5 * self.a0 + t * (c3 + t * (c4 + t * c5))));
-        let v = self.v0 + t * (self.a0 + t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5)));
-        let a = self.a0 + t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5));
+        let x = self.x1 + t * (self.v1 + t * t * (c3 + t * (c4 + t * c5)));
+        let v = self.v1 + t * t * (3.0 * c3 + t * (4.0 * c4 + t * 5.0 * c5));
+        let a = t * (6.0 * c3 + t * (12.0 * c4 + t * 20.0 * c5));
         let j = 6.0 * c3 + t * (24.0 * c4 + t * 60.0 * c5);
         (x, v, a, j)
     }
 
-    fn within(&self, vlim: f32, alim: f32, jlim: f32) -> bool {
+    /// The quintic's sampled speed, acceleration and jerk within the limits, and with `dir`
+    /// its velocity never against `dir`.
+    fn within(&self, vlim: f32, alim: f32, jlim: f32, dir: Option<f32>) -> bool {
         const N: u32 = 64;
+        // f32 rounding at the ends, where the velocity is a difference of larger terms.
+        let back = -1e-4 * vlim;
         (0..=N).all(|k| {
-            let (_, v, a, j) = self.eval(self.dur * k as f32 / N as f32);
-            abs(v) <= vlim && abs(a) <= alim && abs(j) <= jlim
+            let (_, v, a, j) = self.eval(self.tr + self.dur * k as f32 / N as f32);
+            let forward = dir.is_none_or(|d| v * d >= back);
+            abs(v) <= vlim && abs(a) <= alim && abs(j) <= jlim && forward
         })
     }
 
     /// Duration of the motion, without the final dwell [s].
     pub fn duration(&self) -> f32 {
-        self.dur
+        self.tr + self.dur
     }
 
     /// The target [1/65536 count].
@@ -453,14 +492,14 @@ impl MovePlan {
 
     /// True once the motion and the dwell after it have played.
     pub fn done(&self) -> bool {
-        self.t >= self.dur + MOVE_DWELL
+        self.t >= self.duration() + MOVE_DWELL
     }
 
     /// The sample at the plan's time, then the time moves on by `dt` [s].
     pub fn next(&mut self, dt: f32) -> RefSample {
         let t = self.t;
         self.t += dt;
-        if t >= self.dur {
+        if t >= self.duration() {
             return RefSample {
                 pos: self.target,
                 vel: 0.0,

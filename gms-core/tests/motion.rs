@@ -1,49 +1,162 @@
 //! The point-to-point reference of the devices (`move`): plays the move, then holds where it
-//! ended; `hold_at` and `stop` as the firmware and the simulated device use them.
+//! ended; a new move planned from the reference of a move under way continues it without a
+//! jump; `hold_at` and `stop` as the device core uses them.
 
-use gms_core::reference::{MOVE_VMAX, Motion, SUB_PER_COUNT};
+use gms_core::reference::{
+    MOVE_AMAX, MOVE_JMAX, MOVE_VMAX, Motion, RefSample, Reference, SUB_PER_COUNT, Segment,
+};
+
+const RPC: f32 = 3.8e-6;
+const DT: f32 = 1e-4;
+
+fn at_rest(pos: i64) -> RefSample {
+    RefSample {
+        pos,
+        vel: 0.0,
+        acc: 0.0,
+    }
+}
+
+/// Plays `m` to the end; returns the samples.
+fn play(m: &mut Motion) -> Vec<RefSample> {
+    let mut out = Vec::new();
+    while m.is_moving() && out.len() < 1_000_000 {
+        out.push(m.next(DT));
+    }
+    assert!(!m.is_moving(), "the move never finished");
+    out
+}
+
+/// Velocity and acceleration continuity and the limits over a played reference: every change
+/// of velocity within `amax dt`, of acceleration within `jmax dt` (1 % and a little f32 slack),
+/// and the position increments agreeing with the velocity.
+fn assert_smooth(s: &[RefSample], vmax: f32) {
+    for w in s.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        assert!(b.vel.abs() <= vmax * 1.0001, "speed {} above {vmax}", b.vel);
+        assert!(b.acc.abs() <= MOVE_AMAX * 1.001, "acc {}", b.acc);
+        assert!(
+            (b.vel - a.vel).abs() <= MOVE_AMAX * DT * 1.01 + 1e-6,
+            "velocity jump {} -> {}",
+            a.vel,
+            b.vel
+        );
+        assert!(
+            (b.acc - a.acc).abs() <= MOVE_JMAX * DT * 1.011 + 1e-3,
+            "acceleration jump {} -> {}",
+            a.acc,
+            b.acc
+        );
+        // Position increment against the mean velocity (trapezoid), in counts.
+        let dx = (b.pos - a.pos) as f64 / SUB_PER_COUNT as f64;
+        let expect = 0.5 * (a.vel + b.vel) as f64 * DT as f64 / RPC as f64;
+        assert!(
+            (dx - expect).abs() <= 0.05 + 1e-3 * expect.abs(),
+            "position jump {dx} counts where the velocity says {expect}"
+        );
+    }
+}
 
 #[test]
 fn a_move_ends_at_its_target_and_holds_there() {
-    let rpc = 3.8e-6f32;
     let start = 1_000 * SUB_PER_COUNT as i64;
     let mut m = Motion::holding(start);
-    let r = Motion::plan(start, 0.01, None, rpc).unwrap();
-    m.start(r);
+    m.start(Motion::plan(at_rest(start), 0.01, None, RPC).unwrap());
     assert!(m.is_moving());
-    let dt = 1e-4;
-    let mut peak = 0.0f32;
-    let mut n = 0;
-    while m.is_moving() && n < 100_000 {
-        peak = peak.max(m.next(dt).vel.abs());
-        n += 1;
-    }
-    assert!(!m.is_moving(), "the move never finished");
-    // `move` takes an absolute position: 0.01 rad = 2631.6 counts, within the f32 rounding
-    // of the distance (6e-8 relative: a thousandth of a count here).
-    let target = 0.01 / rpc as f64 * SUB_PER_COUNT as f64;
+    let s = play(&mut m);
+    // `move` takes an absolute position: 0.01 rad = 2631.6 counts.
+    let target = 0.01 / RPC as f64 * SUB_PER_COUNT as f64;
     let tol = 1e-3 * SUB_PER_COUNT as f64;
-    assert!(
-        (m.hold() as f64 - target).abs() <= tol,
-        "{} vs {target}",
-        m.hold()
-    );
-    assert!(peak <= MOVE_VMAX * 1.0001 && peak > 0.0, "{peak}");
-    let held = m.next(dt);
+    assert!((m.hold() as f64 - target).abs() <= tol, "{} vs {target}", m.hold());
+    let peak = s.iter().map(|r| r.vel.abs()).fold(0.0, f32::max);
+    // Jerk-limited at this distance (0.01 rad - 1000 counts): T = cbrt(60 D / jmax), peak
+    // 1.875 D / T.
+    let d = 0.01 - 1000.0 * RPC as f64;
+    let t = (60.0 * d / MOVE_JMAX as f64).cbrt();
+    let expect = (1.875 * d / t) as f32;
+    assert!((peak - expect).abs() < 1e-3 * expect, "{peak} vs {expect}");
+    assert_smooth(&s, MOVE_VMAX);
+    let held = m.next(DT);
     assert_eq!((held.pos, held.vel, held.acc), (m.hold(), 0.0, 0.0));
 }
 
 #[test]
-fn stop_keeps_the_hold_and_hold_at_moves_it() {
+fn from_rest_it_is_the_minimum_jerk_segment() {
+    // The other implementation: gms-core's Segment::Move (the scenarios' moves).
+    let start = -77 * SUB_PER_COUNT as i64;
+    let seg = Segment::Move {
+        distance: 0.004 + 77.0 * RPC,
+        vmax: 0.2,
+        amax: MOVE_AMAX,
+        jmax: MOVE_JMAX,
+        dwell: 1e-3,
+    };
+    let mut r = Reference::<1>::try_new(&[seg], RPC, start).unwrap();
+    let mut m = Motion::holding(start);
+    m.start(Motion::plan(at_rest(start), 0.004, Some(0.2), RPC).unwrap());
+    let s = play(&mut m);
+    for (k, a) in s.iter().enumerate() {
+        let b = r.next(DT);
+        let dpos = (a.pos - b.pos).abs() as f64 / SUB_PER_COUNT as f64;
+        assert!(dpos < 0.01, "step {k}: {dpos} counts apart");
+        assert!((a.vel - b.vel).abs() < 1e-5 * 0.2, "step {k}: {} vs {}", a.vel, b.vel);
+    }
+}
+
+#[test]
+fn a_second_move_mid_move_continues_it() {
+    let mut m = Motion::holding(0);
+    m.start(Motion::plan(at_rest(0), 0.01, None, RPC).unwrap());
+    let mut s: Vec<RefSample> = (0..150).map(|_| m.next(DT)).collect();
+    let last = *s.last().unwrap();
+    assert!(last.vel > 0.1 && last.acc.abs() > 1.0, "mid-move: {last:?}");
+    // Further on, planned from the last sample (as the device core does).
+    let mut plan = Motion::plan(last, 0.02, None, RPC).unwrap();
+    plan.skip(DT);
+    m.start(plan);
+    s.extend(play(&mut m));
+    assert_smooth(&s, MOVE_VMAX);
+    // Never backs up (beyond the f32 rounding of the polynomial near the end, where it meets
+    // the exact target: below 1/100 count).
+    for (k, w) in s.windows(2).enumerate() {
+        assert!(w[1].pos >= w[0].pos - 656, "backs up at {k} of {}: {:?} -> {:?}", s.len(), w[0], w[1]);
+    }
+    let target = 0.02 / RPC as f64 * SUB_PER_COUNT as f64;
+    assert!((m.hold() as f64 - target).abs() <= 1e-3 * SUB_PER_COUNT as f64);
+}
+
+#[test]
+fn a_move_back_mid_move_turns_smoothly() {
+    let mut m = Motion::holding(0);
+    m.start(Motion::plan(at_rest(0), 0.01, None, RPC).unwrap());
+    let mut s: Vec<RefSample> = (0..150).map(|_| m.next(DT)).collect();
+    let last = *s.last().unwrap();
+    let mut plan = Motion::plan(last, -0.002, Some(0.3), RPC).unwrap();
+    plan.skip(DT);
+    m.start(plan);
+    s.extend(play(&mut m));
+    // The speed at the turn was above 0.3: the plan may keep the start's own speed, and the
+    // acceleration it had goes to zero at the jerk limit first (+ a0^2 / 2 jmax).
+    let v1 = last.vel.abs() + last.acc * last.acc / (2.0 * MOVE_JMAX);
+    assert_smooth(&s, v1.max(0.3));
+    let target = -0.002 / RPC as f64 * SUB_PER_COUNT as f64;
+    assert!((m.hold() as f64 - target).abs() <= 1e-3 * SUB_PER_COUNT as f64);
+    let turned = s.iter().map(|r| r.pos).max().unwrap();
+    assert!(turned > last.pos, "it turns after going on a little");
+}
+
+#[test]
+fn stop_holds_where_the_reference_was_and_hold_at_moves_it() {
     let mut m = Motion::holding(5);
-    m.start(Motion::plan(5, 1.0, Some(0.2), 1e-3).unwrap());
+    m.start(Motion::plan(at_rest(5), 1.0, Some(0.2), 1e-3).unwrap());
     m.next(1e-3);
-    m.next(1e-3);
+    let r = m.next(1e-3);
     m.stop();
     assert!(!m.is_moving());
-    assert_eq!(m.next(1e-3).pos, 5);
+    assert_eq!(m.next(1e-3).pos, r.pos);
     m.hold_at(77);
     assert_eq!(m.next(1e-3).pos, 77);
     // A bad speed is refused, not played.
-    assert!(Motion::plan(5, 1.0, Some(-1.0), 1e-3).is_err());
+    assert!(Motion::plan(at_rest(5), 1.0, Some(-1.0), 1e-3).is_err());
+    assert!(Motion::plan(at_rest(5), f32::NAN, None, 1e-3).is_err());
 }

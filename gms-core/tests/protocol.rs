@@ -33,8 +33,9 @@ impl Device for Mock {
     fn settings(&self) -> &Settings {
         &self.s
     }
-    fn apply(&mut self, new: Settings) {
+    fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         self.s = new;
+        Ok(())
     }
     fn save(&mut self) -> Result<(), &'static str> {
         if self.enabled {
@@ -47,20 +48,24 @@ impl Device for Mock {
         self.s = self.saved.ok_or("nothing saved")?;
         Ok(())
     }
-    fn defaults(&mut self) {
+    fn defaults(&mut self) -> Result<(), &'static str> {
         self.s = selftest::controller_params();
+        Ok(())
     }
     fn enable(&mut self) -> Result<(), &'static str> {
         self.enabled = true;
         Ok(())
     }
-    fn disable(&mut self) {
+    fn disable(&mut self) -> Result<(), &'static str> {
         self.enabled = false;
+        Ok(())
     }
-    fn status(&self, out: &mut dyn Write) -> core::fmt::Result {
+    fn status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
         write!(out, "enabled={}", self.enabled)
     }
-    fn clear(&mut self) {}
+    fn clear(&mut self) -> Result<(), &'static str> {
+        Ok(())
+    }
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
         self.moves.push((pos, vel));
         Ok(())
@@ -69,8 +74,9 @@ impl Device for Mock {
         self.stream = Some((fields.to_string(), rate_hz));
         Ok(())
     }
-    fn stream_off(&mut self) {
+    fn stream_off(&mut self) -> Result<(), &'static str> {
         self.stream = None;
+        Ok(())
     }
 }
 

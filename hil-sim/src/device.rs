@@ -1,414 +1,371 @@
-//! The virtual device: the simulated axis running in real time behind the same protocol
-//! handler as the firmware (`gms_core::protocol`), served over TCP (`hil-sim serve --tcp`).
+//! The virtual device: the simulated axis in real time behind gms-core's device core, the same
+//! core the firmware runs (`gms_core::device`): the control loop steps at the PWM rate against
+//! the simulated plant, the protocol front answers clients over TCP or a pseudo-terminal. This
+//! file only moves numbers: encoder counts and current-sense codes in, the duty out, the
+//! mailbox behind a mutex, the store on a file.
 //!
 //! Clients are served one after another; a client that drops does not stop the device. With
-//! `--store FILE`, `save` writes the settings there atomically (temporary file + rename, so a
-//! crash leaves the old or the new set) and a restart starts from them.
+//! `--store FILE` the parameter store is a file holding the image of the board's store flash
+//! (gms-core's [`FlashStore`]: same record, same sequential-storage map, same word and sector
+//! sizes), written through at every flash write, so a crash leaves what a power cut leaves on a
+//! board, and a store written by one is read by the other. Without `--store` the store is in
+//! memory (lost at exit).
 
-use std::fmt::Write as _;
-use std::io::{ErrorKind, Read, Write};
+use std::collections::VecDeque;
+use std::fs::{File, OpenOptions};
+use std::io::{ErrorKind, Read, Seek, SeekFrom, Write};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use gms_core::controller::{Controller, FfMode};
-use gms_core::protocol::{self, Access, Device, LineReader, PARAMS, Settings};
-use gms_core::reference::{Motion, SUB_PER_COUNT};
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use gms_core::device::{
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Sample,
+};
+use gms_core::drive::{BoardLimits, CurrentSense};
+use gms_core::protocol::{self, LineReader};
+use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
-use crate::commands::write_atomic;
 use crate::plant::Plant;
-use crate::scenario::{FF_BLOCKS, Scenario};
+use crate::scenario::Scenario;
 
-/// Telemetry fields `stream` accepts.
-pub const FIELDS: [&str; 7] = ["t", "pos", "ref", "error", "ff", "current", "friction"];
+/// Telemetry samples kept for the client (0.4 s at 10 kHz; older ones are dropped).
+pub const QUEUE: usize = 4000;
 
-/// The latest values of the axis, for `status` and telemetry.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Sample {
-    /// Time since start [s].
-    pub t: f64,
-    /// Encoder position [rad].
-    pub pos: f64,
-    /// Reference position [rad].
-    pub reference: f64,
-    /// Position error [rad].
-    pub error: f64,
-    /// Friction feedforward [N·m].
-    pub ff: f64,
-    /// Motor current [A].
-    pub current: f64,
-    /// True friction [N·m].
-    pub friction: f64,
+/// The simulated board: the F405's PWM timer and encoder counter, the plant's ADC as the
+/// current sense (one conversion per sample), its range as the sense range, the firmware
+/// board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
+/// at 20 kHz: the host is shared, so only a stalled simulation counts as an overrun.
+pub fn board(sc: &Scenario) -> Board {
+    Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 1,
+        limits: BoardLimits {
+            trip_factor: 1.5,
+            sense_range: sc.plant.adc_range as f32,
+            max_error: 0.01,
+            max_speed: 100.0,
+            travel: 50.0,
+            clock_hz: 1_000_000_000,
+            budget_fraction: 20_000.0,
+        },
+        has_truth: true,
+    }
 }
 
-/// The simulated axis with its controller.
-pub struct Axis {
-    sc: Scenario,
-    plant: Plant,
-    ctrl: Controller<FF_BLOCKS>,
-    settings: Settings,
-    enabled: bool,
-    faults: u32,
-    motion: Motion,
-    t: f64,
-    last: Sample,
-    /// The last [`HISTORY`] samples, one per position period, for telemetry.
-    history: std::collections::VecDeque<Sample>,
+/// The plant's current sense as ADC codes: one code per LSB, zero current mid-scale.
+struct Adc {
+    lsb: f64,
+    mid: f64,
+    top: f64,
 }
 
-/// Samples kept for telemetry (0.2 s at 10 kHz).
-pub const HISTORY: usize = 2000;
+impl Adc {
+    fn new(sc: &Scenario) -> Adc {
+        let full = (1u64 << sc.plant.adc_bits) as f64;
+        Adc {
+            lsb: 2.0 * sc.plant.adc_range / full,
+            mid: full / 2.0,
+            top: full - 1.0,
+        }
+    }
 
-impl Axis {
-    /// A device at rest with `settings`.
-    pub fn new(sc: Scenario, settings: Settings, faults: u32) -> Result<Axis, String> {
-        let plant = Plant::new(&sc.plant, sc.plant.seed)?;
-        let ctrl = Controller::try_new(settings).map_err(|e| e.to_string())?;
-        Ok(Axis {
-            sc,
-            plant,
-            ctrl,
-            settings,
-            enabled: false,
-            faults,
-            motion: Motion::holding(0),
-            t: 0.0,
-            last: Sample::default(),
-            history: std::collections::VecDeque::with_capacity(HISTORY),
+    fn sense(&self) -> Option<CurrentSense> {
+        Some(CurrentSense {
+            amps_per_code: self.lsb as f32,
+            offset: self.mid as f32,
         })
     }
 
-    fn rpc(&self) -> f64 {
-        self.sc.plant.rad_per_count
-    }
-
-    /// One position-loop period of the device.
-    pub fn tick(&mut self) {
-        let dt = self.ctrl.dt_pos();
-        let r = self.motion.next(dt);
-        let count = self.plant.encoder();
-        let out = if self.enabled {
-            self.ctrl.position_step(count, &r)
-        } else {
-            Default::default()
-        };
-        let n = self.settings.ratio();
-        let dt_plant = self.ctrl.dt_cur() as f64 / self.sc.plant.substeps as f64;
-        for _ in 0..n {
-            let i = self.plant.adc();
-            let duty = if self.enabled {
-                self.ctrl.current_step(i).duty
-            } else {
-                0.0
-            };
-            self.plant.set_duty(duty);
-            for _ in 0..self.sc.plant.substeps {
-                self.plant.step(dt_plant);
-            }
-        }
-        self.t += dt as f64;
-        let rpc = self.rpc();
-        let reference = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
-        let pos = count as f64 * rpc;
-        self.last = Sample {
-            t: self.t,
-            pos,
-            reference,
-            error: reference - pos,
-            ff: out.ff_friction as f64,
-            current: self.plant.i,
-            friction: self.plant.friction,
-        };
-        if self.history.len() == HISTORY {
-            self.history.pop_front();
-        }
-        self.history.push_back(self.last);
-    }
-
-    /// Applies a validated parameter set (between two control steps); the controller keeps
-    /// no state across it.
-    pub fn apply(&mut self, s: Settings) -> Result<(), String> {
-        let scale = self.ctrl.adaptive_scale();
-        self.ctrl = Controller::try_new(s).map_err(|e| e.to_string())?;
-        // What the adaptation learned is about the axis, not the settings: keep it.
-        self.ctrl.set_adaptive_scale(scale);
-        self.settings = s;
-        Ok(())
+    /// The code of a current the plant's ADC measured [A].
+    fn code(&self, amps: f32) -> u32 {
+        (amps as f64 / self.lsb + self.mid).round().clamp(0.0, self.top) as u32
     }
 }
 
-/// The device shared by the real-time thread and the client sessions.
-pub struct Shared {
-    axis: Mutex<Axis>,
-    store: Option<PathBuf>,
-    defaults: Settings,
+/// The loop side: the device core's control loop and the plant, owned by the real-time thread.
+struct Sim {
+    core: ControlLoop,
+    plant: Plant,
+    adc: Adc,
+    substeps: u32,
+    /// Simulated time [s].
+    t: f64,
+}
+
+impl Sim {
+    /// One position period: `ratio` PWM periods of the core, the plant between them.
+    fn tick(&mut self, shared: &Shared) {
+        let n = self.core.ratio();
+        let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
+        for _ in 0..n {
+            let inp = Inputs {
+                encoder: self.plant.encoder() as u32,
+                current_codes: self.adc.code(self.plant.adc()),
+            };
+            let t0 = Instant::now();
+            let out = self.core.step(inp, |st| shared.mailbox().exchange(st));
+            let ns = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
+            self.core.finish(ns);
+            let duty = if self.core.enabled() { out.duty } else { 0.0 };
+            if let Some(mut s) = out.sample {
+                s.friction_true = self.plant.friction as f32;
+                let mut q = shared.telemetry();
+                if q.len() == QUEUE {
+                    q.pop_front();
+                }
+                q.push_back(s);
+            }
+            self.plant.set_duty(duty);
+            for _ in 0..self.substeps {
+                self.plant.step(dt_plant);
+            }
+            self.t += dt_plant * self.substeps as f64;
+        }
+    }
+}
+
+/// What the real-time thread and the client sessions share.
+struct Shared {
+    mailbox: Mutex<Mailbox>,
+    telemetry: Mutex<VecDeque<Sample>>,
+}
+
+fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 impl Shared {
-    fn lock(&self) -> MutexGuard<'_, Axis> {
-        self.axis.lock().unwrap_or_else(|p| p.into_inner())
+    fn mailbox(&self) -> MutexGuard<'_, Mailbox> {
+        relock(&self.mailbox)
+    }
+    fn telemetry(&self) -> MutexGuard<'_, VecDeque<Sample>> {
+        relock(&self.telemetry)
     }
 }
 
-/// The settings as TOML: one protocol path per key.
-pub fn settings_toml(s: &Settings) -> String {
-    let mut out = String::from("# gms device settings: protocol paths and values (SI units)\n");
-    for p in PARAMS {
-        let _ = match p.access {
-            Access::Number { get, .. } => writeln!(out, "\"{}\" = {}", p.path, get(s)),
-            Access::Mode => {
-                let mut v = String::new();
-                let _ = protocol::write_value(p, s, &mut v);
-                writeln!(out, "\"{}\" = \"{v}\"", p.path)
-            }
-            // Estimates are the device's state, not settings.
-            Access::Estimate(_) => Ok(()),
+/// The front's way to the loop: the mailbox behind a mutex; the loop is a thread, so waiting
+/// sleeps a little.
+struct HostLink {
+    shared: Arc<Shared>,
+    start: Instant,
+}
+
+impl Link for HostLink {
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
+        f(&mut self.shared.mailbox())
+    }
+    fn now_us(&self) -> u64 {
+        self.start.elapsed().as_micros() as u64
+    }
+    fn pause(&mut self) {
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    /// A loaded host may hold the simulation thread back for a while.
+    fn timeout_us(&self) -> u64 {
+        2_000_000
+    }
+}
+
+/// The board's store flash on the host: the image of [`STORE_RANGE`] in memory, written
+/// through to a file when there is one. NOR semantics: a write can only clear bits, an erase
+/// sets a whole sector to 0xFF; both are checked for alignment like the F405's.
+pub struct HostFlash {
+    image: Vec<u8>,
+    file: Option<File>,
+}
+
+/// A host flash failure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HostFlashError {
+    /// Outside the store's range.
+    OutOfBounds,
+    /// Not aligned to a word (write) or a sector (erase).
+    NotAligned,
+    /// The file could not be written.
+    Io,
+}
+
+impl NorFlashError for HostFlashError {
+    fn kind(&self) -> NorFlashErrorKind {
+        match self {
+            HostFlashError::OutOfBounds => NorFlashErrorKind::OutOfBounds,
+            HostFlashError::NotAligned => NorFlashErrorKind::NotAligned,
+            HostFlashError::Io => NorFlashErrorKind::Other,
+        }
+    }
+}
+
+/// Bytes of the store's image.
+pub const IMAGE_LEN: usize = (STORE_RANGE.end - STORE_RANGE.start) as usize;
+
+impl HostFlash {
+    /// An erased flash in memory.
+    pub fn in_memory() -> HostFlash {
+        HostFlash {
+            image: vec![0xFF; IMAGE_LEN],
+            file: None,
+        }
+    }
+
+    /// The flash in `path`: created erased if missing; an existing file must be a store image
+    /// ([`IMAGE_LEN`] bytes).
+    pub fn open(path: &Path) -> Result<HostFlash, String> {
+        let shown = path.display();
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(path)
+            .map_err(|e| format!("{shown}: {e}"))?;
+        let mut image = Vec::new();
+        file.read_to_end(&mut image)
+            .map_err(|e| format!("{shown}: {e}"))?;
+        if image.is_empty() {
+            image = vec![0xFF; IMAGE_LEN];
+            file.write_all(&image)
+                .and_then(|_| file.sync_data())
+                .map_err(|e| format!("{shown}: {e}"))?;
+        } else if image.len() != IMAGE_LEN {
+            return Err(format!(
+                "{shown}: not a store image ({} bytes, a store is {IMAGE_LEN}); move it away \
+                 to start a fresh store",
+                image.len()
+            ));
+        }
+        Ok(HostFlash {
+            image,
+            file: Some(file),
+        })
+    }
+
+    /// The image (the store's flash bytes).
+    pub fn image(&self) -> &[u8] {
+        &self.image
+    }
+
+    fn span(&self, offset: u32, len: usize) -> Result<std::ops::Range<usize>, HostFlashError> {
+        let start = offset
+            .checked_sub(STORE_RANGE.start)
+            .ok_or(HostFlashError::OutOfBounds)? as usize;
+        let end = start.checked_add(len).ok_or(HostFlashError::OutOfBounds)?;
+        if end > self.image.len() {
+            return Err(HostFlashError::OutOfBounds);
+        }
+        Ok(start..end)
+    }
+
+    fn persist(&mut self, at: std::ops::Range<usize>) -> Result<(), HostFlashError> {
+        let Some(f) = &mut self.file else {
+            return Ok(());
         };
-    }
-    out
-}
-
-/// Reads settings written by [`settings_toml`] (keys may be missing: `base` fills them).
-pub fn settings_from_toml(text: &str, base: &Settings) -> Result<Settings, String> {
-    let table: toml::Table = toml::from_str(text).map_err(|e| e.message().to_string())?;
-    let mut s = *base;
-    for (k, v) in &table {
-        let value = match v {
-            toml::Value::Float(f) => format!("{f}"),
-            toml::Value::Integer(i) => format!("{i}"),
-            toml::Value::String(t) => t.clone(),
-            _ => return Err(format!("`{k}`: not a number or a name")),
-        };
-        let p = protocol::find(k).ok_or_else(|| format!("unknown parameter `{k}`"))?;
-        // Set without validating the intermediate sets; the whole set is validated below.
-        match p.access {
-            Access::Number { set, min, max, .. } => {
-                let x = protocol::parse_f32(&value)
-                    .filter(|x| *x >= min && *x <= max)
-                    .ok_or_else(|| format!("`{k}` = {value} is out of range"))?;
-                set(&mut s, x);
-            }
-            Access::Mode => {
-                s.ff.mode = FfMode::from_name(&value).ok_or_else(|| {
-                    format!("`{k}` = {value} is not none, static, gms or gms-adaptive")
-                })?;
-            }
-            Access::Estimate(_) => return Err(format!("`{k}` is read-only")),
-        }
-    }
-    s.validate().map_err(|e| e.to_string())?;
-    Ok(s)
-}
-
-/// The start-up settings: the store's when it is valid, else the defaults and a fault flag.
-fn startup(store: Option<&Path>, defaults: &Settings) -> (Settings, u32, Option<String>) {
-    let Some(path) = store else {
-        return (*defaults, 0, None);
-    };
-    match std::fs::read_to_string(path) {
-        Err(e) if e.kind() == ErrorKind::NotFound => (*defaults, 0, None),
-        Err(e) => (*defaults, 1, Some(format!("{}: {e}", path.display()))),
-        Ok(text) => match settings_from_toml(&text, defaults) {
-            Ok(s) => (s, 0, None),
-            Err(e) => (*defaults, 1, Some(format!("{}: {e}", path.display()))),
-        },
+        let bytes = self.image.get(at.clone()).ok_or(HostFlashError::OutOfBounds)?;
+        f.seek(SeekFrom::Start(at.start as u64))
+            .and_then(|_| f.write_all(bytes))
+            .and_then(|_| f.sync_data())
+            .map_err(|_| HostFlashError::Io)
     }
 }
 
-/// One client's view of the device.
-struct Session<'a> {
-    shared: &'a Shared,
-    snapshot: Settings,
-    stream: Option<(Vec<usize>, f64)>,
+impl ErrorType for HostFlash {
+    type Error = HostFlashError;
 }
 
-impl Device for Session<'_> {
-    fn settings(&self) -> &Settings {
-        &self.snapshot
-    }
-    fn apply(&mut self, new: Settings) {
-        if self.shared.lock().apply(new).is_ok() {
-            self.snapshot = new;
-        }
-    }
-    fn save(&mut self) -> Result<(), &'static str> {
-        let axis = self.shared.lock();
-        if axis.enabled {
-            return Err("disable before save");
-        }
-        let path = self
-            .shared
-            .store
-            .as_ref()
-            .ok_or("no store (start with --store FILE)")?;
-        write_atomic(path, settings_toml(&axis.settings).as_bytes())
-            .map_err(|_| "store write failed")
-    }
-    fn load(&mut self) -> Result<(), &'static str> {
-        let path = self
-            .shared
-            .store
-            .as_ref()
-            .ok_or("no store (start with --store FILE)")?;
-        let text = std::fs::read_to_string(path).map_err(|_| "nothing saved")?;
-        let s = settings_from_toml(&text, &self.shared.defaults).map_err(|_| "store invalid")?;
-        let mut axis = self.shared.lock();
-        if axis.enabled {
-            return Err("disable before load");
-        }
-        axis.apply(s).map_err(|_| "store invalid")?;
-        self.snapshot = s;
+impl ReadNorFlash for HostFlash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+        let at = self.span(offset, bytes.len())?;
+        bytes.copy_from_slice(self.image.get(at).ok_or(HostFlashError::OutOfBounds)?);
         Ok(())
     }
-    fn defaults(&mut self) {
-        let d = self.shared.defaults;
-        if self.shared.lock().apply(d).is_ok() {
-            self.snapshot = d;
-        }
-    }
-    fn enable(&mut self) -> Result<(), &'static str> {
-        let mut axis = self.shared.lock();
-        if axis.faults != 0 {
-            return Err("fault latched (clear first)");
-        }
-        let s = axis.settings;
-        axis.apply(s).map_err(|_| "invalid settings")?;
-        let here = axis.plant.encoder() * SUB_PER_COUNT as i64;
-        axis.motion.hold_at(here);
-        axis.enabled = true;
-        Ok(())
-    }
-    fn disable(&mut self) {
-        let mut axis = self.shared.lock();
-        axis.enabled = false;
-        axis.motion.stop();
-    }
-    fn status(&self, out: &mut dyn std::fmt::Write) -> std::fmt::Result {
-        let axis = self.shared.lock();
-        let l = axis.last;
-        let rpc = axis.rpc();
-        write!(
-            out,
-            "mode={} enabled={} faults={} t={:.3} pos={:.9} error_counts={:.1} moving={}",
-            axis.settings.ff.mode.name(),
-            axis.enabled as u8,
-            axis.faults,
-            l.t,
-            l.pos,
-            l.error / rpc,
-            axis.motion.is_moving() as u8
-        )
-    }
-    fn clear(&mut self) {
-        self.shared.lock().faults = 0;
-    }
-    fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
-        let mut axis = self.shared.lock();
-        if !axis.enabled {
-            return Err("disabled (enable first)");
-        }
-        let r = Motion::plan(axis.motion.hold(), pos, vel, axis.rpc() as f32)
-            .map_err(|_| "bad move")?;
-        axis.motion.start(r);
-        Ok(())
-    }
-    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
-        let idx: Option<Vec<usize>> = fields
-            .split(',')
-            .map(|f| FIELDS.iter().position(|x| *x == f))
-            .collect();
-        let idx = idx.ok_or("unknown field (t, pos, ref, error, ff, current, friction)")?;
-        if rate_hz > 1000.0 {
-            return Err("rate above 1000 Hz");
-        }
-        self.stream = Some((idx, rate_hz as f64));
-        Ok(())
-    }
-    fn stream_off(&mut self) {
-        self.stream = None;
-    }
-    fn estimate(&self, which: protocol::Estimate) -> f32 {
-        match which {
-            protocol::Estimate::AdaptScale => self.shared.lock().ctrl.adaptive_scale(),
-        }
+
+    fn capacity(&self) -> usize {
+        STORE_RANGE.end as usize
     }
 }
 
-fn telemetry(s: &Sample, fields: &[usize]) -> String {
-    let mut line = String::from("#");
-    for &f in fields {
-        let v = match f {
-            0 => s.t,
-            1 => s.pos,
-            2 => s.reference,
-            3 => s.error,
-            4 => s.ff,
-            5 => s.current,
-            _ => s.friction,
-        };
-        let _ = write!(line, " {}={v:e}", FIELDS[f]);
+impl NorFlash for HostFlash {
+    const WRITE_SIZE: usize = WORD_SIZE;
+    const ERASE_SIZE: usize = SECTOR_SIZE;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+        if from % SECTOR_SIZE as u32 != 0 || to % SECTOR_SIZE as u32 != 0 || to < from {
+            return Err(HostFlashError::NotAligned);
+        }
+        let at = self.span(from, (to - from) as usize)?;
+        self.image
+            .get_mut(at.clone())
+            .ok_or(HostFlashError::OutOfBounds)?
+            .fill(0xFF);
+        self.persist(at)
     }
-    line.push('\n');
-    line
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+        if offset % WORD_SIZE as u32 != 0 || bytes.len() % WORD_SIZE != 0 {
+            return Err(HostFlashError::NotAligned);
+        }
+        let at = self.span(offset, bytes.len())?;
+        let dst = self
+            .image
+            .get_mut(at.clone())
+            .ok_or(HostFlashError::OutOfBounds)?;
+        // NOR: programming only clears bits.
+        for (d, s) in dst.iter_mut().zip(bytes) {
+            *d &= *s;
+        }
+        self.persist(at)
+    }
 }
+
+/// The virtual device's protocol side.
+type Dev = Front<HostLink, FlashStore<HostFlash>>;
 
 /// Serves one client until it disconnects. `conn` reads must not block for long: a TCP
 /// socket with a read timeout, or a non-blocking PTY master.
-fn serve_client<C: Read + Write>(shared: &Shared, mut conn: C) {
-    let mut session = Session {
-        shared,
-        snapshot: shared.lock().settings,
-        stream: None,
-    };
+fn serve_client<C: Read + Write>(dev: &mut Dev, shared: &Shared, mut conn: C) {
     let mut reader = LineReader::default();
     let mut buf = [0u8; 512];
-    // Telemetry: the device's own samples, decimated to the requested rate, from the time
-    // the stream started.
-    let mut next_t = f64::NEG_INFINITY;
+    shared.telemetry().clear();
     loop {
         match conn.read(&mut buf) {
-            Ok(0) => return,
+            Ok(0) => break,
             Ok(n) => {
                 let mut reply = String::new();
                 for &b in &buf[..n] {
                     if let Some(line) = reader.push(b) {
-                        session.snapshot = shared.lock().settings;
-                        let _ = protocol::execute(&mut session, line, &mut reply);
+                        let _ = protocol::execute(dev, line, &mut reply);
                     }
                 }
                 if conn.write_all(reply.as_bytes()).is_err() {
-                    return;
+                    break;
                 }
             }
             Err(e) if e.kind() == ErrorKind::WouldBlock => {
                 std::thread::sleep(Duration::from_millis(2))
             }
             Err(e) if e.kind() == ErrorKind::TimedOut => {}
-            Err(_) => return,
+            Err(_) => break,
         }
-        match &session.stream {
-            Some((fields, rate)) => {
-                let mut lines = String::new();
-                {
-                    let axis = shared.lock();
-                    if next_t == f64::NEG_INFINITY {
-                        next_t = axis.last.t;
-                    }
-                    for smp in axis.history.iter() {
-                        if smp.t >= next_t {
-                            lines += &telemetry(smp, fields);
-                            next_t = smp.t + 1.0 / rate - 1e-9;
-                        }
-                    }
-                }
-                if !lines.is_empty() && conn.write_all(lines.as_bytes()).is_err() {
-                    return;
-                }
+        let samples: Vec<Sample> = shared.telemetry().drain(..).collect();
+        if dev.streaming() && !samples.is_empty() {
+            let mut lines = String::new();
+            for s in &samples {
+                let _ = dev.telemetry_line(&mut lines, s);
             }
-            None => next_t = f64::NEG_INFINITY,
+            if conn.write_all(lines.as_bytes()).is_err() {
+                break;
+            }
         }
     }
+    // A new client starts without a stream.
+    dev.disconnected();
 }
 
 /// Where the device listens.
@@ -421,9 +378,10 @@ pub enum Endpoint {
     Pty,
 }
 
-/// Runs the device: the axis in real time on its own thread, clients in turn. `on_ready`
-/// receives the address (TCP address or PTY path) and any start-up fault before the first
-/// client.
+/// Runs the device: the control loop and the plant in real time on their own thread, clients
+/// in turn. `on_ready` receives the address (TCP address or PTY path) and what the start-up
+/// found in the store (`Some` when the defaults run with `invalid_params` latched) before the
+/// first client.
 pub fn serve(
     sc: Scenario,
     endpoint: Endpoint,
@@ -431,58 +389,78 @@ pub fn serve(
     on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), String> {
     let defaults = sc.controller_params()?;
-    let (settings, faults, why) = startup(store.as_deref(), &defaults);
-    let axis = Axis::new(sc, settings, faults)?;
+    let board = board(&sc);
+    let flash = match &store {
+        Some(path) => HostFlash::open(path)?,
+        None => HostFlash::in_memory(),
+    };
+    let mut flash_store = FlashStore::new(flash);
+    let start = device::startup(flash_store.load(), &defaults, &board)
+        .map_err(|e| format!("the scenario's controller: {e}"))?;
+    let why = (!start.faults.is_empty()).then_some(start.note);
+    let adc = Adc::new(&sc);
+    let sense = adc.sense().ok_or("plant: the ADC's range is not usable")?;
+    let plant = Plant::new(&sc.plant, sc.plant.seed)?;
+    let encoder = plant.encoder() as u32;
+    let mut sim = Sim {
+        core: ControlLoop::new(board, start.applied, sense, start.faults, encoder),
+        plant,
+        adc,
+        substeps: sc.plant.substeps,
+        t: 0.0,
+    };
     let shared = Arc::new(Shared {
-        axis: Mutex::new(axis),
-        store,
-        defaults,
+        mailbox: Mutex::new(Mailbox::new()),
+        telemetry: Mutex::new(VecDeque::with_capacity(QUEUE)),
     });
     let rt = Arc::clone(&shared);
     std::thread::spawn(move || {
         // Real time: advance by as many position periods as wall time allows.
         let start = Instant::now();
         loop {
-            let mut axis = rt.lock();
-            let dt = axis.ctrl.dt_pos() as f64;
+            let dt = sim.core.controller().dt_pos() as f64;
             let due = start.elapsed().as_secs_f64();
             let mut n = 0;
-            while axis.t + dt <= due && n < 200 {
-                axis.tick();
+            while sim.t + dt <= due && n < 200 {
+                sim.tick(&rt);
                 n += 1;
             }
             if n == 200 {
                 // Cannot keep up: skip ahead rather than fall ever further behind.
-                axis.t = due;
+                sim.t = due;
             }
-            drop(axis);
             std::thread::sleep(Duration::from_millis(1));
         }
     });
+    let link = HostLink {
+        shared: Arc::clone(&shared),
+        start: Instant::now(),
+    };
+    let mut dev = Front::new(link, flash_store, board, start.settings, defaults);
     match endpoint {
         Endpoint::Tcp(listener) => {
             let addr = listener
                 .local_addr()
                 .map_err(|e| e.to_string())?
                 .to_string();
-            on_ready(&addr, why.as_deref());
+            on_ready(&addr, why);
             for conn in listener.incoming() {
                 let Ok(c) = conn else { continue };
                 let _ = c.set_read_timeout(Some(Duration::from_millis(2)));
                 let _ = c.set_nodelay(true);
-                serve_client(&shared, c);
+                serve_client(&mut dev, &shared, c);
             }
             Ok(())
         }
         #[cfg(unix)]
-        Endpoint::Pty => serve_pty(&shared, |path| on_ready(path, why.as_deref())),
+        Endpoint::Pty => serve_pty(&mut dev, &shared, |path| on_ready(path, why)),
     }
 }
 
 /// Serves the protocol on a pseudo-terminal. The device keeps the slave open too, so a client
 /// that closes it does not end the session: the next one finds the device where it was.
 #[cfg(unix)]
-fn serve_pty(shared: &Shared, on_ready: impl FnOnce(&str)) -> Result<(), String> {
+fn serve_pty(dev: &mut Dev, shared: &Shared, on_ready: impl FnOnce(&str)) -> Result<(), String> {
     use nix::fcntl::{FcntlArg, OFlag, fcntl};
     use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 
@@ -493,11 +471,11 @@ fn serve_pty(shared: &Shared, on_ready: impl FnOnce(&str)) -> Result<(), String>
     let path = nix::unistd::ttyname(&pty.slave).map_err(|e| format!("ttyname: {e}"))?;
     fcntl(&pty.master, FcntlArg::F_SETFL(OFlag::O_NONBLOCK)).map_err(|e| format!("fcntl: {e}"))?;
     on_ready(&path.display().to_string());
-    let master = std::fs::File::from(pty.master);
+    let master = File::from(pty.master);
     let _slave = pty.slave;
     loop {
         // serve_client returns only on an I/O error; start over after a pause.
-        serve_client(shared, &master);
+        serve_client(dev, shared, &master);
         std::thread::sleep(Duration::from_millis(10));
     }
 }

@@ -259,7 +259,7 @@ fn main() -> ExitCode {
             };
             hil_sim::device::serve(sc, endpoint, store, |addr, fault| {
                 if let Some(f) = fault {
-                    eprintln!("warning: store unusable, starting from defaults (fault 1): {f}");
+                    eprintln!("warning: {f} (fault invalid_params latched: clear to enable)");
                 }
                 println!("listening on {addr}");
                 use std::io::Write as _;
