@@ -41,6 +41,8 @@ impl Loop {
         let (psc, arr) = core.timing();
         hw.set_pwm_timing(psc, arr);
         hw.set_bridge(0, 0);
+        // The loop's status from the start (before its first step).
+        MAILBOX.lock(|m| m.borrow_mut().status = core.status());
         Loop { hw, core }
     }
 

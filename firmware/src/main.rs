@@ -131,7 +131,13 @@ async fn main(spawner: Spawner) {
     let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
     let usb = builder.build();
 
-    let dev = comms::Dev::new(comms::IrqLink, store, board::BOARD, start.settings, defaults);
+    let dev = comms::Dev::new(
+        comms::IrqLink,
+        store,
+        board::BOARD,
+        start.settings,
+        defaults,
+    );
     spawner.spawn(unwrap!(usb_task(usb)));
     spawner.spawn(unwrap!(comms_task(class, dev)));
     spawner.spawn(unwrap!(supervisor(

@@ -181,23 +181,51 @@ impl<const N: usize> ControllerParams<N> {
         use crate::protocol::range;
         let a = &self.ff.actuator;
         let scalars: [(&'static str, f32, (f32, f32)); 23] = [
-            ("rate.pos_hz", self.pos_rate_hz, const { range("rate.pos_hz") }),
-            ("rate.cur_hz", self.cur_rate_hz, const { range("rate.cur_hz") }),
+            (
+                "rate.pos_hz",
+                self.pos_rate_hz,
+                const { range("rate.pos_hz") },
+            ),
+            (
+                "rate.cur_hz",
+                self.cur_rate_hz,
+                const { range("rate.cur_hz") },
+            ),
             ("pos.kp", self.pid.kp, const { range("pos.kp") }),
             ("pos.ki", self.pid.ki, const { range("pos.ki") }),
             ("pos.kd", self.pid.kd, const { range("pos.kd") }),
-            ("pos.d_filter_hz", self.pid.d_filter_hz, const { range("pos.d_filter_hz") }),
-            ("pos.i_limit", self.pid.i_limit, const { range("pos.i_limit") }),
+            (
+                "pos.d_filter_hz",
+                self.pid.d_filter_hz,
+                const { range("pos.d_filter_hz") },
+            ),
+            (
+                "pos.i_limit",
+                self.pid.i_limit,
+                const { range("pos.i_limit") },
+            ),
             ("cur.kp", self.current.kp, const { range("cur.kp") }),
             ("cur.ki", self.current.ki, const { range("cur.ki") }),
             ("motor.k_m", self.motor.k_m, const { range("motor.k_m") }),
             ("motor.r", self.motor.r, const { range("motor.r") }),
             ("motor.k_e", self.motor.k_e, const { range("motor.k_e") }),
             ("lim.i_max", self.i_max, const { range("lim.i_max") }),
-            ("lim.v_supply", self.v_supply, const { range("lim.v_supply") }),
+            (
+                "lim.v_supply",
+                self.v_supply,
+                const { range("lim.v_supply") },
+            ),
             ("ff.gain", self.ff.gain, const { range("ff.gain") }),
-            ("ff.inertia", self.motor.inertia, const { range("ff.inertia") }),
-            ("ff.static_band", self.ff.static_band, const { range("ff.static_band") }),
+            (
+                "ff.inertia",
+                self.motor.inertia,
+                const { range("ff.inertia") },
+            ),
+            (
+                "ff.static_band",
+                self.ff.static_band,
+                const { range("ff.static_band") },
+            ),
             ("gms.fs", a.stribeck.fs, const { range("gms.fs") }),
             ("gms.fc", a.stribeck.fc, const { range("gms.fc") }),
             ("gms.vs", a.stribeck.vs, const { range("gms.vs") }),
@@ -539,7 +567,8 @@ impl<const N: usize> Controller<N> {
         let speed = if vel < 0.0 { -vel } else { vel };
         let scale = if speed < band { speed / band } else { 1.0 };
         let guide = self.map_guide.as_ref();
-        scale * (self.map_act.force_at(vel) + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
+        scale
+            * (self.map_act.force_at(vel) + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
     }
 
     /// The friction feedforward torque [N·m] (before the gain) for the reference moving by

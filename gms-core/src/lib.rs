@@ -38,9 +38,9 @@ pub mod selftest;
 #[cfg(feature = "serde")]
 mod serde_array;
 pub mod static_map;
-pub mod stribeck;
 #[cfg(feature = "store")]
 pub mod store;
+pub mod stribeck;
 
 pub use error::{Field, ParamError, Side};
 pub use gms::{Block, Gms, GmsParams};

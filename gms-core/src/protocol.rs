@@ -423,21 +423,20 @@ pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result
 }
 
 /// Writes a parameter's value as `dev` has it (settings and estimates).
-pub fn write_param<D: Device + ?Sized>(p: &Param, dev: &mut D, out: &mut impl Write) -> fmt::Result {
+pub fn write_param<D: Device + ?Sized>(
+    p: &Param,
+    dev: &mut D,
+    out: &mut impl Write,
+) -> fmt::Result {
     match p.access {
         Access::Estimate(e) => write!(out, "{}", Num(dev.estimate(e))),
         _ => write_value(p, dev.settings(), out),
     }
 }
 
-/// `set`: the settings with `path` set to `value`, validated as a whole; on error nothing is
-/// returned and the caller's settings stay as they are.
-pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
-    let p = find(path).ok_or(ParseError {
-        code: ErrorCode::UnknownPath,
-        reason: "unknown parameter (try list)",
-    })?;
-    let mut new = *s;
+/// Sets one parameter of `s` from its text (a number within the table's range, or a mode
+/// name), without validating the whole set (see [`with_value`]); on error `s` is unchanged.
+pub fn set_param(s: &mut Settings, p: &Param, value: &str) -> Result<(), ParseError> {
     match p.access {
         Access::Number { set, min, max, .. } => {
             let v = parse_f32(value)
@@ -446,10 +445,10 @@ pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, Par
                     code: ErrorCode::OutOfRange,
                     reason: "not a finite number within the range (see list)",
                 })?;
-            set(&mut new, v);
+            set(s, v);
         }
         Access::Mode => {
-            new.ff.mode = FfMode::from_name(value).ok_or(ParseError {
+            s.ff.mode = FfMode::from_name(value).ok_or(ParseError {
                 code: ErrorCode::OutOfRange,
                 reason: "ff.mode is none, static, gms or gms-adaptive",
             })?;
@@ -461,6 +460,18 @@ pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, Par
             });
         }
     }
+    Ok(())
+}
+
+/// `set`: the settings with `path` set to `value`, validated as a whole; on error nothing is
+/// returned and the caller's settings stay as they are.
+pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
+    let p = find(path).ok_or(ParseError {
+        code: ErrorCode::UnknownPath,
+        reason: "unknown parameter (try list)",
+    })?;
+    let mut new = *s;
+    set_param(&mut new, p, value)?;
     new.validate().map_err(|_| ParseError {
         code: ErrorCode::InvalidSet,
         reason: "the parameter set would be invalid",

@@ -6,9 +6,7 @@
 //! and runs the controller against a toy plant; every output's bit pattern goes into an
 //! FNV-1a hash.
 
-use crate::controller::{
-    Controller, ControllerParams, FfMode,
-};
+use crate::controller::{Controller, ControllerParams, FfMode};
 use crate::gms::Gms;
 use crate::lugre::{LuGre, LugreParams};
 use crate::model::FrictionModel;

@@ -67,7 +67,11 @@ fn a_move_ends_at_its_target_and_holds_there() {
     // `move` takes an absolute position: 0.01 rad = 2631.6 counts.
     let target = 0.01 / RPC as f64 * SUB_PER_COUNT as f64;
     let tol = 1e-3 * SUB_PER_COUNT as f64;
-    assert!((m.hold() as f64 - target).abs() <= tol, "{} vs {target}", m.hold());
+    assert!(
+        (m.hold() as f64 - target).abs() <= tol,
+        "{} vs {target}",
+        m.hold()
+    );
     let peak = s.iter().map(|r| r.vel.abs()).fold(0.0, f32::max);
     // Jerk-limited at this distance (0.01 rad - 1000 counts): T = cbrt(60 D / jmax), peak
     // 1.875 D / T.
@@ -99,7 +103,12 @@ fn from_rest_it_is_the_minimum_jerk_segment() {
         let b = r.next(DT);
         let dpos = (a.pos - b.pos).abs() as f64 / SUB_PER_COUNT as f64;
         assert!(dpos < 0.01, "step {k}: {dpos} counts apart");
-        assert!((a.vel - b.vel).abs() < 1e-5 * 0.2, "step {k}: {} vs {}", a.vel, b.vel);
+        assert!(
+            (a.vel - b.vel).abs() < 1e-5 * 0.2,
+            "step {k}: {} vs {}",
+            a.vel,
+            b.vel
+        );
     }
 }
 
@@ -119,7 +128,13 @@ fn a_second_move_mid_move_continues_it() {
     // Never backs up (beyond the f32 rounding of the polynomial near the end, where it meets
     // the exact target: below 1/100 count).
     for (k, w) in s.windows(2).enumerate() {
-        assert!(w[1].pos >= w[0].pos - 656, "backs up at {k} of {}: {:?} -> {:?}", s.len(), w[0], w[1]);
+        assert!(
+            w[1].pos >= w[0].pos - 656,
+            "backs up at {k} of {}: {:?} -> {:?}",
+            s.len(),
+            w[0],
+            w[1]
+        );
     }
     let target = 0.02 / RPC as f64 * SUB_PER_COUNT as f64;
     assert!((m.hold() as f64 - target).abs() <= 1e-3 * SUB_PER_COUNT as f64);

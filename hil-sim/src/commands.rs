@@ -58,7 +58,7 @@ pub fn trace_csv(trace: &[TraceRow]) -> String {
 /// `trace.csv`, `metrics.json` and `plot.svg` into `out`.
 pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
-    let res = sim::run(sc, sc.controller.ff.mode, sc.plant.seed)?;
+    let res = sim::run(sc, sc.mode(), sc.plant.seed)?;
     #[derive(Serialize)]
     struct Out<'a> {
         mode: &'a str,
@@ -66,7 +66,7 @@ pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
         metrics: &'a Metrics,
         energy_balance: EnergyOut,
     }
-    let mode = sc.controller.ff.mode.name();
+    let mode = sc.mode().name();
     let e = res.energy;
     let json = serde_json::to_string_pretty(&Out {
         mode,

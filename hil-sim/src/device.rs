@@ -84,7 +84,9 @@ impl Adc {
 
     /// The code of a current the plant's ADC measured [A].
     fn code(&self, amps: f32) -> u32 {
-        (amps as f64 / self.lsb + self.mid).round().clamp(0.0, self.top) as u32
+        (amps as f64 / self.lsb + self.mid)
+            .round()
+            .clamp(0.0, self.top) as u32
     }
 }
 
@@ -265,7 +267,10 @@ impl HostFlash {
         let Some(f) = &mut self.file else {
             return Ok(());
         };
-        let bytes = self.image.get(at.clone()).ok_or(HostFlashError::OutOfBounds)?;
+        let bytes = self
+            .image
+            .get(at.clone())
+            .ok_or(HostFlashError::OutOfBounds)?;
         f.seek(SeekFrom::Start(at.start as u64))
             .and_then(|_| f.write_all(bytes))
             .and_then(|_| f.sync_data())
@@ -410,7 +415,11 @@ pub fn serve(
         t: 0.0,
     };
     let shared = Arc::new(Shared {
-        mailbox: Mutex::new(Mailbox::new()),
+        // The loop's status from the start (before its first step).
+        mailbox: Mutex::new(Mailbox {
+            status: sim.core.status(),
+            ..Mailbox::new()
+        }),
         telemetry: Mutex::new(VecDeque::with_capacity(QUEUE)),
     });
     let rt = Arc::clone(&shared);

@@ -339,7 +339,7 @@ fn main() -> ExitCode {
             compare_and_write(&sc, runs, 1, &out.join("compare.json"), threads(None))?;
             for mode in FfMode::ALL {
                 let mut one = sc.clone();
-                one.controller.ff.mode = mode;
+                one.set_controller("ff.mode", toml::Value::String(mode.name().into()));
                 commands::run(&one, &out.join(format!("run-{}", mode.name())))?;
             }
             let dirs: Vec<String> = FfMode::ALL

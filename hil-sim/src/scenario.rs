@@ -7,9 +7,8 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
-use gms_core::controller::{
-    ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
-};
+use gms_core::controller::{ControllerParams, FfMode};
+use gms_core::protocol;
 use gms_core::reference::Segment;
 use serde::{Deserialize, Serialize};
 
@@ -47,8 +46,12 @@ fn merge(base: &mut toml::Table, user: toml::Table) {
 pub struct Scenario {
     /// The simulated axis.
     pub plant: Plant,
-    /// The controller (the firmware's own).
-    pub controller: Controller,
+    /// The controller: the device's parameters by their protocol paths (`pos.kp`, `ff.mode`,
+    /// …, as nested tables: `[controller.pos] kp = 0.2`), plus `ff.guideway` (compensate the
+    /// guideway too). What is left out is the device's default
+    /// ([`gms_core::device::default_settings`]); `motor.*` and `gms.*` default to the plant's
+    /// nominal values.
+    pub controller: toml::Table,
     /// The reference trajectory.
     pub reference: Reference,
 }
@@ -162,68 +165,6 @@ impl Plant {
     pub fn ratio(&self) -> f64 {
         self.lead / (2.0 * std::f64::consts::PI * self.gear_ratio)
     }
-}
-
-/// The controller's settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Controller {
-    /// Position-loop rate [Hz].
-    pub pos_rate_hz: f32,
-    /// Current-loop rate [Hz].
-    pub cur_rate_hz: f32,
-    /// Current limit [A].
-    pub i_max: f32,
-    /// Position PID.
-    pub pid: Pid,
-    /// Current PI.
-    pub current: Current,
-    /// Friction feedforward.
-    pub ff: Ff,
-}
-
-/// Position PID gains.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Pid {
-    /// [N·m/rad]
-    pub kp: f32,
-    /// [N·m/(rad·s)]
-    pub ki: f32,
-    /// [N·m·s/rad]
-    pub kd: f32,
-    /// [Hz]
-    pub d_filter_hz: f32,
-    /// [N·m]
-    pub i_limit: f32,
-}
-
-/// Current PI gains.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Current {
-    /// [V/A]
-    pub kp: f32,
-    /// [V/(A·s)]
-    pub ki: f32,
-}
-
-/// Friction feedforward settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Ff {
-    /// Mode.
-    pub mode: FfMode,
-    /// Gain [-].
-    pub gain: f32,
-    /// Acceleration feedforward inertia [kg·m^2].
-    pub inertia: f32,
-    /// Compensate the guideway too.
-    pub guideway: bool,
-    /// Velocity band of the static map [rad/s].
-    pub static_band: f32,
-    /// Adaptation (mode `gms-adaptive`).
-    pub adapt: gms_core::adaptive::AdaptiveParams,
 }
 
 /// The reference trajectory.
@@ -404,9 +345,40 @@ impl Scenario {
         Ok(())
     }
 
-    /// The controller's parameters (compensator = the plant's nominal friction).
+    /// Sets one controller parameter by its protocol path (e.g. `ff.mode`).
+    pub fn set_controller(&mut self, path: &str, value: toml::Value) {
+        let mut table = &mut self.controller;
+        let mut parts = path.split('.').peekable();
+        while let Some(part) = parts.next() {
+            if parts.peek().is_none() {
+                table.insert(part.to_string(), value);
+                return;
+            }
+            let entry = table
+                .entry(part.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            if !entry.is_table() {
+                *entry = toml::Value::Table(toml::Table::new());
+            }
+            let Some(t) = entry.as_table_mut() else {
+                return;
+            };
+            table = t;
+        }
+    }
+
+    /// The feedforward mode the controller runs.
+    pub fn mode(&self) -> FfMode {
+        self.controller_params()
+            .map(|p| p.ff.mode)
+            .unwrap_or_default()
+    }
+
+    /// The controller's parameters: the device's defaults, the plant's nominal motor and
+    /// friction (the compensator knows the nominal plant), then the `[controller]` table by
+    /// protocol paths, each checked against the protocol's range table, and the whole set
+    /// validated. Errors name the scenario key.
     pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
-        let c = &self.controller;
         let p = &self.plant;
         let gms = |spec: &FrictionSpec, what: &str| {
             if spec.model != crate::paramfile::ModelKind::Gms {
@@ -419,47 +391,47 @@ impl Scenario {
                 format!("plant.{what}: {e} (the compensator is built for {FF_BLOCKS})")
             })
         };
-        let params = ControllerParams {
-            pos_rate_hz: c.pos_rate_hz,
-            cur_rate_hz: c.cur_rate_hz,
-            rad_per_count: p.rad_per_count as f32,
-            pid: PidParams {
-                kp: c.pid.kp,
-                ki: c.pid.ki,
-                kd: c.pid.kd,
-                d_filter_hz: c.pid.d_filter_hz,
-                i_limit: c.pid.i_limit,
-            },
-            current: CurrentParams {
-                kp: c.current.kp,
-                ki: c.current.ki,
-            },
-            motor: MotorModel {
-                k_m: p.k_m as f32,
-                r: p.resistance as f32,
-                k_e: p.k_e as f32,
-                inertia: c.ff.inertia,
-            },
-            i_max: c.i_max,
-            v_supply: p.supply_v as f32,
-            ff: FeedforwardParams {
-                mode: c.ff.mode,
-                gain: c.ff.gain,
-                actuator: gms(&p.actuator, "actuator")?,
-                guideway: if c.ff.guideway {
-                    Some(gms(&p.guideway, "guideway")?)
-                } else {
-                    None
-                },
-                ratio: p.ratio() as f32,
-                static_band: c.ff.static_band,
-                adapt: c.ff.adapt,
-            },
+        let mut s = gms_core::device::default_settings();
+        s.rad_per_count = p.rad_per_count as f32;
+        s.motor.k_m = p.k_m as f32;
+        s.motor.r = p.resistance as f32;
+        s.motor.k_e = p.k_e as f32;
+        s.v_supply = p.supply_v as f32;
+        s.ff.actuator = gms(&p.actuator, "actuator")?;
+        s.ff.ratio = p.ratio() as f32;
+        let mut guideway = true;
+        let mut keys = Vec::new();
+        flatten("", &self.controller, &mut keys);
+        for (path, value) in keys {
+            let key = format!("controller.{path}");
+            if path == "ff.guideway" {
+                guideway = value
+                    .as_bool()
+                    .ok_or_else(|| format!("{key}: true or false"))?;
+                continue;
+            }
+            let param = protocol::find(&path).ok_or_else(|| {
+                format!(
+                    "{key}: unknown key (the keys are the protocol's paths: `gms-tune send list`)"
+                )
+            })?;
+            let text = match value {
+                toml::Value::Float(f) => format!("{f:e}"),
+                toml::Value::Integer(i) => format!("{i}"),
+                toml::Value::String(t) => t.clone(),
+                _ => return Err(format!("{key}: a number or a name")),
+            };
+            protocol::set_param(&mut s, param, &text)
+                .map_err(|e| format!("{key} = {text}: {}", e.reason))?;
+        }
+        s.ff.guideway = if guideway {
+            Some(gms(&p.guideway, "guideway")?)
+        } else {
+            None
         };
-        params
-            .validate()
+        s.validate()
             .map_err(|e| format!("controller: {}", controller_key(e)))?;
-        Ok(params)
+        Ok(s)
     }
 
     /// The reference segments expanded into gms-core's form.
@@ -545,17 +517,32 @@ impl Scenario {
     }
 }
 
-/// The scenario key of a controller error.
+/// The scenario key of a controller error (the protocol path under `[controller]`, or the
+/// plant's key a value came from).
 fn controller_key(e: gms_core::controller::ControllerError) -> String {
     use gms_core::controller::ControllerError as E;
     match e {
         E::Invalid("ff.ratio") => "plant.lead / plant.gear_ratio out of range".into(),
-        E::Invalid("motor.inertia") => "controller.ff.inertia is out of range".into(),
-        E::Invalid(name) if name.starts_with("motor.") || name == "v_supply" => {
-            format!("{name} (from [plant]) is out of range")
-        }
         E::Invalid("rad_per_count") => "plant.rad_per_count is out of range".into(),
+        E::Invalid(name) if name.starts_with("motor.") || name == "lim.v_supply" => {
+            format!("controller.{name} (from [plant] unless set) is out of range")
+        }
         E::Invalid(name) => format!("controller.{name} is out of range"),
         other => other.to_string(),
+    }
+}
+
+/// The leaves of a TOML table as dotted paths.
+fn flatten(prefix: &str, t: &toml::Table, out: &mut Vec<(String, toml::Value)>) {
+    for (k, v) in t {
+        let path = if prefix.is_empty() {
+            k.clone()
+        } else {
+            format!("{prefix}.{k}")
+        };
+        match v {
+            toml::Value::Table(sub) => flatten(&path, sub, out),
+            other => out.push((path, other.clone())),
+        }
     }
 }

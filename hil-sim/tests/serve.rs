@@ -63,7 +63,7 @@ impl Client {
 #[test]
 fn set_save_restart_and_read_back() {
     let dir = tempfile::tempdir().unwrap();
-    let store = dir.path().join("flash.toml");
+    let store = dir.path().join("flash.img");
     {
         let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
         let mut c = connect(&srv);
@@ -92,17 +92,59 @@ fn set_save_restart_and_read_back() {
 }
 
 #[test]
-fn a_corrupt_store_means_defaults_and_a_fault() {
+fn a_corrupt_record_means_defaults_and_a_fault() {
+    use gms_core::device::ParamStore;
     let dir = tempfile::tempdir().unwrap();
-    let store = dir.path().join("flash.toml");
-    std::fs::write(&store, "\"pos.kp\" = \"half\"\n").unwrap();
+    let store = dir.path().join("flash.img");
+    {
+        // A record whose checksum fails, written with the board's store code.
+        let mut s = default_settings();
+        s.pid.kp = 0.4;
+        let mut rec = gms_core::drive::encode_settings(&s);
+        rec[10] ^= 0x40;
+        let flash = hil_sim::device::HostFlash::open(&store).unwrap();
+        let mut st = gms_core::store::FlashStore::new(flash);
+        st.save(&rec).unwrap();
+    }
     let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
     let mut c = connect(&srv);
     assert_eq!(c.ask("get pos.kp"), "ok 0.2");
-    assert!(c.ask("status").contains("faults=1"));
+    let st = c.ask("status");
+    assert!(
+        st.contains("faults=32 ") && st.contains("fault_names=invalid_params "),
+        "{st}"
+    );
     assert!(c.ask("enable").starts_with("err 8 "));
     assert_eq!(c.ask("clear"), "ok");
     assert_eq!(c.ask("enable"), "ok");
+}
+
+#[test]
+fn a_file_that_is_not_a_store_image_is_refused_and_left_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("flash.toml");
+    std::fs::write(&store, "\"pos.kp\" = 0.3\n").unwrap();
+    let (code, _, err) = common::hil(
+        &[
+            "serve",
+            "--tcp",
+            "127.0.0.1:0",
+            "--store",
+            store.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("not a store image"), "{err}");
+    assert_eq!(
+        std::fs::read_to_string(&store).unwrap(),
+        "\"pos.kp\" = 0.3\n"
+    );
+}
+
+fn default_settings() -> gms_core::protocol::Settings {
+    gms_core::device::default_settings()
 }
 
 #[test]

@@ -19,14 +19,31 @@ fn default_scenario_is_complete_and_documented() {
     assert_eq!(code, 0);
     let parsed = hil_sim::scenario::Scenario::parse(&text, "printed").unwrap();
     assert_eq!(parsed, hil_sim::scenario::Scenario::default());
+    // One default set: the default scenario's controller is the device's default (what does
+    // not come from the plant: rates, gains, limits, feedforward settings).
+    let (a, b) = (
+        parsed.controller_params().unwrap(),
+        gms_core::device::default_settings(),
+    );
+    assert_eq!(
+        (a.pos_rate_hz, a.cur_rate_hz, a.pid, a.current),
+        (b.pos_rate_hz, b.cur_rate_hz, b.pid, b.current)
+    );
+    assert_eq!(
+        (a.i_max, a.motor.inertia, a.ff.mode, a.ff.gain),
+        (b.i_max, b.motor.inertia, b.ff.mode, b.ff.gain)
+    );
+    assert_eq!(
+        (a.ff.static_band, a.ff.adapt),
+        (b.ff.static_band, b.ff.adapt)
+    );
     // Units in comments on the physical keys.
     for key in [
         "resistance",
         "inductance",
         "inertia",
-        "kp",
-        "ki",
-        "pos_rate_hz",
+        "k_m",
+        "rad_per_count",
     ] {
         let line = text
             .lines()
@@ -144,10 +161,20 @@ fn the_example_scenarios_parse() {
 #[test]
 fn bad_scenarios_and_arguments_exit_2_with_one_line() {
     let d = tempfile::tempdir().unwrap();
-    let cases: [(&str, &str); 6] = [
+    let cases: [(&str, &str); 9] = [
         ("[plant]\nresistence = 3\n", "resistence"),
-        ("[controller.pid]\nkp = \"high\"\n", "controller.pid.kp"),
-        ("[controller.pid]\nkp = -1\n", "controller.pid.kp"),
+        // The scenario's controller keys are the protocol's paths, with its ranges.
+        (
+            "[controller.ff.adapt]\nvmin = -1\n",
+            "controller.ff.adapt.vmin",
+        ),
+        ("[controller.pos]\nkp = 5000\n", "controller.pos.kp"),
+        (
+            "[controller.pid]\nkp = 0.2\n",
+            "controller.pid.kp: unknown key",
+        ),
+        ("[controller.pos]\nkp = \"high\"\n", "controller.pos.kp"),
+        ("[controller.pos]\nkp = -1\n", "controller.pos.kp"),
         ("[plant.actuator]\nfs = 1e-6\n", "plant.actuator"),
         (
             "[reference]\nsegments = [{ kind = \"sine\", amplitude = 0.1, freq = 0, cycles = 1 }]\n",

@@ -186,7 +186,7 @@ fn the_adaptive_scale_stays_put_at_rest_and_in_saturation() {
     assert!(rest.iter().all(|r| r.ff_scale == 1.0));
     // 1 mA of current limit: the sine saturates the command throughout.
     let sine = "{ kind = \"sine\", amplitude = 0.05, freq = 1.0, cycles = 2.0 }";
-    let sat = run("[controller]\ni_max = 1e-3", sine);
+    let sat = run("[controller.lim]\ni_max = 1e-3", sine);
     assert!(sat.iter().all(|r| (0.5..=1.5).contains(&r.ff_scale)));
     let wild = run("[controller.ff.adapt]\ngain = 1e4", sine);
     assert!(wild.iter().any(|r| r.ff_scale != 1.0));

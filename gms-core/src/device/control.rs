@@ -61,7 +61,13 @@ pub struct ControlLoop {
 impl ControlLoop {
     /// A loop at rest (bridge off) running the parameter set `a` on `board`, with the current
     /// sense `sense`, the faults found at start-up and the encoder counter's value now.
-    pub fn new(board: Board, a: Applied, sense: CurrentSense, faults: Faults, encoder: u32) -> Self {
+    pub fn new(
+        board: Board,
+        a: Applied,
+        sense: CurrentSense,
+        faults: Faults,
+        encoder: u32,
+    ) -> Self {
         let ratio = a.ctrl.params().ratio().max(1);
         ControlLoop {
             board,

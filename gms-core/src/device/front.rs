@@ -8,7 +8,9 @@ use crate::numtext::Num;
 use crate::protocol::{self, Device, Settings};
 use crate::reference::{Motion, SUB_PER_COUNT};
 
-use super::{Applied, Board, Ctrl, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status};
+use super::{
+    Applied, Board, Ctrl, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status,
+};
 
 /// How the protocol side reaches the loop.
 pub trait Link {
