@@ -23,7 +23,7 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Sample,
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Requests, Sample, Status,
 };
 use gms_core::drive::{BoardLimits, CurrentSense};
 use gms_core::protocol::{self, LineReader};
@@ -102,7 +102,14 @@ struct Sim {
 
 impl Sim {
     /// One position period: `ratio` PWM periods of the core, the plant between them.
-    fn tick(&mut self, shared: &Shared) {
+    /// `exchange` is the mailbox's (behind a mutex or local); step durations are timed on the
+    /// host when `timed` (real time), else counted as 0 (simulated time).
+    fn tick(
+        &mut self,
+        mut exchange: impl FnMut(Status) -> Option<Requests>,
+        queue: &Mutex<VecDeque<Sample>>,
+        timed: bool,
+    ) {
         let n = self.core.ratio();
         let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
         for _ in 0..n {
@@ -111,13 +118,17 @@ impl Sim {
                 current_codes: self.adc.code(self.plant.adc()),
             };
             let t0 = Instant::now();
-            let out = self.core.step(inp, |st| shared.mailbox().exchange(st));
-            let ns = t0.elapsed().as_nanos().min(u32::MAX as u128) as u32;
+            let out = self.core.step(inp, &mut exchange);
+            let ns = if timed {
+                t0.elapsed().as_nanos().min(u32::MAX as u128) as u32
+            } else {
+                0
+            };
             self.core.finish(ns);
             let duty = if self.core.enabled() { out.duty } else { 0.0 };
             if let Some(mut s) = out.sample {
                 s.friction_true = self.plant.friction as f32;
-                let mut q = shared.telemetry();
+                let mut q = relock(queue);
                 if q.len() == QUEUE {
                     q.pop_front();
                 }
@@ -431,7 +442,7 @@ pub fn serve(
             let due = start.elapsed().as_secs_f64();
             let mut n = 0;
             while sim.t + dt <= due && n < 200 {
-                sim.tick(&rt);
+                sim.tick(|st| rt.mailbox().exchange(st), &rt.telemetry, true);
                 n += 1;
             }
             if n == 200 {
@@ -486,5 +497,112 @@ fn serve_pty(dev: &mut Dev, shared: &Shared, on_ready: impl FnOnce(&str)) -> Res
         // serve_client returns only on an I/O error; start over after a pause.
         serve_client(dev, shared, &master);
         std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// The virtual device in-process and in simulated time: the same core, plant and store as
+/// [`serve`], with the protocol's waits driving the simulation instead of a real-time thread
+/// (deterministic: every run of the same requests gives the same numbers). For tests and
+/// scripted experiments.
+pub struct LocalDevice {
+    dev: Front<LocalLink, FlashStore<HostFlash>>,
+}
+
+/// The in-process link: waiting on the loop runs it one position period.
+struct LocalLink {
+    sim: Sim,
+    mailbox: Mailbox,
+    queue: Mutex<VecDeque<Sample>>,
+}
+
+impl Link for LocalLink {
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
+        f(&mut self.mailbox)
+    }
+    fn now_us(&self) -> u64 {
+        (self.sim.t * 1e6) as u64
+    }
+    fn pause(&mut self) {
+        self.tick();
+    }
+}
+
+impl LocalLink {
+    fn tick(&mut self) {
+        let mb = &mut self.mailbox;
+        self.sim.tick(|st| mb.exchange(st), &self.queue, false);
+    }
+}
+
+impl LocalDevice {
+    /// A device on the scenario `sc`, its store in memory.
+    pub fn new(sc: &Scenario) -> Result<LocalDevice, String> {
+        let defaults = sc.controller_params()?;
+        let board = board(sc);
+        let mut store = FlashStore::new(HostFlash::in_memory());
+        let start = device::startup(store.load(), &defaults, &board)
+            .map_err(|e| format!("the scenario's controller: {e}"))?;
+        let adc = Adc::new(sc);
+        let sense = adc.sense().ok_or("plant: the ADC's range is not usable")?;
+        let plant = Plant::new(&sc.plant, sc.plant.seed)?;
+        let encoder = plant.encoder() as u32;
+        let core = ControlLoop::new(board, start.applied, sense, start.faults, encoder);
+        let mailbox = Mailbox {
+            status: core.status(),
+            ..Mailbox::new()
+        };
+        let link = LocalLink {
+            sim: Sim {
+                core,
+                plant,
+                adc,
+                substeps: sc.plant.substeps,
+                t: 0.0,
+            },
+            mailbox,
+            queue: Mutex::new(VecDeque::with_capacity(QUEUE)),
+        };
+        Ok(LocalDevice {
+            dev: Front::new(link, store, board, start.settings, defaults),
+        })
+    }
+
+    /// Sends one request line; returns the reply (its lines, the last `ok …` or `err …`).
+    pub fn ask(&mut self, line: &str) -> String {
+        let mut out = String::new();
+        let mut reader = LineReader::default();
+        for b in line.bytes().chain(std::iter::once(b'\n')) {
+            if let Some(l) = reader.push(b) {
+                let _ = protocol::execute(&mut self.dev, l, &mut out);
+            }
+        }
+        out
+    }
+
+    /// Runs the device for `seconds` of simulated time.
+    pub fn run(&mut self, seconds: f64) {
+        let link = self.dev.link_mut();
+        let end = link.sim.t + seconds;
+        while link.sim.t < end {
+            link.tick();
+        }
+    }
+
+    /// The telemetry lines produced since the last call (while a stream is on).
+    pub fn telemetry(&mut self) -> Vec<String> {
+        let samples: Vec<Sample> = relock(&self.dev.link_mut().queue).drain(..).collect();
+        if !self.dev.streaming() {
+            return Vec::new();
+        }
+        let mut text = String::new();
+        for s in &samples {
+            let _ = self.dev.telemetry_line(&mut text, s);
+        }
+        text.lines().map(String::from).collect()
+    }
+
+    /// The plant's true position now [rad] (the simulator's truth, for tests).
+    pub fn true_position(&mut self) -> f64 {
+        self.dev.link_mut().sim.plant.theta
     }
 }

@@ -1,0 +1,271 @@
+//! One conformance suite of protocol exchanges, run against the device core in-process (with
+//! the simulated plant, in simulated time) and against `hil-sim serve` over TCP (real time):
+//! both are gms-core's device core, so both must answer alike.
+
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
+use hil_sim::device::LocalDevice;
+use hil_sim::scenario::Scenario;
+
+mod common;
+use common::Server;
+
+/// A device under test.
+trait Dut {
+    /// Sends a line; returns every line received up to its reply (telemetry included).
+    fn ask_all(&mut self, line: &str) -> Vec<String>;
+    /// Lets `seconds` pass on the device.
+    fn wait(&mut self, seconds: f64);
+    /// The reply line.
+    fn ask(&mut self, line: &str) -> String {
+        self.ask_all(line).pop().unwrap_or_default()
+    }
+}
+
+struct Local(LocalDevice);
+
+impl Dut for Local {
+    fn ask_all(&mut self, line: &str) -> Vec<String> {
+        let mut lines = self.0.telemetry();
+        let reply = self.0.ask(line);
+        lines.extend(reply.lines().map(String::from));
+        lines
+    }
+    fn wait(&mut self, seconds: f64) {
+        self.0.run(seconds);
+    }
+}
+
+struct Tcp {
+    _srv: Server,
+    s: TcpStream,
+    pending: String,
+}
+
+impl Dut for Tcp {
+    fn ask_all(&mut self, line: &str) -> Vec<String> {
+        self.s.write_all(format!("{line}\n").as_bytes()).unwrap();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        let mut buf = [0u8; 8192];
+        loop {
+            if let Some(end) = self.pending.match_indices('\n').map(|(i, _)| i).find(|&i| {
+                let start = self.pending[..i].rfind('\n').map_or(0, |j| j + 1);
+                let l = &self.pending[start..i];
+                l.starts_with("ok") || l.starts_with("err ")
+            }) {
+                let lines = self.pending[..end].lines().map(String::from).collect();
+                self.pending = self.pending[end + 1..].to_string();
+                return lines;
+            }
+            assert!(Instant::now() < deadline, "no reply: {:?}", self.pending);
+            if let Ok(n) = self.s.read(&mut buf) {
+                assert!(n > 0, "server closed");
+                self.pending.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+    }
+    fn wait(&mut self, seconds: f64) {
+        std::thread::sleep(Duration::from_secs_f64(seconds));
+    }
+}
+
+fn local() -> Local {
+    Local(LocalDevice::new(&Scenario::default()).unwrap())
+}
+
+fn tcp(dir: &std::path::Path) -> Tcp {
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.join("flash.img"));
+    let s = TcpStream::connect(&srv.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+    Tcp {
+        _srv: srv,
+        s,
+        pending: String::new(),
+    }
+}
+
+/// Runs `check` on both devices.
+fn both(check: impl Fn(&mut dyn Dut)) {
+    check(&mut local());
+    let dir = tempfile::tempdir().unwrap();
+    check(&mut tcp(dir.path()));
+}
+
+/// The value of `key=` in a status or telemetry line.
+fn field(line: &str, key: &str) -> f64 {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(key).and_then(|v| v.strip_prefix('=')))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {line}"))
+}
+
+fn keys(line: &str) -> Vec<String> {
+    line.split_whitespace()
+        .skip(1)
+        .filter_map(|w| w.split_once('=').map(|(k, _)| k.to_string()))
+        .collect()
+}
+
+#[test]
+fn status_keys_are_one_set() {
+    let expect = [
+        "mode",
+        "enabled",
+        "faults",
+        "t",
+        "pos",
+        "error_counts",
+        "moving",
+        "current",
+        "fault_names",
+        "ff",
+        "duty",
+        "step_us_worst",
+        "step_us_mean",
+        "sense_offset",
+    ];
+    both(|d| assert_eq!(keys(&d.ask("status")), expect));
+}
+
+#[test]
+fn enable_and_disable() {
+    both(|d| {
+        assert_eq!(d.ask("enable"), "ok");
+        assert_eq!(field(&d.ask("status"), "enabled"), 1.0);
+        assert_eq!(d.ask("disable"), "ok");
+        assert_eq!(field(&d.ask("status"), "enabled"), 0.0);
+        assert!(
+            d.ask("move 0.01").starts_with("err 8 "),
+            "move while disabled"
+        );
+    });
+}
+
+#[test]
+fn a_second_move_mid_move_continues_the_reference() {
+    both(|d| {
+        assert_eq!(d.ask("enable"), "ok");
+        assert_eq!(d.ask("stream ref 1000"), "ok");
+        assert_eq!(d.ask("move 0.01 0.1"), "ok");
+        d.wait(0.05);
+        assert_eq!(d.ask("move 0.02 0.1"), "ok");
+        d.wait(0.35);
+        let lines = d.ask_all("stream off");
+        let refs: Vec<f64> = lines
+            .iter()
+            .filter(|l| l.starts_with('#'))
+            .map(|l| field(l, "ref"))
+            .collect();
+        assert!(refs.len() > 300, "{} samples", refs.len());
+        let count = 3.8e-6;
+        for w in refs.windows(2) {
+            // Monotonic, and no step above the speed limit (0.1 rad/s over 1 ms).
+            assert!(
+                w[1] >= w[0] - 0.01 * count,
+                "backs up: {} -> {}",
+                w[0],
+                w[1]
+            );
+            assert!(
+                w[1] - w[0] <= 0.1 * 1e-3 * 1.02,
+                "jumps: {} -> {}",
+                w[0],
+                w[1]
+            );
+        }
+        assert!(
+            (refs.last().unwrap() - 0.02).abs() < count,
+            "{:?}",
+            refs.last()
+        );
+    });
+}
+
+#[test]
+fn a_following_error_latches_and_clear_works() {
+    both(|d| {
+        assert_eq!(d.ask("set lim.i_max 0.02"), "ok");
+        assert_eq!(d.ask("enable"), "ok");
+        assert_eq!(d.ask("move 0.5 5"), "ok");
+        d.wait(0.3);
+        let st = d.ask("status");
+        assert!(st.contains("fault_names=following_error "), "{st}");
+        assert_eq!(field(&st, "enabled"), 0.0);
+        assert!(d.ask("enable").starts_with("err 8 "));
+        assert_eq!(d.ask("clear"), "ok");
+        assert_eq!(d.ask("enable"), "ok");
+    });
+}
+
+#[test]
+fn an_over_current_latches() {
+    both(|d| {
+        // A current loop far too stiff for the winding oscillates beyond the trip.
+        assert_eq!(d.ask("set cur.kp 5000"), "ok");
+        // It may trip before `enable` has answered ("not enabled (fault)").
+        d.ask("enable");
+        d.wait(0.1);
+        let st = d.ask("status");
+        assert!(st.contains("over_current"), "{st}");
+        assert_eq!(field(&st, "enabled"), 0.0);
+    });
+}
+
+#[test]
+fn a_refused_set_changes_nothing() {
+    both(|d| {
+        assert!(d.ask("set gms.fs 1e-6").starts_with("err 7 "));
+        assert_eq!(d.ask("get gms.fs"), "ok 0.00022");
+        assert!(d.ask("set pos.kp 5000").starts_with("err 6 "));
+        assert_eq!(d.ask("get pos.kp"), "ok 0.2");
+        assert!(d.ask("set ff.adapt.scale 1.1").starts_with("err 8 "));
+    });
+}
+
+/// The largest |error| [counts] in the telemetry lines.
+fn peak_error(lines: &[String]) -> f64 {
+    lines
+        .iter()
+        .filter(|l| l.starts_with('#'))
+        .map(|l| field(l, "error").abs() / 3.8e-6)
+        .fold(0.0, f64::max)
+}
+
+/// A slow move; at 0.2 s `set` (if any); the error's peak over the next 150 ms.
+fn error_after(set: Option<&str>) -> f64 {
+    let mut d = local();
+    assert_eq!(d.ask("enable"), "ok");
+    assert_eq!(d.ask("move 0.05 0.1"), "ok");
+    d.wait(0.2);
+    assert_eq!(d.ask("stream error 1000"), "ok");
+    if let Some(line) = set {
+        assert_eq!(d.ask(line), "ok", "{line}");
+    }
+    d.wait(0.15);
+    peak_error(&d.ask_all("stream off"))
+}
+
+#[test]
+fn live_sets_are_bumpless() {
+    // In simulated time the run without the set is the exact reference.
+    let base = error_after(None);
+    assert!(base > 0.2 && base < 5.0, "{base}");
+    for set in [
+        "set ff.gain 0.94",
+        "set ff.gain 0.9",
+        "set pos.kp 0.22",
+        "set pos.ki 110",
+        "set cur.kp 1.65",
+        "set gms.fc 1.3e-4",
+        "set ff.mode gms-adaptive",
+    ] {
+        let e = error_after(Some(set));
+        eprintln!("{set}: peak {e:.2} counts (without: {base:.2})");
+        assert!(
+            e <= base * 1.2 + 0.5,
+            "{set}: peak {e} counts against {base}"
+        );
+    }
+}
