@@ -376,7 +376,7 @@ impl MovePlan {
             return Err(SegmentError::NotPositive(0));
         }
         let target_sub = target as f64 / rad_per_count as f64 * SUB_PER_COUNT as f64;
-        if !(target_sub.abs() < 9.0e18) {
+        if target_sub.is_nan() || target_sub.abs() >= 9.0e18 {
             return Err(SegmentError::NonFinite(0));
         }
         let target_sub = if target_sub >= 0.0 {

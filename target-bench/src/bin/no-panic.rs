@@ -4,7 +4,9 @@
 //! position and current steps, the reference generator) and the bench protocol (line reader,
 //! parser, `execute` with every command, the number parser and formatter) and the firmware's
 //! pure control-step logic (`gms_core::drive`: count extension, current scaling, fault checks,
-//! step statistics, bridge compare values) on inputs the optimiser cannot see,
+//! step statistics, bridge compare values) and the device core (`gms_core::device`: the
+//! protocol front with every command, move planning, start-up, and the control loop's step
+//! with its request handling and bumpless hand-over) on inputs the optimiser cannot see,
 //! with `panic-never` as its panic handler: that handler refers to a symbol that does not
 //! exist, so the release build links only if no panic (bounds check, overflow, unwrap, …)
 //! is reachable from this code. `cargo build -p target-bench --bin no-panic --release
@@ -17,51 +19,62 @@ use core::hint::black_box;
 
 use cortex_m_rt::entry;
 use gms_core::controller::Controller;
+use gms_core::device::{
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, StoreError,
+};
 use gms_core::drive;
-use gms_core::protocol::{self, Device, LineReader, Settings};
+use gms_core::protocol::{self, LineReader};
 use gms_core::reference::{Reference, Segment};
 use gms_core::{
     FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
 };
 use panic_never as _;
 
-/// A device that does nothing but keep the settings (the protocol's own paths are the point).
-struct Nop(Settings);
+/// The device core's link on this check: the mailbox here, and waiting on the loop runs
+/// the loop one PWM period on inputs the optimiser cannot see (so `ControlLoop::step`, the
+/// exchange and the request handling are all covered).
+struct CheckLink {
+    mailbox: Mailbox,
+    core: ControlLoop,
+    t: u64,
+}
 
-impl Device for Nop {
-    fn settings(&self) -> &Settings {
-        &self.0
+impl Link for CheckLink {
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
+        f(&mut self.mailbox)
     }
-    fn apply(&mut self, new: Settings) {
-        self.0 = new;
+    fn now_us(&self) -> u64 {
+        self.t
     }
-    fn save(&mut self) -> Result<(), &'static str> {
-        black_box(drive::encode_settings(&self.0));
+    fn pause(&mut self) {
+        self.t = self.t.wrapping_add(black_box(50));
+        let inp = Inputs {
+            encoder: black_box(7),
+            current_codes: black_box(4096),
+        };
+        let mb = &mut self.mailbox;
+        let out = self.core.step(inp, |st| mb.exchange(st));
+        black_box((
+            out.compare,
+            out.duty,
+            out.timing,
+            out.sample.map(|s| s.friction),
+        ));
+        black_box(self.core.finish(black_box(3000)));
+    }
+}
+
+/// A store in RAM (one record).
+struct RamStore(Option<[u8; drive::RECORD_LEN]>);
+
+impl ParamStore for RamStore {
+    fn save(&mut self, rec: &[u8; drive::RECORD_LEN]) -> Result<(), StoreError> {
+        self.0 = Some(*black_box(rec));
         Ok(())
     }
-    fn load(&mut self) -> Result<(), &'static str> {
-        let rec = black_box(drive::encode_settings(&self.0));
-        self.0 = drive::decode_settings(&rec, &self.0).map_err(|_| "invalid")?;
-        Ok(())
+    fn load(&mut self) -> Result<Option<[u8; drive::RECORD_LEN]>, StoreError> {
+        Ok(black_box(self.0))
     }
-    fn defaults(&mut self) {}
-    fn enable(&mut self) -> Result<(), &'static str> {
-        Err("no")
-    }
-    fn disable(&mut self) {}
-    fn status(&self, out: &mut dyn Write) -> fmt::Result {
-        gms_core::numtext::write_f32(out, black_box(self.0.i_max))
-    }
-    fn clear(&mut self) {}
-    fn move_to(&mut self, pos: f32, _vel: Option<f32>) -> Result<(), &'static str> {
-        black_box(pos);
-        Ok(())
-    }
-    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
-        black_box((fields, rate_hz));
-        Ok(())
-    }
-    fn stream_off(&mut self) {}
 }
 
 /// A sink that keeps the last byte written.
@@ -135,7 +148,39 @@ fn main() -> ! {
     let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
     let mut stats = drive::StepStats::new();
     let mut faults = drive::Faults::NONE;
-    let mut dev = Nop(selftest::controller_params());
+    let board = Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 2,
+        limits: drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            travel: 50.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.8,
+        },
+        has_truth: false,
+    };
+    let defaults = device::default_settings();
+    let mut store = RamStore(None);
+    let (Ok(start), Some(dsense)) = (
+        device::startup(store.load(), &defaults, black_box(&board)),
+        drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0)),
+    ) else {
+        loop {
+            cortex_m::asm::wfi();
+        }
+    };
+    let core = ControlLoop::new(board, start.applied, dsense, start.faults, black_box(0));
+    let link = CheckLink {
+        mailbox: Mailbox::new(),
+        core,
+        t: 0,
+    };
+    let mut dev = Front::new(link, store, board, start.settings, defaults);
     let mut reader = LineReader::default();
     let mut sink = Sink(0);
     loop {
@@ -144,6 +189,8 @@ fn main() -> ! {
         if let Some(line) = reader.push(byte) {
             let _ = protocol::execute(&mut dev, line, &mut sink);
         }
+        let sample = device::Sample::default();
+        let _ = dev.telemetry_line(&mut sink, black_box(&sample));
         black_box(gms_core::numtext::parse_f32(black_box("1.5e-3")));
         // The firmware's control-step logic.
         let delta = enc.update(black_box(7u32));
