@@ -8,7 +8,7 @@
 use crate::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use crate::error::ParamError;
 use crate::gms::{Gms, GmsParams};
-use crate::math;
+use crate::math::{self, clamp};
 use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::static_map::{StaticMap, StaticParams};
@@ -180,58 +180,36 @@ impl<const N: usize> ControllerParams<N> {
     pub fn validate(&self) -> Result<(), ControllerError> {
         use crate::protocol::range;
         let a = &self.ff.actuator;
+        // One row per parameter: its path, its value, its range from the protocol's table.
+        macro_rules! row {
+            ($path:literal, $v:expr) => {
+                ($path, $v, const { range($path) })
+            };
+        }
         let scalars: [(&'static str, f32, (f32, f32)); 23] = [
-            (
-                "rate.pos_hz",
-                self.pos_rate_hz,
-                const { range("rate.pos_hz") },
-            ),
-            (
-                "rate.cur_hz",
-                self.cur_rate_hz,
-                const { range("rate.cur_hz") },
-            ),
-            ("pos.kp", self.pid.kp, const { range("pos.kp") }),
-            ("pos.ki", self.pid.ki, const { range("pos.ki") }),
-            ("pos.kd", self.pid.kd, const { range("pos.kd") }),
-            (
-                "pos.d_filter_hz",
-                self.pid.d_filter_hz,
-                const { range("pos.d_filter_hz") },
-            ),
-            (
-                "pos.i_limit",
-                self.pid.i_limit,
-                const { range("pos.i_limit") },
-            ),
-            ("cur.kp", self.current.kp, const { range("cur.kp") }),
-            ("cur.ki", self.current.ki, const { range("cur.ki") }),
-            ("motor.k_m", self.motor.k_m, const { range("motor.k_m") }),
-            ("motor.r", self.motor.r, const { range("motor.r") }),
-            ("motor.k_e", self.motor.k_e, const { range("motor.k_e") }),
-            ("lim.i_max", self.i_max, const { range("lim.i_max") }),
-            (
-                "lim.v_supply",
-                self.v_supply,
-                const { range("lim.v_supply") },
-            ),
-            ("ff.gain", self.ff.gain, const { range("ff.gain") }),
-            (
-                "ff.inertia",
-                self.motor.inertia,
-                const { range("ff.inertia") },
-            ),
-            (
-                "ff.static_band",
-                self.ff.static_band,
-                const { range("ff.static_band") },
-            ),
-            ("gms.fs", a.stribeck.fs, const { range("gms.fs") }),
-            ("gms.fc", a.stribeck.fc, const { range("gms.fc") }),
-            ("gms.vs", a.stribeck.vs, const { range("gms.vs") }),
-            ("gms.delta", a.stribeck.delta, const { range("gms.delta") }),
-            ("gms.sigma", a.sigma, const { range("gms.sigma") }),
-            ("gms.c", a.c, const { range("gms.c") }),
+            row!("rate.pos_hz", self.pos_rate_hz),
+            row!("rate.cur_hz", self.cur_rate_hz),
+            row!("pos.kp", self.pid.kp),
+            row!("pos.ki", self.pid.ki),
+            row!("pos.kd", self.pid.kd),
+            row!("pos.d_filter_hz", self.pid.d_filter_hz),
+            row!("pos.i_limit", self.pid.i_limit),
+            row!("cur.kp", self.current.kp),
+            row!("cur.ki", self.current.ki),
+            row!("motor.k_m", self.motor.k_m),
+            row!("motor.r", self.motor.r),
+            row!("motor.k_e", self.motor.k_e),
+            row!("lim.i_max", self.i_max),
+            row!("lim.v_supply", self.v_supply),
+            row!("ff.gain", self.ff.gain),
+            row!("ff.inertia", self.motor.inertia),
+            row!("ff.static_band", self.ff.static_band),
+            row!("gms.fs", a.stribeck.fs),
+            row!("gms.fc", a.stribeck.fc),
+            row!("gms.vs", a.stribeck.vs),
+            row!("gms.delta", a.stribeck.delta),
+            row!("gms.sigma", a.sigma),
+            row!("gms.c", a.c),
         ];
         for (name, v, (lo, hi)) in scalars {
             if !(v.is_finite() && v >= lo && v <= hi) {
@@ -340,16 +318,6 @@ fn static_of<const N: usize>(g: &GmsParams<N>) -> StaticParams {
         stribeck: g.stribeck,
         negative: g.negative,
         sigma: g.sigma,
-    }
-}
-
-fn clamp(x: f32, lim: f32) -> f32 {
-    if x > lim {
-        lim
-    } else if x < -lim {
-        -lim
-    } else {
-        x
     }
 }
 
@@ -467,29 +435,22 @@ impl<const N: usize> Controller<N> {
             || p.rad_per_count != self.p.rad_per_count
     }
 
-    /// Takes the parameter set `p` while running, without a bump (live tuning).
+    /// Live tuning: this controller (new, built by [`Controller::try_new`] from the new set,
+    /// at rest) takes the running state of `old`, without a bump. Cheap (no validation, no
+    /// transcendental function): fit for a control step, so that the set is validated and
+    /// built outside the loop.
     ///
     /// At the same rates every state is kept: the integrators, the derivative filter, the
-    /// friction models' block forces (each clamped into its new limit, see [`Gms::retune`]),
-    /// the adaptive scale (clamped into its new bounds), the last reference. The position
-    /// loop's integrator is handed over so that its total torque at the last step's inputs
-    /// (error, filtered velocity error, friction model, reference acceleration) stays the
-    /// same, scaled by `k_M new / k_M old` so that the current command stays the same; the
-    /// current loop's integrator likewise keeps its voltage at the last current error. Both
-    /// stay within their new limits (`pos.i_limit`, `lim.v_supply`), so a change that needs
-    /// more than those limits allow is bumpless only up to them. A change of the loop rates
-    /// or of the encoder resolution ([`Controller::rates_differ`]) gives a controller at rest
-    /// ([`Controller::reset`]) keeping only the adaptive scale. On error nothing changes.
-    pub fn retune(&mut self, p: ControllerParams<N>) -> Result<(), ControllerError> {
-        let mut next = Controller::try_new(p)?;
-        next.take_state_from(self);
-        *self = next;
-        Ok(())
-    }
-
-    /// The hand-over of [`Controller::retune`]: this controller (new, validated, at rest)
-    /// takes the running state of `old`. Cheap (no validation, no transcendental function):
-    /// fit for a control step, so that the set is validated and built outside the loop.
+    /// friction models' block forces (each clamped into its new limit, see
+    /// [`Gms::take_state_from`]), the adaptive scale (clamped into its new bounds), the last
+    /// reference. The position loop's integrator is handed over so that its total torque at
+    /// the last step's inputs (error, filtered velocity error, friction model, reference
+    /// acceleration) stays the same, scaled by `k_M new / k_M old` so that the current command
+    /// stays the same; the current loop's integrator likewise keeps its voltage at the last
+    /// current error. Both stay within their new limits (`pos.i_limit`, `lim.v_supply`), so a
+    /// change that needs more than those limits allow is bumpless only up to them. After a
+    /// change of the loop rates or of the encoder resolution ([`Controller::rates_differ`])
+    /// it stays at rest and keeps only the adaptive scale.
     pub fn take_state_from(&mut self, old: &Controller<N>) {
         let scale = old.adapt.scale();
         let ad = self.p.ff.adapt;

@@ -136,16 +136,8 @@ impl<const N: usize> Gms<N> {
         self.viscous
     }
 
-    /// Takes new parameters without forgetting the state (live tuning): see
-    /// [`Gms::take_state_from`]. On error nothing changes.
-    pub fn retune(&mut self, params: GmsParams<N>) -> Result<(), ParamError> {
-        let mut next = Gms::try_new(params)?;
-        next.take_state_from(self);
-        *self = next;
-        Ok(())
-    }
-
-    /// Takes over the state of `old` (a model of other parameters): each block keeps its
+    /// Live tuning: this model (new, of other parameters) takes over the state of `old`:
+    /// each block keeps its
     /// force, clamped into its new limit `alpha_i` times the larger breakaway level (`Fs`, or
     /// the larger of both directions' with `negative`); the viscous part of the last step is
     /// rescaled to the new `sigma` (zero if the old `sigma` was 0). A few dozen operations: fit
@@ -156,13 +148,7 @@ impl<const N: usize> Gms<N> {
         for i in 0..N {
             let lim = self.alpha[i] * fs;
             let f = old.f[i];
-            let clamped = if f > lim {
-                lim
-            } else if f < -lim {
-                -lim
-            } else {
-                f
-            };
+            let clamped = math::clamp(f, lim);
             self.f[i] = clamped;
             self.comp[i] = if clamped == f { old.comp[i] } else { 0.0 };
             sum += clamped;

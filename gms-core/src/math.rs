@@ -241,3 +241,14 @@ pub fn stribeck_decay(r: f32, delta: f32) -> f32 {
 pub fn powf(base: f32, p: f32) -> f32 {
     exp(p * ln(base))
 }
+
+/// `x` clamped into `[-lim, lim]` (`lim >= 0`; a NaN `x` stays NaN).
+pub(crate) fn clamp(x: f32, lim: f32) -> f32 {
+    if x > lim {
+        lim
+    } else if x < -lim {
+        -lim
+    } else {
+        x
+    }
+}

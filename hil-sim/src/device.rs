@@ -117,13 +117,9 @@ impl Sim {
                 encoder: self.plant.encoder() as u32,
                 current_codes: self.adc.code(self.plant.adc()),
             };
-            let t0 = Instant::now();
+            let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);
-            let ns = if timed {
-                t0.elapsed().as_nanos().min(u32::MAX as u128) as u32
-            } else {
-                0
-            };
+            let ns = t0.map_or(0, |t| t.elapsed().as_nanos().min(u32::MAX as u128) as u32);
             self.core.finish(ns);
             let duty = if self.core.enabled() { out.duty } else { 0.0 };
             if let Some(mut s) = out.sample {
@@ -599,10 +595,5 @@ impl LocalDevice {
             let _ = self.dev.telemetry_line(&mut text, s);
         }
         text.lines().map(String::from).collect()
-    }
-
-    /// The plant's true position now [rad] (the simulator's truth, for tests).
-    pub fn true_position(&mut self) -> f64 {
-        self.dev.link_mut().sim.plant.theta
     }
 }

@@ -165,20 +165,18 @@ impl ControlLoop {
             let ratio = a.ctrl.params().ratio().max(1);
             let rates = self.ctrl.rates_differ(a.ctrl.params())
                 || (a.psc, a.arr, ratio) != (self.psc, self.arr, self.ratio);
+            // Same rates: the running state is handed over (bumpless); new rates: the new
+            // controller starts at rest, keeping what the adaptation learned about the axis.
             let mut next = a.ctrl;
+            next.take_state_from(&self.ctrl);
             if rates {
-                // New loop rates: the bridge goes off for the change, the new controller
-                // starts at rest (keeping what the adaptation learned about the axis).
+                // The bridge goes off for the change.
                 self.switch_off();
-                next.set_adaptive_scale(self.ctrl.adaptive_scale());
                 self.ratio = ratio;
                 self.phase = 0;
                 self.psc = a.psc;
                 self.arr = a.arr;
                 timing = Some((a.psc, a.arr));
-            } else {
-                // Same rates: the running state is handed over (bumpless).
-                next.take_state_from(&self.ctrl);
             }
             self.ctrl = next;
             self.limits = a.limits;

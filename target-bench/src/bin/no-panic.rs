@@ -132,22 +132,6 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    let limits = drive::limits_for(
-        &selftest::controller_params(),
-        black_box(&drive::BoardLimits {
-            trip_factor: 1.5,
-            sense_range: 0.48,
-            max_error: 0.01,
-            max_speed: 100.0,
-            travel: 50.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.8,
-        }),
-    );
-    let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
-    let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
-    let mut stats = drive::StepStats::new();
-    let mut faults = drive::Faults::NONE;
     let board = Board {
         pwm_timer_hz: 168_000_000,
         pwm_max_arr: 65_534,
@@ -164,6 +148,11 @@ fn main() -> ! {
         },
         has_truth: false,
     };
+    let limits = drive::limits_for(&selftest::controller_params(), black_box(&board.limits));
+    let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
+    let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
+    let mut stats = drive::StepStats::new();
+    let mut faults = drive::Faults::NONE;
     let defaults = device::default_settings();
     let mut store = RamStore(None);
     let (Ok(start), Some(dsense)) = (
