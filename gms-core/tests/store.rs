@@ -252,12 +252,12 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
     // The F405 board's figures (firmware/src/board.rs).
     let board = Board {
         pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_535,
-        encoder_bits: 16,
-        sense_oversample: 4,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 2,
         limits: BoardLimits {
             trip_factor: 1.5,
-            sense_range: 4095.0,
+            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             travel: 50.0,

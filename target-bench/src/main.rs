@@ -6,7 +6,9 @@
 //! instruction counts:
 //! - `calib <ticks>`: SysTick ticks for `CALIB_REPS` × 32 extra `nop`s (the tick/instruction
 //!   ratio, measured rather than assumed);
-//! - `cost <name> <ticks> <calls>`: ticks of `calls` calls minus the same loop without them;
+//! - `cost <name> <ticks> <calls>`: ticks of `calls` calls minus the same loop without them
+//!   (`device_period`: one position period of the device core, `ControlLoop::step` for the
+//!   position step and each current step, `finish` after each, the mailbox exchange);
 //! - `equiv <name> <hash>`: gms-core's self-test hashes.
 #![no_std]
 #![no_main]
@@ -18,7 +20,9 @@ use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hio};
 use gms_core::controller::{Controller, FfMode};
-use gms_core::reference::RefSample;
+use gms_core::device::{self, Board, ControlLoop, Inputs, Mailbox, MoveRequest, Requests};
+use gms_core::drive::{self, CurrentSense, Faults};
+use gms_core::reference::{Motion, RefSample};
 use gms_core::{
     FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
 };
@@ -90,6 +94,114 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
         }
     });
     with.saturating_sub(without)
+}
+
+/// The cost of one position period of the device core on the firmware's timing (20 kHz
+/// current loop, 10 kHz position loop: two `ControlLoop::step` calls, each followed by
+/// `finish`), enabled, during a `move` at 0.3 rad/s with telemetry every 10th position step,
+/// the exchange going through a [`Mailbox`] as on the board; the encoder follows the
+/// reference with a 0-3 count lag.
+fn device_period(out: &mut hio::HostStream) {
+    // The F405 board's figures (firmware/src/board.rs).
+    let board = Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 2,
+        limits: drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            travel: 50.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.8,
+        },
+        has_truth: false,
+    };
+    let settings = device::default_settings();
+    let (Ok(a), Some(sense)) = (
+        device::prepare(&settings, &board),
+        CurrentSense::new(3.3, 4095.0, 3.4, 2048.0),
+    ) else {
+        return;
+    };
+    let rpc = settings.rad_per_count;
+    let mut lp = ControlLoop::new(board, a, sense, Faults::NONE, 0);
+    let mut mb = Mailbox::new();
+    // About 0.02 A: two conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
+    let codes = 2 * (2048 + 84);
+    let mut first = Some(Requests {
+        enable: true,
+        stream_every: Some(10),
+        ..Requests::default()
+    });
+    lp.step(
+        Inputs {
+            encoder: 0,
+            current_codes: codes,
+        },
+        |_| first.take(),
+    );
+    let st = lp.status();
+    let Ok(plan) = Motion::plan(st.reference, 0.5, Some(0.3), rpc) else {
+        return;
+    };
+    let mut mv = Some(Requests {
+        motion: Some(MoveRequest {
+            plan,
+            from_step: st.steps,
+        }),
+        ..Requests::default()
+    });
+    let ratio = lp.ratio();
+    for _ in 0..ratio {
+        lp.step(
+            Inputs {
+                encoder: 0,
+                current_codes: codes,
+            },
+            |_| mv.take(),
+        );
+    }
+    let reference = core::cell::Cell::new(0i64);
+    let c = cost(
+        |i| {
+            let encoder = ((reference.get() >> 16) - (i & 3) as i64) as u32;
+            for _ in 0..ratio {
+                let o = lp.step(
+                    Inputs {
+                        encoder: black_box(encoder),
+                        current_codes: black_box(codes),
+                    },
+                    |st| {
+                        reference.set(st.reference.pos);
+                        mb.exchange(st)
+                    },
+                );
+                black_box((o.compare, o.sample.map(|s| s.error)));
+                black_box(lp.finish(black_box(3000)));
+            }
+        },
+        |i| {
+            let encoder = ((reference.get() >> 16) - (i & 3) as i64) as u32;
+            for _ in 0..ratio {
+                black_box((black_box(encoder), black_box(codes)));
+                black_box(black_box(3000u32));
+            }
+        },
+    );
+    if lp.enabled() && lp.status().moving {
+        writeln!(out, "cost device_period {c} {CALLS}").ok();
+    } else {
+        // A fault switched the loop off: the figure would not be the enabled path's.
+        writeln!(
+            out,
+            "device_period: the loop left the move (faults {:?})",
+            lp.faults().0
+        )
+        .ok();
+    }
 }
 
 #[entry]
@@ -225,6 +337,8 @@ fn main() -> ! {
         );
         writeln!(out, "cost {name} {c} {CALLS}").ok();
     }
+
+    device_period(&mut out);
 
     {
         let xs = [0.3f32, 1.7, 0.05, 3.0];
