@@ -75,7 +75,6 @@ pub const LIMITS: BoardLimits = BoardLimits {
     sense_range: 0.48,
     max_error: 0.01,
     max_speed: 100.0,
-    travel: 50.0,
     clock_hz: SYSCLK_HZ,
     budget_fraction: 0.8,
 };

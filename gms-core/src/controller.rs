@@ -141,6 +141,11 @@ pub struct ControllerParams<const N: usize> {
     pub i_max: f32,
     /// Supply voltage [V], `> 0` (duty = voltage / supply).
     pub v_supply: f32,
+    /// Soft stroke limit, low side [rad] from the power-up position: the axis below it latches
+    /// `position_limit`; a `move` below it is refused. `< pos_max`.
+    pub pos_min: f32,
+    /// Soft stroke limit, high side [rad] from the power-up position (see `pos_min`).
+    pub pos_max: f32,
     /// Friction feedforward.
     pub ff: FeedforwardParams<N>,
 }
@@ -186,7 +191,7 @@ impl<const N: usize> ControllerParams<N> {
                 ($path, $v, const { range($path) })
             };
         }
-        let scalars: [(&'static str, f32, (f32, f32)); 23] = [
+        let scalars: [(&'static str, f32, (f32, f32)); 25] = [
             row!("rate.pos_hz", self.pos_rate_hz),
             row!("rate.cur_hz", self.cur_rate_hz),
             row!("pos.kp", self.pid.kp),
@@ -201,6 +206,8 @@ impl<const N: usize> ControllerParams<N> {
             row!("motor.k_e", self.motor.k_e),
             row!("lim.i_max", self.i_max),
             row!("lim.v_supply", self.v_supply),
+            row!("lim.pos_min", self.pos_min),
+            row!("lim.pos_max", self.pos_max),
             row!("ff.gain", self.ff.gain),
             row!("ff.inertia", self.motor.inertia),
             row!("ff.static_band", self.ff.static_band),
@@ -215,6 +222,9 @@ impl<const N: usize> ControllerParams<N> {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err(ControllerError::Invalid(name));
             }
+        }
+        if self.pos_min >= self.pos_max {
+            return Err(ControllerError::Invalid("lim.pos_min"));
         }
         const K: (f32, f32) = range("gms.k1");
         const ALPHA: (f32, f32) = range("gms.a1");

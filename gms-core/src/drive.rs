@@ -256,8 +256,6 @@ pub struct BoardLimits {
     pub max_error: f32,
     /// Highest plausible speed [rad/s]: a faster encoder step is a jump.
     pub max_speed: f32,
-    /// Soft limits: this far either side of the power-on position [rad].
-    pub travel: f32,
     /// CPU clock [Hz] (DWT cycles).
     pub clock_hz: u32,
     /// Share of the current-loop period one control step may take [-], in (0, 1].
@@ -270,14 +268,13 @@ pub fn limits_for(s: &Settings, b: &BoardLimits) -> Limits {
     let cap = 0.95 * b.sense_range;
     let rpc = s.rad_per_count;
     let per_step = b.max_speed / rpc / s.pos_rate_hz;
-    let travel = b.travel / rpc;
     Limits {
         i_trip: if trip < cap { trip } else { cap },
         max_error: b.max_error,
         // Float to int casts saturate (NaN gives 0).
         max_step_counts: (libm_ceil(per_step as f64) as i64).max(1),
-        pos_min: -(travel as i64),
-        pos_max: travel as i64,
+        pos_min: (s.pos_min as f64 / rpc as f64) as i64,
+        pos_max: (s.pos_max as f64 / rpc as f64) as i64,
         budget_cycles: (b.clock_hz as f32 / s.cur_rate_hz * b.budget_fraction) as u32,
     }
 }

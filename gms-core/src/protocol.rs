@@ -317,6 +317,8 @@ pub const PARAMS: &[Param] = &[
     num!("motor.k_e", "V·s/rad", 0.0, 10.0, |s| s.motor.k_e),
     num!("lim.i_max", "A", 1e-6, 100.0, |s| s.i_max),
     num!("lim.v_supply", "V", 0.1, 1e3, |s| s.v_supply),
+    num!("lim.pos_min", "rad", -1e5, 1e5, |s| s.pos_min),
+    num!("lim.pos_max", "rad", -1e5, 1e5, |s| s.pos_max),
     Param {
         path: "ff.mode",
         unit: "-",

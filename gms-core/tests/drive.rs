@@ -314,13 +314,14 @@ fn pwm_timer_settings() {
 
 #[test]
 fn limits_from_settings_and_board() {
-    let s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
+    let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
+    s.pos_min = -38.0;
+    s.pos_max = 19.0;
     let b = drive::BoardLimits {
         trip_factor: 1.5,
         sense_range: 0.48,
         max_error: 0.01,
         max_speed: 100.0,
-        travel: 38.0,
         clock_hz: 168_000_000,
         budget_fraction: 0.8,
     };
@@ -330,8 +331,9 @@ fn limits_from_settings_and_board() {
     assert_eq!(l.max_error, 0.01);
     // 100 rad/s over 0.1 ms is 0.01 rad = 2631.6 counts: 2632.
     assert_eq!(l.max_step_counts, 2632);
-    // 38 rad / 3.8 urad = 1e7 counts (f32 rounding of 3.8e-6 allows ±1).
-    assert!((l.pos_max - 10_000_000).abs() <= 1 && l.pos_min == -l.pos_max);
+    // 38 rad / 3.8 urad = 1e7 counts, 19 rad 5e6 (f32 rounding of 3.8e-6 allows ±1).
+    assert!((l.pos_min + 10_000_000).abs() <= 1, "{}", l.pos_min);
+    assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);
     // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
     assert_eq!(l.budget_cycles, 6720);
     let roomy = drive::BoardLimits {

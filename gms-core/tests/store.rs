@@ -260,7 +260,6 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
             sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
-            travel: 50.0,
             clock_hz: 168_000_000,
             budget_fraction: 0.8,
         },

@@ -50,7 +50,6 @@ pub fn board(sc: &Scenario) -> Board {
             sense_range: sc.plant.adc_range as f32,
             max_error: 0.01,
             max_speed: 100.0,
-            travel: 50.0,
             clock_hz: 1_000_000_000,
             budget_fraction: 20_000.0,
         },
@@ -531,11 +530,17 @@ impl LocalLink {
 }
 
 impl LocalDevice {
-    /// A device on the scenario `sc`, its store in memory.
+    /// A device on the scenario `sc`, its store in memory (erased).
     pub fn new(sc: &Scenario) -> Result<LocalDevice, String> {
+        Self::with_flash(sc, HostFlash::in_memory())
+    }
+
+    /// A device on the scenario `sc` starting on the store flash `flash` (what a board finds
+    /// at power-up).
+    pub fn with_flash(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, String> {
         let defaults = sc.controller_params()?;
         let board = board(sc);
-        let mut store = FlashStore::new(HostFlash::in_memory());
+        let mut store = FlashStore::new(flash);
         let start = device::startup(store.load(), &defaults, &board)
             .map_err(|e| format!("the scenario's controller: {e}"))?;
         let adc = Adc::new(sc);
@@ -573,6 +578,14 @@ impl LocalDevice {
             }
         }
         out
+    }
+
+    /// The store flash as it is now (the device is gone: to power up again on it, with
+    /// [`LocalDevice::with_flash`]).
+    pub fn into_flash(self) -> HostFlash {
+        let (_, store) = self.dev.into_parts();
+        // `FlashStore::new` accepted this flash's geometry, so the map is there.
+        store.into_flash().unwrap_or_else(HostFlash::in_memory)
     }
 
     /// Runs the device for `seconds` of simulated time.

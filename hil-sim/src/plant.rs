@@ -69,6 +69,7 @@ pub struct Plant {
     actuator: AnyModel,
     guideway: AnyModel,
     drift: crate::scenario::Drift,
+    glitch: crate::scenario::Glitch,
     /// Time since the start [s].
     pub t: f64,
     /// Current [A].
@@ -139,6 +140,7 @@ impl Plant {
             actuator,
             guideway,
             drift: spec.drift.clone(),
+            glitch: spec.encoder_glitch,
             t: 0.0,
             i: 0.0,
             omega: 0.0,
@@ -155,9 +157,15 @@ impl Plant {
         self.drift.factor(self.t, self.theta)
     }
 
-    /// The encoder count now (floor of angle / resolution).
+    /// The encoder count now (floor of angle / resolution, plus the injected glitch once it
+    /// is due).
     pub fn encoder(&self) -> i64 {
-        (self.theta / self.rad_per_count).floor() as i64
+        let glitch = if self.t >= self.glitch.at {
+            self.glitch.counts
+        } else {
+            0
+        };
+        ((self.theta / self.rad_per_count).floor() as i64).saturating_add(glitch)
     }
 
     /// The current-sense reading now [A]: noise, then quantisation and clipping.

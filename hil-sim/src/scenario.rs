@@ -105,6 +105,20 @@ pub struct Plant {
     pub guideway: FrictionSpec,
     /// How the friction drifts during the run.
     pub drift: Drift,
+    /// An injected encoder fault (none by default).
+    pub encoder_glitch: Glitch,
+}
+
+/// Fault injection for testing what the device does about a bad encoder signal (a burst of
+/// noise counted as edges, a loose connector): from `at` on, the encoder reads `counts` away
+/// from the true angle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Glitch {
+    /// When the reading jumps [s of simulated time from the start], `>= 0`.
+    pub at: f64,
+    /// By how much [counts]; 0: no glitch.
+    pub counts: i64,
 }
 
 /// How the plant's friction drifts during a run: a factor on both sources' friction torque
@@ -324,6 +338,12 @@ impl Scenario {
             if !(v.is_finite() && v > 0.0) {
                 return Err(format!("{name} must be a finite number > 0"));
             }
+        }
+        if !(p.encoder_glitch.at.is_finite() && p.encoder_glitch.at >= 0.0) {
+            return Err("plant.encoder_glitch.at must be a finite number >= 0".into());
+        }
+        if p.encoder_glitch.counts.unsigned_abs() > 1 << 40 {
+            return Err("plant.encoder_glitch.counts must be within ±2^40".into());
         }
         if !(2..=24).contains(&p.adc_bits) {
             return Err("plant.adc_bits must be in 2..=24".into());

@@ -6,6 +6,8 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
+use std::path::{Path, PathBuf};
+
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -18,30 +20,63 @@ trait Dut {
     fn ask_all(&mut self, line: &str) -> Vec<String>;
     /// Lets `seconds` pass on the device.
     fn wait(&mut self, seconds: f64);
+    /// Powers the device off and on again (its store kept).
+    fn restart(&mut self);
     /// The reply line.
     fn ask(&mut self, line: &str) -> String {
         self.ask_all(line).pop().unwrap_or_default()
     }
 }
 
-struct Local(LocalDevice);
+struct Local {
+    sc: Scenario,
+    dev: Option<LocalDevice>,
+}
+
+impl Local {
+    fn dev(&mut self) -> &mut LocalDevice {
+        self.dev.as_mut().unwrap()
+    }
+}
 
 impl Dut for Local {
     fn ask_all(&mut self, line: &str) -> Vec<String> {
-        let mut lines = self.0.telemetry();
-        let reply = self.0.ask(line);
+        let mut lines = self.dev().telemetry();
+        let reply = self.dev().ask(line);
         lines.extend(reply.lines().map(String::from));
         lines
     }
     fn wait(&mut self, seconds: f64) {
-        self.0.run(seconds);
+        self.dev().run(seconds);
+    }
+    fn restart(&mut self) {
+        let flash = self.dev.take().unwrap().into_flash();
+        self.dev = Some(LocalDevice::with_flash(&self.sc, flash).unwrap());
     }
 }
 
 struct Tcp {
-    _srv: Server,
+    srv: Option<Server>,
     s: TcpStream,
     pending: String,
+    args: Vec<String>,
+    store: PathBuf,
+}
+
+impl Tcp {
+    fn start(args: Vec<String>, store: PathBuf) -> Tcp {
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        let srv = Server::start(&a, &store);
+        let s = TcpStream::connect(&srv.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        Tcp {
+            srv: Some(srv),
+            s,
+            pending: String::new(),
+            args,
+            store,
+        }
+    }
 }
 
 impl Dut for Tcp {
@@ -69,28 +104,50 @@ impl Dut for Tcp {
     fn wait(&mut self, seconds: f64) {
         std::thread::sleep(Duration::from_secs_f64(seconds));
     }
+    fn restart(&mut self) {
+        // The process ends (its store file stays, as a board's flash does).
+        drop(self.srv.take());
+        *self = Tcp::start(std::mem::take(&mut self.args), self.store.clone());
+    }
 }
 
 fn local() -> Local {
-    Local(LocalDevice::new(&Scenario::default()).unwrap())
+    local_on(Scenario::default())
 }
 
-fn tcp(dir: &std::path::Path) -> Tcp {
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.join("flash.img"));
-    let s = TcpStream::connect(&srv.addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
-    Tcp {
-        _srv: srv,
-        s,
-        pending: String::new(),
+fn local_on(sc: Scenario) -> Local {
+    Local {
+        dev: Some(LocalDevice::new(&sc).unwrap()),
+        sc,
     }
+}
+
+/// `hil-sim serve` on TCP with its store in `dir`, on the scenario file `scenario` if any.
+fn tcp(dir: &Path, scenario: Option<&Path>) -> Tcp {
+    let mut args = vec!["--tcp".to_string(), "127.0.0.1:0".to_string()];
+    if let Some(p) = scenario {
+        args.extend(["--scenario".to_string(), p.display().to_string()]);
+    }
+    Tcp::start(args, dir.join("flash.img"))
 }
 
 /// Runs `check` on both devices.
 fn both(check: impl Fn(&mut dyn Dut)) {
     check(&mut local());
     let dir = tempfile::tempdir().unwrap();
-    check(&mut tcp(dir.path()));
+    check(&mut tcp(dir.path(), None));
+}
+
+/// Runs `check` on both devices, both on the default scenario changed by `toml` (a scenario
+/// file's text).
+fn both_on(toml: &str, check: impl Fn(&mut dyn Dut)) {
+    check(&mut local_on(
+        Scenario::parse(toml, "test scenario").unwrap(),
+    ));
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("scenario.toml");
+    std::fs::write(&file, toml).unwrap();
+    check(&mut tcp(dir.path(), Some(&file)));
 }
 
 /// The value of `key=` in a status or telemetry line.
@@ -221,6 +278,86 @@ fn a_refused_set_changes_nothing() {
         assert!(d.ask("set pos.kp 5000").starts_with("err 6 "));
         assert_eq!(d.ask("get pos.kp"), "ok 0.2");
         assert!(d.ask("set ff.adapt.scale 1.1").starts_with("err 8 "));
+    });
+}
+
+#[test]
+fn leaving_the_soft_limits_latches_position_limit() {
+    both(|d| {
+        assert_eq!(d.ask("get lim.pos_max"), "ok 50");
+        // A limit below the low one is refused, and nothing changes.
+        assert!(d.ask("set lim.pos_max -60").starts_with("err 7 "));
+        assert_eq!(d.ask("get lim.pos_max"), "ok 50");
+        assert_eq!(d.ask("enable"), "ok");
+        assert_eq!(d.ask("move 0.02 0.2"), "ok");
+        d.wait(0.3);
+        let st = d.ask("status");
+        assert_eq!(field(&st, "faults"), 0.0, "{st}");
+        assert!((field(&st, "pos") - 0.02).abs() < 1e-4, "{st}");
+        // A move beyond a limit is refused before it starts.
+        assert_eq!(d.ask("set lim.pos_max 0.05"), "ok");
+        assert!(d.ask("move 0.06").starts_with("err 8 "));
+        assert_eq!(field(&d.ask("status"), "enabled"), 1.0);
+        // The limit moved under the axis: it trips.
+        assert_eq!(d.ask("set lim.pos_max 0.01"), "ok");
+        d.wait(0.05);
+        let st = d.ask("status");
+        assert!(st.contains("fault_names=position_limit "), "{st}");
+        assert_eq!(field(&st, "enabled"), 0.0);
+        assert!(d.ask("enable").starts_with("err 8 "));
+        assert_eq!(d.ask("set lim.pos_max 0.05"), "ok");
+        assert_eq!(d.ask("clear"), "ok");
+        assert_eq!(d.ask("enable"), "ok");
+        d.wait(0.05);
+        assert_eq!(field(&d.ask("status"), "faults"), 0.0);
+    });
+}
+
+#[test]
+fn an_encoder_jump_latches() {
+    // 100 000 counts (0.38 rad) in one period, far above 100 rad/s.
+    let scenario = "[plant.encoder_glitch]\nat = 0.5\ncounts = 100000\n";
+    both_on(scenario, |d| {
+        // Enabled, or not yet if the server was slow: the jump latches either way.
+        d.ask("enable");
+        d.wait(0.8);
+        let st = d.ask("status");
+        assert!(st.contains("encoder_jump"), "{st}");
+        assert_eq!(field(&st, "enabled"), 0.0);
+        assert!(d.ask("enable").starts_with("err 8 "));
+        // The encoder reads steadily again: clear and enable work, holding where it reads.
+        assert_eq!(d.ask("clear"), "ok");
+        assert_eq!(d.ask("enable"), "ok");
+        d.wait(0.05);
+        let st = d.ask("status");
+        assert_eq!(field(&st, "faults"), 0.0, "{st}");
+        assert!((field(&st, "pos") - 0.38).abs() < 1e-3, "{st}");
+    });
+}
+
+#[test]
+fn save_restart_load() {
+    both(|d| {
+        assert_eq!(d.ask("set pos.kp 0.25"), "ok");
+        assert_eq!(d.ask("set ff.mode gms-adaptive"), "ok");
+        assert_eq!(d.ask("save"), "ok");
+        assert_eq!(d.ask("set pos.kp 0.3"), "ok");
+        d.restart();
+        // The saved set runs after a restart, without a fault.
+        let st = d.ask("status");
+        assert_eq!(field(&st, "faults"), 0.0, "{st}");
+        assert!(st.starts_with("ok mode=gms-adaptive "), "{st}");
+        assert_eq!(d.ask("get pos.kp"), "ok 0.25");
+        // defaults and load: the built-in set, then the saved one again.
+        assert_eq!(d.ask("defaults"), "ok");
+        assert_eq!(d.ask("get pos.kp"), "ok 0.2");
+        assert_eq!(d.ask("load"), "ok");
+        assert_eq!(d.ask("get pos.kp"), "ok 0.25");
+        assert_eq!(d.ask("get ff.mode"), "ok gms-adaptive");
+        // Save and load refuse while the bridge drives.
+        assert_eq!(d.ask("enable"), "ok");
+        assert!(d.ask("save").starts_with("err 8 "));
+        assert!(d.ask("load").starts_with("err 8 "));
     });
 }
 

@@ -113,7 +113,6 @@ fn device_period(out: &mut hio::HostStream) {
             sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
-            travel: 50.0,
             clock_hz: 168_000_000,
             budget_fraction: 0.8,
         },

@@ -154,6 +154,11 @@ impl<L: Link, S: ParamStore> Front<L, S> {
         &mut self.link
     }
 
+    /// The link and the store back (the device is gone: a power cycle, a shell shutting down).
+    pub fn into_parts(self) -> (L, S) {
+        (self.link, self.store)
+    }
+
     /// The store.
     pub fn store_mut(&mut self) -> &mut S {
         &mut self.store

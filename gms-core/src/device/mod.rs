@@ -274,6 +274,9 @@ pub fn default_settings() -> Settings {
         },
         i_max: 0.5,
         v_supply: 12.0,
+        // ±50 rad of the motor: ±0.9 mm of the slide through the gearhead and lead screw.
+        pos_min: -50.0,
+        pos_max: 50.0,
         ff: FeedforwardParams {
             mode: FfMode::Gms,
             gain: 0.94,
