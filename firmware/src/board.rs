@@ -39,7 +39,7 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
-use gms_core::device::Board;
+use gms_core::device::{Board, SenseChain};
 use gms_core::drive::BoardLimits;
 
 bind_interrupts!(struct Irqs {
@@ -85,6 +85,11 @@ pub const BOARD: Board = Board {
     pwm_max_arr: PWM_MAX_ARR,
     encoder_bits: ENCODER_BITS,
     sense_oversample: SENSE_OVERSAMPLE,
+    sense: SenseChain {
+        amps_per_code: ADC_VREF / ADC_FULL_SCALE / SENSE_V_PER_A,
+        zero_code: SENSE_OFFSET_EXPECTED,
+        zero_tolerance: SENSE_OFFSET_TOLERANCE,
+    },
     limits: LIMITS,
     has_truth: false,
 };

@@ -28,14 +28,11 @@ use embassy_time::Timer;
 use embassy_usb::UsbDevice;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use gms_core::device::{self, ControlLoop, ParamStore as _};
-use gms_core::drive::{CurrentSense, Faults, OffsetCalibration};
+use gms_core::drive::Faults;
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
 use crate::control::Loop;
-
-/// Samples of the current-sense zero taken at start-up (bridge off).
-const OFFSET_SAMPLES: u32 = 256;
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
@@ -73,35 +70,15 @@ async fn main(spawner: Spawner) {
     info!("{}", start.note);
     faults.latch(start.faults);
 
-    // Current-sense zero, with the bridge off.
-    let mut cal = OffsetCalibration::default();
-    for _ in 0..OFFSET_SAMPLES {
-        let sum = hw.current_codes();
-        cal.push((sum / board::SENSE_OVERSAMPLE) as u16);
+    // Current-sense zero, with the bridge off (the decision is gms-core's).
+    let zero = device::calibrate_sense(&board::BOARD, || hw.current_codes());
+    if zero.faults.is_empty() {
+        info!("current-sense zero at {} codes", zero.sense.offset);
+    } else {
+        warn!("current-sense zero out of the board's window: check the amplifier");
     }
-    let offset = match cal.finish(board::SENSE_OFFSET_EXPECTED, board::SENSE_OFFSET_TOLERANCE) {
-        Some(o) => {
-            info!("current-sense zero at {} codes", o);
-            o
-        }
-        None => {
-            warn!("current-sense zero out of the board's window: check the amplifier");
-            faults.latch(Faults::CURRENT_SENSE);
-            board::SENSE_OFFSET_EXPECTED
-        }
-    };
-    let sense = CurrentSense::new(
-        board::ADC_VREF,
-        board::ADC_FULL_SCALE,
-        board::SENSE_V_PER_A,
-        offset,
-    );
-    let Some(sense) = sense else {
-        error!("the board's current-sense constants are invalid");
-        loop {
-            cortex_m::asm::wfi();
-        }
-    };
+    faults.latch(zero.faults);
+    let sense = zero.sense;
 
     let encoder = hw.encoder_raw();
     let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder);

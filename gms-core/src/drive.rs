@@ -119,8 +119,9 @@ pub struct OffsetCalibration {
 }
 
 impl OffsetCalibration {
-    /// Adds one code taken with the bridge off.
-    pub fn push(&mut self, code: u16) {
+    /// Adds one reading taken with the bridge off [code] (a code, or a sum of oversampled
+    /// codes: then `finish`'s window is in sums too).
+    pub fn push(&mut self, code: u32) {
         self.sum = self.sum.saturating_add(code as u64);
         self.n = self.n.saturating_add(1);
     }

@@ -152,7 +152,7 @@ fn current_scaling() {
 fn offset_calibration() {
     let mut c = OffsetCalibration::default();
     assert_eq!(c.finish(2048.0, 200.0), None);
-    for code in [2040u16, 2050, 2060, 2050] {
+    for code in [2040u32, 2050, 2060, 2050] {
         c.push(code);
     }
     assert_eq!(c.samples(), 4);
@@ -341,4 +341,50 @@ fn limits_from_settings_and_board() {
         ..b
     };
     assert!((drive::limits_for(&s, &roomy).i_trip - 0.75).abs() < 1e-6);
+}
+
+#[test]
+fn sense_zero_at_start() {
+    use gms_core::device::{Board, SenseChain, ZERO_SAMPLES, calibrate_sense};
+    let board = Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 2,
+        sense: SenseChain {
+            amps_per_code: 2.37e-4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+        },
+        limits: drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.8,
+        },
+        has_truth: false,
+    };
+    // Sums of two conversions alternating 2100+2101 and 2100+2100: the zero is 2100.25 codes.
+    let mut i = 0u32;
+    let z = calibrate_sense(&board, || {
+        i += 1;
+        if i % 2 == 0 { 4201 } else { 4200 }
+    });
+    assert_eq!(i, ZERO_SAMPLES);
+    assert_eq!(z.faults, Faults::NONE);
+    assert_eq!(z.sense.offset, 2100.25);
+    assert_eq!(z.sense.amps_per_code, 2.37e-4);
+    // 151 codes off (per conversion): the amplifier is not what the board says.
+    let z = calibrate_sense(&board, || 2 * (2048 + 151));
+    assert_eq!(z.faults, Faults::CURRENT_SENSE);
+    assert_eq!(z.sense.offset, 2048.0);
+    // 150 off is still inside; a dead amplifier (0) is not.
+    assert!(
+        calibrate_sense(&board, || 2 * (2048 - 150))
+            .faults
+            .is_empty()
+    );
+    assert_eq!(calibrate_sense(&board, || 0).faults, Faults::CURRENT_SENSE);
 }

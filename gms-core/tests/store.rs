@@ -18,7 +18,7 @@ use std::rc::Rc;
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
-use gms_core::device::{Board, ParamStore, default_settings, startup};
+use gms_core::device::{Board, ParamStore, SenseChain, default_settings, startup};
 use gms_core::drive::{BoardLimits, Faults, RECORD_LEN, encode_settings};
 use gms_core::protocol::Settings;
 use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
@@ -255,6 +255,11 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
         pwm_max_arr: 65_534,
         encoder_bits: 32,
         sense_oversample: 2,
+        sense: SenseChain {
+            amps_per_code: 3.3 / 4095.0 / 3.4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+        },
         limits: BoardLimits {
             trip_factor: 1.5,
             sense_range: 0.48,

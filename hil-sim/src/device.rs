@@ -23,10 +23,11 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Requests, Sample, Status,
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Requests, Sample,
+    SenseChain, Status,
 };
-use gms_core::drive::{BoardLimits, CurrentSense};
-use gms_core::protocol::{self, LineReader};
+use gms_core::drive::BoardLimits;
+use gms_core::protocol::{self, LineReader, Settings};
 use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
 use crate::plant::Plant;
@@ -36,8 +37,8 @@ use crate::scenario::Scenario;
 pub const QUEUE: usize = 4000;
 
 /// The simulated board: the F405's PWM timer and encoder counter, the plant's ADC as the
-/// current sense (one conversion per sample), its range as the sense range, the firmware
-/// board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
+/// current sense (one conversion per sample, zero at mid-scale within the firmware board's
+/// ±150 codes), its range as the sense range, the firmware board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
 /// at 20 kHz: the host is shared, so only a stalled simulation counts as an overrun.
 pub fn board(sc: &Scenario) -> Board {
     Board {
@@ -45,6 +46,14 @@ pub fn board(sc: &Scenario) -> Board {
         pwm_max_arr: 65_534,
         encoder_bits: 32,
         sense_oversample: 1,
+        sense: {
+            let adc = Adc::new(sc);
+            SenseChain {
+                amps_per_code: adc.lsb as f32,
+                zero_code: adc.mid as f32,
+                zero_tolerance: 150.0,
+            }
+        },
         limits: BoardLimits {
             trip_factor: 1.5,
             sense_range: sc.plant.adc_range as f32,
@@ -72,13 +81,6 @@ impl Adc {
             mid: full / 2.0,
             top: full - 1.0,
         }
-    }
-
-    fn sense(&self) -> Option<CurrentSense> {
-        Some(CurrentSense {
-            amps_per_code: self.lsb as f32,
-            offset: self.mid as f32,
-        })
     }
 
     /// The code of a current the plant's ADC measured [A].
@@ -136,6 +138,56 @@ impl Sim {
             self.t += dt_plant * self.substeps as f64;
         }
     }
+}
+
+/// A virtual device just powered up: the loop on the plant, the store, and what the start-up
+/// decided.
+struct PowerUp {
+    sim: Sim,
+    store: FlashStore<HostFlash>,
+    board: Board,
+    settings: Settings,
+    defaults: Settings,
+    /// Why the start-up latched faults, if it did.
+    why: Option<&'static str>,
+}
+
+/// The start-up of the board, on the plant: the parameter set from the store (gms-core's
+/// decision), the current-sense zero measured with the bridge off (gms-core's), the loop at
+/// rest at the encoder's reading.
+fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
+    let defaults = sc.controller_params()?;
+    let board = board(sc);
+    let mut store = FlashStore::new(flash);
+    let start = device::startup(store.load(), &defaults, &board)
+        .map_err(|e| format!("the scenario's controller: {e}"))?;
+    let adc = Adc::new(sc);
+    let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
+    let zero = device::calibrate_sense(&board, || adc.code(plant.adc()));
+    let mut faults = start.faults;
+    faults.latch(zero.faults);
+    let why = if !start.faults.is_empty() {
+        Some(start.note)
+    } else if !zero.faults.is_empty() {
+        Some("current-sense zero out of the board's window")
+    } else {
+        None
+    };
+    let encoder = plant.encoder() as u32;
+    Ok(PowerUp {
+        sim: Sim {
+            core: ControlLoop::new(board, start.applied, zero.sense, faults, encoder),
+            plant,
+            adc,
+            substeps: sc.plant.substeps,
+            t: 0.0,
+        },
+        store,
+        board,
+        settings: start.settings,
+        defaults,
+        why,
+    })
 }
 
 /// What the real-time thread and the client sessions share.
@@ -399,27 +451,18 @@ pub fn serve(
     store: Option<PathBuf>,
     on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), String> {
-    let defaults = sc.controller_params()?;
-    let board = board(&sc);
     let flash = match &store {
         Some(path) => HostFlash::open(path)?,
         None => HostFlash::in_memory(),
     };
-    let mut flash_store = FlashStore::new(flash);
-    let start = device::startup(flash_store.load(), &defaults, &board)
-        .map_err(|e| format!("the scenario's controller: {e}"))?;
-    let why = (!start.faults.is_empty()).then_some(start.note);
-    let adc = Adc::new(&sc);
-    let sense = adc.sense().ok_or("plant: the ADC's range is not usable")?;
-    let plant = Plant::new(&sc.plant, sc.plant.seed)?;
-    let encoder = plant.encoder() as u32;
-    let mut sim = Sim {
-        core: ControlLoop::new(board, start.applied, sense, start.faults, encoder),
-        plant,
-        adc,
-        substeps: sc.plant.substeps,
-        t: 0.0,
-    };
+    let PowerUp {
+        mut sim,
+        store: flash_store,
+        board,
+        settings,
+        defaults,
+        why,
+    } = power_up(&sc, flash)?;
     let shared = Arc::new(Shared {
         // The loop's status from the start (before its first step).
         mailbox: Mutex::new(Mailbox {
@@ -451,7 +494,7 @@ pub fn serve(
         shared: Arc::clone(&shared),
         start: Instant::now(),
     };
-    let mut dev = Front::new(link, flash_store, board, start.settings, defaults);
+    let mut dev = Front::new(link, flash_store, board, settings, defaults);
     match endpoint {
         Endpoint::Tcp(listener) => {
             let addr = listener
@@ -538,33 +581,18 @@ impl LocalDevice {
     /// A device on the scenario `sc` starting on the store flash `flash` (what a board finds
     /// at power-up).
     pub fn with_flash(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, String> {
-        let defaults = sc.controller_params()?;
-        let board = board(sc);
-        let mut store = FlashStore::new(flash);
-        let start = device::startup(store.load(), &defaults, &board)
-            .map_err(|e| format!("the scenario's controller: {e}"))?;
-        let adc = Adc::new(sc);
-        let sense = adc.sense().ok_or("plant: the ADC's range is not usable")?;
-        let plant = Plant::new(&sc.plant, sc.plant.seed)?;
-        let encoder = plant.encoder() as u32;
-        let core = ControlLoop::new(board, start.applied, sense, start.faults, encoder);
+        let p = power_up(sc, flash)?;
         let mailbox = Mailbox {
-            status: core.status(),
+            status: p.sim.core.status(),
             ..Mailbox::new()
         };
         let link = LocalLink {
-            sim: Sim {
-                core,
-                plant,
-                adc,
-                substeps: sc.plant.substeps,
-                t: 0.0,
-            },
+            sim: p.sim,
             mailbox,
             queue: Mutex::new(VecDeque::with_capacity(QUEUE)),
         };
         Ok(LocalDevice {
-            dev: Front::new(link, store, board, start.settings, defaults),
+            dev: Front::new(link, p.store, p.board, p.settings, p.defaults),
         })
     }
 

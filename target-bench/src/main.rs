@@ -20,8 +20,10 @@ use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hio};
 use gms_core::controller::{Controller, FfMode};
-use gms_core::device::{self, Board, ControlLoop, Inputs, Mailbox, MoveRequest, Requests};
-use gms_core::drive::{self, CurrentSense, Faults};
+use gms_core::device::{
+    self, Board, ControlLoop, Inputs, Mailbox, MoveRequest, Requests, SenseChain,
+};
+use gms_core::drive;
 use gms_core::reference::{Motion, RefSample};
 use gms_core::{
     FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
@@ -108,6 +110,11 @@ fn device_period(out: &mut hio::HostStream) {
         pwm_max_arr: 65_534,
         encoder_bits: 32,
         sense_oversample: 2,
+        sense: SenseChain {
+            amps_per_code: 3.3 / 4095.0 / 3.4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+        },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
             sense_range: 0.48,
@@ -119,14 +126,12 @@ fn device_period(out: &mut hio::HostStream) {
         has_truth: false,
     };
     let settings = device::default_settings();
-    let (Ok(a), Some(sense)) = (
-        device::prepare(&settings, &board),
-        CurrentSense::new(3.3, 4095.0, 3.4, 2048.0),
-    ) else {
+    let Ok(a) = device::prepare(&settings, &board) else {
         return;
     };
+    let zero = device::calibrate_sense(&board, || 2 * 2048);
     let rpc = settings.rad_per_count;
-    let mut lp = ControlLoop::new(board, a, sense, Faults::NONE, 0);
+    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0);
     let mut mb = Mailbox::new();
     // About 0.02 A: two conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
     let codes = 2 * (2048 + 84);

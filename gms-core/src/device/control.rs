@@ -6,6 +6,49 @@ use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
 use super::{Applied, Board, Ctrl, Requests, Sample, Status};
 
+/// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
+/// [`Board::sense_oversample`] conversions).
+pub const ZERO_SAMPLES: u32 = 256;
+
+/// What the start-up calibration found about the current sense.
+#[derive(Debug, Clone, Copy)]
+pub struct SenseStart {
+    /// The sense to run with: the measured zero, or the board's nominal one if that was out of
+    /// its window.
+    pub sense: CurrentSense,
+    /// `current_sense` when the measured zero was out of the board's window.
+    pub faults: Faults,
+}
+
+/// The current-sense zero at start-up: the mean of [`ZERO_SAMPLES`] readings taken by `read`
+/// (a sum of [`Board::sense_oversample`] codes, bridge off). A zero outside the board's
+/// window (amplifier missing, wrong reference) latches `current_sense` and runs on the nominal
+/// zero.
+pub fn calibrate_sense(board: &Board, mut read: impl FnMut() -> u32) -> SenseStart {
+    let n = board.sense_oversample.max(1) as f32;
+    let chain = board.sense;
+    let mut cal = drive::OffsetCalibration::default();
+    for _ in 0..ZERO_SAMPLES {
+        cal.push(read());
+    }
+    match cal.finish(chain.zero_code * n, chain.zero_tolerance * n) {
+        Some(sum) => SenseStart {
+            sense: CurrentSense {
+                amps_per_code: chain.amps_per_code,
+                offset: sum / n,
+            },
+            faults: Faults::NONE,
+        },
+        None => SenseStart {
+            sense: CurrentSense {
+                amps_per_code: chain.amps_per_code,
+                offset: chain.zero_code,
+            },
+            faults: Faults::CURRENT_SENSE,
+        },
+    }
+}
+
 /// What the hardware measured at the start of a PWM period.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Inputs {

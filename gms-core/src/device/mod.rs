@@ -20,7 +20,7 @@
 mod control;
 mod front;
 
-pub use control::{ControlLoop, Inputs, Outputs};
+pub use control::{ControlLoop, Inputs, Outputs, SenseStart, ZERO_SAMPLES, calibrate_sense};
 pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
 
 use crate::controller::Controller;
@@ -42,10 +42,24 @@ pub struct Board {
     pub encoder_bits: u32,
     /// ADC conversions summed per current sample [-] (`>= 1`).
     pub sense_oversample: u32,
-    /// Safety limits of the board (trip factor, sense range, travel, step budget).
+    /// The current-sense chain (scale and the zero the start-up calibration expects).
+    pub sense: SenseChain,
+    /// Safety limits of the board (trip factor, sense range, step budget).
     pub limits: BoardLimits,
     /// True on a simulator, whose telemetry also has the true friction (`friction_true`).
     pub has_truth: bool,
+}
+
+/// A board's current-sense chain, as the start-up calibration needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SenseChain {
+    /// Current per ADC code [A/code] (negative if the amplifier's sign is reversed).
+    pub amps_per_code: f32,
+    /// ADC code at zero current the board is built for [code].
+    pub zero_code: f32,
+    /// How far the measured zero may lie from `zero_code` [code] (amplifier offset, resistor
+    /// tolerances).
+    pub zero_tolerance: f32,
 }
 
 /// A complete, validated parameter set prepared for the loop (built on the protocol side,

@@ -20,7 +20,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use gms_core::controller::Controller;
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, StoreError,
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, SenseChain, StoreError,
 };
 use gms_core::drive;
 use gms_core::protocol::{self, LineReader};
@@ -137,6 +137,11 @@ fn main() -> ! {
         pwm_max_arr: 65_534,
         encoder_bits: 32,
         sense_oversample: 2,
+        sense: SenseChain {
+            amps_per_code: 3.3 / 4095.0 / 3.4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+        },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
             sense_range: 0.48,
@@ -154,15 +159,13 @@ fn main() -> ! {
     let mut faults = drive::Faults::NONE;
     let defaults = device::default_settings();
     let mut store = RamStore(None);
-    let (Ok(start), Some(dsense)) = (
-        device::startup(store.load(), &defaults, black_box(&board)),
-        drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0)),
-    ) else {
+    let Ok(start) = device::startup(store.load(), &defaults, black_box(&board)) else {
         loop {
             cortex_m::asm::wfi();
         }
     };
-    let core = ControlLoop::new(board, start.applied, dsense, start.faults, black_box(0));
+    let zero = device::calibrate_sense(black_box(&board), || black_box(4096));
+    let core = ControlLoop::new(board, start.applied, zero.sense, zero.faults, black_box(0));
     let link = CheckLink {
         mailbox: Mailbox::new(),
         core,
