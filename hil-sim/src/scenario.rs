@@ -441,8 +441,13 @@ impl Scenario {
                 toml::Value::String(t) => t.clone(),
                 _ => return Err(format!("{key}: a number or a name")),
             };
-            protocol::set_param(&mut s, param, &text)
-                .map_err(|e| format!("{key} = {text}: {}", e.reason))?;
+            protocol::set_param(&mut s, param, &text).map_err(|e| match param.access {
+                protocol::Access::Number { min, max, .. } => format!(
+                    "{key} = {text}: not a finite number within [{min}, {max}] {}",
+                    param.unit
+                ),
+                _ => format!("{key} = {text}: {}", e.reason),
+            })?;
         }
         s.ff.guideway = if guideway {
             Some(gms(&p.guideway, "guideway")?)

@@ -168,7 +168,10 @@ fn bad_scenarios_and_arguments_exit_2_with_one_line() {
             "[controller.ff.adapt]\nvmin = -1\n",
             "controller.ff.adapt.vmin",
         ),
-        ("[controller.pos]\nkp = 5000\n", "controller.pos.kp"),
+        (
+            "[controller.pos]\nkp = 5000\n",
+            "controller.pos.kp = 5000: not a finite number within [0, 1000] N·m/rad",
+        ),
         (
             "[controller.pid]\nkp = 0.2\n",
             "controller.pid.kp: unknown key",
