@@ -201,6 +201,20 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
 
     let p = embassy_stm32::init(config());
+    // Flash accelerator on: embassy-stm32 0.6's RCC set-up (rcc/f247.rs) writes FLASH_ACR's
+    // LATENCY only (`FLASH.acr().write(|w| w.set_latency(..))`), so the prefetch buffer and the
+    // instruction and data caches stay at their reset value, off (RM0090 §3.5.2, §3.9.1):
+    // at 168 MHz with 5 wait states every fetch outside the prefetch stalls. The caches are
+    // empty after reset, so no ICRST/DCRST is needed before enabling them. With the data cache
+    // on, lines of the parameter sectors read before an erase or a write could be served stale
+    // afterwards: embassy's flash driver (flash/f4.rs) only touches DCEN on dual-bank parts
+    // (erratum 2.2.12), so `storage.rs` flushes the data cache after each erase and write, as
+    // ST's HAL does after an erase (`FLASH_FlushCaches`).
+    pac::FLASH.acr().modify(|w| {
+        w.set_prften(true);
+        w.set_icen(true);
+        w.set_dcen(true);
+    });
 
     // PWM: TIM8 CH1/CH2, center-aligned (the update event at the counter's bottom, every
     // other one through the repetition counter, so one interrupt per period).
