@@ -94,8 +94,9 @@ pub const BOARD: Board = Board {
     has_truth: false,
 };
 
-/// Watchdog timeout [us]: above a 128 KiB sector erase (up to 2 s on the F405, during which
-/// nothing runs from flash).
+/// Watchdog timeout [us], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
+/// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
+/// reloads the watchdog right before each, see `storage.rs`).
 pub const WATCHDOG_US: u32 = 4_000_000;
 
 /// Clocks: 8 MHz HSE, PLL to 168 MHz, 48 MHz for USB.

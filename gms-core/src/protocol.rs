@@ -23,6 +23,11 @@ use crate::numtext::Num;
 /// The longest request line [bytes], without its line ending.
 pub const MAX_LINE: usize = 120;
 
+/// How long a device may take to answer `save` [ms]: a board's flash erases a sector during a
+/// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing
+/// meanwhile. Other requests are answered within a position period or two.
+pub const SAVE_REPLY_MS: u32 = 5000;
+
 /// Error codes of `err` replies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

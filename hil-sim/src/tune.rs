@@ -108,14 +108,22 @@ impl Link {
         }
     }
 
-    /// Sends `line` and returns the reply's lines before `ok` and the text after `ok`.
+    /// Sends `line` and returns the reply's lines before `ok` and the text after `ok`. A
+    /// `save` gets at least [`gms_core::protocol::SAVE_REPLY_MS`] (a board erases flash).
     pub fn request(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
-        let deadline = Instant::now() + self.timeout;
+        let wait = if line.split_whitespace().next() == Some("save") {
+            self.timeout.max(Duration::from_millis(
+                gms_core::protocol::SAVE_REPLY_MS as u64,
+            ))
+        } else {
+            self.timeout
+        };
+        let deadline = Instant::now() + wait;
         let mut body = Vec::new();
         loop {
             match self.next_line(deadline)? {
-                None => return Err(LinkError::Timeout(self.timeout)),
+                None => return Err(LinkError::Timeout(wait)),
                 Some(l) if l == "ok" || l.starts_with("ok ") => {
                     return Ok((body, l.get(3..).unwrap_or("").to_string()));
                 }
