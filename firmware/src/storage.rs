@@ -99,7 +99,8 @@ impl NorFlash for StoreFlash {
 
     /// Sector by sector, each at ×32 and with the watchdog reloaded just before.
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Error> {
-        if from % SECTOR_SIZE as u32 != 0 || to % SECTOR_SIZE as u32 != 0 || to < from {
+        let sector = SECTOR_SIZE as u32;
+        if !from.is_multiple_of(sector) || !to.is_multiple_of(sector) || to < from {
             return Err(Error::Unaligned);
         }
         let mut at = from;
