@@ -40,7 +40,7 @@ use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
 use gms_core::device::{Board, SenseChain};
-use gms_core::drive::BoardLimits;
+use gms_core::drive::{self, BoardLimits, BridgeOff};
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
@@ -177,13 +177,45 @@ impl ControlHw {
     }
 }
 
+/// The bridge inputs PC6/PC7 (TIM8_CH1/CH2) as registers, for [`bridge_off_now`].
+struct Bridge;
+
+impl BridgeOff for Bridge {
+    fn disable_timer_outputs(&mut self) {
+        // MOE cleared: with OSSI set at init and OIS1/OIS2 at 0, both outputs go to their idle
+        // level, low (RM0090 §17.4.18 TIMx_BDTR, table 95 "Output control bits").
+        pac::TIM8.bdtr().modify(|w| w.set_moe(false));
+    }
+    fn latch_pins_low(&mut self) {
+        pac::GPIOC.bsrr().write(|w| {
+            w.set_br(6, true);
+            w.set_br(7, true);
+        });
+    }
+    fn pins_to_gpio_outputs(&mut self) {
+        use embassy_stm32::pac::gpio::vals::Moder;
+        pac::GPIOC.moder().modify(|w| {
+            w.set_moder(6, Moder::OUTPUT);
+            w.set_moder(7, Moder::OUTPUT);
+        });
+    }
+}
+
+/// Switches the bridge off from any context (panic, HardFault, an unexpected interrupt, the
+/// supervisor seeing the loop stalled): register writes only, no lock, callable with
+/// interrupts off. Both DRV8871 inputs end low (coast) as GPIO outputs, whatever TIM8 does
+/// afterwards; only a reset gives the pins back to the timer.
+pub fn bridge_off_now() {
+    drive::bridge_off(&mut Bridge);
+}
+
 /// Everything else the firmware uses.
 pub struct Rest {
     /// USB OTG FS driver.
     pub usb: Driver<'static, peripherals::USB_OTG_FS>,
     /// Internal flash (blocking; parameters).
     pub flash: Flash<'static, Blocking>,
-    /// Independent watchdog (not started).
+    /// Independent watchdog (started: feed it).
     pub watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
     /// Run LED (on while the bridge is enabled, blinking while disabled).
     pub led_run: Output<'static>,
@@ -202,6 +234,14 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
 
     let p = embassy_stm32::init(config());
+    // The watchdog first: from here on a hang resets the MCU (the supervisor feeds it; until
+    // it runs, the start-up below takes well under a second).
+    let mut watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
+    watchdog.unleash();
+    // A debug halt stops TIM8, and a stopped advanced timer's outputs are disabled, forced to
+    // their idle level with OSSI set (RM0090 §17.3.21 "Debug mode", §38.16.5 DBGMCU_APB2_FZ
+    // DBG_TIM8_STOP): the bridge coasts while the core is halted.
+    pac::DBGMCU.apb2fzr().modify(|w| w.set_tim8(true));
     // Flash accelerator on: embassy-stm32 0.6's RCC set-up (rcc/f247.rs) writes FLASH_ACR's
     // LATENCY only (`FLASH.acr().write(|w| w.set_latency(..))`), so the prefetch buffer and the
     // instruction and data caches stay at their reset value, off (RM0090 §3.5.2, §3.9.1):
@@ -234,6 +274,15 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     pwm.ch2().set_duty_cycle(0);
     pwm.ch1().enable();
     pwm.ch2().enable();
+    // Off-state when idle: outputs forced to their idle level (OIS1 = OIS2 = 0: low) whenever
+    // MOE is cleared, by software, a debug halt or a panic (RM0090 §17.4.18).
+    pac::TIM8.bdtr().modify(|w| {
+        w.set_ossi(pac::timer::vals::Ossi::IDLE_LEVEL);
+    });
+    pac::TIM8.cr2().modify(|w| {
+        w.set_ois(0, false);
+        w.set_ois(1, false);
+    });
     pac::TIM8.rcr().write(|w| w.set_rep(1));
     pac::TIM8.sr().write(|w| w.0 = 0);
     pac::TIM8.dier().modify(|w| w.set_uie(true));
@@ -263,7 +312,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     let rest = Rest {
         usb,
         flash: Flash::new_blocking(p.FLASH),
-        watchdog: IndependentWatchdog::new(p.IWDG, WATCHDOG_US),
+        watchdog,
         led_run: Output::new(p.PB0, Level::Low, Speed::Low),
         led_fault: Output::new(p.PB1, Level::Low, Speed::Low),
         watchdog_reset,

@@ -6,10 +6,11 @@
 //! - `comms`: USB CDC-ACM and the bench protocol in the thread executor.
 //! - `storage`: the parameter record in flash (sequential-storage).
 //!
-//! Start-up: clocks and peripherals; the stored parameters (defaults and a latched
-//! `invalid_params` fault when missing or invalid); the current-sense zero measured with the
-//! bridge off (a latched `current_sense` fault when out of the board's window); the control
-//! interrupt; the watchdog; USB.
+//! Start-up: clocks, the watchdog, peripherals (the bridge off); the stored parameters
+//! (defaults and a latched `invalid_params` fault when missing or invalid); the current-sense
+//! zero measured with the bridge off (a latched `current_sense` fault when out of the board's window); the control
+//! interrupt; USB. A panic, a HardFault or an unhandled interrupt switches the bridge off
+//! before anything else (`board::bridge_off_now`), and so does a debug halt (TIM8 stops).
 #![no_std]
 #![no_main]
 
@@ -19,6 +20,7 @@ mod control;
 mod storage;
 
 use defmt::{error, info, unwrap, warn};
+use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
@@ -30,7 +32,6 @@ use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use gms_core::device::{self, ControlLoop, ParamStore as _};
 use gms_core::drive::Faults;
 use static_cell::StaticCell;
-use {defmt_rtt as _, panic_probe as _};
 
 use crate::control::Loop;
 
@@ -124,6 +125,40 @@ async fn main(spawner: Spawner) {
     )));
 }
 
+/// A panic switches the bridge off first, then logs, then ends in a HardFault (`udf`), where
+/// a debugger (probe-rs) stops with a backtrace; the watchdog, started first thing at
+/// start-up, resets the MCU.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    use core::sync::atomic::{AtomicBool, Ordering};
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    board::bridge_off_now();
+    if !PANICKED.swap(true, Ordering::Relaxed) {
+        error!("panic: {}", defmt::Display2Format(info));
+    }
+    cortex_m::asm::udf()
+}
+
+/// A HardFault (a bus or usage fault escalated, a panic's `udf`): the bridge off, then wait
+/// for the watchdog.
+#[cortex_m_rt::exception]
+unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+    board::bridge_off_now();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
+/// An interrupt nothing handles: the bridge off, then wait for the watchdog.
+#[cortex_m_rt::exception]
+unsafe fn DefaultHandler(_irqn: i16) {
+    board::bridge_off_now();
+    loop {
+        cortex_m::asm::nop();
+    }
+}
+
 #[embassy_executor::task]
 async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB_OTG_FS>>) -> ! {
     usb.run().await
@@ -145,7 +180,6 @@ async fn supervisor(
     mut led_run: Output<'static>,
     mut led_fault: Output<'static>,
 ) -> ! {
-    wdg.unleash();
     let mut last_steps = 0u64;
     let mut last_faults = Faults::NONE;
     let mut tick = 0u32;
@@ -157,7 +191,9 @@ async fn supervisor(
             wdg.pet();
             last_steps = st.steps;
         } else {
-            error!("control loop stalled: the watchdog will reset");
+            // The loop (and its fault checks) no longer runs: nothing may drive the bridge.
+            board::bridge_off_now();
+            error!("control loop stalled: bridge off, the watchdog will reset");
         }
         if st.faults != last_faults {
             if !st.faults.is_empty() {

@@ -409,6 +409,28 @@ pub fn cycles_to_us(cycles: f32, clock_hz: u32) -> f32 {
     }
 }
 
+/// A board's means of switching its bridge off from any context (a panic, a fault handler,
+/// the supervisor), register writes only.
+pub trait BridgeOff {
+    /// The PWM timer stops driving its outputs (on an STM32 advanced timer: BDTR.MOE cleared;
+    /// with OSSI set the outputs go to their idle level).
+    fn disable_timer_outputs(&mut self);
+    /// The bridge inputs' GPIO output latches set low (no effect on the pins yet while the
+    /// timer owns them).
+    fn latch_pins_low(&mut self);
+    /// The bridge inputs taken from the timer as plain GPIO outputs (driving the latches).
+    fn pins_to_gpio_outputs(&mut self);
+}
+
+/// Switches the bridge off, whatever state the timer is in: the timer's outputs off, then the
+/// pins' latches low, and only then the pins handed to the GPIO, so that no pin ever drives
+/// an old latch value (a high latch handed over first would switch that input on).
+pub fn bridge_off<B: BridgeOff>(b: &mut B) {
+    b.disable_timer_outputs();
+    b.latch_pins_low();
+    b.pins_to_gpio_outputs();
+}
+
 /// Timer compare values for the two inputs of an H-bridge driven sign-magnitude with slow
 /// decay (drive / brake, as a DRV8871's IN1/IN2), for `duty` in [-1, 1] and a timer period
 /// of `period` counts: the input on the side of the direction stays high, the other is low

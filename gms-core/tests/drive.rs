@@ -388,3 +388,78 @@ fn sense_zero_at_start() {
     );
     assert_eq!(calibrate_sense(&board, || 0).faults, Faults::CURRENT_SENSE);
 }
+
+/// A model of a bridge input pin: the timer drives it while it is its alternate function,
+/// else the GPIO latch does.
+#[derive(Default)]
+struct PinModel {
+    timer_on: bool,
+    timer_level: bool,
+    latch: bool,
+    gpio: bool,
+    /// Every level the pin took.
+    seen: Vec<bool>,
+}
+
+impl PinModel {
+    fn level(&self) -> bool {
+        if self.gpio {
+            self.latch
+        } else {
+            self.timer_on && self.timer_level
+        }
+    }
+    fn record(&mut self) {
+        let l = self.level();
+        self.seen.push(l);
+    }
+}
+
+impl drive::BridgeOff for PinModel {
+    fn disable_timer_outputs(&mut self) {
+        self.timer_on = false;
+        self.record();
+    }
+    fn latch_pins_low(&mut self) {
+        self.latch = false;
+        self.record();
+    }
+    fn pins_to_gpio_outputs(&mut self) {
+        self.gpio = true;
+        self.record();
+    }
+}
+
+#[test]
+fn bridge_off_never_drives_a_pin_high() {
+    // From every state: the timer driving high or low, an old latch high or low, the pin
+    // already a GPIO or not.
+    for bits in 0..16u8 {
+        let mut p = PinModel {
+            timer_on: true,
+            timer_level: bits & 1 != 0,
+            latch: bits & 2 != 0,
+            gpio: bits & 4 != 0,
+            seen: Vec::new(),
+        };
+        if bits & 8 != 0 {
+            // Already off once: the path is idempotent.
+            drive::bridge_off(&mut p);
+            p.seen.clear();
+        }
+        let before = p.level();
+        drive::bridge_off(&mut p);
+        assert!(!p.level(), "state {bits:04b}: the pin ends high");
+        // No step of the path raises the pin (it may only fall).
+        let mut last = before;
+        for &l in &p.seen {
+            assert!(
+                !l || last,
+                "state {bits:04b}: a step drove the pin high: {:?}",
+                p.seen
+            );
+            last = l;
+        }
+        assert!(p.gpio && !p.latch && !p.timer_on);
+    }
+}
