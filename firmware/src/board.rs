@@ -28,7 +28,7 @@
 
 use embassy_stm32::adc::{Adc, SampleTime};
 use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::gpio::{Level, Output, OutputType, Speed};
+use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::peripherals::{ADC1, PC0, TIM2, TIM8};
@@ -55,6 +55,13 @@ pub const PWM_TIMER_HZ: u32 = 168_000_000;
 pub const PWM_MAX_ARR: u32 = 65_534;
 /// Width of the encoder counter [bits] (TIM2 is 32-bit).
 pub const ENCODER_BITS: u32 = 32;
+/// TIM2's clock [Hz] (APB1 42 MHz, doubled for timers; f_DTS with CKD = 0).
+pub const ENCODER_TIMER_HZ: u32 = 84_000_000;
+/// The highest count rate the encoder input must pass [counts/s]: 3.8 rad/s at 3.8 urad per
+/// count, 7.6 times the protocol's move speed limit (0.5 rad/s). The input filter is sized
+/// from it (`drive::encoder_filter`: f_DTS/4, N = 8, a 381 ns window: shorter glitches are not
+/// counted); an encoder that must count faster needs this raised (and gets a lighter filter).
+pub const ENCODER_MAX_RATE: f32 = 1.0e6;
 
 /// ADC reference [V].
 pub const ADC_VREF: f32 = 3.3;
@@ -287,13 +294,27 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     pac::TIM8.sr().write(|w| w.0 = 0);
     pac::TIM8.dier().modify(|w| w.set_uie(true));
 
-    // Encoder: TIM2 in encoder mode on both edges of both channels, 32-bit.
+    // Encoder: TIM2 in encoder mode on both edges of both channels, 32-bit. Pull-ups so that
+    // an open-collector encoder or a loose wire reads a steady level rather than noise (a
+    // push-pull or line-receiver output overrides them).
     let qcfg = embassy_stm32::timer::qei::Config {
         mode: QeiMode::Mode3,
+        ch1_pull: Pull::Up,
+        ch2_pull: Pull::Up,
         ..Default::default()
     };
     let qei = Qei::new(p.TIM2, p.PA0, p.PA1, qcfg);
     pac::TIM2.arr().write_value(u32::MAX);
+    // Digital filter on TI1/TI2 (TIMx_CCMR1 IC1F/IC2F, RM0090 §18.4.7; embassy's Qei leaves
+    // them at 0, no filter): a glitch that the filter does not reject is a count lost for
+    // good in nanometre positioning. Written with the counter running: the filter only
+    // delays edges by its window.
+    let (filter, _window) = drive::encoder_filter(ENCODER_TIMER_HZ, ENCODER_MAX_RATE);
+    pac::TIM2.ccmr_input(0).modify(|w| {
+        let f = pac::timer::vals::FilterValue::from_bits(filter);
+        w.set_icf(0, f);
+        w.set_icf(1, f);
+    });
 
     let adc = Adc::new(p.ADC1);
 

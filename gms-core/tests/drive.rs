@@ -463,3 +463,29 @@ fn bridge_off_never_drives_a_pin_high() {
         assert!(p.gpio && !p.latch && !p.timer_on);
     }
 }
+
+#[test]
+fn encoder_input_filter() {
+    // 84 MHz, 1 Mcount/s: edges 1 us apart, the window at most 0.5 us: f_DTS/4 with N = 8 is
+    // 381 ns (f_DTS/8, N = 6 would be 571 ns).
+    let (code, w) = drive::encoder_filter(84_000_000, 1e6);
+    assert_eq!(code, 0b0111);
+    assert!((w - 32.0 / 84e6).abs() < 1e-12, "{w}");
+    // Slower encoders get stronger filters, never a window above half the edge spacing.
+    let mut last = 0.0;
+    for rate in [1e7f32, 3e6, 1e6, 3e5, 1e5, 3e4, 1e4] {
+        let (c, w) = drive::encoder_filter(84_000_000, rate);
+        assert!(w <= 0.5 / rate, "{rate}: {w}");
+        assert!(w >= last, "{rate}: {w} below {last}");
+        let (div, n) = drive::INPUT_FILTERS[c as usize];
+        assert_eq!(w, (n * div) as f32 / 84e6);
+        last = w;
+    }
+    // The strongest filter (f_DTS/32, N = 8: 3.05 us) once the edges are 6.1 us apart.
+    assert_eq!(drive::encoder_filter(84_000_000, 1.6e5).0, 0b1111);
+    // Too fast for any filter (2 samples at 84 MHz = 24 ns > half of 1/30 MHz), or nonsense.
+    assert_eq!(drive::encoder_filter(84_000_000, 3e7), (0, 0.0));
+    assert_eq!(drive::encoder_filter(0, 1e6), (0, 0.0));
+    assert_eq!(drive::encoder_filter(84_000_000, f32::NAN), (0, 0.0));
+    assert_eq!(drive::encoder_filter(84_000_000, -1.0), (0, 0.0));
+}
