@@ -439,7 +439,7 @@ pub const INPUT_FILTERS: [(u32, u32); 16] = [
 /// the ICxF code and the window [s]; code 0 (no filter, window 0) when even the lightest
 /// filter would be too slow or the arguments are not positive.
 pub fn encoder_filter(timer_hz: u32, max_count_rate: f32) -> (u8, f32) {
-    if timer_hz == 0 || !(max_count_rate > 0.0) || !max_count_rate.is_finite() {
+    if timer_hz == 0 || !max_count_rate.is_finite() || max_count_rate <= 0.0 {
         return (0, 0.0);
     }
     let limit = 0.5 / max_count_rate as f64;
