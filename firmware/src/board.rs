@@ -23,10 +23,18 @@
 //! in-line motor sensing, rejects the PWM edges) sees it all the time.
 //!
 //! Current sense: 68 mohm × gain 50 = 3.4 V/A around 1.65 V: ±0.48 A over the 12-bit ADC,
-//! 0.24 mA per code (the simulator's ±0.5 A, 12 bits). Timers: TIM2 encoder, TIM8 PWM, TIM4
-//! embassy's time driver (none shared).
+//! 0.24 mA per code (the simulator's ±0.5 A, 12 bits). Sampled by the hardware, not by the
+//! CPU: TIM8's OC4REF (channel 4, no pin) is its trigger output (TRGO), rising once per PWM
+//! period [`SENSE_TIMING`]`.lead` before the counter's bottom; it starts ADC1's regular
+//! sequence of 16 conversions of PC0, which DMA2 stream 0 moves into a buffer; the DMA's
+//! transfer-complete interrupt is the control interrupt. The sampling instants are centred on
+//! the bottom, the middle of the bridge's on-time, where the current's PWM ripple is at its
+//! mean. Timers: TIM2 encoder, TIM8 PWM and sense trigger, TIM4 embassy's time driver (none
+//! shared).
 
-use embassy_stm32::adc::{Adc, SampleTime};
+use core::cell::UnsafeCell;
+
+use embassy_stm32::adc::Adc;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
@@ -40,7 +48,7 @@ use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
 use gms_core::device::{Board, SenseChain};
-use gms_core::drive::{self, BoardLimits, BridgeOff};
+use gms_core::drive::{self, BoardLimits, BridgeOff, SenseTiming};
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
@@ -73,8 +81,22 @@ pub const SENSE_V_PER_A: f32 = 0.068 * 50.0;
 pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
 /// How far the measured zero may lie from it [code] (INA240 offset, resistor tolerances).
 pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
-/// ADC conversions averaged per current sample.
-pub const SENSE_OVERSAMPLE: u32 = 2;
+/// ADC1's clock [Hz]: PCLK2 84 MHz / 4 (embassy-stm32 0.6's `Adc::new` takes the smallest
+/// prescaler under the F4's 36 MHz maximum, `adc/v2.rs` `from_pclk2`).
+pub const ADC_HZ: u32 = 21_000_000;
+/// ADC1 channel of the current sense (PC0 = ADC123_IN10, DS8626 pin table).
+const SENSE_CHANNEL: u8 = 10;
+/// How the current is sampled: 16 conversions (the simulator's 16-fold oversampling) of 15
+/// cycles' sampling (0.71 us: the INA240's output drives the pin directly) + 12, from a trigger
+/// latency of 2 ADC cycles (DS8626 t_latr, at most 3): 20.7 us, centred on the bottom.
+pub const SENSE_TIMING: SenseTiming = SenseTiming {
+    adc_hz: ADC_HZ,
+    sample_cycles: 15,
+    conversions: 16,
+    latency_cycles: 2,
+};
+/// ADC conversions summed per current sample.
+pub const SENSE_OVERSAMPLE: u32 = SENSE_TIMING.conversions;
 
 /// What the board allows (see [`BoardLimits`]).
 pub const LIMITS: BoardLimits = BoardLimits {
@@ -83,7 +105,10 @@ pub const LIMITS: BoardLimits = BoardLimits {
     max_error: 0.01,
     max_speed: 100.0,
     clock_hz: SYSCLK_HZ,
-    budget_fraction: 0.8,
+    // The step starts when the samples are in, half the sense window (10.3 us) after the
+    // bottom, and must end before the next bottom (its compare values are taken there): 60 %
+    // of the period (30 us at 20 kHz) leaves 9 us.
+    budget_fraction: 0.6,
 };
 
 /// The board as the device core sees it.
@@ -96,6 +121,7 @@ pub const BOARD: Board = Board {
         amps_per_code: ADC_VREF / ADC_FULL_SCALE / SENSE_V_PER_A,
         zero_code: SENSE_OFFSET_EXPECTED,
         zero_tolerance: SENSE_OFFSET_TOLERANCE,
+        window_s: SENSE_TIMING.window_s(),
     },
     limits: LIMITS,
     has_truth: false,
@@ -129,11 +155,20 @@ pub fn config() -> embassy_stm32::Config {
     c
 }
 
+/// The DMA's destination: the last sequence of current-sense conversions. Written only by
+/// DMA2 stream 0, read only with volatile reads after its transfer-complete flag.
+struct SenseBuf(UnsafeCell<[u16; SENSE_OVERSAMPLE as usize]>);
+
+// SAFETY: the CPU only reads it (volatile), the DMA only writes it.
+unsafe impl Sync for SenseBuf {}
+
+static SENSE_BUF: SenseBuf = SenseBuf(UnsafeCell::new([0; SENSE_OVERSAMPLE as usize]));
+
 /// The control loop's hardware: owned by the control interrupt.
 pub struct ControlHw {
-    adc: Adc<'static, ADC1>,
-    isense: Peri<'static, PC0>,
-    // Kept alive: dropping them would gate the timers' clocks.
+    // Kept alive: dropping them would gate the peripherals' clocks or free the pin.
+    _adc: Adc<'static, ADC1>,
+    _isense: Peri<'static, PC0>,
     _pwm: SimplePwm<'static, TIM8>,
     _qei: Qei<'static, TIM2>,
 }
@@ -145,16 +180,31 @@ impl ControlHw {
         pac::TIM2.cnt().read()
     }
 
-    /// Sum of [`SENSE_OVERSAMPLE`] ADC codes of the motor current.
+    /// Sum of the [`SENSE_OVERSAMPLE`] ADC codes of the motor current of the last sequence
+    /// (in the control interrupt: the sequence that just completed).
     #[inline(always)]
-    pub fn current_codes(&mut self) -> u32 {
-        let mut sum = 0;
-        for _ in 0..SENSE_OVERSAMPLE {
-            sum += self
-                .adc
-                .blocking_read(&mut self.isense, SampleTime::CYCLES15) as u32;
+    pub fn current_codes(&self) -> u32 {
+        let base = SENSE_BUF.0.get() as *const u16;
+        let mut sum = 0u32;
+        for i in 0..SENSE_OVERSAMPLE as usize {
+            // SAFETY: in bounds of the buffer; volatile, as the DMA writes it.
+            sum += unsafe { core::ptr::read_volatile(base.add(i)) } as u32;
         }
         sum
+    }
+
+    /// Waits for the next sequence (at most about 10 ms) and returns its sum, for the
+    /// start-up calibration while the control interrupt is off. 0 if none came: the ADC is
+    /// not running, which the calibration reports as a `current_sense` fault.
+    pub fn next_current_codes(&mut self) -> u32 {
+        ack_sample();
+        for _ in 0..1_000_000u32 {
+            if pac::DMA2.isr(0).read().tcif(0) {
+                ack_sample();
+                return self.current_codes();
+            }
+        }
+        0
     }
 
     /// Writes the two bridge inputs' compare values (take effect at the next PWM period).
@@ -166,22 +216,104 @@ impl ControlHw {
     }
 
     /// Sets the PWM timer's prescaler and period (register values; preloaded, so they take
-    /// effect at the next update).
+    /// effect at the next update) and the sense trigger's lead for them.
     pub fn set_pwm_timing(&mut self, psc: u32, arr: u32) {
+        let arr = arr.min(PWM_MAX_ARR);
         pac::TIM8.psc().write_value(psc.min(u16::MAX as u32) as u16);
-        pac::TIM8
-            .arr()
-            .write(|w| w.set_arr(arr.min(PWM_MAX_ARR) as u16));
+        pac::TIM8.arr().write(|w| w.set_arr(arr as u16));
+        let lead = SENSE_TIMING.lead_counts(PWM_TIMER_HZ, psc).min(arr - 1);
+        pac::TIM8.ccr(3).write(|w| w.set_ccr(lead as u16));
     }
 
-    /// Clears the PWM timer's update flag (first thing in the interrupt).
+    /// Clears the sense DMA's flags (first thing in the interrupt).
     #[inline(always)]
-    pub fn ack_update(&mut self) {
-        pac::TIM8.sr().write(|w| {
-            w.0 = !0;
-            w.set_uif(false)
-        });
+    pub fn ack_sample(&mut self) {
+        ack_sample();
     }
+}
+
+/// Clears DMA2 stream 0's flags (LIFCR, RM0090 §10.5.3).
+#[inline(always)]
+fn ack_sample() {
+    pac::DMA2.ifcr(0).write(|w| {
+        w.set_tcif(0, true);
+        w.set_htif(0, true);
+        w.set_teif(0, true);
+        w.set_dmeif(0, true);
+        w.set_feif(0, true);
+    });
+}
+
+/// Sets up the hardware sampling of the motor current (see the module's notes): ADC1's regular
+/// sequence of [`SENSE_OVERSAMPLE`] conversions of PC0 on TIM8's TRGO, moved by DMA2 stream 0
+/// (channel 0 = ADC1, RM0090 table 43) into [`SENSE_BUF`], circularly, with its
+/// transfer-complete interrupt (left disabled in the NVIC until [`start_control`]). ADC1 is
+/// already clocked, prescaled and on (`Adc::new`).
+fn sense_init() {
+    use pac::adc::vals::{Dds, Eocs, Exten, Res, SampleTime};
+    use pac::dma::vals::{Dir, Size};
+    // PC0 analog (RM0090 §8.4.1: MODER = 11).
+    pac::GPIOC
+        .moder()
+        .modify(|w| w.set_moder(0, pac::gpio::vals::Moder::ANALOG));
+    // DMA2 stream 0, disabled while configured (RM0090 §10.3.17).
+    pac::RCC.ahb1enr().modify(|w| w.set_dma2en(true));
+    let st = pac::DMA2.st(0);
+    st.cr().modify(|w| w.set_en(false));
+    while st.cr().read().en() {}
+    ack_sample();
+    st.par().write_value(pac::ADC1.dr().as_ptr() as u32);
+    st.m0ar().write_value(SENSE_BUF.0.get() as u32);
+    st.ndtr().write(|w| w.set_ndt(SENSE_OVERSAMPLE as u16));
+    st.cr().write(|w| {
+        w.set_chsel(0);
+        w.set_dir(Dir::PERIPHERAL_TO_MEMORY);
+        w.set_psize(Size::BITS16);
+        w.set_msize(Size::BITS16);
+        w.set_minc(true);
+        w.set_circ(true);
+        w.set_tcie(true);
+        w.set_en(true);
+    });
+    // ADC1 (RM0090 §13.13): 12 bits, scan of 16 ranks of channel 10, each sampled 15 cycles;
+    // DMA requests continuing after each sequence (DDS); EOC per sequence; started by the
+    // rising edge of TIM8_TRGO (EXTSEL = 1110, §13.13.3 table "External trigger for regular
+    // channels").
+    let adc = pac::ADC1;
+    adc.cr1().modify(|w| {
+        w.set_res(Res::BITS12);
+        w.set_scan(true);
+        w.set_eocie(false);
+        w.set_ovrie(false);
+    });
+    adc.smpr1()
+        .modify(|w| w.set_smp((SENSE_CHANNEL - 10) as usize, SampleTime::CYCLES15));
+    adc.sqr1().modify(|w| w.set_l(SENSE_OVERSAMPLE as u8 - 1));
+    // Ranks 1-6 in SQR3, 7-12 in SQR2, 13-16 in SQR1.
+    adc.sqr3().write(|w| {
+        for i in 0..6 {
+            w.set_sq(i, SENSE_CHANNEL);
+        }
+    });
+    adc.sqr2().write(|w| {
+        for i in 0..6 {
+            w.set_sq(i, SENSE_CHANNEL);
+        }
+    });
+    adc.sqr1().modify(|w| {
+        for i in 0..4 {
+            w.set_sq(i, SENSE_CHANNEL);
+        }
+    });
+    adc.cr2().modify(|w| {
+        w.set_cont(false);
+        w.set_dma(true);
+        w.set_dds(Dds::CONTINUOUS);
+        w.set_eocs(Eocs::EACH_SEQUENCE);
+        w.set_extsel(0b1110);
+        w.set_exten(Exten::RISING_EDGE);
+        w.set_adon(true);
+    });
 }
 
 /// The bridge inputs PC6/PC7 (TIM8_CH1/CH2) as registers, for [`bridge_off_now`].
@@ -264,8 +396,11 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
         w.set_dcen(true);
     });
 
-    // PWM: TIM8 CH1/CH2, center-aligned (the update event at the counter's bottom, every
-    // other one through the repetition counter, so one interrupt per period).
+    // PWM: TIM8 CH1/CH2, center-aligned. The update event (where the preloaded compare values
+    // take effect) comes at every other turning point through the repetition counter: RCR = 1
+    // written after the counter started gives it at the underflow, the counter's bottom
+    // (RM0090 §17.3.3: "If the RCR was written after starting the counter, the UEV occurs on
+    // the underflow").
     let in1 = PwmPin::new(p.PC6, OutputType::PushPull);
     let in2 = PwmPin::new(p.PC7, OutputType::PushPull);
     let mut pwm = SimplePwm::new(
@@ -292,7 +427,19 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     });
     pac::TIM8.rcr().write(|w| w.set_rep(1));
     pac::TIM8.sr().write(|w| w.0 = 0);
-    pac::TIM8.dier().modify(|w| w.set_uie(true));
+    // The sense trigger: channel 4 (no pin) in PWM mode 1, so OC4REF is high while the
+    // counter is below CCR4; rising on the way down, CCR4 counts before the bottom; OC4REF
+    // as TRGO (CR2.MMS = 111, RM0090 §17.4.2) is the ADC's trigger, once per period.
+    pac::TIM8.ccmr_output(1).modify(|w| {
+        w.set_ocm(1, pac::timer::vals::Ocm::PWM_MODE1);
+        w.set_ocpe(1, true);
+    });
+    pac::TIM8
+        .ccr(3)
+        .write(|w| w.set_ccr(SENSE_TIMING.lead_counts(PWM_TIMER_HZ, 0) as u16));
+    pac::TIM8
+        .cr2()
+        .modify(|w| w.set_mms(pac::timer::vals::Mms::COMPARE_OC4));
 
     // Encoder: TIM2 in encoder mode on both edges of both channels, 32-bit. Pull-ups so that
     // an open-collector encoder or a loose wire reads a steady level rather than noise (a
@@ -317,6 +464,10 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     });
 
     let adc = Adc::new(p.ADC1);
+    // The control interrupt stays off in the NVIC (embassy's init enabled every DMA stream's)
+    // until the loop is handed over; the start-up calibration polls the flag meanwhile.
+    interrupt::DMA2_STREAM0.disable();
+    sense_init();
 
     let mut usb_cfg = usb::Config::default();
     usb_cfg.vbus_detection = false;
@@ -325,8 +476,8 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     interrupt::OTG_FS.set_priority(Priority::P3);
 
     let hw = ControlHw {
-        adc,
-        isense: p.PC0,
+        _adc: adc,
+        _isense: p.PC0,
         _pwm: pwm,
         _qei: qei,
     };
@@ -341,27 +492,26 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     (hw, rest)
 }
 
-/// Enables the control interrupt (the PWM timer's update) one level below the time driver.
+/// Enables the control interrupt (the sense DMA's transfer complete, once per PWM period)
+/// one level below the time driver.
 pub fn start_control() {
-    interrupt::TIM8_UP_TIM13.set_priority(Priority::P1);
+    ack_sample();
+    interrupt::DMA2_STREAM0.set_priority(Priority::P1);
     // SAFETY: the handler below only touches state it owns or takes through a critical
     // section; enabling it cannot break another critical section.
-    unsafe { interrupt::TIM8_UP_TIM13.enable() };
+    unsafe { interrupt::DMA2_STREAM0.enable() };
 }
 
-/// The control interrupt: the PWM timer's update, once per PWM period.
+/// The control interrupt: the current samples of this PWM period are in.
 #[interrupt]
-fn TIM8_UP_TIM13() {
+fn DMA2_STREAM0() {
     static mut LOOP: Option<crate::control::Loop> = None;
-    crate::control::on_pwm_update(LOOP);
+    crate::control::on_sample(LOOP);
 }
 
-/// The update interrupt before the loop is handed over: bridge off, flag cleared.
-pub fn idle_update() {
-    pac::TIM8.sr().write(|w| {
-        w.0 = !0;
-        w.set_uif(false)
-    });
+/// The control interrupt before the loop is handed over: bridge off, flags cleared.
+pub fn idle_sample() {
+    ack_sample();
     pac::TIM8.ccr(0).write(|w| w.set_ccr(0));
     pac::TIM8.ccr(1).write(|w| w.set_ccr(0));
 }

@@ -1,6 +1,7 @@
-//! The control loop's shell: runs gms-core's [`ControlLoop`] in the PWM timer's update
-//! interrupt (one call per PWM period, the current-loop rate), so that it is locked to the
-//! PWM and independent of everything the communication side does. No allocation, no logging,
+//! The control loop's shell: runs gms-core's [`ControlLoop`] in the current-sense DMA's
+//! transfer-complete interrupt (one call per PWM period, the current-loop rate, as soon as the
+//! period's samples are in; see `board.rs`), so that it is locked to the PWM and independent
+//! of everything the communication side does. No allocation, no logging,
 //! no waiting lock: one short critical section per position step exchanges requests and status
 //! with the comms task through the [`MAILBOX`].
 //!
@@ -54,7 +55,7 @@ impl Loop {
     /// One PWM period.
     fn step(&mut self) {
         let t0 = cortex_m::peripheral::DWT::cycle_count();
-        self.hw.ack_update();
+        self.hw.ack_sample();
         let inp = Inputs {
             encoder: self.hw.encoder_raw(),
             current_codes: self.hw.current_codes(),
@@ -78,17 +79,17 @@ impl Loop {
     }
 }
 
-/// Called by the PWM timer's update interrupt with the interrupt's own slot for the loop
+/// Called by the control interrupt with the interrupt's own slot for the loop
 /// (a `static mut` of the handler, reached from nowhere else): the loop is taken from the
 /// hand-off on the first call, then owned there.
 #[inline(always)]
-pub fn on_pwm_update(slot: &mut Option<Loop>) {
+pub fn on_sample(slot: &mut Option<Loop>) {
     if slot.is_none() {
         *slot = HANDOFF.lock(|h| h.borrow_mut().take());
     }
     match slot {
         Some(l) => l.step(),
         // Not handed over yet: keep the bridge off and the flag clear.
-        None => crate::board::idle_update(),
+        None => crate::board::idle_sample(),
     }
 }

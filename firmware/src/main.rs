@@ -1,7 +1,7 @@
 //! gms firmware for the STM32F405 motor driver: a thin embassy shell around gms-core.
 //!
 //! - `board`: pins, peripherals, clocks (the only file to change for another board).
-//! - `control`: the control loop in the PWM timer's update interrupt (current loop at the PWM
+//! - `control`: the control loop in the current-sense DMA interrupt (current loop at the PWM
 //!   rate, position loop every `ratio`-th period, faults, step timing).
 //! - `comms`: USB CDC-ACM and the bench protocol in the thread executor.
 //! - `storage`: the parameter record in flash (sequential-storage).
@@ -72,7 +72,7 @@ async fn main(spawner: Spawner) {
     faults.latch(start.faults);
 
     // Current-sense zero, with the bridge off (the decision is gms-core's).
-    let zero = device::calibrate_sense(&board::BOARD, || hw.current_codes());
+    let zero = device::calibrate_sense(&board::BOARD, || hw.next_current_codes());
     if zero.faults.is_empty() {
         info!("current-sense zero at {} codes", zero.sense.offset);
     } else {

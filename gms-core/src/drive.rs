@@ -497,6 +497,65 @@ pub fn bridge_compare(duty: f32, period: u32, enabled: bool) -> (u32, u32) {
     if d >= 0.0 { (high, pwm) } else { (pwm, high) }
 }
 
+/// How a board's ADC samples the motor current: a sequence of `conversions` conversions of
+/// one channel started by a hardware trigger, each `sample_cycles` of sampling plus 12 cycles
+/// of 12-bit conversion (RM0090 §13.5: T_conv = sampling time + 12 ADC cycles), at `adc_hz`.
+/// The trigger leads the PWM period's turning point so that the sampling instants are centred
+/// on it: the triangular ripple of the current is point-symmetric about its mid-value there,
+/// so the mean of a centred window is the period's mean current, without the ripple.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SenseTiming {
+    /// ADC clock [Hz].
+    pub adc_hz: u32,
+    /// Sampling time of one conversion [ADC cycles].
+    pub sample_cycles: u32,
+    /// Conversions per sample (summed) [-].
+    pub conversions: u32,
+    /// Delay from the trigger to the start of the first sampling [ADC cycles] (the
+    /// datasheet's trigger-to-conversion latency).
+    pub latency_cycles: u32,
+}
+
+impl SenseTiming {
+    /// One conversion [ADC cycles].
+    pub const fn conversion_cycles(&self) -> u32 {
+        self.sample_cycles + 12
+    }
+
+    /// From the trigger to the end of the last conversion [s].
+    pub const fn window_s(&self) -> f32 {
+        if self.adc_hz == 0 {
+            return 0.0;
+        }
+        (self.latency_cycles + self.conversions * self.conversion_cycles()) as f32
+            / self.adc_hz as f32
+    }
+
+    /// From the trigger to the centroid of the sampling instants (each at the end of its
+    /// sampling time) [s]: how far the trigger must lead the turning point.
+    pub const fn lead_s(&self) -> f32 {
+        if self.adc_hz == 0 {
+            return 0.0;
+        }
+        let n = if self.conversions == 0 {
+            1.0
+        } else {
+            self.conversions as f32
+        };
+        (self.latency_cycles as f32
+            + self.sample_cycles as f32
+            + 0.5 * (n - 1.0) * self.conversion_cycles() as f32)
+            / self.adc_hz as f32
+    }
+
+    /// The lead in counts of a timer clocked at `timer_hz` [Hz] with prescaler register `psc`
+    /// (counting at timer_hz / (psc + 1)), rounded.
+    pub fn lead_counts(&self, timer_hz: u32, psc: u32) -> u32 {
+        let f = timer_hz as f64 / (psc as f64 + 1.0);
+        (self.lead_s() as f64 * f + 0.5) as u32
+    }
+}
+
 /// Prescaler and period (both as the register values, i.e. minus one) of a center-aligned
 /// timer at `clock_hz` [Hz] giving `rate_hz` [Hz], with a period of at most `max_arr`
 /// (65535 for a 16-bit timer). The period is the largest that fits, so that the duty

@@ -355,6 +355,7 @@ fn sense_zero_at_start() {
             amps_per_code: 2.37e-4,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
+            window_s: 0.0,
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
@@ -488,4 +489,84 @@ fn encoder_input_filter() {
     assert_eq!(drive::encoder_filter(0, 1e6), (0, 0.0));
     assert_eq!(drive::encoder_filter(84_000_000, f32::NAN), (0, 0.0));
     assert_eq!(drive::encoder_filter(84_000_000, -1.0), (0, 0.0));
+}
+
+#[test]
+fn current_sense_trigger_timing() {
+    // The F405 board: ADC at 84 MHz / 4 = 21 MHz, 16 conversions of 15 + 12 cycles, 2 cycles
+    // of trigger latency.
+    let t = drive::SenseTiming {
+        adc_hz: 21_000_000,
+        sample_cycles: 15,
+        conversions: 16,
+        latency_cycles: 2,
+    };
+    assert_eq!(t.conversion_cycles(), 27);
+    // 2 + 16 × 27 = 434 cycles = 20.67 us.
+    assert!((t.window_s() - 434.0 / 21e6).abs() < 1e-10);
+    // Sampling instants at 2 + 15 + 27 k, k = 0..15: mean 2 + 15 + 7.5 × 27 = 219.5 cycles.
+    let instants: Vec<f64> = (0..16).map(|k| (2 + 15 + 27 * k) as f64).collect();
+    let centroid = instants.iter().sum::<f64>() / 16.0;
+    assert_eq!(centroid, 219.5);
+    assert!((t.lead_s() as f64 - centroid / 21e6).abs() < 1e-10);
+    // In TIM8 counts at 168 MHz: 219.5 × 8 = 1756; with the prescaler at 1 (84 MHz), 878.
+    assert_eq!(t.lead_counts(168_000_000, 0), 1756);
+    assert_eq!(t.lead_counts(168_000_000, 1), 878);
+    // One conversion: the lead is latency + sampling.
+    let one = drive::SenseTiming {
+        conversions: 1,
+        ..t
+    };
+    assert_eq!(one.lead_counts(168_000_000, 0), 17 * 8);
+    // A centred window: as much of it before the trigger's target as after (to a cycle).
+    let before = t.lead_s() - (2.0 + 15.0) / 21e6;
+    let after = t.window_s() - t.lead_s() - 12.0 / 21e6;
+    assert!((before - after).abs() < 1.0 / 21e6, "{before} {after}");
+}
+
+#[test]
+fn rates_the_current_sense_cannot_sample_are_refused() {
+    use gms_core::device::{Board, SenseChain, default_settings, prepare};
+    let timing = drive::SenseTiming {
+        adc_hz: 21_000_000,
+        sample_cycles: 15,
+        conversions: 16,
+        latency_cycles: 2,
+    };
+    let board = Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 16,
+        sense: SenseChain {
+            amps_per_code: 2.37e-4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+            window_s: timing.window_s(),
+        },
+        limits: drive::BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.6,
+        },
+        has_truth: false,
+    };
+    // 20.67 us of window against 2 × 0.4 × period: 20 kHz (40 us) and 30 kHz (26.7 us) run,
+    // 40 kHz (20 us) does not.
+    let mut s = default_settings();
+    for (hz, ok) in [(20_000.0, true), (30_000.0, true), (40_000.0, false)] {
+        s.cur_rate_hz = hz;
+        s.pos_rate_hz = hz / 2.0;
+        let r = prepare(&s, &board);
+        assert_eq!(r.is_ok(), ok, "{hz} Hz: {:?}", r.err());
+        if !ok {
+            assert_eq!(
+                r.err(),
+                Some("the board's current sense cannot sample at rate.cur_hz")
+            );
+        }
+    }
 }

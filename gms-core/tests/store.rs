@@ -259,6 +259,7 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
             amps_per_code: 3.3 / 4095.0 / 3.4,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
+            window_s: 0.0,
         },
         limits: BoardLimits {
             trip_factor: 1.5,

@@ -52,6 +52,7 @@ pub fn board(sc: &Scenario) -> Board {
                 amps_per_code: adc.lsb as f32,
                 zero_code: adc.mid as f32,
                 zero_tolerance: 150.0,
+                window_s: 0.0,
             }
         },
         limits: BoardLimits {

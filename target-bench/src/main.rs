@@ -114,6 +114,7 @@ fn device_period(out: &mut hio::HostStream) {
             amps_per_code: 3.3 / 4095.0 / 3.4,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
+            window_s: 0.0,
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,

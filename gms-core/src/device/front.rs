@@ -52,6 +52,10 @@ pub fn prepare(s: &Settings, board: &Board) -> Result<Applied, &'static str> {
     let ctrl = Ctrl::try_new(*s).map_err(|_| "the parameter set is invalid")?;
     let (psc, arr) = drive::pwm_timing(board.pwm_timer_hz, s.cur_rate_hz, board.pwm_max_arr)
         .ok_or("the board's PWM timer cannot run rate.cur_hz")?;
+    let window = board.sense.window_s;
+    if window > 0.0 && window > 2.0 * (1.0 - board.limits.budget_fraction) / s.cur_rate_hz {
+        return Err("the board's current sense cannot sample at rate.cur_hz");
+    }
     Ok(Applied {
         ctrl,
         limits: drive::limits_for(s, &board.limits),

@@ -60,6 +60,11 @@ pub struct SenseChain {
     /// How far the measured zero may lie from `zero_code` [code] (amplifier offset, resistor
     /// tolerances).
     pub zero_tolerance: f32,
+    /// From the sampling trigger to the last conversion's end [s] ([`crate::drive::SenseTiming`];
+    /// 0 for an instantaneous sense): the window is centred on the PWM period's turning point
+    /// and the control step starts at its end, so it must leave the step its budget:
+    /// `window_s <= 2 (1 - budget_fraction) / rate.cur_hz` ([`prepare`] refuses other rates).
+    pub window_s: f32,
 }
 
 /// A complete, validated parameter set prepared for the loop (built on the protocol side,
