@@ -38,7 +38,7 @@ use embassy_stm32::adc::Adc;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
-use embassy_stm32::interrupt::{InterruptExt, Priority};
+use embassy_stm32::interrupt::InterruptExt;
 use embassy_stm32::peripherals::{ADC1, PC0, TIM2, TIM8};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
@@ -152,6 +152,9 @@ pub fn config() -> embassy_stm32::Config {
     c.rcc.apb1_pre = APBPrescaler::DIV4;
     c.rcc.apb2_pre = APBPrescaler::DIV2;
     c.rcc.sys = Sysclk::PLL1_P;
+    // The DMA interrupts embassy enables (none used but the loop's, set apart in
+    // `start_control`) below the loop.
+    c.dma_interrupt_priority = crate::irq::DRIVERS;
     c
 }
 
@@ -472,8 +475,10 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     let mut usb_cfg = usb::Config::default();
     usb_cfg.vbus_detection = false;
     let usb = Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, ep_out_buffer, usb_cfg);
-    // USB below the control loop (the time driver's TIM4 stays at the top).
-    interrupt::OTG_FS.set_priority(Priority::P3);
+    // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
+    // the reset priority 0, level with the loop (time_driver/gp16.rs); USB lowest.
+    interrupt::TIM4.set_priority(crate::irq::DRIVERS);
+    interrupt::OTG_FS.set_priority(crate::irq::USB);
 
     let hw = ControlHw {
         _adc: adc,
@@ -492,11 +497,11 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     (hw, rest)
 }
 
-/// Enables the control interrupt (the sense DMA's transfer complete, once per PWM period)
-/// one level below the time driver.
+/// Enables the control interrupt (the sense DMA's transfer complete, once per PWM period) at
+/// the top priority (`irq.rs`).
 pub fn start_control() {
     ack_sample();
-    interrupt::DMA2_STREAM0.set_priority(Priority::P1);
+    interrupt::DMA2_STREAM0.set_priority(crate::irq::CONTROL);
     // SAFETY: the handler below only touches state it owns or takes through a critical
     // section; enabling it cannot break another critical section.
     unsafe { interrupt::DMA2_STREAM0.enable() };

@@ -17,6 +17,7 @@
 mod board;
 mod comms;
 mod control;
+mod irq;
 mod storage;
 
 use defmt::{error, info, unwrap, warn};

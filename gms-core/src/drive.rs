@@ -243,6 +243,8 @@ pub struct Limits {
     pub pos_max: i64,
     /// Control-step budget [cycles]: a step that takes longer is an overrun.
     pub budget_cycles: u32,
+    /// One PWM period [cycles of the step clock]: steps further apart missed periods.
+    pub period_cycles: u32,
 }
 
 /// What the board allows: the inputs of [`limits_for`].
@@ -277,6 +279,7 @@ pub fn limits_for(s: &Settings, b: &BoardLimits) -> Limits {
         pos_min: (s.pos_min as f64 / rpc as f64) as i64,
         pos_max: (s.pos_max as f64 / rpc as f64) as i64,
         budget_cycles: (b.clock_hz as f32 / s.cur_rate_hz * b.budget_fraction) as u32,
+        period_cycles: (b.clock_hz as f64 / s.cur_rate_hz as f64 + 0.5) as u32,
     }
 }
 
@@ -345,13 +348,25 @@ pub fn check(m: &Measured, lim: &Limits, enabled: bool) -> Faults {
     f
 }
 
-/// Worst and mean duration of the control step [cycles].
+/// Periods missed between two control steps `since_last` [cycles] apart, for a period of
+/// `period` [cycles]: the nearest whole number of periods, less the one expected (a step more
+/// than 1.5 periods after the last missed one). 0 when either is 0 (not measured).
+pub fn missed_periods(since_last: u32, period: u32) -> u32 {
+    if since_last == 0 || period == 0 {
+        return 0;
+    }
+    let periods = (since_last as u64 + period as u64 / 2) / period as u64;
+    periods.saturating_sub(1).min(u32::MAX as u64) as u32
+}
+
+/// Worst and mean duration of the control step [cycles], and the periods missed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StepStats {
     worst: u32,
     last: u32,
     sum: u64,
     n: u64,
+    missed: u32,
 }
 
 impl StepStats {
@@ -362,7 +377,18 @@ impl StepStats {
             last: 0,
             sum: 0,
             n: 0,
+            missed: 0,
         }
+    }
+
+    /// Records `n` missed periods.
+    pub fn record_missed(&mut self, n: u32) {
+        self.missed = self.missed.saturating_add(n);
+    }
+
+    /// Periods missed while the bridge drove.
+    pub fn missed(&self) -> u32 {
+        self.missed
     }
 
     /// Records one step of `cycles`.

@@ -165,6 +165,7 @@ fn offset_calibration() {
 
 fn limits() -> Limits {
     Limits {
+        period_cycles: 8400,
         i_trip: 0.75,
         max_error: 0.01,
         max_step_counts: 2_000,
@@ -336,6 +337,7 @@ fn limits_from_settings_and_board() {
     assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);
     // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
     assert_eq!(l.budget_cycles, 6720);
+    assert_eq!(l.period_cycles, 8400);
     let roomy = drive::BoardLimits {
         sense_range: 10.0,
         ..b
@@ -569,4 +571,22 @@ fn rates_the_current_sense_cannot_sample_are_refused() {
             );
         }
     }
+}
+
+#[test]
+fn missed_periods_between_steps() {
+    let p = 8400;
+    // On time, early or late by less than half a period: none missed.
+    for since in [8400, 8000, 12_599, 4201] {
+        assert_eq!(drive::missed_periods(since, p), 0, "{since}");
+    }
+    // 1.5 periods and more: one, then one per period.
+    assert_eq!(drive::missed_periods(12_600, p), 1);
+    assert_eq!(drive::missed_periods(2 * p, p), 1);
+    assert_eq!(drive::missed_periods(3 * p, p), 2);
+    assert_eq!(drive::missed_periods(1000 * p, p), 999);
+    // Not measured.
+    assert_eq!(drive::missed_periods(0, p), 0);
+    assert_eq!(drive::missed_periods(p, 0), 0);
+    assert_eq!(drive::missed_periods(u32::MAX, 1), u32::MAX - 1);
 }

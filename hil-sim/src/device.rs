@@ -118,6 +118,9 @@ impl Sim {
             let inp = Inputs {
                 encoder: self.plant.encoder() as u32,
                 current_codes: self.adc.code(self.plant.adc()),
+                // Simulated time: the steps are exactly one period apart (in the board's
+                // step clock, ns), so none is ever missed.
+                since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
             };
             let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);

@@ -145,6 +145,7 @@ fn device_period(out: &mut hio::HostStream) {
         Inputs {
             encoder: 0,
             current_codes: codes,
+            since_last: 0,
         },
         |_| first.take(),
     );
@@ -165,6 +166,8 @@ fn device_period(out: &mut hio::HostStream) {
             Inputs {
                 encoder: 0,
                 current_codes: codes,
+                since_last: 0,
+                since_last: 0,
             },
             |_| mv.take(),
         );
@@ -178,6 +181,7 @@ fn device_period(out: &mut hio::HostStream) {
                     Inputs {
                         encoder: black_box(encoder),
                         current_codes: black_box(codes),
+                        since_last: black_box(8400),
                     },
                     |st| {
                         reference.set(st.reference.pos);

@@ -56,6 +56,10 @@ pub struct Inputs {
     pub encoder: u32,
     /// The sum of [`Board::sense_oversample`] current-sense ADC codes [code].
     pub current_codes: u32,
+    /// Time since the previous call started [cycles of the board's step clock,
+    /// `BoardLimits::clock_hz`]; 0 when not measured. A call more than 1.5 PWM periods after
+    /// the last one missed a period: counted, and an `overrun` while the bridge drives.
+    pub since_last: u32,
 }
 
 /// What the shell writes to the hardware after a PWM period.
@@ -265,6 +269,11 @@ impl ControlLoop {
         let mut timing = None;
         let mut sample = None;
         let mut new_faults = Faults::NONE;
+        let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
+        if missed > 0 && self.enabled {
+            self.stats.record_missed(missed);
+            new_faults.latch(Faults::OVERRUN);
+        }
         if self.phase == 0 {
             if let Some(req) = exchange(self.status()) {
                 timing = self.take(req);
@@ -291,11 +300,11 @@ impl ControlLoop {
                 pos,
                 cycles: self.last_cycles,
             };
-            new_faults = drive::check(&m, &self.limits, self.enabled);
+            new_faults.latch(drive::check(&m, &self.limits, self.enabled));
             sample = self.telemetry(pos);
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
             // Over-current is checked at every current step.
-            new_faults = Faults::OVER_CURRENT;
+            new_faults.latch(Faults::OVER_CURRENT);
         }
         self.phase += 1;
         if self.phase >= self.ratio {

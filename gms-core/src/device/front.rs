@@ -310,12 +310,13 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         st.faults.write_names(out)?;
         write!(
             out,
-            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={}",
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={}",
             Num(st.ff),
             Num(st.duty),
             Num(drive::cycles_to_us(st.stats.worst() as f32, clock)),
             Num(drive::cycles_to_us(st.stats.mean(), clock)),
             Num(st.sense_offset),
+            st.stats.missed(),
         )
     }
 

@@ -51,6 +51,7 @@ impl Link for CheckLink {
         let inp = Inputs {
             encoder: black_box(7),
             current_codes: black_box(4096),
+            since_last: black_box(8400),
         };
         let mb = &mut self.mailbox;
         let out = self.core.step(inp, |st| mb.exchange(st));

@@ -1,0 +1,76 @@
+//! The device core's control loop on its own: missed periods.
+
+use gms_core::device::{
+    Board, ControlLoop, Inputs, Requests, SenseChain, calibrate_sense, default_settings, prepare,
+};
+use gms_core::drive::{BoardLimits, Faults};
+
+fn board() -> Board {
+    Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 16,
+        sense: SenseChain {
+            amps_per_code: 2.37e-4,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+            window_s: 0.0,
+        },
+        limits: BoardLimits {
+            trip_factor: 1.5,
+            sense_range: 0.48,
+            max_error: 0.01,
+            max_speed: 100.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.6,
+        },
+        has_truth: false,
+    }
+}
+
+/// A loop at rest at count 0, zero current.
+fn rest() -> ControlLoop {
+    let b = board();
+    let a = prepare(&default_settings(), &b).unwrap();
+    let zero = calibrate_sense(&b, || 16 * 2048);
+    ControlLoop::new(b, a, zero.sense, zero.faults, 0)
+}
+
+fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
+    let mut req = req;
+    let inp = Inputs {
+        encoder: 0,
+        current_codes: 16 * 2048,
+        since_last,
+    };
+    lp.step(inp, |_| req.take());
+    lp.finish(1000);
+}
+
+#[test]
+fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
+    let period = 168_000_000 / 20_000;
+    let mut lp = rest();
+    // Disabled: steps far apart (a flash erase holds the CPU for seconds) count nothing.
+    step(&mut lp, 0, None);
+    step(&mut lp, 1000 * period, None);
+    assert_eq!(lp.status().stats.missed(), 0);
+    assert_eq!(lp.faults(), Faults::NONE);
+    // Enabled, on time (with jitter): nothing.
+    let enable = Requests {
+        enable: true,
+        ..Requests::default()
+    };
+    step(&mut lp, period, Some(enable));
+    for k in 0..100u32 {
+        step(&mut lp, period - 300 + 6 * k, None);
+    }
+    assert!(lp.enabled());
+    assert_eq!(lp.status().stats.missed(), 0);
+    // Two periods missed: counted, overrun latched, the bridge off at once.
+    step(&mut lp, 3 * period, None);
+    assert_eq!(lp.status().stats.missed(), 2);
+    assert!(lp.faults().contains(Faults::OVERRUN), "{:?}", lp.faults());
+    assert!(!lp.enabled());
+}
