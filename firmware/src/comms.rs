@@ -1,14 +1,24 @@
 //! The bench link: USB CDC-ACM at low priority (thread mode), speaking gms-core's protocol
 //! (`LineReader` → `execute`) over gms-core's device [`Front`]: everything a command does is
 //! decided there; this file carries bytes and reaches the loop through the mailbox.
+//!
+//! A session ends when the host goes away, which VBUS sensing cannot tell (it is off: the
+//! port may be closed with the cable in): the USB endpoint fails (unplugged, bus reset), the
+//! host drops DTR after having raised it (it closed the port: Linux and macOS drop DTR on
+//! close, `ACM` control request SET_CONTROL_LINE_STATE), or a packet is not taken within
+//! [`WRITE_TIMEOUT_MS`] (nobody reads: a closed port never polls the IN endpoint, and the
+//! write would wait forever). Then the stream stops and the partial request line is dropped,
+//! so the next session starts clean; the axis is not touched — it keeps holding or finishing
+//! its move, the bridge as it was, every fault check running (`disable` is a request like any
+//! other).
 
 use core::fmt::{self, Write};
 
 use defmt::info;
-use embassy_futures::select::{Either, select};
+use embassy_futures::select::{Either3, select3};
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
-use embassy_time::Instant;
+use embassy_time::{Duration, Instant, Timer, with_timeout};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use gms_core::device::{Front, Link, Mailbox, Status};
@@ -75,18 +85,50 @@ impl<const N: usize> Write for Buf<N> {
     }
 }
 
+/// How long a packet may wait for the host to take it [ms] before the session is taken as
+/// over (a reading host takes one every 1 ms USB frame).
+pub const WRITE_TIMEOUT_MS: u64 = 200;
+
+/// How often the host's DTR is looked at [ms].
+const DTR_POLL_MS: u64 = 50;
+
+/// The host is gone (see the module's notes).
+struct Gone;
+
+impl From<EndpointError> for Gone {
+    fn from(_: EndpointError) -> Gone {
+        Gone
+    }
+}
+
+/// Writes one packet, or gives up after [`WRITE_TIMEOUT_MS`].
+async fn write(
+    class: &mut CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
+    chunk: &[u8],
+) -> Result<(), Gone> {
+    match with_timeout(
+        Duration::from_millis(WRITE_TIMEOUT_MS),
+        class.write_packet(chunk),
+    )
+    .await
+    {
+        Ok(r) => Ok(r?),
+        Err(_) => Err(Gone),
+    }
+}
+
 /// Writes `bytes` in packets; a final full packet is followed by an empty one, so that the
 /// host sees the end of the transfer.
 async fn send(
     class: &mut CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
     bytes: &[u8],
-) -> Result<(), EndpointError> {
+) -> Result<(), Gone> {
     let max = class.max_packet_size() as usize;
     for chunk in bytes.chunks(max) {
-        class.write_packet(chunk).await?;
+        write(class, chunk).await?;
     }
     if !bytes.is_empty() && bytes.len().is_multiple_of(max) {
-        class.write_packet(&[]).await?;
+        write(class, &[]).await?;
     }
     Ok(())
 }
@@ -94,21 +136,29 @@ async fn send(
 /// Replies of one request can be long (`list`: 1.3 KB today, room for the table to grow).
 const REPLY: usize = 4096;
 
-/// Serves the protocol while a host is connected, forever.
+/// Serves the protocol to one host after another, forever.
 pub async fn serve(
     mut class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
     mut dev: Dev,
 ) -> ! {
-    let mut reader = LineReader::default();
     let mut reply = Buf::<REPLY>::new();
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];
     loop {
         class.wait_connection().await;
         info!("USB host connected");
+        // A new session: no partial line from the last one.
+        let mut reader = LineReader::default();
+        let mut dtr_seen = false;
         loop {
-            match select(class.read_packet(&mut packet), TELEMETRY.receive()).await {
-                Either::First(Ok(n)) => {
+            let event = select3(
+                class.read_packet(&mut packet),
+                TELEMETRY.receive(),
+                Timer::after_millis(DTR_POLL_MS),
+            )
+            .await;
+            match event {
+                Either3::First(Ok(n)) => {
                     let mut link_ok = true;
                     for &b in packet.get(..n).unwrap_or(&[]) {
                         let Some(line) = reader.push(b) else {
@@ -130,8 +180,16 @@ pub async fn serve(
                         break;
                     }
                 }
-                Either::First(Err(_)) => break,
-                Either::Second(sample) => {
+                Either3::First(Err(_)) => break,
+                Either3::Third(()) => {
+                    // DTR up then down: the host closed the port.
+                    if class.dtr() {
+                        dtr_seen = true;
+                    } else if dtr_seen {
+                        break;
+                    }
+                }
+                Either3::Second(sample) => {
                     if !dev.streaming() {
                         continue;
                     }
@@ -156,7 +214,7 @@ pub async fn serve(
                 }
             }
         }
-        info!("USB host disconnected");
+        info!("USB host gone: stream off, partial line dropped; the axis holds as it was");
         // A new client starts with no stream.
         dev.disconnected();
     }
