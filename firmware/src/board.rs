@@ -125,7 +125,14 @@ pub const BOARD: Board = Board {
     },
     limits: LIMITS,
     has_truth: false,
+    bridge_wake_s: BRIDGE_WAKE_S,
 };
+
+/// The DRV8871 sleeps once both inputs have been low for about 1 ms (as they are while the
+/// bridge is off) and must wake before it drives: `enable` brakes (both inputs high) this long
+/// first. Taken at the 1 ms of TI's drivers of this family (a DRV8871 specific figure is to be
+/// confirmed at bring-up: an `enable` that jolts means it is too short).
+pub const BRIDGE_WAKE_S: f32 = 1.0e-3;
 
 /// Watchdog timeout [us], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
 /// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
@@ -247,6 +254,60 @@ fn ack_sample() {
     });
 }
 
+/// Waits (at most about 5 ms, a few hundred periods) for TIM8's next update event; the
+/// counter's direction just after it: `Some(true)` counting up (the update was at the bottom),
+/// `Some(false)` down (at the top), `None` if none came.
+fn next_update_counting_up() -> Option<bool> {
+    let t = pac::TIM8;
+    t.sr().write(|w| {
+        w.0 = !0;
+        w.set_uif(false)
+    });
+    for _ in 0..1_000_000u32 {
+        if t.sr().read().uif() {
+            return Some(t.cr1().read().dir() == pac::timer::vals::Dir::UP);
+        }
+    }
+    None
+}
+
+/// Puts TIM8's update event at the counter's bottom, once per period, and checks it; true if
+/// it is there. The repetition counter reloads from RCR at each update and an update comes at
+/// a turning point that finds it at 0 (RM0090 §17.3.3, figure "Update rate examples"): with
+/// RCR = 0 every turning point updates; RCR = 1 written just after an update at the top is
+/// loaded at the next update, the bottom, and from then on every other turning point — every
+/// bottom — updates. RM0090 also says the outcome depends on when RCR is written relative to
+/// the counter's start, so the result is checked on two updates, and the write is tried just
+/// after a bottom too if that is what this silicon needs. Run before the control interrupt,
+/// with the bridge off.
+fn align_update_to_bottom() -> bool {
+    let t = pac::TIM8;
+    for write_after_top in [true, false] {
+        t.rcr().write(|w| w.set_rep(0));
+        // Two updates: the repetition counter now reloads from 0 at every turning point.
+        let _ = next_update_counting_up();
+        let _ = next_update_counting_up();
+        // RCR = 1 right after the chosen turning point.
+        let mut written = false;
+        for _ in 0..4 {
+            if next_update_counting_up() == Some(!write_after_top) {
+                t.rcr().write(|w| w.set_rep(1));
+                written = true;
+                break;
+            }
+        }
+        if !written {
+            return false;
+        }
+        // One update to load it, then two that must both be at the bottom.
+        let _ = next_update_counting_up();
+        if next_update_counting_up() == Some(true) && next_update_counting_up() == Some(true) {
+            return true;
+        }
+    }
+    false
+}
+
 /// Sets up the hardware sampling of the motor current (see the module's notes): ADC1's regular
 /// sequence of [`SENSE_OVERSAMPLE`] conversions of PC0 on TIM8's TRGO, moved by DMA2 stream 0
 /// (channel 0 = ADC1, RM0090 table 43) into [`SENSE_BUF`], circularly, with its
@@ -365,6 +426,9 @@ pub struct Rest {
     pub led_fault: Output<'static>,
     /// True when the last reset came from the watchdog.
     pub watchdog_reset: bool,
+    /// True when TIM8's update event was seen at the counter's bottom (see
+    /// [`align_update_to_bottom`]); false means the compare values may be taken mid-step.
+    pub update_at_bottom: bool,
 }
 
 /// Sets up the board. The bridge starts off (both inputs low) and the PWM timer's update
@@ -384,6 +448,9 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     // their idle level with OSSI set (RM0090 §17.3.21 "Debug mode", §38.16.5 DBGMCU_APB2_FZ
     // DBG_TIM8_STOP): the bridge coasts while the core is halted.
     pac::DBGMCU.apb2fzr().modify(|w| w.set_tim8(true));
+    // And the watchdog stops too (DBGMCU_APB1_FZ DBG_IWDG_STOP, RM0090 §38.16.4): a breakpoint
+    // does not reset the MCU under the debugger.
+    pac::DBGMCU.apb1fzr().modify(|w| w.set_iwdg(true));
     // Flash accelerator on: embassy-stm32 0.6's RCC set-up (rcc/f247.rs) writes FLASH_ACR's
     // LATENCY only (`FLASH.acr().write(|w| w.set_latency(..))`), so the prefetch buffer and the
     // instruction and data caches stay at their reset value, off (RM0090 §3.5.2, §3.9.1):
@@ -400,10 +467,9 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     });
 
     // PWM: TIM8 CH1/CH2, center-aligned. The update event (where the preloaded compare values
-    // take effect) comes at every other turning point through the repetition counter: RCR = 1
-    // written after the counter started gives it at the underflow, the counter's bottom
-    // (RM0090 §17.3.3: "If the RCR was written after starting the counter, the UEV occurs on
-    // the underflow").
+    // take effect) comes at every other turning point through the repetition counter (RCR =
+    // 1); which one depends on when RCR was written (RM0090 §17.3.3), so
+    // `align_update_to_bottom` puts it at the bottom and checks it.
     let in1 = PwmPin::new(p.PC6, OutputType::PushPull);
     let in2 = PwmPin::new(p.PC7, OutputType::PushPull);
     let mut pwm = SimplePwm::new(
@@ -428,7 +494,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
         w.set_ois(0, false);
         w.set_ois(1, false);
     });
-    pac::TIM8.rcr().write(|w| w.set_rep(1));
+    let update_at_bottom = align_update_to_bottom();
     pac::TIM8.sr().write(|w| w.0 = 0);
     // The sense trigger: channel 4 (no pin) in PWM mode 1, so OC4REF is high while the
     // counter is below CCR4; rising on the way down, CCR4 counts before the bottom; OC4REF
@@ -493,6 +559,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
         led_run: Output::new(p.PB0, Level::Low, Speed::Low),
         led_fault: Output::new(p.PB1, Level::Low, Speed::Low),
         watchdog_reset,
+        update_at_bottom,
     };
     (hw, rest)
 }

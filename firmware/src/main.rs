@@ -50,6 +50,13 @@ async fn main(spawner: Spawner) {
     cp.DWT.enable_cycle_counter();
 
     let mut faults = Faults::NONE;
+    if rest.update_at_bottom {
+        info!("PWM update event at the counter's bottom");
+    } else {
+        error!(
+            "PWM update event not found at the counter's bottom: compare values may be taken mid-step"
+        );
+    }
     if rest.watchdog_reset {
         warn!("reset by the watchdog");
         faults.latch(Faults::WATCHDOG_RESET);
@@ -92,7 +99,9 @@ async fn main(spawner: Spawner) {
     let mut usb_cfg = embassy_usb::Config::new(0x1209, 0x0001);
     usb_cfg.manufacturer = Some("gms");
     usb_cfg.product = Some("gms motor driver");
-    usb_cfg.serial_number = Some("gms-f405");
+    // The chip's 96-bit unique ID (RM0090 §39.1) as 24 hex digits: two boards on one PC are
+    // two ports with their own serial numbers (udev names them by it).
+    usb_cfg.serial_number = Some(embassy_stm32::uid::uid_hex());
     usb_cfg.max_power = 100;
     usb_cfg.max_packet_size_0 = 64;
     static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();

@@ -26,6 +26,7 @@ fn board() -> Board {
             budget_fraction: 0.6,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     }
 }
 
@@ -73,4 +74,45 @@ fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
     assert_eq!(lp.status().stats.missed(), 2);
     assert!(lp.faults().contains(Faults::OVERRUN), "{:?}", lp.faults());
     assert!(!lp.enabled());
+}
+
+#[test]
+fn after_enable_the_bridge_wakes_in_brake_before_control() {
+    let mut b = board();
+    b.bridge_wake_s = 1e-3;
+    let a = prepare(&default_settings(), &b).unwrap();
+    let zero = calibrate_sense(&b, || 16 * 2048);
+    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0);
+    let period = 168_000_000 / 20_000;
+    let mut req = Some(Requests {
+        enable: true,
+        ..Requests::default()
+    });
+    // The axis reads 5 counts off its hold point: control would drive at once.
+    let mut outs = Vec::new();
+    for _ in 0..40 {
+        let inp = Inputs {
+            encoder: if outs.is_empty() { 0 } else { 5 },
+            current_codes: 16 * 2048,
+            since_last: period,
+        };
+        let o = lp.step(inp, |_| req.take());
+        lp.finish(1000);
+        outs.push(o);
+    }
+    let arr = lp.timing().1;
+    // 1 ms at 20 kHz: 20 periods of brake (both inputs high for the whole period, but for
+    // the single count at the top on the PWM side), duty 0.
+    for (k, o) in outs.iter().enumerate().take(20) {
+        assert!(o.enabled, "{k}");
+        assert_eq!(o.duty, 0.0, "{k}");
+        assert!(
+            o.compare.0 >= arr && o.compare.1 >= arr,
+            "{k}: {:?}",
+            o.compare
+        );
+    }
+    // Then the loop controls: the 5-count error gives a duty.
+    assert!(outs[20..].iter().any(|o| o.duty != 0.0));
+    assert_eq!(lp.faults(), Faults::NONE);
 }

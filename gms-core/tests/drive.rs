@@ -368,6 +368,7 @@ fn sense_zero_at_start() {
             budget_fraction: 0.8,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     };
     // Sums of two conversions alternating 2100+2101 and 2100+2100: the zero is 2100.25 codes.
     let mut i = 0u32;
@@ -555,6 +556,7 @@ fn rates_the_current_sense_cannot_sample_are_refused() {
             budget_fraction: 0.6,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     };
     // 20.67 us of window against 2 × 0.4 × period: 20 kHz (40 us) and 30 kHz (26.7 us) run,
     // 40 kHz (20 us) does not.

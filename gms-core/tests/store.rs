@@ -270,6 +270,7 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
             budget_fraction: 0.8,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     };
     let defaults = default_settings();
     let (mut tried, mut found_old, mut found_new) = (0, 0, 0);

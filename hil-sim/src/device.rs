@@ -64,6 +64,7 @@ pub fn board(sc: &Scenario) -> Board {
             budget_fraction: 20_000.0,
         },
         has_truth: true,
+        bridge_wake_s: 0.0,
     }
 }
 

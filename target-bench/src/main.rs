@@ -125,6 +125,7 @@ fn device_period(out: &mut hio::HostStream) {
             budget_fraction: 0.8,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     };
     let settings = device::default_settings();
     let Ok(a) = device::prepare(&settings, &board) else {

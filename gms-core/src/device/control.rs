@@ -103,6 +103,8 @@ pub struct ControlLoop {
     steps: u64,
     stream_every: u32,
     stream_count: u32,
+    /// PWM periods left of the bridge's wake-up after `enable` (brake, no control).
+    wake_left: u32,
 }
 
 impl ControlLoop {
@@ -139,6 +141,7 @@ impl ControlLoop {
             steps: 0,
             stream_every: 0,
             stream_count: 0,
+            wake_left: 0,
         }
     }
 
@@ -242,6 +245,9 @@ impl ControlLoop {
             };
             self.last_pos = self.enc.count();
             self.enabled = true;
+            let wake = self.board.bridge_wake_s * self.ctrl.params().cur_rate_hz;
+            // Float to int casts saturate (NaN gives 0).
+            self.wake_left = (wake + 0.999) as u32;
         }
         if let Some(m) = req.motion
             && self.enabled
@@ -282,9 +288,12 @@ impl ControlLoop {
             let pos = self.enc.count();
             let delta = pos.saturating_sub(self.last_pos);
             self.last_pos = pos;
-            if self.enabled {
+            if self.enabled && self.wake_left == 0 {
                 self.r = self.motion.next(self.ctrl.dt_pos());
                 self.out = self.ctrl.position_step(pos, &self.r);
+            } else if self.enabled {
+                // The bridge wakes: hold the reference where the axis is, no control yet.
+                self.out = PositionOutput::default();
             } else {
                 self.r = RefSample {
                     pos: pos.saturating_mul(SUB_PER_COUNT as i64),
@@ -314,7 +323,11 @@ impl ControlLoop {
         if self.enabled && !self.faults.is_empty() {
             self.switch_off();
         }
-        if self.enabled {
+        if self.enabled && self.wake_left > 0 {
+            // Duty 0 while enabled is both inputs high: brake, which wakes the driver.
+            self.wake_left -= 1;
+            self.duty = 0.0;
+        } else if self.enabled {
             self.duty = self.ctrl.current_step(self.current).duty;
         }
         Outputs {

@@ -48,6 +48,11 @@ pub struct Board {
     pub limits: BoardLimits,
     /// True on a simulator, whose telemetry also has the true friction (`friction_true`).
     pub has_truth: bool,
+    /// How long the bridge needs to wake from its sleep before it drives [s]: after `enable`
+    /// the loop holds both inputs high (brake: no voltage across the motor) this long before
+    /// it starts controlling, so that no command is lost while the driver wakes (which the
+    /// integrators would make up for with a jolt). 0: drives at once.
+    pub bridge_wake_s: f32,
 }
 
 /// A board's current-sense chain, as the start-up calibration needs it.

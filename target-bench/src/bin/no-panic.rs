@@ -153,6 +153,7 @@ fn main() -> ! {
             budget_fraction: 0.8,
         },
         has_truth: false,
+        bridge_wake_s: 0.0,
     };
     let limits = drive::limits_for(&selftest::controller_params(), black_box(&board.limits));
     let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
