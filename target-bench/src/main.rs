@@ -168,7 +168,6 @@ fn device_period(out: &mut hio::HostStream) {
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
-                since_last: 0,
             },
             |_| mv.take(),
         );
