@@ -1,36 +1,16 @@
-//! Everything that names a pin, a peripheral or a clock: porting the firmware to another STM32
-//! or another board is a change in this file only.
+//! The driver of the power stage (`boards/power_stage.rs`) on an STM32F4, common to every
+//! board: clocks from the board's description, the bridge on TIM8, the encoder on TIM2, the
+//! current sense on ADC1 with DMA2, USB, flash, watchdog. What differs between boards is in
+//! `boards/` (one module per board, chosen by a cargo feature); this file re-exports the
+//! chosen board's description.
 //!
-//! The board: an STM32F405RG (8 MHz crystal) with
-//!
-//! | signal | MCU pin | peripheral | goes to |
-//! |---|---|---|---|
-//! | H-bridge IN1 | PC6 | TIM8_CH1 (20 kHz PWM, center-aligned) | DRV8871 IN1 |
-//! | H-bridge IN2 | PC7 | TIM8_CH2 | DRV8871 IN2 |
-//! | motor current | PC0 | ADC1_IN10 | INA240A2 OUT (68 mohm shunt in series with the motor, REF at 1.65 V) |
-//! | encoder A | PA0 | TIM2_CH1 (32-bit encoder mode) | encoder A (5 V encoders through a 74LVC14 or a divider) |
-//! | encoder B | PA1 | TIM2_CH2 | encoder B |
-//! | USB D- / D+ | PA11 / PA12 | OTG_FS | USB connector (CDC-ACM) |
-//! | LED run | PB0 | GPIO | LED + 1 k to GND |
-//! | LED fault | PB1 | GPIO | LED + 1 k to GND |
-//! | SWD | PA13 / PA14 | | probe (probe-rs: flash, defmt logs over RTT) |
-//!
-//! The DRV8871 (a cheap 3.6 A H-bridge breakout): VM = motor supply (6.5-45 V, `lim.v_supply`),
-//! ILIM resistor for its own hardware current limit above our trip level, GND common with the
-//! MCU. IN1/IN2 both low = coast (outputs off, the state while disabled or faulted), both high
-//! = brake; driving is sign-magnitude with slow decay (one input high, the other PWM), so the
-//! motor current flows through the shunt in both phases of the PWM and the INA240 (built for
-//! in-line motor sensing, rejects the PWM edges) sees it all the time.
-//!
-//! Current sense: 68 mohm × gain 50 = 3.4 V/A around 1.65 V: ±0.48 A over the 12-bit ADC,
-//! 0.24 mA per code (the simulator's ±0.5 A, 12 bits). Sampled by the hardware, not by the
-//! CPU: TIM8's OC4REF (channel 4, no pin) is its trigger output (TRGO), rising once per PWM
-//! period [`SENSE_TIMING`]`.lead` before the counter's bottom; it starts ADC1's regular
-//! sequence of 16 conversions of PC0, which DMA2 stream 0 moves into a buffer; the DMA's
-//! transfer-complete interrupt is the control interrupt. The sampling instants are centred on
-//! the bottom, the middle of the bridge's on-time, where the current's PWM ripple is at its
-//! mean. Timers: TIM2 encoder, TIM8 PWM and sense trigger, TIM4 embassy's time driver (none
-//! shared).
+//! The current is sampled by the hardware, not by the CPU: TIM8's OC4REF (channel 4, no pin)
+//! is its trigger output (TRGO), rising once per PWM period [`SENSE_TIMING`]`.lead` before the
+//! counter's bottom; it starts ADC1's regular sequence of 16 conversions of PC0, which DMA2
+//! stream 0 moves into a buffer; the DMA's transfer-complete interrupt is the control
+//! interrupt. The sampling instants are centred on the bottom, the middle of the bridge's
+//! on-time, where the current's PWM ripple is at its mean. Timers: TIM2 encoder, TIM8 PWM and
+//! sense trigger, TIM4 embassy's time driver (none shared).
 
 use core::cell::UnsafeCell;
 
@@ -47,117 +27,71 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
-use gms_core::device::{Board, SenseChain};
-use gms_core::drive::{self, BoardLimits, BridgeOff, SenseTiming};
+use gms_core::drive::{self, BridgeOff};
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
 });
 
-/// CPU clock [Hz] (DWT cycles).
-pub const SYSCLK_HZ: u32 = 168_000_000;
-/// TIM8's clock [Hz] (APB2 84 MHz, doubled for timers).
-pub const PWM_TIMER_HZ: u32 = 168_000_000;
-/// The largest PWM period the 16-bit TIM8 takes [counts] (one below 65535 so that "always
-/// on" is a compare value above it).
-pub const PWM_MAX_ARR: u32 = 65_534;
-/// Width of the encoder counter [bits] (TIM2 is 32-bit).
-pub const ENCODER_BITS: u32 = 32;
-/// TIM2's clock [Hz] (APB1 42 MHz, doubled for timers; f_DTS with CKD = 0).
-pub const ENCODER_TIMER_HZ: u32 = 84_000_000;
-/// The highest count rate the encoder input must pass [counts/s]: 3.8 rad/s at 3.8 urad per
-/// count, 7.6 times the protocol's move speed limit (0.5 rad/s). The input filter is sized
-/// from it (`drive::encoder_filter`: f_DTS/4, N = 8, a 381 ns window: shorter glitches are not
-/// counted); an encoder that must count faster needs this raised (and gets a lighter filter).
-pub const ENCODER_MAX_RATE: f32 = 1.0e6;
+pub use crate::boards::power_stage::*;
+pub use crate::boards::*;
 
-/// ADC reference [V].
-pub const ADC_VREF: f32 = 3.3;
-/// ADC full scale [codes].
-pub const ADC_FULL_SCALE: f32 = 4095.0;
-/// Current-sense transimpedance [V/A]: 68 mohm shunt × INA240A2 gain 50.
-pub const SENSE_V_PER_A: f32 = 0.068 * 50.0;
-/// ADC code at zero current the board is built for [code] (REF at VDD/2).
-pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
-/// How far the measured zero may lie from it [code] (INA240 offset, resistor tolerances).
-pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
-/// ADC1's clock [Hz]: PCLK2 84 MHz / 4 (embassy-stm32 0.6's `Adc::new` takes the smallest
-/// prescaler under the F4's 36 MHz maximum, `adc/v2.rs` `from_pclk2`).
-pub const ADC_HZ: u32 = 21_000_000;
-/// ADC1 channel of the current sense (PC0 = ADC123_IN10, DS8626 pin table).
-const SENSE_CHANNEL: u8 = 10;
-/// How the current is sampled: 16 conversions (the simulator's 16-fold oversampling) of 15
-/// cycles' sampling (0.71 us: the INA240's output drives the pin directly) + 12, from a trigger
-/// latency of 2 ADC cycles (DS8626 t_latr, at most 3): 20.7 us, centred on the bottom.
-pub const SENSE_TIMING: SenseTiming = SenseTiming {
-    adc_hz: ADC_HZ,
-    sample_cycles: 15,
-    conversions: 16,
-    latency_cycles: 2,
-};
+/// TIM8's clock [Hz] (on APB2).
+pub const PWM_TIMER_HZ: u32 = CLOCKS.tim_apb2_hz();
+/// TIM2's clock [Hz] (on APB1; f_DTS with CKD = 0).
+pub const ENCODER_TIMER_HZ: u32 = CLOCKS.tim_apb1_hz();
 /// ADC conversions summed per current sample.
 pub const SENSE_OVERSAMPLE: u32 = SENSE_TIMING.conversions;
 
-/// What the board allows (see [`BoardLimits`]).
-pub const LIMITS: BoardLimits = BoardLimits {
-    trip_factor: 1.5,
-    sense_range: 0.48,
-    max_error: 0.01,
-    max_speed: 100.0,
-    clock_hz: SYSCLK_HZ,
-    // The step starts when the samples are in, half the sense window (10.3 us) after the
-    // bottom, and must end before the next bottom (its compare values are taken there): 60 %
-    // of the period (30 us at 20 kHz) leaves 9 us.
-    budget_fraction: 0.6,
-};
+// The board's numbers hold together (also checked by `tests/tests/boards.rs`).
+const _: () = assert!(CLOCKS.check(&PART).is_ok());
+const _: () = assert!(MEMORY.check().is_ok());
 
-/// The board as the device core sees it.
-pub const BOARD: Board = Board {
-    pwm_timer_hz: PWM_TIMER_HZ,
-    pwm_max_arr: PWM_MAX_ARR,
-    encoder_bits: ENCODER_BITS,
-    sense_oversample: SENSE_OVERSAMPLE,
-    sense: SenseChain {
-        amps_per_code: ADC_VREF / ADC_FULL_SCALE / SENSE_V_PER_A,
-        zero_code: SENSE_OFFSET_EXPECTED,
-        zero_tolerance: SENSE_OFFSET_TOLERANCE,
-        window_s: SENSE_TIMING.window_s(),
-    },
-    limits: LIMITS,
-    has_truth: false,
-    bridge_wake_s: BRIDGE_WAKE_S,
-};
+/// The RCC's register encoding of an APB prescaler (RM0090 §7.3.3 PPREx: 1 → 0, 2 → 100,
+/// 4 → 101, 8 → 110, 16 → 111).
+const fn ppre(div: u32) -> u8 {
+    if div <= 1 {
+        0
+    } else {
+        3 + div.trailing_zeros() as u8
+    }
+}
 
-/// The DRV8871 sleeps once both inputs have been low for about 1 ms (as they are while the
-/// bridge is off) and must wake before it drives: `enable` brakes (both inputs high) this long
-/// first. Taken at the 1 ms of TI's drivers of this family (a DRV8871 specific figure is to be
-/// confirmed at bring-up: an `enable` that jolts means it is too short).
-pub const BRIDGE_WAKE_S: f32 = 1.0e-3;
+/// The RCC's register encoding of the AHB prescaler (RM0090 §7.3.3 HPRE: 1 → 0, 2 → 1000,
+/// …, 16 → 1011, 64 → 1100, …, 512 → 1111; there is no 32).
+const fn hpre(div: u32) -> u8 {
+    let log = div.trailing_zeros() as u8;
+    match div {
+        0 | 1 => 0,
+        _ if div < 32 => 7 + log,
+        _ => 6 + log,
+    }
+}
 
-/// Watchdog timeout [us], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
-/// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
-/// reloads the watchdog right before each, see `storage.rs`).
-pub const WATCHDOG_US: u32 = 4_000_000;
-
-/// Clocks: 8 MHz HSE, PLL to 168 MHz, 48 MHz for USB.
+/// Clocks as the board describes them ([`CLOCKS`], checked against the part's limits).
 pub fn config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut c = embassy_stm32::Config::default();
     c.rcc.hse = Some(Hse {
-        freq: Hertz(8_000_000),
-        mode: HseMode::Oscillator,
+        freq: Hertz(CLOCKS.hse_hz),
+        mode: if CLOCKS.hse_bypass {
+            HseMode::Bypass
+        } else {
+            HseMode::Oscillator
+        },
     });
     c.rcc.pll_src = PllSource::HSE;
     c.rcc.pll = Some(Pll {
-        prediv: PllPreDiv::DIV4,
-        mul: PllMul::MUL168,
-        divp: Some(PllPDiv::DIV2), // 8 / 4 × 168 / 2 = 168 MHz
-        divq: Some(PllQDiv::DIV7), // 336 / 7 = 48 MHz
+        prediv: PllPreDiv::from_bits(CLOCKS.pll_m as u8),
+        mul: PllMul::from_bits(CLOCKS.pll_n as u16),
+        // PLLP's encoding: 2 → 0, 4 → 1, 6 → 2, 8 → 3.
+        divp: Some(PllPDiv::from_bits((CLOCKS.pll_p / 2 - 1) as u8)),
+        divq: Some(PllQDiv::from_bits(CLOCKS.pll_q as u8)),
         divr: None,
     });
-    c.rcc.ahb_pre = AHBPrescaler::DIV1;
-    c.rcc.apb1_pre = APBPrescaler::DIV4;
-    c.rcc.apb2_pre = APBPrescaler::DIV2;
+    c.rcc.ahb_pre = AHBPrescaler::from_bits(hpre(CLOCKS.ahb_div));
+    c.rcc.apb1_pre = APBPrescaler::from_bits(ppre(CLOCKS.apb1_div));
+    c.rcc.apb2_pre = APBPrescaler::from_bits(ppre(CLOCKS.apb2_div));
     c.rcc.sys = Sysclk::PLL1_P;
     // The DMA interrupts embassy enables (none used but the loop's, set apart in
     // `start_control`) below the loop.
@@ -319,7 +253,7 @@ fn sense_init() {
     // PC0 analog (RM0090 §8.4.1: MODER = 11).
     pac::GPIOC
         .moder()
-        .modify(|w| w.set_moder(0, pac::gpio::vals::Moder::ANALOG));
+        .modify(|w| w.set_moder(SENSE_PIN, pac::gpio::vals::Moder::ANALOG));
     // DMA2 stream 0, disabled while configured (RM0090 §10.3.17).
     pac::RCC.ahb1enr().modify(|w| w.set_dma2en(true));
     let st = pac::DMA2.st(0);
@@ -391,15 +325,17 @@ impl BridgeOff for Bridge {
     }
     fn latch_pins_low(&mut self) {
         pac::GPIOC.bsrr().write(|w| {
-            w.set_br(6, true);
-            w.set_br(7, true);
+            for pin in BRIDGE_PINS {
+                w.set_br(pin, true);
+            }
         });
     }
     fn pins_to_gpio_outputs(&mut self) {
         use embassy_stm32::pac::gpio::vals::Moder;
         pac::GPIOC.moder().modify(|w| {
-            w.set_moder(6, Moder::OUTPUT);
-            w.set_moder(7, Moder::OUTPUT);
+            for pin in BRIDGE_PINS {
+                w.set_moder(pin, Moder::OUTPUT);
+            }
         });
     }
 }
@@ -546,6 +482,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     interrupt::TIM4.set_priority(crate::irq::DRIVERS);
     interrupt::OTG_FS.set_priority(crate::irq::USB);
 
+    let (run_pin, fault_pin) = crate::boards::led_pins!(p);
     let hw = ControlHw {
         _adc: adc,
         _isense: p.PC0,
@@ -556,8 +493,8 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
         usb,
         flash: Flash::new_blocking(p.FLASH),
         watchdog,
-        led_run: Output::new(p.PB0, Level::Low, Speed::Low),
-        led_fault: Output::new(p.PB1, Level::Low, Speed::Low),
+        led_run: Output::new(run_pin, Level::Low, Speed::Low),
+        led_fault: Output::new(fault_pin, Level::Low, Speed::Low),
         watchdog_reset,
         update_at_bottom,
     };

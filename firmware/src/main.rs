@@ -15,6 +15,7 @@
 #![no_main]
 
 mod board;
+mod boards;
 mod comms;
 mod control;
 mod irq;
@@ -40,7 +41,12 @@ use crate::control::Loop;
 async fn main(spawner: Spawner) {
     static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
     let (mut hw, rest) = board::init(EP_OUT.init([0; 256]));
-    info!("gms firmware {}", env!("CARGO_PKG_VERSION"));
+    info!(
+        "gms firmware {} on board {} ({})",
+        env!("CARGO_PKG_VERSION"),
+        board::NAME,
+        board::memory::PROBE_RS_CHIP
+    );
 
     // The DWT cycle counter times the control step.
     // SAFETY: only the DCB and DWT are touched, here, before the control interrupt starts;

@@ -27,6 +27,8 @@ use embassy_stm32::pac;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use gms_core::store::{FlashStore, SECTOR_SIZE, WORD_SIZE};
 
+use crate::board::MEMORY;
+
 /// Longest erase of one 128 KiB sector at ×32 parallelism [ms] (DS8626).
 pub const SECTOR_ERASE_MAX_MS: u32 = 2000;
 
@@ -119,10 +121,12 @@ impl NorFlash for StoreFlash {
 /// The parameter store on the internal flash.
 pub type Store = FlashStore<BlockingAsync<StoreFlash>>;
 
-// The store's format assumes the F405's flash geometry as embassy-stm32 reports it.
+// The store's format assumes the F4's flash geometry as embassy-stm32 reports it, and the
+// board's store sectors are of that size.
 const _: () = assert!(WRITE_SIZE == WORD_SIZE && MAX_ERASE_SIZE == SECTOR_SIZE);
+const _: () = assert!(MEMORY.store_sector as usize == SECTOR_SIZE);
 
 /// The store on the internal flash.
 pub fn new(flash: Flash<'static, Blocking>) -> Store {
-    FlashStore::new(BlockingAsync::new(StoreFlash(flash)))
+    FlashStore::with_range(BlockingAsync::new(StoreFlash(flash)), MEMORY.store.clone())
 }

@@ -27,6 +27,7 @@ pub mod device;
 pub mod drive;
 pub mod error;
 pub mod gms;
+pub mod hw;
 pub mod lugre;
 pub mod math;
 pub mod model;

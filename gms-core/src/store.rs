@@ -1,6 +1,7 @@
 //! The parameter store on NOR flash, one format for the board and the virtual device: one
 //! record ([`crate::drive::encode_settings`]: version, layout id, values, CRC-32) under one
-//! key of a `sequential-storage` map over [`STORE_RANGE`]. The firmware runs it on the
+//! key of a `sequential-storage` map over two or more flash sectors ([`STORE_RANGE`] on the
+//! F405 board and in the simulator's store image; each board says where). The firmware runs it on the
 //! STM32F405's internal flash; `hil-sim serve --store FILE` on a file holding the image of the
 //! same range (same word and sector sizes), so that a store written by one is read by the
 //! other.
@@ -50,17 +51,23 @@ fn block_on<T>(fut: impl Future<Output = T>) -> T {
     }
 }
 
-/// The parameter store over a NOR flash `F` covering [`STORE_RANGE`].
+/// The parameter store over a NOR flash `F`.
 pub struct FlashStore<F: NorFlash> {
     map: Option<Map<F>>,
     buf: [u8; BUF],
 }
 
 impl<F: NorFlash> FlashStore<F> {
-    /// A store on `flash`. A flash whose sector size does not fit [`STORE_RANGE`] gives a
-    /// store whose every operation fails.
+    /// A store on `flash` over [`STORE_RANGE`] (the F405's sectors 10-11; the simulator's
+    /// image).
     pub fn new(flash: F) -> Self {
-        let map = MapConfig::<F>::try_new(STORE_RANGE)
+        Self::with_range(flash, STORE_RANGE)
+    }
+
+    /// A store on `flash` over `range` (offsets from the flash start). A range that is not
+    /// whole sectors of `flash` gives a store whose every operation fails.
+    pub fn with_range(flash: F, range: core::ops::Range<u32>) -> Self {
+        let map = MapConfig::<F>::try_new(range)
             .ok()
             .map(|c| MapStorage::new(flash, c, Cache::new_uncached()));
         FlashStore { map, buf: [0; BUF] }

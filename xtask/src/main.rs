@@ -13,6 +13,24 @@
 use std::process::{Command, ExitCode};
 use std::time::Duration;
 
+// The boards' memory maps and probe-rs chip names, from the firmware's own files.
+#[path = "../../firmware/src/boards/f405/memory.rs"]
+#[allow(dead_code)]
+mod f405;
+#[path = "../../firmware/src/boards/nucleo_f446/memory.rs"]
+#[allow(dead_code)]
+mod nucleo_f446;
+
+/// The boards: name (as in `--board`), cargo feature, probe-rs chip.
+const BOARDS: [(&str, &str, &str); 2] = [
+    ("f405", "board-f405", f405::PROBE_RS_CHIP),
+    (
+        "nucleo-f446",
+        "board-nucleo-f446",
+        nucleo_f446::PROBE_RS_CHIP,
+    ),
+];
+
 /// The budgets [instructions].
 const BUDGETS: [(&str, f64); 4] = [
     ("gms6_step", 300.0),
@@ -34,11 +52,65 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Some("flash") => match flash(&args[1..]) {
+            Ok(code) => ExitCode::from(code),
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(2)
+            }
+        },
         _ => {
-            eprintln!("usage: cargo xtask target-bench [--report-only]");
+            eprintln!(
+                "usage: cargo xtask target-bench [--report-only]\n       cargo xtask flash [--board f405|nucleo-f446]"
+            );
             ExitCode::from(2)
         }
     }
+}
+
+/// `cargo xtask flash [--board NAME]`: builds the firmware for the board (default f405) and
+/// runs it with probe-rs (`probe-rs run --chip CHIP`: flashes, resets, prints the defmt log).
+fn flash(args: &[String]) -> Result<u8, String> {
+    let name = match args {
+        [] => "f405",
+        [flag, name] if flag == "--board" => name.as_str(),
+        _ => return Err("usage: cargo xtask flash [--board f405|nucleo-f446]".into()),
+    };
+    let (_, feature, chip) = BOARDS.iter().find(|b| b.0 == name).ok_or_else(|| {
+        let names: Vec<&str> = BOARDS.iter().map(|b| b.0).collect();
+        format!("unknown board {name:?} (boards: {})", names.join(", "))
+    })?;
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(&cargo)
+        .args([
+            "build",
+            "-p",
+            "firmware",
+            "--release",
+            "--target",
+            "thumbv7em-none-eabihf",
+            "--no-default-features",
+            "--features",
+            feature,
+        ])
+        .status()
+        .map_err(|e| format!("cannot run cargo: {e}"))?;
+    if !status.success() {
+        return Err(format!("building the firmware for {name} failed"));
+    }
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let target_dir = std::env::var("CARGO_TARGET_DIR")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|_| root.join("target"));
+    let elf = target_dir.join("thumbv7em-none-eabihf/release/firmware");
+    let status = Command::new("probe-rs")
+        .args(["run", "--chip", chip])
+        .arg(&elf)
+        .status()
+        .map_err(|e| {
+            format!("cannot run probe-rs ({e}); install it: cargo install probe-rs-tools")
+        })?;
+    Ok(if status.success() { 0 } else { 1 })
 }
 
 fn target_bench(report_only: bool) -> Result<u8, String> {

@@ -1,0 +1,46 @@
+//! NUCLEO-F446RE carrying the same power stage on the same pins (`power_stage.rs`: PC6/PC7,
+//! PC0, PA0/PA1 are on its morpho headers, PA11/PA12 to a USB breakout), flashed through its
+//! on-board ST-LINK. Plain numbers, checked on the host.
+
+use gms_core::device::Board;
+use gms_core::drive::SenseTiming;
+use gms_core::hw::{F4Clocks, F4Limits, F446_LIMITS, MemoryMap};
+
+use super::{memory, power_stage};
+
+/// The board's name (its cargo feature is `board-nucleo-f446`).
+pub const NAME: &str = "nucleo-f446";
+
+/// Clocks: the ST-LINK's 8 MHz MCO into OSC_IN as HSE in bypass (the board's default solder
+/// bridges; there is no crystal on X3), PLL to 168 MHz like the F405 board — below the
+/// F446's 180 MHz, where the PLL could not also give USB its 48 MHz — so that every timing
+/// is the same.
+pub const CLOCKS: F4Clocks = F4Clocks {
+    hse_hz: 8_000_000,
+    hse_bypass: true,
+    pll_m: 4,
+    pll_n: 168,
+    pll_p: 2,
+    pll_q: 7,
+    ahb_div: 1,
+    apb1_div: 4,
+    apb2_div: 2,
+};
+
+/// The part's limits.
+pub const PART: F4Limits = F446_LIMITS;
+
+/// The memory map.
+pub const MEMORY: MemoryMap = MemoryMap {
+    flash_len: memory::FLASH_LEN,
+    app_len: memory::APP_LEN,
+    ram_len: memory::RAM_LEN,
+    store: memory::STORE_START..memory::STORE_END,
+    store_sector: memory::STORE_SECTOR,
+};
+
+/// How the current is sampled.
+pub const SENSE_TIMING: SenseTiming = power_stage::sense_timing(&CLOCKS);
+
+/// The board as the device core sees it.
+pub const BOARD: Board = power_stage::board(&CLOCKS);

@@ -1,0 +1,117 @@
+//! The power stage every board carries, on the same pins of an STM32F4 (`board.rs` drives
+//! it): a DRV8871 H-bridge, an INA240A2 current-sense amplifier, a quadrature encoder.
+//! Plain numbers, checked on the host (`tests/tests/boards.rs`).
+//!
+//! | signal | MCU pin | peripheral | goes to |
+//! |---|---|---|---|
+//! | H-bridge IN1 | PC6 | TIM8_CH1 (20 kHz PWM, center-aligned) | DRV8871 IN1 |
+//! | H-bridge IN2 | PC7 | TIM8_CH2 | DRV8871 IN2 |
+//! | motor current | PC0 | ADC1_IN10 | INA240A2 OUT (68 mohm shunt in series with the motor, REF at 1.65 V) |
+//! | encoder A | PA0 | TIM2_CH1 (32-bit encoder mode) | encoder A (5 V encoders through a 74LVC14 or a divider) |
+//! | encoder B | PA1 | TIM2_CH2 | encoder B |
+//! | USB D- / D+ | PA11 / PA12 | OTG_FS | USB connector (CDC-ACM) |
+//! | SWD | PA13 / PA14 | | probe (probe-rs: flash, defmt logs over RTT) |
+//!
+//! The DRV8871 (a cheap 3.6 A H-bridge breakout): VM = motor supply (6.5-45 V, `lim.v_supply`),
+//! ILIM resistor for its own hardware current limit above our trip level, GND common with the
+//! MCU. IN1/IN2 both low = coast (outputs off, the state while disabled or faulted), both high
+//! = brake; driving is sign-magnitude with slow decay (one input high, the other PWM), so the
+//! motor current flows through the shunt in both phases of the PWM and the INA240 (built for
+//! in-line motor sensing, rejects the PWM edges) sees it all the time.
+//!
+//! Current sense: 68 mohm × gain 50 = 3.4 V/A around 1.65 V: ±0.48 A over the 12-bit ADC,
+//! 0.24 mA per code (the simulator's ±0.5 A, 12 bits), sampled 16 times per PWM period by the
+//! hardware, centred on the counter's bottom (`board.rs`).
+
+use gms_core::device::{Board, SenseChain};
+use gms_core::drive::{BoardLimits, SenseTiming};
+use gms_core::hw::F4Clocks;
+
+/// GPIOC pins of the bridge inputs IN1, IN2 (TIM8_CH1, TIM8_CH2).
+pub const BRIDGE_PINS: [usize; 2] = [6, 7];
+/// GPIOC pin of the current sense (PC0).
+pub const SENSE_PIN: usize = 0;
+/// ADC1 channel of the current sense (PC0 = ADC123_IN10).
+pub const SENSE_CHANNEL: u8 = 10;
+
+/// The largest PWM period the 16-bit TIM8 takes [counts] (one below 65535 so that "always
+/// on" is a compare value above it).
+pub const PWM_MAX_ARR: u32 = 65_534;
+/// Width of the encoder counter [bits] (TIM2 is 32-bit).
+pub const ENCODER_BITS: u32 = 32;
+/// The highest count rate the encoder input must pass [counts/s]: 3.8 rad/s at 3.8 urad per
+/// count, 7.6 times the protocol's move speed limit (0.5 rad/s). The input filter is sized
+/// from it (`drive::encoder_filter`: at 84 MHz f_DTS/4, N = 8, a 381 ns window: shorter
+/// glitches are not counted); an encoder that must count faster needs this raised (and gets
+/// a lighter filter).
+pub const ENCODER_MAX_RATE: f32 = 1.0e6;
+
+/// ADC reference [V].
+pub const ADC_VREF: f32 = 3.3;
+/// ADC full scale [codes].
+pub const ADC_FULL_SCALE: f32 = 4095.0;
+/// Current-sense transimpedance [V/A]: 68 mohm shunt × INA240A2 gain 50.
+pub const SENSE_V_PER_A: f32 = 0.068 * 50.0;
+/// ADC code at zero current the board is built for [code] (REF at VDD/2).
+pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
+/// How far the measured zero may lie from it [code] (INA240 offset, resistor tolerances).
+pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
+
+/// How the current is sampled on a board clocked by `clocks`: 16 conversions (the
+/// simulator's 16-fold oversampling) of 15 cycles' sampling (0.71 us at 21 MHz: the INA240's
+/// output drives the pin directly) + 12, from a trigger latency of 2 ADC cycles (DS8626
+/// t_latr, at most 3).
+pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
+    SenseTiming {
+        adc_hz: clocks.adc_hz(),
+        sample_cycles: 15,
+        conversions: 16,
+        latency_cycles: 2,
+    }
+}
+
+/// The DRV8871 sleeps once both inputs have been low for about 1 ms (as they are while the
+/// bridge is off) and must wake before it drives: `enable` brakes (both inputs high) this long
+/// first. Taken at the 1 ms of TI's drivers of this family (a DRV8871 specific figure is to be
+/// confirmed at bring-up: an `enable` that jolts means it is too short).
+pub const BRIDGE_WAKE_S: f32 = 1.0e-3;
+
+/// Watchdog timeout [us], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
+/// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
+/// reloads the watchdog right before each, see `storage.rs`).
+pub const WATCHDOG_US: u32 = 4_000_000;
+
+/// What the power stage allows on a board clocked by `clocks` (see [`BoardLimits`]).
+pub const fn limits(clocks: &F4Clocks) -> BoardLimits {
+    BoardLimits {
+        trip_factor: 1.5,
+        sense_range: 0.48,
+        max_error: 0.01,
+        max_speed: 100.0,
+        clock_hz: clocks.hclk_hz(),
+        // The step starts when the samples are in, half the sense window (10.3 us) after
+        // the bottom, and must end before the next bottom (its compare values are taken
+        // there): 60 % of the period (30 us at 20 kHz) leaves 9 us.
+        budget_fraction: 0.6,
+    }
+}
+
+/// The board as the device core sees it, for the clock tree `clocks`.
+pub const fn board(clocks: &F4Clocks) -> Board {
+    let timing = sense_timing(clocks);
+    Board {
+        pwm_timer_hz: clocks.tim_apb2_hz(),
+        pwm_max_arr: PWM_MAX_ARR,
+        encoder_bits: ENCODER_BITS,
+        sense_oversample: timing.conversions,
+        sense: SenseChain {
+            amps_per_code: ADC_VREF / ADC_FULL_SCALE / SENSE_V_PER_A,
+            zero_code: SENSE_OFFSET_EXPECTED,
+            zero_tolerance: SENSE_OFFSET_TOLERANCE,
+            window_s: timing.window_s(),
+        },
+        limits: limits(clocks),
+        has_truth: false,
+        bridge_wake_s: BRIDGE_WAKE_S,
+    }
+}

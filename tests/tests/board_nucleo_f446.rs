@@ -1,0 +1,27 @@
+//! The nucleo_f446 board's description (`firmware/src/boards/nucleo_f446/`), compiled on the host from
+//! the firmware's own files and checked (`support/board_checks.rs`).
+#![allow(dead_code)]
+
+#[path = "support/board_checks.rs"]
+mod checks;
+#[path = "../../firmware/src/boards/nucleo_f446/desc.rs"]
+mod desc;
+#[path = "../../firmware/src/boards/nucleo_f446/memory.rs"]
+mod memory;
+#[path = "../../firmware/src/boards/power_stage.rs"]
+mod power_stage;
+
+#[test]
+fn the_description_holds_together() {
+    checks::all(&checks::Desc {
+        name: desc::NAME,
+        clocks: desc::CLOCKS,
+        part: desc::PART,
+        memory: desc::MEMORY,
+        timing: desc::SENSE_TIMING,
+        board: desc::BOARD,
+        chip: memory::PROBE_RS_CHIP,
+        encoder_max_rate: power_stage::ENCODER_MAX_RATE,
+        watchdog_us: power_stage::WATCHDOG_US,
+    });
+}
