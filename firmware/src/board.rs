@@ -36,9 +36,9 @@ bind_interrupts!(struct Irqs {
 pub use crate::boards::power_stage::*;
 pub use crate::boards::*;
 
-/// TIM8's clock [Hz] (on APB2).
+/// TIM8's clock \[Hz\] (on APB2).
 pub const PWM_TIMER_HZ: u32 = CLOCKS.tim_apb2_hz();
-/// TIM2's clock [Hz] (on APB1; f_DTS with CKD = 0).
+/// TIM2's clock \[Hz\] (on APB1; f_DTS with CKD = 0).
 pub const ENCODER_TIMER_HZ: u32 = CLOCKS.tim_apb1_hz();
 /// ADC conversions summed per current sample.
 pub const SENSE_OVERSAMPLE: u32 = SENSE_TIMING.conversions;

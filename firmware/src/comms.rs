@@ -85,11 +85,11 @@ impl<const N: usize> Write for Buf<N> {
     }
 }
 
-/// How long a packet may wait for the host to take it [ms] before the session is taken as
+/// How long a packet may wait for the host to take it \[ms\] before the session is taken as
 /// over (a reading host takes one every 1 ms USB frame).
 pub const WRITE_TIMEOUT_MS: u64 = 200;
 
-/// How often the host's DTR is looked at [ms].
+/// How often the host's DTR is looked at \[ms\].
 const DTR_POLL_MS: u64 = 50;
 
 /// The host is gone (see the module's notes).

@@ -29,7 +29,7 @@ use gms_core::store::{FlashStore, SECTOR_SIZE, WORD_SIZE};
 
 use crate::board::MEMORY;
 
-/// Longest erase of one 128 KiB sector at ×32 parallelism [ms] (DS8626).
+/// Longest erase of one 128 KiB sector at ×32 parallelism \[ms\] (DS8626).
 pub const SECTOR_ERASE_MAX_MS: u32 = 2000;
 
 // Two sector erases (a repair) and the record's writes fit the protocol's reply time.

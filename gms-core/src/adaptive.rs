@@ -154,7 +154,7 @@ impl Adaptive {
         };
     }
 
-    /// One update over `dt` [s]; returns the new scale. Non-finite inputs change nothing.
+    /// One update over `dt` \[s\]; returns the new scale. Non-finite inputs change nothing.
     pub fn update(&mut self, p: &AdaptiveParams, x: &AdaptInput, dt: f32) -> f32 {
         let speed = if x.v_ref < 0.0 { -x.v_ref } else { x.v_ref };
         let active = !x.saturated && speed >= p.v_min && speed.is_finite();

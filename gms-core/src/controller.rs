@@ -3,7 +3,7 @@
 //!
 //! All f32, fixed size, no allocation. The position loop runs at `pos_rate_hz` (default
 //! 10 kHz) and the current loop at `cur_rate_hz` (default 20 kHz, an integer multiple).
-//! Torques are motor-side [N·m], angles those of the encoder [rad], currents [A], volts [V].
+//! Torques are motor-side [N·m], angles those of the encoder \[rad\], currents \[A\], volts \[V\].
 
 use crate::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use crate::error::ParamError;
@@ -68,7 +68,7 @@ pub struct PidParams {
     /// Derivative gain [N·m·s/rad], `>= 0`: on the velocity error (reference velocity minus
     /// the encoder's), filtered.
     pub kd: f32,
-    /// Corner of the derivative's first-order filter [Hz], `> 0`.
+    /// Corner of the derivative's first-order filter \[Hz\], `> 0`.
     pub d_filter_hz: f32,
     /// Limit of the integral term's torque [N·m], `>= 0` (anti-windup).
     pub i_limit: f32,
@@ -92,7 +92,7 @@ pub struct CurrentParams {
 pub struct MotorModel {
     /// Torque constant k_M [N·m/A] (6.6e-3 in the paper), `> 0`.
     pub k_m: f32,
-    /// Winding resistance [ohm], `>= 0` (voltage feedforward R i).
+    /// Winding resistance \[ohm\], `>= 0` (voltage feedforward R i).
     pub r: f32,
     /// Back-EMF constant [V·s/rad], `>= 0` (voltage feedforward k_E omega_ref).
     pub k_e: f32,
@@ -125,9 +125,9 @@ pub struct FeedforwardParams<const N: usize> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ControllerParams<const N: usize> {
-    /// Position-loop rate [Hz], `> 0`.
+    /// Position-loop rate \[Hz\], `> 0`.
     pub pos_rate_hz: f32,
-    /// Current-loop rate [Hz], an integer multiple (1 to 16) of `pos_rate_hz`.
+    /// Current-loop rate \[Hz\], an integer multiple (1 to 16) of `pos_rate_hz`.
     pub cur_rate_hz: f32,
     /// Encoder resolution [rad/count], `> 0`.
     pub rad_per_count: f32,
@@ -137,14 +137,14 @@ pub struct ControllerParams<const N: usize> {
     pub current: CurrentParams,
     /// Motor model.
     pub motor: MotorModel,
-    /// Current command limit [A], `> 0`.
+    /// Current command limit \[A\], `> 0`.
     pub i_max: f32,
-    /// Supply voltage [V], `> 0` (duty = voltage / supply).
+    /// Supply voltage \[V\], `> 0` (duty = voltage / supply).
     pub v_supply: f32,
-    /// Soft stroke limit, low side [rad] from the power-up position: the axis below it latches
+    /// Soft stroke limit, low side \[rad\] from the power-up position: the axis below it latches
     /// `position_limit`; a `move` below it is refused. `< pos_max`.
     pub pos_min: f32,
-    /// Soft stroke limit, high side [rad] from the power-up position (see `pos_min`).
+    /// Soft stroke limit, high side \[rad\] from the power-up position (see `pos_min`).
     pub pos_max: f32,
     /// Friction feedforward.
     pub ff: FeedforwardParams<N>,
@@ -269,7 +269,7 @@ impl<const N: usize> ControllerParams<N> {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct PositionOutput {
-    /// Position error, reference minus measurement [rad].
+    /// Position error, reference minus measurement \[rad\].
     pub error: f32,
     /// Proportional torque [N·m].
     pub p: f32,
@@ -283,7 +283,7 @@ pub struct PositionOutput {
     pub ff_scale: f32,
     /// Inertia feedforward torque [N·m].
     pub ff_inertia: f32,
-    /// Current command after limiting [A].
+    /// Current command after limiting \[A\].
     pub i_cmd: f32,
     /// True when the current command hit `i_max`.
     pub saturated: bool,
@@ -293,7 +293,7 @@ pub struct PositionOutput {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct CurrentOutput {
-    /// Voltage command after limiting [V].
+    /// Voltage command after limiting \[V\].
     pub voltage: f32,
     /// PWM duty in [-1, 1] (sign = direction).
     pub duty: f32,
@@ -382,12 +382,12 @@ impl<const N: usize> Controller<N> {
         &self.p
     }
 
-    /// Position-loop period [s].
+    /// Position-loop period \[s\].
     pub fn dt_pos(&self) -> f32 {
         self.dt_pos
     }
 
-    /// Current-loop period [s].
+    /// Current-loop period \[s\].
     pub fn dt_cur(&self) -> f32 {
         self.dt_cur
     }
@@ -543,7 +543,7 @@ impl<const N: usize> Controller<N> {
     }
 
     /// The friction feedforward torque [N·m] (before the gain) for the reference moving by
-    /// `dx` [rad] at velocity `vel` [rad/s] over one position period. Every model is advanced
+    /// `dx` \[rad\] at velocity `vel` [rad/s] over one position period. Every model is advanced
     /// whatever the mode, so that switching modes finds them in the right state.
     fn friction_ff(&mut self, dx: f32, vel: f32) -> f32 {
         let dt = self.dt_pos;
@@ -626,7 +626,7 @@ impl<const N: usize> Controller<N> {
         self.out
     }
 
-    /// One current-loop step on the measured current `i_meas` [A]; returns the voltage and
+    /// One current-loop step on the measured current `i_meas` \[A\]; returns the voltage and
     /// PWM duty to apply.
     pub fn current_step(&mut self, i_meas: f32) -> CurrentOutput {
         let c = &self.p.current;

@@ -28,7 +28,7 @@ pub struct CountExtender {
     count: i64,
 }
 
-/// The signed difference `raw - last` of a `bits`-bit wrapping counter [counts], taken as the
+/// The signed difference `raw - last` of a `bits`-bit wrapping counter \[counts\], taken as the
 /// shortest way round (in `-2^(bits-1) .. 2^(bits-1)`). `bits` is clamped to 1..=32.
 pub fn wrapping_delta(last: u32, raw: u32, bits: u32) -> i64 {
     let bits = bits.clamp(1, 32);
@@ -49,7 +49,7 @@ impl CountExtender {
         }
     }
 
-    /// Takes a new raw reading; returns the increment since the last one [counts].
+    /// Takes a new raw reading; returns the increment since the last one \[counts\].
     pub fn update(&mut self, raw: u32) -> i64 {
         let d = wrapping_delta(self.last, raw, self.bits);
         self.last = raw;
@@ -57,25 +57,25 @@ impl CountExtender {
         d
     }
 
-    /// The extended count [counts].
+    /// The extended count \[counts\].
     pub fn count(&self) -> i64 {
         self.count
     }
 }
 
-/// ADC code to motor current [A]: `i = (code - offset) * amps_per_code`.
+/// ADC code to motor current \[A\]: `i = (code - offset) * amps_per_code`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CurrentSense {
     /// Current per ADC code [A/code] (negative if the amplifier's sign is reversed).
     pub amps_per_code: f32,
-    /// ADC code at zero current [code].
+    /// ADC code at zero current \[code\].
     pub offset: f32,
 }
 
 impl CurrentSense {
-    /// A sense chain: ADC reference `vref` [V], `full_scale` codes (4095 for 12 bits),
+    /// A sense chain: ADC reference `vref` \[V\], `full_scale` codes (4095 for 12 bits),
     /// transimpedance `volts_per_amp` [V/A] (shunt resistance times amplifier gain), zero at
-    /// `offset` [code]. `None` unless every value is finite and positive (offset >= 0).
+    /// `offset` \[code\]. `None` unless every value is finite and positive (offset >= 0).
     pub fn new(vref: f32, full_scale: f32, volts_per_amp: f32, offset: f32) -> Option<Self> {
         let ok = |x: f32| x.is_finite() && x > 0.0;
         if !(ok(vref) && ok(full_scale) && ok(volts_per_amp) && offset.is_finite()) || offset < 0.0
@@ -89,12 +89,12 @@ impl CurrentSense {
     }
 
     /// The current for an ADC code (or the sum of `n` codes, see [`CurrentSense::amps_sum`])
-    /// [A].
+    /// \[A\].
     pub fn amps(&self, code: u16) -> f32 {
         (code as f32 - self.offset) * self.amps_per_code
     }
 
-    /// The current for the sum of `n` oversampled codes [A] (`n` = 0 gives 0).
+    /// The current for the sum of `n` oversampled codes \[A\] (`n` = 0 gives 0).
     pub fn amps_sum(&self, sum: u32, n: u32) -> f32 {
         if n == 0 {
             return 0.0;
@@ -102,7 +102,7 @@ impl CurrentSense {
         (sum as f32 / n as f32 - self.offset) * self.amps_per_code
     }
 
-    /// The largest current the ADC can show in either direction [A].
+    /// The largest current the ADC can show in either direction \[A\].
     pub fn range(&self, full_scale: f32) -> f32 {
         let up = (full_scale - self.offset) * self.amps_per_code;
         let down = self.offset * self.amps_per_code;
@@ -119,7 +119,7 @@ pub struct OffsetCalibration {
 }
 
 impl OffsetCalibration {
-    /// Adds one reading taken with the bridge off [code] (a code, or a sum of oversampled
+    /// Adds one reading taken with the bridge off \[code\] (a code, or a sum of oversampled
     /// codes: then `finish`'s window is in sums too).
     pub fn push(&mut self, code: u32) {
         self.sum = self.sum.saturating_add(code as u64);
@@ -131,8 +131,8 @@ impl OffsetCalibration {
         self.n
     }
 
-    /// The mean code [code] if at least one sample was taken and it lies within
-    /// `expected ± tolerance` [code]; `None` means the sense chain is not what the board says
+    /// The mean code \[code\] if at least one sample was taken and it lies within
+    /// `expected ± tolerance` \[code\]; `None` means the sense chain is not what the board says
     /// (not connected, wrong reference): a fault.
     pub fn finish(&self, expected: f32, tolerance: f32) -> Option<f32> {
         if self.n == 0 {
@@ -231,17 +231,17 @@ impl Faults {
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Limits {
-    /// Over-current trip [A]: |measured current| above it is a fault.
+    /// Over-current trip \[A\]: |measured current| above it is a fault.
     pub i_trip: f32,
-    /// Following-error limit [rad]: |reference - position| above it is a fault.
+    /// Following-error limit \[rad\]: |reference - position| above it is a fault.
     pub max_error: f32,
     /// Encoder jump limit [counts per position period].
     pub max_step_counts: i64,
-    /// Soft lower position limit [counts].
+    /// Soft lower position limit \[counts\].
     pub pos_min: i64,
-    /// Soft upper position limit [counts].
+    /// Soft upper position limit \[counts\].
     pub pos_max: i64,
-    /// Control-step budget [cycles]: a step that takes longer is an overrun.
+    /// Control-step budget \[cycles\]: a step that takes longer is an overrun.
     pub budget_cycles: u32,
     /// One PWM period [cycles of the step clock]: steps further apart missed periods.
     pub period_cycles: u32,
@@ -253,13 +253,13 @@ pub struct Limits {
 pub struct BoardLimits {
     /// Over-current trip as a multiple of the current limit `i_max` [-] (e.g. 1.5).
     pub trip_factor: f32,
-    /// Largest current the sense chain can show [A]; the trip stays below 95 % of it.
+    /// Largest current the sense chain can show \[A\]; the trip stays below 95 % of it.
     pub sense_range: f32,
-    /// Following-error limit [rad].
+    /// Following-error limit \[rad\].
     pub max_error: f32,
     /// Highest plausible speed [rad/s]: a faster encoder step is a jump.
     pub max_speed: f32,
-    /// CPU clock [Hz] (DWT cycles).
+    /// CPU clock \[Hz\] (DWT cycles).
     pub clock_hz: u32,
     /// Share of the current-loop period one control step may take [-], in (0, 1].
     pub budget_fraction: f32,
@@ -283,27 +283,27 @@ pub fn limits_for(s: &Settings, b: &BoardLimits) -> Limits {
     }
 }
 
-/// Over-current: |`i`| [A] above `trip` [A], or `i` not finite.
+/// Over-current: |`i`| \[A\] above `trip` \[A\], or `i` not finite.
 pub fn over_current(i: f32, trip: f32) -> bool {
     abs(i) > trip || i.is_nan()
 }
 
-/// Following error: |`error`| [rad] above `max` [rad], or not finite.
+/// Following error: |`error`| \[rad\] above `max` \[rad\], or not finite.
 pub fn following_error(error: f32, max: f32) -> bool {
     abs(error) > max || error.is_nan()
 }
 
-/// Encoder jump: |`delta`| [counts] in one period above `max` [counts].
+/// Encoder jump: |`delta`| \[counts\] in one period above `max` \[counts\].
 pub fn encoder_jump(delta: i64, max: i64) -> bool {
     delta.unsigned_abs() > max.unsigned_abs()
 }
 
-/// Outside the soft limits: `pos` [counts] below `min` or above `max`.
+/// Outside the soft limits: `pos` \[counts\] below `min` or above `max`.
 pub fn outside_limits(pos: i64, min: i64, max: i64) -> bool {
     pos < min || pos > max
 }
 
-/// Overrun: a step of `cycles` above `budget` [cycles].
+/// Overrun: a step of `cycles` above `budget` \[cycles\].
 pub fn overrun(cycles: u32, budget: u32) -> bool {
     cycles > budget
 }
@@ -311,15 +311,15 @@ pub fn overrun(cycles: u32, budget: u32) -> bool {
 /// What the control step measured, for [`check`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Measured {
-    /// Motor current [A].
+    /// Motor current \[A\].
     pub current: f32,
-    /// Position error [rad] (0 while the bridge is off).
+    /// Position error \[rad\] (0 while the bridge is off).
     pub error: f32,
-    /// Encoder increment over the last position period [counts].
+    /// Encoder increment over the last position period \[counts\].
     pub delta: i64,
-    /// Position [counts].
+    /// Position \[counts\].
     pub pos: i64,
-    /// Duration of the previous control step [cycles].
+    /// Duration of the previous control step \[cycles\].
     pub cycles: u32,
 }
 
@@ -348,8 +348,8 @@ pub fn check(m: &Measured, lim: &Limits, enabled: bool) -> Faults {
     f
 }
 
-/// Periods missed between two control steps `since_last` [cycles] apart, for a period of
-/// `period` [cycles]: the nearest whole number of periods, less the one expected (a step more
+/// Periods missed between two control steps `since_last` \[cycles\] apart, for a period of
+/// `period` \[cycles\]: the nearest whole number of periods, less the one expected (a step more
 /// than 1.5 periods after the last missed one). 0 when either is 0 (not measured).
 pub fn missed_periods(since_last: u32, period: u32) -> u32 {
     if since_last == 0 || period == 0 {
@@ -359,7 +359,7 @@ pub fn missed_periods(since_last: u32, period: u32) -> u32 {
     periods.saturating_sub(1).min(u32::MAX as u64) as u32
 }
 
-/// Worst and mean duration of the control step [cycles], and the periods missed.
+/// Worst and mean duration of the control step \[cycles\], and the periods missed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StepStats {
     worst: u32,
@@ -401,12 +401,12 @@ impl StepStats {
         self.n = self.n.saturating_add(1);
     }
 
-    /// The longest step recorded [cycles].
+    /// The longest step recorded \[cycles\].
     pub fn worst(&self) -> u32 {
         self.worst
     }
 
-    /// The last step recorded [cycles].
+    /// The last step recorded \[cycles\].
     pub fn last(&self) -> u32 {
         self.last
     }
@@ -416,7 +416,7 @@ impl StepStats {
         self.n
     }
 
-    /// The mean step [cycles] (0 before the first).
+    /// The mean step \[cycles\] (0 before the first).
     pub fn mean(&self) -> f32 {
         if self.n == 0 {
             0.0
@@ -426,7 +426,7 @@ impl StepStats {
     }
 }
 
-/// `cycles` of a `clock_hz` clock in microseconds [us].
+/// `cycles` of a `clock_hz` clock in microseconds \[us\].
 pub fn cycles_to_us(cycles: f32, clock_hz: u32) -> f32 {
     if clock_hz == 0 {
         0.0
@@ -458,11 +458,11 @@ pub const INPUT_FILTERS: [(u32, u32); 16] = [
 ];
 
 /// The strongest timer input filter for a quadrature encoder counted on both edges of both
-/// channels up to `max_count_rate` [counts/s], on a timer clocked at `timer_hz` [Hz] (f_DTS =
+/// channels up to `max_count_rate` [counts/s], on a timer clocked at `timer_hz` \[Hz\] (f_DTS =
 /// f_CK_INT): the filter's window (N samples) stays at most half of the shortest time between
 /// two edges (1 / `max_count_rate`), so edges at the highest rate pass with a factor 2 for
 /// phase error and duty spread, while glitches shorter than the window are rejected. Returns
-/// the ICxF code and the window [s]; code 0 (no filter, window 0) when even the lightest
+/// the ICxF code and the window \[s\]; code 0 (no filter, window 0) when even the lightest
 /// filter would be too slow or the arguments are not positive.
 pub fn encoder_filter(timer_hz: u32, max_count_rate: f32) -> (u8, f32) {
     if timer_hz == 0 || !max_count_rate.is_finite() || max_count_rate <= 0.0 {
@@ -531,7 +531,7 @@ pub fn bridge_compare(duty: f32, period: u32, enabled: bool) -> (u32, u32) {
 /// so the mean of a centred window is the period's mean current, without the ripple.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SenseTiming {
-    /// ADC clock [Hz].
+    /// ADC clock \[Hz\].
     pub adc_hz: u32,
     /// Sampling time of one conversion [ADC cycles].
     pub sample_cycles: u32,
@@ -548,7 +548,7 @@ impl SenseTiming {
         self.sample_cycles + 12
     }
 
-    /// From the trigger to the end of the last conversion [s].
+    /// From the trigger to the end of the last conversion \[s\].
     pub const fn window_s(&self) -> f32 {
         if self.adc_hz == 0 {
             return 0.0;
@@ -558,7 +558,7 @@ impl SenseTiming {
     }
 
     /// From the trigger to the centroid of the sampling instants (each at the end of its
-    /// sampling time) [s]: how far the trigger must lead the turning point.
+    /// sampling time) \[s\]: how far the trigger must lead the turning point.
     pub const fn lead_s(&self) -> f32 {
         if self.adc_hz == 0 {
             return 0.0;
@@ -574,7 +574,7 @@ impl SenseTiming {
             / self.adc_hz as f32
     }
 
-    /// The lead in counts of a timer clocked at `timer_hz` [Hz] with prescaler register `psc`
+    /// The lead in counts of a timer clocked at `timer_hz` \[Hz\] with prescaler register `psc`
     /// (counting at timer_hz / (psc + 1)), rounded.
     pub fn lead_counts(&self, timer_hz: u32, psc: u32) -> u32 {
         let f = timer_hz as f64 / (psc as f64 + 1.0);
@@ -583,7 +583,7 @@ impl SenseTiming {
 }
 
 /// Prescaler and period (both as the register values, i.e. minus one) of a center-aligned
-/// timer at `clock_hz` [Hz] giving `rate_hz` [Hz], with a period of at most `max_arr`
+/// timer at `clock_hz` \[Hz\] giving `rate_hz` \[Hz\], with a period of at most `max_arr`
 /// (65535 for a 16-bit timer). The period is the largest that fits, so that the duty
 /// resolution is the best the clock allows. `None` if no setting gives the rate within 1 %
 /// or the period would be below 100 counts.

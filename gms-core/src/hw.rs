@@ -10,7 +10,7 @@ use core::ops::Range;
 /// APB1/APB2, as the firmware hands it to embassy-stm32's RCC set-up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct F4Clocks {
-    /// External clock [Hz].
+    /// External clock \[Hz\].
     pub hse_hz: u32,
     /// True when the HSE is an external clock signal (bypass), false for a crystal.
     pub hse_bypass: bool,
@@ -33,11 +33,11 @@ pub struct F4Clocks {
 /// The limits of one STM32F4 part (its datasheet's "general operating conditions").
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct F4Limits {
-    /// Highest SYSCLK/HCLK [Hz].
+    /// Highest SYSCLK/HCLK \[Hz\].
     pub sysclk_max: u32,
-    /// Highest APB1 clock [Hz].
+    /// Highest APB1 clock \[Hz\].
     pub pclk1_max: u32,
-    /// Highest APB2 clock [Hz].
+    /// Highest APB2 clock \[Hz\].
     pub pclk2_max: u32,
 }
 
@@ -56,42 +56,42 @@ pub const F446_LIMITS: F4Limits = F4Limits {
 };
 
 impl F4Clocks {
-    /// The PLL's input (HSE / M) [Hz]; RM0090 asks 1-2 MHz (2 MHz for less jitter).
+    /// The PLL's input (HSE / M) \[Hz\]; RM0090 asks 1-2 MHz (2 MHz for less jitter).
     pub const fn pll_in_hz(&self) -> u32 {
         self.hse_hz / self.pll_m
     }
 
-    /// The PLL's VCO (input × N) [Hz]; 100-432 MHz.
+    /// The PLL's VCO (input × N) \[Hz\]; 100-432 MHz.
     pub const fn vco_hz(&self) -> u32 {
         self.pll_in_hz() * self.pll_n
     }
 
-    /// SYSCLK (VCO / P) [Hz].
+    /// SYSCLK (VCO / P) \[Hz\].
     pub const fn sysclk_hz(&self) -> u32 {
         self.vco_hz() / self.pll_p
     }
 
-    /// The 48 MHz clock of USB OTG FS (VCO / Q) [Hz].
+    /// The 48 MHz clock of USB OTG FS (VCO / Q) \[Hz\].
     pub const fn usb_hz(&self) -> u32 {
         self.vco_hz() / self.pll_q
     }
 
-    /// HCLK (SYSCLK / AHB prescaler) [Hz]: the CPU and the DWT cycle counter.
+    /// HCLK (SYSCLK / AHB prescaler) \[Hz\]: the CPU and the DWT cycle counter.
     pub const fn hclk_hz(&self) -> u32 {
         self.sysclk_hz() / self.ahb_div
     }
 
-    /// APB1 [Hz].
+    /// APB1 \[Hz\].
     pub const fn pclk1_hz(&self) -> u32 {
         self.hclk_hz() / self.apb1_div
     }
 
-    /// APB2 [Hz].
+    /// APB2 \[Hz\].
     pub const fn pclk2_hz(&self) -> u32 {
         self.hclk_hz() / self.apb2_div
     }
 
-    /// The clock of the timers on APB1 (TIM2-5, …) [Hz]: twice PCLK1 when the APB1
+    /// The clock of the timers on APB1 (TIM2-5, …) \[Hz\]: twice PCLK1 when the APB1
     /// prescaler is not 1 (RM0090 §6.2, TIMPRE = 0).
     pub const fn tim_apb1_hz(&self) -> u32 {
         if self.apb1_div == 1 {
@@ -101,7 +101,7 @@ impl F4Clocks {
         }
     }
 
-    /// The clock of the timers on APB2 (TIM1, TIM8, …) [Hz].
+    /// The clock of the timers on APB2 (TIM1, TIM8, …) \[Hz\].
     pub const fn tim_apb2_hz(&self) -> u32 {
         if self.apb2_div == 1 {
             self.pclk2_hz()
@@ -112,7 +112,7 @@ impl F4Clocks {
 
     /// The ADC clock as embassy-stm32 0.6 sets it (`adc/v2.rs` `from_pclk2`: with
     /// `raw = (PCLK2 - 1) / 36 MHz`, the prescaler is 2 for raw 0-1, 4 for 2-3, 6 for 4-5, 8
-    /// for 6-7) [Hz]; 0 where embassy would panic (raw above 7).
+    /// for 6-7) \[Hz\]; 0 where embassy would panic (raw above 7).
     pub const fn adc_hz(&self) -> u32 {
         let p = self.pclk2_hz();
         let raw = p.saturating_sub(1) / 36_000_000;
@@ -174,15 +174,15 @@ impl F4Clocks {
 /// Where a board's firmware and parameter store live in its flash, and its RAM.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct MemoryMap {
-    /// The chip's flash [bytes].
+    /// The chip's flash \[bytes\].
     pub flash_len: u32,
-    /// The flash the firmware may use, from the start [bytes] (`memory.x` FLASH).
+    /// The flash the firmware may use, from the start \[bytes\] (`memory.x` FLASH).
     pub app_len: u32,
-    /// The RAM the firmware uses [bytes] (`memory.x` RAM; the F4's main SRAM).
+    /// The RAM the firmware uses \[bytes\] (`memory.x` RAM; the F4's main SRAM).
     pub ram_len: u32,
-    /// The parameter store's sectors, as offsets from the flash start [bytes].
+    /// The parameter store's sectors, as offsets from the flash start \[bytes\].
     pub store: Range<u32>,
-    /// The store's sector size [bytes].
+    /// The store's sector size \[bytes\].
     pub store_sector: u32,
 }
 

@@ -6,7 +6,7 @@
 /// The motion between two calls is taken at constant velocity `dx / dt`.
 pub trait FrictionModel {
     /// Advances the model by the displacement `dx` [m or rad] done at constant velocity over
-    /// `dt` [s] and returns the friction force after it [N or N·m].
+    /// `dt` \[s\] and returns the friction force after it [N or N·m].
     ///
     /// `dx = 0` holds the state (zero velocity). `dt = 0` with `dx != 0` is an instantaneous
     /// displacement (the limit of infinite velocity: no time for relaxation, no viscous force).

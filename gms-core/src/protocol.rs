@@ -20,10 +20,10 @@ use core::fmt::{self, Write};
 use crate::controller::{ControllerParams, FfMode};
 use crate::numtext::Num;
 
-/// The longest request line [bytes], without its line ending.
+/// The longest request line \[bytes\], without its line ending.
 pub const MAX_LINE: usize = 120;
 
-/// How long a device may take to answer `save` [ms]: a board's flash erases a sector during a
+/// How long a device may take to answer `save` \[ms\]: a board's flash erases a sector during a
 /// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing
 /// meanwhile. Other requests are answered within a position period or two.
 pub const SAVE_REPLY_MS: u32 = 5000;
@@ -149,16 +149,16 @@ pub enum Command<'a> {
     Clear,
     /// `move POS [VEL]` [rad, rad/s].
     Move {
-        /// Target [rad].
+        /// Target \[rad\].
         pos: f32,
         /// Speed limit [rad/s].
         vel: Option<f32>,
     },
-    /// `stream FIELDS RATE_HZ`: comma-separated field names, rate [Hz].
+    /// `stream FIELDS RATE_HZ`: comma-separated field names, rate \[Hz\].
     Stream {
         /// Field names, comma-separated.
         fields: &'a str,
-        /// Rate [Hz].
+        /// Rate \[Hz\].
         rate_hz: f32,
     },
     /// `stream off`.
@@ -508,7 +508,7 @@ pub trait Device {
     fn status(&mut self, out: &mut dyn Write) -> fmt::Result;
     /// Clears latched faults.
     fn clear(&mut self) -> Result<(), &'static str>;
-    /// Moves to `pos` [rad] at up to `vel` [rad/s].
+    /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str>;
     /// Starts telemetry of `fields` at `rate_hz`.
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;

@@ -19,42 +19,42 @@ pub type SubCounts = i64;
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Segment {
-    /// Stay where the previous segment ended for `duration` [s].
+    /// Stay where the previous segment ended for `duration` \[s\].
     Hold {
-        /// Duration [s].
+        /// Duration \[s\].
         duration: f32,
     },
-    /// An instantaneous step of `distance` [rad], then `dwell` [s] at rest.
+    /// An instantaneous step of `distance` \[rad\], then `dwell` \[s\] at rest.
     Step {
-        /// Step size [rad].
+        /// Step size \[rad\].
         distance: f32,
-        /// Time at rest after the step [s].
+        /// Time at rest after the step \[s\].
         dwell: f32,
     },
-    /// `count` steps of `distance` [rad], each followed by `dwell` [s].
+    /// `count` steps of `distance` \[rad\], each followed by `dwell` \[s\].
     Staircase {
-        /// Step size [rad].
+        /// Step size \[rad\].
         distance: f32,
         /// Number of steps.
         count: u32,
-        /// Time at rest after each step [s].
+        /// Time at rest after each step \[s\].
         dwell: f32,
     },
     /// `x = A (1 - cos(2 pi f t))` for `cycles` periods: starts and ends at rest, reverses
     /// at 0 and 2A.
     Sine {
-        /// Amplitude A [rad].
+        /// Amplitude A \[rad\].
         amplitude: f32,
-        /// Frequency f [Hz].
+        /// Frequency f \[Hz\].
         freq: f32,
         /// Number of periods.
         cycles: f32,
     },
-    /// A jerk-limited point-to-point move of `distance` [rad] (quintic minimum-jerk profile,
+    /// A jerk-limited point-to-point move of `distance` \[rad\] (quintic minimum-jerk profile,
     /// its duration the shortest that keeps speed, acceleration and jerk within the limits),
-    /// then `dwell` [s] at rest.
+    /// then `dwell` \[s\] at rest.
     Move {
-        /// Distance [rad].
+        /// Distance \[rad\].
         distance: f32,
         /// Speed limit [rad/s].
         vmax: f32,
@@ -62,7 +62,7 @@ pub enum Segment {
         amax: f32,
         /// Jerk limit [rad/s^3].
         jmax: f32,
-        /// Time at rest after the move [s].
+        /// Time at rest after the move \[s\].
         dwell: f32,
     },
 }
@@ -125,7 +125,7 @@ impl Segment {
         Ok(())
     }
 
-    /// Duration of the move part of a `Move` [s].
+    /// Duration of the move part of a `Move` \[s\].
     fn move_time(distance: f32, vmax: f32, amax: f32, jmax: f32) -> f32 {
         let d = abs(distance);
         // Quintic x = D(10u^3 - 15u^4 + 6u^5): peak v = 1.875 D/T, a = 5.7735 D/T^2,
@@ -136,7 +136,7 @@ impl Segment {
         tv.max(ta).max(tj).max(1e-6)
     }
 
-    /// Total duration [s].
+    /// Total duration \[s\].
     pub fn duration(&self) -> f32 {
         match *self {
             Segment::Hold { duration } => duration,
@@ -153,8 +153,8 @@ impl Segment {
         }
     }
 
-    /// Offset from the segment's start [rad], velocity [rad/s] and acceleration [rad/s^2] at
-    /// time `t` [s] into the segment (t in [0, duration]).
+    /// Offset from the segment's start \[rad\], velocity [rad/s] and acceleration [rad/s^2] at
+    /// time `t` \[s\] into the segment (t in [0, duration]).
     fn eval(&self, t: f32) -> (f32, f32, f32) {
         match *self {
             Segment::Hold { .. } => (0.0, 0.0, 0.0),
@@ -226,7 +226,7 @@ pub struct Reference<const S: usize> {
 
 impl<const S: usize> Reference<S> {
     /// A reference starting at `start` [1/65536 count] with the segments `segs` (at most
-    /// `S`), for an encoder of `rad_per_count` [rad]. Errors name the first bad segment.
+    /// `S`), for an encoder of `rad_per_count` \[rad\]. Errors name the first bad segment.
     pub fn try_new(
         segs: &[Segment],
         rad_per_count: f32,
@@ -255,7 +255,7 @@ impl<const S: usize> Reference<S> {
         })
     }
 
-    /// Total duration of all segments [s].
+    /// Total duration of all segments \[s\].
     pub fn duration(&self) -> f32 {
         let segs = self.segs.get(..self.len).unwrap_or(&[]);
         segs.iter().map(Segment::duration).sum()
@@ -276,7 +276,7 @@ impl<const S: usize> Reference<S> {
         self.idx
     }
 
-    /// Returns the sample at the current time, then advances the time by `dt` [s]. The first
+    /// Returns the sample at the current time, then advances the time by `dt` \[s\]. The first
     /// call returns the start (t = 0). After the last segment the reference holds its final
     /// position.
     pub fn next(&mut self, dt: f32) -> RefSample {
@@ -338,27 +338,27 @@ pub struct MovePlan {
     /// The start's velocity [rad/s] and acceleration [rad/s^2].
     v0: f32,
     a0: f32,
-    /// The jerk of the first piece [rad/s^3] and its duration [s].
+    /// The jerk of the first piece [rad/s^3] and its duration \[s\].
     jr: f32,
     tr: f32,
-    /// Offset [rad] and velocity [rad/s] at the end of the first piece.
+    /// Offset \[rad\] and velocity [rad/s] at the end of the first piece.
     x1: f32,
     v1: f32,
     c3: f32,
     c4: f32,
     c5: f32,
-    /// Duration of the quintic [s].
+    /// Duration of the quintic \[s\].
     dur: f32,
     t: f32,
 }
 
-/// Time at rest after a move before it counts as finished [s].
+/// Time at rest after a move before it counts as finished \[s\].
 const MOVE_DWELL: f32 = 1e-3;
 
 impl MovePlan {
-    /// A move from the reference sample `from` to `target` [rad] with the limits `vmax`
+    /// A move from the reference sample `from` to `target` \[rad\] with the limits `vmax`
     /// [rad/s], `amax` [rad/s^2], `jmax` [rad/s^3] (all `> 0`), for an encoder of
-    /// `rad_per_count` [rad]. Planning costs up to a few thousand polynomial evaluations:
+    /// `rad_per_count` \[rad\]. Planning costs up to a few thousand polynomial evaluations:
     /// plan outside the control step.
     pub fn new(
         from: RefSample,
@@ -443,7 +443,7 @@ impl MovePlan {
         self.c5 = (12.0 * d - 6.0 * v * t) / (2.0 * t3 * t2);
     }
 
-    /// Offset [rad], velocity, acceleration and jerk at `t` [s] from the start.
+    /// Offset \[rad\], velocity, acceleration and jerk at `t` \[s\] from the start.
     fn eval(&self, t: f32) -> (f32, f32, f32, f32) {
         if t < self.tr {
             let (a0, jr) = (self.a0, self.jr);
@@ -473,7 +473,7 @@ impl MovePlan {
         })
     }
 
-    /// Duration of the motion, without the final dwell [s].
+    /// Duration of the motion, without the final dwell \[s\].
     pub fn duration(&self) -> f32 {
         self.tr + self.dur
     }
@@ -483,7 +483,7 @@ impl MovePlan {
         self.target
     }
 
-    /// Moves the plan's clock on by `t` [s] (to join it at the step it is taken).
+    /// Moves the plan's clock on by `t` \[s\] (to join it at the step it is taken).
     pub fn skip(&mut self, t: f32) {
         if t.is_finite() && t > 0.0 {
             self.t += t;
@@ -495,7 +495,7 @@ impl MovePlan {
         self.t >= self.duration() + MOVE_DWELL
     }
 
-    /// The sample at the plan's time, then the time moves on by `dt` [s].
+    /// The sample at the plan's time, then the time moves on by `dt` \[s\].
     pub fn next(&mut self, dt: f32) -> RefSample {
         let t = self.t;
         self.t += dt;
@@ -533,9 +533,9 @@ impl Motion {
         }
     }
 
-    /// The protocol's `move` from the reference sample `from` to `pos` [rad] at up to `vel`
+    /// The protocol's `move` from the reference sample `from` to `pos` \[rad\] at up to `vel`
     /// [rad/s] ([`MOVE_VMAX`] when `None`), within [`MOVE_AMAX`] and [`MOVE_JMAX`], for an
-    /// encoder of `rad_per_count` [rad].
+    /// encoder of `rad_per_count` \[rad\].
     pub fn plan(
         from: RefSample,
         pos: f32,
@@ -573,7 +573,7 @@ impl Motion {
         self.moving.is_some()
     }
 
-    /// The reference for this step; advances a move by `dt` [s]. A finished move becomes
+    /// The reference for this step; advances a move by `dt` \[s\]. A finished move becomes
     /// the hold position.
     pub fn next(&mut self, dt: f32) -> RefSample {
         if let Some(m) = &mut self.moving {
@@ -614,7 +614,7 @@ fn cbrt(x: f32) -> f32 {
     }
 }
 
-/// sin and cos of `x` [rad]: reduction to [-pi/4, pi/4] and Taylor polynomials (error below
+/// sin and cos of `x` \[rad\]: reduction to [-pi/4, pi/4] and Taylor polynomials (error below
 /// 1e-7 there; the reduction keeps ~1e-7 relative phase accuracy for |x| up to ~1e3).
 pub fn sin_cos(x: f32) -> (f32, f32) {
     const FRAC_2_PI: f32 = core::f32::consts::FRAC_2_PI;

@@ -60,7 +60,7 @@ impl Rng {
     }
 }
 
-/// The increment (dx [rad], dt [s]) of step `i` of the friction workload.
+/// The increment (dx \[rad\], dt \[s\]) of step `i` of the friction workload.
 pub fn friction_input(rng: &mut Rng, i: u32) -> (f32, f32) {
     let u = rng.uniform();
     let dt = if i % 97 == 0 { 0.0 } else { 1e-4 };

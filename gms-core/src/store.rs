@@ -24,10 +24,10 @@ use crate::drive::RECORD_LEN;
 /// The store's flash range, as offsets from the start of the F405's flash: its last two
 /// 128 KiB sectors (10 and 11, RM0090 table 5), which `memory.x` leaves out of FLASH.
 pub const STORE_RANGE: core::ops::Range<u32> = 0x000C_0000..0x0010_0000;
-/// Flash word of the F405 as embassy-stm32 0.6 writes it (`WRITE_SIZE`) [bytes].
+/// Flash word of the F405 as embassy-stm32 0.6 writes it (`WRITE_SIZE`) \[bytes\].
 pub const WORD_SIZE: usize = 4;
 /// Sector size of the store's range (`MAX_ERASE_SIZE` of embassy-stm32 0.6 for the F405)
-/// [bytes].
+/// \[bytes\].
 pub const SECTOR_SIZE: usize = 128 * 1024;
 
 /// The key of the parameter record.

@@ -93,7 +93,7 @@ pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
     Ok(res)
 }
 
-/// The energy ledger in metrics.json [J].
+/// The energy ledger in metrics.json \[J\].
 #[derive(Serialize)]
 struct EnergyOut {
     input: f64,

@@ -85,7 +85,7 @@ impl Adc {
         }
     }
 
-    /// The code of a current the plant's ADC measured [A].
+    /// The code of a current the plant's ADC measured \[A\].
     fn code(&self, amps: f32) -> u32 {
         (amps as f64 / self.lsb + self.mid)
             .round()
@@ -99,7 +99,7 @@ struct Sim {
     plant: Plant,
     adc: Adc,
     substeps: u32,
-    /// Simulated time [s].
+    /// Simulated time \[s\].
     t: f64,
 }
 

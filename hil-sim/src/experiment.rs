@@ -222,9 +222,9 @@ pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<
     }
 }
 
-/// Length of the frictional-lag run [s].
+/// Length of the frictional-lag run \[s\].
 pub const LAG_DURATION: f64 = 8.0;
-/// Sample period of the frictional-lag record [s].
+/// Sample period of the frictional-lag record \[s\].
 pub const LAG_SAMPLE: f64 = 1e-3;
 
 /// The frictional-lag run: speed `vs (1.5 + 1.2 sin φ(t))` with the frequency swept

@@ -1,6 +1,6 @@
 //! `hil-sim friction`: a friction model driven by a position trajectory from a CSV file.
 //!
-//! Input: a header naming at least `t` [s] and `x` [m or rad] (any order, other columns
+//! Input: a header naming at least `t` \[s\] and `x` [m or rad] (any order, other columns
 //! ignored), one sample per row, `t` strictly increasing, every value finite. Between two rows
 //! the motion is at constant velocity. Output: `t,x,v,f`, one row per input row, `v` the
 //! velocity of the motion that ended at this row and `f` the friction after it (row 0: the
@@ -14,7 +14,7 @@ use crate::paramfile::{AnyModel, FileError, ParamFile};
 /// One sample of a trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// Position [m or rad].
     pub x: f64,
@@ -23,7 +23,7 @@ pub struct Sample {
 /// One row of the output.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrictionRow {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
     /// Position [m or rad].
     pub x: f64,

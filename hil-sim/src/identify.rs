@@ -391,7 +391,7 @@ pub struct LagFit {
     pub rms_rule: f64,
     /// Samples used (after the first second, which is skipped as the start-up).
     pub samples: usize,
-    /// For the plot: (t [s], measured, fitted model) over the half second where the lag
+    /// For the plot: (t \[s\], measured, fitted model) over the half second where the lag
     /// matters most (the fitted model farthest from a lag-free one, C × 10^4).
     pub window: Vec<(f64, f64, f64)>,
 }
@@ -431,7 +431,7 @@ fn lag_sse(
         .sum())
 }
 
-/// Fits C to a frictional-lag record (`t,x,f`: time [s], position, friction) with every
+/// Fits C to a frictional-lag record (`t,x,f`: time \[s\], position, friction) with every
 /// other parameter of `spec` fixed: the model is driven by the recorded positions and C
 /// minimises the squared difference to the recorded friction (golden-section search over
 /// ln C, from 10^-4 to 10^4 × the paper's rule). The first second is the start-up and is

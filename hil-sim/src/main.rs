@@ -24,7 +24,7 @@ enum Cmd {
         /// Parameter file (TOML with a [friction] table).
         #[arg(long, value_name = "P.toml")]
         params: PathBuf,
-        /// Trajectory CSV with a header naming at least `t` [s] and `x` [m or rad].
+        /// Trajectory CSV with a header naming at least `t` \[s\] and `x` [m or rad].
         #[arg(long, value_name = "TRAJ.csv")]
         input: PathBuf,
         /// Output CSV: t,x,v,f (written atomically).
@@ -255,6 +255,10 @@ fn main() -> ExitCode {
                 ),
                 #[cfg(unix)]
                 (None, true) => hil_sim::device::Endpoint::Pty,
+                #[cfg(not(unix))]
+                (None, true) => {
+                    return Err("--pty needs a Unix pseudo-terminal: use --tcp ADDR here".into());
+                }
                 _ => return Err("give --tcp ADDR or --pty".into()),
             };
             hil_sim::device::serve(sc, endpoint, store, |addr, fault| {

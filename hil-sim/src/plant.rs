@@ -34,7 +34,7 @@ use rand_distr::{Distribution, Normal};
 use crate::paramfile::{AnyModel, FrictionSpec};
 use crate::scenario::Plant as PlantSpec;
 
-/// Energy ledger of a run [J], accumulated in f64.
+/// Energy ledger of a run \[J\], accumulated in f64.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Energy {
     /// Electrical energy delivered by the bridge, ∫ V i dt.
@@ -70,17 +70,17 @@ pub struct Plant {
     guideway: AnyModel,
     drift: crate::scenario::Drift,
     glitch: crate::scenario::Glitch,
-    /// Time since the start [s].
+    /// Time since the start \[s\].
     pub t: f64,
-    /// Current [A].
+    /// Current \[A\].
     pub i: f64,
     /// Motor speed [rad/s].
     pub omega: f64,
-    /// Motor angle [rad].
+    /// Motor angle \[rad\].
     pub theta: f64,
     /// Friction torque acting now (actuator + reflected guideway) [N·m].
     pub friction: f64,
-    /// Voltage applied by the bridge now [V].
+    /// Voltage applied by the bridge now \[V\].
     pub voltage: f64,
     /// Duty waiting to be applied at the next current-loop period.
     pending_duty: f64,
@@ -168,7 +168,7 @@ impl Plant {
         ((self.theta / self.rad_per_count).floor() as i64).saturating_add(glitch)
     }
 
-    /// The current-sense reading now [A]: noise, then quantisation and clipping.
+    /// The current-sense reading now \[A\]: noise, then quantisation and clipping.
     pub fn adc(&mut self) -> f32 {
         let raw = self.i + self.noise.sample(&mut self.rng);
         let q = (raw / self.adc_lsb).round() * self.adc_lsb;
@@ -185,7 +185,7 @@ impl Plant {
         self.pending_duty = q;
     }
 
-    /// Advances the plant by `dt` [s] at the applied voltage.
+    /// Advances the plant by `dt` \[s\] at the applied voltage.
     pub fn step(&mut self, dt: f64) {
         // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step.
         let a = self.r / self.l;

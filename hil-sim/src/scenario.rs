@@ -67,11 +67,11 @@ impl Default for Scenario {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plant {
-    /// H-bridge supply [V].
+    /// H-bridge supply \[V\].
     pub supply_v: f64,
-    /// Winding resistance [ohm].
+    /// Winding resistance \[ohm\].
     pub resistance: f64,
-    /// Winding inductance [H].
+    /// Winding inductance \[H\].
     pub inductance: f64,
     /// Torque constant [N·m/A].
     pub k_m: f64,
@@ -85,13 +85,13 @@ pub struct Plant {
     pub lead: f64,
     /// Encoder resolution [rad/count].
     pub rad_per_count: f64,
-    /// ADC resolution [bits].
+    /// ADC resolution \[bits\].
     pub adc_bits: u32,
-    /// ADC full scale, ± [A].
+    /// ADC full scale, ± \[A\].
     pub adc_range: f64,
-    /// Current-sense noise, standard deviation [A].
+    /// Current-sense noise, standard deviation \[A\].
     pub adc_noise: f64,
-    /// PWM duty resolution [steps].
+    /// PWM duty resolution \[steps\].
     pub pwm_steps: u32,
     /// Plant steps per current-loop period.
     pub substeps: u32,
@@ -117,7 +117,7 @@ pub struct Plant {
 pub struct Glitch {
     /// When the reading jumps [s of simulated time from the start], `>= 0`.
     pub at: f64,
-    /// By how much [counts]; 0: no glitch.
+    /// By how much \[counts\]; 0: no glitch.
     pub counts: i64,
 }
 
@@ -145,14 +145,14 @@ pub struct Drift {
     pub kind: DriftKind,
     /// Its size, a fraction [-], in (-0.9, 0.9); negative drifts the other way.
     pub amount: f64,
-    /// Ramp duration or step interval [s], `> 0`.
+    /// Ramp duration or step interval \[s\], `> 0`.
     pub time: f64,
     /// Spatial period of the position-dependent drift [rad of motor angle], `> 0`.
     pub period: f64,
 }
 
 impl Drift {
-    /// The friction factor at time `t` [s] and motor angle `theta` [rad].
+    /// The friction factor at time `t` \[s\] and motor angle `theta` \[rad\].
     pub fn factor(&self, t: f64, theta: f64) -> f64 {
         match self.kind {
             DriftKind::None => 1.0,
@@ -195,21 +195,21 @@ pub struct Reference {
 pub enum SegmentSpec {
     /// Rest.
     Hold {
-        /// [s]
+        /// \[s\]
         duration: f32,
     },
     /// One step.
     Step {
-        /// [rad]
+        /// \[rad\]
         distance: f32,
-        /// [s]
+        /// \[s\]
         dwell: f32,
     },
     /// Jerk-limited moves of the given numbers of encoder counts, each followed by a dwell.
     Steps {
-        /// Step sizes [counts].
+        /// Step sizes \[counts\].
         counts: Vec<i64>,
-        /// Rest after each move [s].
+        /// Rest after each move \[s\].
         dwell: f32,
         /// Speed limit [rad/s].
         #[serde(default = "default_vmax")]
@@ -223,25 +223,25 @@ pub enum SegmentSpec {
     },
     /// Equal steps.
     Staircase {
-        /// [rad]
+        /// \[rad\]
         distance: f32,
         /// Number of steps.
         count: u32,
-        /// [s]
+        /// \[s\]
         dwell: f32,
     },
     /// x = A (1 - cos 2 pi f t).
     Sine {
-        /// [rad]
+        /// \[rad\]
         amplitude: f32,
-        /// [Hz]
+        /// \[Hz\]
         freq: f32,
         /// Periods.
         cycles: f32,
     },
     /// Jerk-limited move.
     Move {
-        /// [rad]
+        /// \[rad\]
         distance: f32,
         /// [rad/s]
         vmax: f32,
@@ -249,7 +249,7 @@ pub enum SegmentSpec {
         amax: f32,
         /// [rad/s^3]
         jmax: f32,
-        /// [s]
+        /// \[s\]
         dwell: f32,
     },
 }

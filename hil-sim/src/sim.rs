@@ -10,19 +10,19 @@ use crate::scenario::{FF_BLOCKS, MAX_SEGMENTS, Scenario};
 /// One row of the trace, at the position-loop rate.
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct TraceRow {
-    /// Time [s].
+    /// Time \[s\].
     pub t: f64,
-    /// Reference position [rad].
+    /// Reference position \[rad\].
     pub reference: f64,
-    /// Measured position (encoder) [rad].
+    /// Measured position (encoder) \[rad\].
     pub position: f64,
-    /// Position error, reference - measured [rad].
+    /// Position error, reference - measured \[rad\].
     pub error: f64,
-    /// True motor current [A].
+    /// True motor current \[A\].
     pub current: f64,
-    /// Current command [A].
+    /// Current command \[A\].
     pub current_cmd: f64,
-    /// Voltage applied by the bridge [V].
+    /// Voltage applied by the bridge \[V\].
     pub voltage: f64,
     /// True friction torque, actuator + reflected guideway [N·m].
     pub friction: f64,
@@ -41,18 +41,18 @@ pub struct TraceRow {
 /// The figures of one run (SI units: rad, s).
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
 pub struct Metrics {
-    /// RMS position error over the whole run [rad].
+    /// RMS position error over the whole run \[rad\].
     pub rms_error: f64,
-    /// Largest |error| [rad].
+    /// Largest |error| \[rad\].
     pub max_error: f64,
-    /// Largest |error| within 50 ms after a velocity reversal of the reference [rad].
+    /// Largest |error| within 50 ms after a velocity reversal of the reference \[rad\].
     pub reversal_error: f64,
-    /// RMS error over the sine segments only [rad].
+    /// RMS error over the sine segments only \[rad\].
     pub sine_rms_error: f64,
     /// Longest time, after a step's reference has come to rest at its target, until |error|
-    /// stays within 1 count (the rest of the dwell when it never does) [s].
+    /// stays within 1 count (the rest of the dwell when it never does) \[s\].
     pub settle_time: f64,
-    /// Largest mean |error| over the last 20 % of a step's dwell [rad].
+    /// Largest mean |error| over the last 20 % of a step's dwell \[rad\].
     pub steady_state_error: f64,
     /// Steps that did not settle within ±1 count before their dwell ended.
     pub unsettled_steps: f64,

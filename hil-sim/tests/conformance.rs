@@ -371,7 +371,7 @@ fn save_restart_load() {
     });
 }
 
-/// The largest |error| [counts] in the telemetry lines.
+/// The largest |error| \[counts\] in the telemetry lines.
 fn peak_error(lines: &[String]) -> f64 {
     lines
         .iter()

@@ -31,7 +31,7 @@ const BOARDS: [(&str, &str, &str); 2] = [
     ),
 ];
 
-/// The budgets [instructions].
+/// The budgets (instructions).
 const BUDGETS: [(&str, f64); 4] = [
     ("gms6_step", 300.0),
     ("controller_step", 1500.0),

@@ -34,10 +34,10 @@ pub const SENSE_PIN: usize = 0;
 /// ADC1 channel of the current sense (PC0 = ADC123_IN10).
 pub const SENSE_CHANNEL: u8 = 10;
 
-/// The largest PWM period the 16-bit TIM8 takes [counts] (one below 65535 so that "always
+/// The largest PWM period the 16-bit TIM8 takes \[counts\] (one below 65535 so that "always
 /// on" is a compare value above it).
 pub const PWM_MAX_ARR: u32 = 65_534;
-/// Width of the encoder counter [bits] (TIM2 is 32-bit).
+/// Width of the encoder counter \[bits\] (TIM2 is 32-bit).
 pub const ENCODER_BITS: u32 = 32;
 /// The highest count rate the encoder input must pass [counts/s]: 3.8 rad/s at 3.8 urad per
 /// count, 7.6 times the protocol's move speed limit (0.5 rad/s). The input filter is sized
@@ -46,15 +46,15 @@ pub const ENCODER_BITS: u32 = 32;
 /// a lighter filter).
 pub const ENCODER_MAX_RATE: f32 = 1.0e6;
 
-/// ADC reference [V].
+/// ADC reference \[V\].
 pub const ADC_VREF: f32 = 3.3;
-/// ADC full scale [codes].
+/// ADC full scale \[codes\].
 pub const ADC_FULL_SCALE: f32 = 4095.0;
 /// Current-sense transimpedance [V/A]: 68 mohm shunt × INA240A2 gain 50.
 pub const SENSE_V_PER_A: f32 = 0.068 * 50.0;
-/// ADC code at zero current the board is built for [code] (REF at VDD/2).
+/// ADC code at zero current the board is built for \[code\] (REF at VDD/2).
 pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
-/// How far the measured zero may lie from it [code] (INA240 offset, resistor tolerances).
+/// How far the measured zero may lie from it \[code\] (INA240 offset, resistor tolerances).
 pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
 
 /// How the current is sampled on a board clocked by `clocks`: 16 conversions (the
@@ -76,7 +76,7 @@ pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
 /// confirmed at bring-up: an `enable` that jolts means it is too short).
 pub const BRIDGE_WAKE_S: f32 = 1.0e-3;
 
-/// Watchdog timeout [us], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
+/// Watchdog timeout \[us\], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
 /// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
 /// reloads the watchdog right before each, see `storage.rs`).
 pub const WATCHDOG_US: u32 = 4_000_000;

@@ -52,9 +52,9 @@ pub fn calibrate_sense(board: &Board, mut read: impl FnMut() -> u32) -> SenseSta
 /// What the hardware measured at the start of a PWM period.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Inputs {
-    /// The encoder counter's raw value [counts] (wrapping, [`Board::encoder_bits`] wide).
+    /// The encoder counter's raw value \[counts\] (wrapping, [`Board::encoder_bits`] wide).
     pub encoder: u32,
-    /// The sum of [`Board::sense_oversample`] current-sense ADC codes [code].
+    /// The sum of [`Board::sense_oversample`] current-sense ADC codes \[code\].
     pub current_codes: u32,
     /// Time since the previous call started [cycles of the board's step clock,
     /// `BoardLimits::clock_hz`]; 0 when not measured. A call more than 1.5 PWM periods after
@@ -339,7 +339,7 @@ impl ControlLoop {
         }
     }
 
-    /// Records the duration of the step just run [cycles]; an overrun latches the fault and
+    /// Records the duration of the step just run \[cycles\]; an overrun latches the fault and
     /// switches the bridge off. Returns true when the bridge must be switched off now.
     pub fn finish(&mut self, cycles: u32) -> bool {
         self.stats.record(cycles);

@@ -17,12 +17,12 @@ pub trait Link {
     /// Runs `f` on the mailbox, atomically with respect to the loop (a critical section on a
     /// board, a mutex on a host); `f` only copies.
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R;
-    /// A monotonic time [us], for waiting on the loop.
+    /// A monotonic time \[us\], for waiting on the loop.
     fn now_us(&self) -> u64;
     /// Lets the loop run for a moment while waiting (nothing where the loop is an interrupt
     /// that preempts the caller; a short sleep where it is a thread).
     fn pause(&mut self);
-    /// How long to wait for the loop to take a request before giving up [us].
+    /// How long to wait for the loop to take a request before giving up \[us\].
     fn timeout_us(&self) -> u64 {
         50_000
     }

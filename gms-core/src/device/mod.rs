@@ -34,11 +34,11 @@ pub type Ctrl = Controller<6>;
 /// What a board is, as far as the device core needs to know.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Board {
-    /// Clock of the PWM timer [Hz].
+    /// Clock of the PWM timer \[Hz\].
     pub pwm_timer_hz: u32,
-    /// Largest period register value of the PWM timer [counts].
+    /// Largest period register value of the PWM timer \[counts\].
     pub pwm_max_arr: u32,
-    /// Width of the encoder counter [bits].
+    /// Width of the encoder counter \[bits\].
     pub encoder_bits: u32,
     /// ADC conversions summed per current sample [-] (`>= 1`).
     pub sense_oversample: u32,
@@ -48,7 +48,7 @@ pub struct Board {
     pub limits: BoardLimits,
     /// True on a simulator, whose telemetry also has the true friction (`friction_true`).
     pub has_truth: bool,
-    /// How long the bridge needs to wake from its sleep before it drives [s]: after `enable`
+    /// How long the bridge needs to wake from its sleep before it drives \[s\]: after `enable`
     /// the loop holds both inputs high (brake: no voltage across the motor) this long before
     /// it starts controlling, so that no command is lost while the driver wakes (which the
     /// integrators would make up for with a jolt). 0: drives at once.
@@ -60,12 +60,12 @@ pub struct Board {
 pub struct SenseChain {
     /// Current per ADC code [A/code] (negative if the amplifier's sign is reversed).
     pub amps_per_code: f32,
-    /// ADC code at zero current the board is built for [code].
+    /// ADC code at zero current the board is built for \[code\].
     pub zero_code: f32,
-    /// How far the measured zero may lie from `zero_code` [code] (amplifier offset, resistor
+    /// How far the measured zero may lie from `zero_code` \[code\] (amplifier offset, resistor
     /// tolerances).
     pub zero_tolerance: f32,
-    /// From the sampling trigger to the last conversion's end [s] ([`crate::drive::SenseTiming`];
+    /// From the sampling trigger to the last conversion's end \[s\] ([`crate::drive::SenseTiming`];
     /// 0 for an instantaneous sense): the window is centred on the PWM period's turning point
     /// and the control step starts at its end, so it must leave the step its budget:
     /// `window_s <= 2 (1 - budget_fraction) / rate.cur_hz` ([`prepare`] refuses other rates).
@@ -136,17 +136,17 @@ impl Requests {
 pub struct Status {
     /// Position steps since start (the step whose values these are).
     pub steps: u64,
-    /// Position-loop rate [Hz].
+    /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
-    /// Encoder position [counts].
+    /// Encoder position \[counts\].
     pub pos: i64,
     /// The reference of that step (position [1/65536 count], velocity, acceleration).
     pub reference: RefSample,
-    /// Position error [rad] (0 while disabled).
+    /// Position error \[rad\] (0 while disabled).
     pub error: f32,
     /// Friction feedforward applied [N·m].
     pub ff: f32,
-    /// Motor current [A].
+    /// Motor current \[A\].
     pub current: f32,
     /// Last duty [-1, 1].
     pub duty: f32,
@@ -158,7 +158,7 @@ pub struct Status {
     pub moving: bool,
     /// Control-step durations [cycles of `limits.clock_hz`].
     pub stats: StepStats,
-    /// Current-sense zero [code].
+    /// Current-sense zero \[code\].
     pub sense_offset: f32,
     /// The adaptive scale on the friction feedforward (`ff.adapt.scale`) [-].
     pub adapt_scale: f32,
@@ -169,15 +169,15 @@ pub struct Status {
 pub struct Sample {
     /// Position steps since start.
     pub steps: u64,
-    /// Encoder position [counts].
+    /// Encoder position \[counts\].
     pub pos: i64,
     /// Reference [1/65536 count].
     pub reference: i64,
-    /// Position error [rad].
+    /// Position error \[rad\].
     pub error: f32,
     /// Friction feedforward applied [N·m].
     pub ff: f32,
-    /// Motor current [A].
+    /// Motor current \[A\].
     pub current: f32,
     /// Friction estimate: motor torque k_M i minus J a_ref [N·m] (what a board can know).
     pub friction: f32,
@@ -199,7 +199,7 @@ pub const FIELDS: [&str; 8] = [
     "friction_true",
 ];
 
-/// The highest telemetry rate [Hz].
+/// The highest telemetry rate \[Hz\].
 pub const MAX_STREAM_HZ: f32 = 1000.0;
 
 /// The exchange between the two halves: requests one way, the status the other. Held by the

@@ -19,7 +19,7 @@ struct Cli {
     /// TCP address of a virtual device (`hil-sim serve --tcp`).
     #[arg(long)]
     tcp: Option<String>,
-    /// Reply timeout [ms].
+    /// Reply timeout \[ms\].
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(1..=600_000))]
     timeout_ms: u64,
     #[command(subcommand)]
@@ -63,10 +63,10 @@ enum Cmd {
         /// Comma-separated fields: t, pos, ref, error, ff, current, friction.
         #[arg(long, default_value = "t,pos,ref,error,ff")]
         fields: String,
-        /// Duration [s].
+        /// Duration \[s\].
         #[arg(long, default_value_t = 1.0)]
         seconds: f64,
-        /// Telemetry rate [Hz].
+        /// Telemetry rate \[Hz\].
         #[arg(long, default_value_t = 500.0)]
         rate: f64,
         /// Output CSV.
@@ -75,10 +75,10 @@ enum Cmd {
     },
     /// Enable, command a step, record it, print its figures, write trace.csv and plot.svg.
     StepTest {
-        /// Step size [rad].
+        /// Step size \[rad\].
         #[arg(long, allow_negative_numbers = true)]
         distance: f64,
-        /// Recording time [s].
+        /// Recording time \[s\].
         #[arg(long, default_value_t = 0.5)]
         seconds: f64,
         /// Output directory.
@@ -90,7 +90,7 @@ enum Cmd {
         /// Stop after this many seconds (default: run until interrupted).
         #[arg(long)]
         seconds: Option<f64>,
-        /// Refresh period [ms].
+        /// Refresh period \[ms\].
         #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(20..=10_000))]
         refresh_ms: u64,
     },
@@ -98,10 +98,10 @@ enum Cmd {
 
 #[derive(Subcommand)]
 enum ParamsCmd {
-    /// Print the device's parameters: a [friction] table (the compensator's GMS model, the
-    /// parameter-file format) and a [device] table (everything else, by protocol path).
+    /// Print the device's parameters: a `[friction]` table (the compensator's GMS model, the
+    /// parameter-file format) and a `[device]` table (everything else, by protocol path).
     Dump,
-    /// Send a file written by `dump` (or any parameter file with a 6-block GMS [friction]).
+    /// Send a file written by `dump` (or any parameter file with a 6-block GMS `[friction]`).
     Load {
         /// The parameter file.
         file: PathBuf,
