@@ -1,7 +1,6 @@
 //! The `run`, `compare` and `demo` commands.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -10,49 +9,11 @@ use gms_core::controller::FfMode;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
-use crate::plot;
 use crate::scenario::{DriftKind, Scenario};
-use crate::sim::{self, Metrics, RunResult, TraceRow};
-
-/// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
-pub fn write_atomic(path: &Path, text: &[u8]) -> Result<(), String> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let err = |e: std::io::Error| format!("{}: cannot write: {e}", path.display());
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(err)?;
-    tmp.write_all(text).map_err(err)?;
-    tmp.as_file().sync_all().map_err(err)?;
-    tmp.persist(path).map_err(|e| err(e.error))?;
-    Ok(())
-}
-
-/// The trace as CSV text.
-pub fn trace_csv(trace: &[TraceRow]) -> String {
-    let mut s = String::from(
-        "t,reference,position,error,current,current_cmd,voltage,friction,feedforward,ref_velocity,segment,ff_scale,drift\n",
-    );
-    for r in trace {
-        s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            r.t,
-            r.reference,
-            r.position,
-            r.error,
-            r.current,
-            r.current_cmd,
-            r.voltage,
-            r.friction,
-            r.feedforward,
-            r.ref_velocity,
-            r.segment,
-            r.ff_scale,
-            r.drift
-        );
-    }
-    s
-}
+use crate::sim::{self, RunResult};
+use gms_ident::io::write_atomic;
+use gms_ident::plot;
+use gms_ident::trace::{Metrics, TraceRow, trace_csv};
 
 /// `hil-sim run`: one run of the scenario with its own feedforward mode and seed; writes
 /// `trace.csv`, `metrics.json` and `plot.svg` into `out`.

@@ -17,8 +17,8 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use crate::paramfile::{AnyModel, FrictionSpec};
 use crate::plant::draw_friction;
+use gms_ident::paramfile::{AnyModel, FrictionSpec};
 
 /// Which experiment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

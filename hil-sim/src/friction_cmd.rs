@@ -9,7 +9,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use crate::paramfile::{AnyModel, FileError, ParamFile};
+use gms_ident::paramfile::{AnyModel, FileError, ParamFile};
 
 /// One sample of a trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]

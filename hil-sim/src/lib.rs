@@ -1,8 +1,9 @@
 //! # hil-sim
 //!
-//! The host side of gms: the simulator of the positioning axis and its command-line tools,
-//! reusing `gms-core` unchanged. Today: the parameter file ([`paramfile`]) and the friction
-//! command ([`friction_cmd`]).
+//! The simulated axis: the plant (motor, gearhead, lead screw, guideways, sensors), scenarios,
+//! closed-loop runs of gms-core's controller against it, the paper's experiments on it, and
+//! the virtual device (gms-core's device core on the plant, `hil-sim serve`). The fits and
+//! the parameter file are `gms-ident`'s; the bench tool is `gms-tune`.
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
@@ -10,10 +11,6 @@ pub mod commands;
 pub mod device;
 pub mod experiment;
 pub mod friction_cmd;
-pub mod identify;
-pub mod paramfile;
 pub mod plant;
-pub mod plot;
 pub mod scenario;
 pub mod sim;
-pub mod tune;

@@ -163,7 +163,7 @@ fn compare_and_write(
     let (cmp, traces) = commands::compare(sc, runs as usize, seed, threads, true)?;
     print!("{}", commands::table(&cmp, sc.plant.rad_per_count));
     let text = serde_json::to_string_pretty(&cmp).map_err(|e| e.to_string())?;
-    commands::write_atomic(json, text.as_bytes())?;
+    gms_ident::io::write_atomic(json, text.as_bytes())?;
     let svg = json.with_extension("svg");
     // The zoomed panel starts at the first step segment.
     let segs = sc.segments()?;
@@ -179,12 +179,12 @@ fn compare_and_write(
         }
         t += s.duration() as f64;
     }
-    let named: Vec<(&str, &[hil_sim::sim::TraceRow])> = FfMode::ALL
+    let named: Vec<(&str, &[gms_ident::trace::TraceRow])> = FfMode::ALL
         .iter()
         .zip(&traces)
         .map(|(m, t)| (m.name(), t.as_slice()))
         .collect();
-    hil_sim::plot::compare_plot(
+    gms_ident::plot::compare_plot(
         &svg,
         &format!("position error by feedforward mode (draw seed {seed})"),
         &named,
@@ -281,7 +281,7 @@ fn main() -> ExitCode {
             if !(0.0..0.9).contains(&variability) {
                 return Err("--variability must be in [0, 0.9)".to_string());
             }
-            let pf = hil_sim::paramfile::ParamFile::load(&params).map_err(|e| e.to_string())?;
+            let pf = gms_ident::paramfile::ParamFile::load(&params).map_err(|e| e.to_string())?;
             pf.friction
                 .build()
                 .map_err(|e| format!("{}: {e}", params.display()))?;
@@ -293,7 +293,7 @@ fn main() -> ExitCode {
             };
             let setup = Setup::paper(k, &pf.friction, variability);
             let text = run(k, &pf.friction, &setup, seed)?;
-            commands::write_atomic(&out, text.as_bytes())?;
+            gms_ident::io::write_atomic(&out, text.as_bytes())?;
             println!("{} rows to {}", text.lines().count() - 1, out.display());
             Ok(())
         })(),
@@ -306,7 +306,7 @@ fn main() -> ExitCode {
             report,
             asymmetric,
         } => (|| {
-            let id = hil_sim::identify::identify_from(&hil_sim::identify::Inputs {
+            let id = gms_ident::identify::identify_from(&gms_ident::identify::Inputs {
                 presliding: presliding.as_deref(),
                 sliding: sliding.as_deref(),
                 lag: lag.as_deref(),
@@ -317,10 +317,10 @@ fn main() -> ExitCode {
                 println!("{l}");
             }
             if let Some(dir) = &report {
-                hil_sim::identify::write_report(&id, dir)?;
+                gms_ident::identify::write_report(&id, dir)?;
                 println!("report in {}", dir.display());
             }
-            let file = hil_sim::paramfile::ParamFile {
+            let file = gms_ident::paramfile::ParamFile {
                 friction: id.spec,
                 device: None,
             };
@@ -332,7 +332,7 @@ fn main() -> ExitCode {
                     .collect::<String>()
                     + &file.to_toml()
             );
-            commands::write_atomic(&out, text.as_bytes())?;
+            gms_ident::io::write_atomic(&out, text.as_bytes())?;
             println!("wrote {}", out.display());
             Ok(())
         })(),

@@ -31,8 +31,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::paramfile::{AnyModel, FrictionSpec};
 use crate::scenario::Plant as PlantSpec;
+use gms_ident::paramfile::{AnyModel, FrictionSpec};
 
 /// Energy ledger of a run \[J\], accumulated in f64.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

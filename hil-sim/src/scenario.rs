@@ -12,7 +12,7 @@ use gms_core::protocol;
 use gms_core::reference::Segment;
 use serde::{Deserialize, Serialize};
 
-use crate::paramfile::{FileError, FrictionSpec, parse_toml, read_text};
+use gms_ident::paramfile::{FileError, FrictionSpec, parse_toml, read_text};
 
 /// The default scenario, with a comment on every key.
 pub const DEFAULT_SCENARIO: &str = include_str!("default_scenario.toml");
@@ -401,7 +401,7 @@ impl Scenario {
     pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
         let p = &self.plant;
         let gms = |spec: &FrictionSpec, what: &str| {
-            if spec.model != crate::paramfile::ModelKind::Gms {
+            if spec.model != gms_ident::paramfile::ModelKind::Gms {
                 return Err(format!(
                     "plant.{what}: the compensator needs model \"gms\" (it has {})",
                     spec.model

@@ -1,9 +1,9 @@
 //! Identification round trip: the paper's experiments simulated on a known friction, then
 //! identified back (hil-sim's experiment and identify, as the CLI runs them).
 
+use gms_ident::identify::identify;
+use gms_ident::paramfile::{FrictionSpec, ParamFile};
 use hil_sim::experiment::{Kind, Setup, run};
-use hil_sim::identify::identify;
-use hil_sim::paramfile::{FrictionSpec, ParamFile};
 
 fn example(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -91,7 +91,7 @@ fn the_guideway_presliding_is_identified_back() {
 #[test]
 fn the_direction_asymmetry_is_identified_per_direction() {
     let mut truth = ParamFile::load(&example("table1.toml")).unwrap().friction;
-    truth.negative = Some(hil_sim::paramfile::NegativeSpec {
+    truth.negative = Some(gms_ident::paramfile::NegativeSpec {
         fs: Some(250e-6),
         fc: Some(140e-6),
         vs: None,
@@ -105,7 +105,7 @@ fn the_direction_asymmetry_is_identified_per_direction() {
         std::fs::write(&p, text).unwrap();
         paths.push(p);
     }
-    let id = hil_sim::identify::identify_with(Some(&paths[0]), Some(&paths[1]), 6, true).unwrap();
+    let id = gms_ident::identify::identify_with(Some(&paths[0]), Some(&paths[1]), 6, true).unwrap();
     let n = id.spec.negative.unwrap();
     assert!((n.fs.unwrap() / 250e-6 - 1.0).abs() < 0.03, "{n:?}");
     assert!((n.fc.unwrap() / 140e-6 - 1.0).abs() < 0.03, "{n:?}");
@@ -116,7 +116,7 @@ fn the_direction_asymmetry_is_identified_per_direction() {
 
 /// Runs the three actuator experiments on `truth` and identifies them (with the lag record,
 /// so C is fitted).
-fn round_trip_with_lag(truth: &FrictionSpec, seed: u64) -> hil_sim::identify::Identified {
+fn round_trip_with_lag(truth: &FrictionSpec, seed: u64) -> gms_ident::identify::Identified {
     let dir = tempfile::tempdir().unwrap();
     let mut paths = Vec::new();
     for (i, k) in [Kind::Presliding, Kind::Sliding, Kind::Lag]
@@ -128,7 +128,7 @@ fn round_trip_with_lag(truth: &FrictionSpec, seed: u64) -> hil_sim::identify::Id
         std::fs::write(&p, text).unwrap();
         paths.push(p);
     }
-    hil_sim::identify::identify_from(&hil_sim::identify::Inputs {
+    gms_ident::identify::identify_from(&gms_ident::identify::Inputs {
         presliding: Some(&paths[0]),
         sliding: Some(&paths[1]),
         lag: Some(&paths[2]),
@@ -186,14 +186,14 @@ fn random_friction() -> impl Strategy<Value = FrictionSpec> {
                         d *= grow[i];
                     }
                     let alpha = w[i] / wsum;
-                    hil_sim::paramfile::BlockSpec {
+                    gms_ident::paramfile::BlockSpec {
                         k: alpha * fs / d,
                         alpha,
                     }
                 })
                 .collect();
             FrictionSpec {
-                model: hil_sim::paramfile::ModelKind::Gms,
+                model: gms_ident::paramfile::ModelKind::Gms,
                 fs: Some(fs),
                 fc: Some(fc),
                 vs: Some(vs),
@@ -259,7 +259,7 @@ fn an_early_breakaway_is_reported() {
     let fs = 2e-3;
     let d = [3.2e-4, 4.8e-4, 7.1e-4, 1.07e-3, 1.6e-3, 2.4e-3];
     let truth = FrictionSpec {
-        model: hil_sim::paramfile::ModelKind::Gms,
+        model: gms_ident::paramfile::ModelKind::Gms,
         fs: Some(fs),
         fc: Some(0.4 * fs),
         vs: Some(0.087),
@@ -268,7 +268,7 @@ fn an_early_breakaway_is_reported() {
         c: Some(0.4),
         blocks: Some(
             d.iter()
-                .map(|d| hil_sim::paramfile::BlockSpec {
+                .map(|d| gms_ident::paramfile::BlockSpec {
                     k: fs / 6.0 / d,
                     alpha: 1.0 / 6.0,
                 })

@@ -4,8 +4,8 @@
 
 use std::path::Path;
 
+use gms_ident::paramfile::{FrictionSpec, ParamFile};
 use hil_sim::friction_cmd::{Sample, read_trajectory, simulate};
-use hil_sim::paramfile::{FrictionSpec, ParamFile};
 use proptest::prelude::*;
 
 /// The paper's GMS in f64, straight from the equations.

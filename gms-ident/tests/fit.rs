@@ -1,7 +1,7 @@
 //! The identification fits recover known parameters from exact and noisy synthetic data.
 
 use gms_core::presets;
-use hil_sim::identify::{fit_stribeck, fit_virgin};
+use gms_ident::identify::{fit_stribeck, fit_virgin};
 
 /// Deterministic noise in [-1, 1).
 fn noise(i: usize) -> f64 {

@@ -1,23 +1,89 @@
-//! `gms-tune` against a real `hil-sim serve` over TCP, end to end.
+//! `gms-tune` end to end against the virtual device (`hil-sim`'s device core on the simulated
+//! plant) over TCP and over a pseudo-terminal.
+//!
+//! A custom harness (`harness = false`): the servers are this test binary itself, started
+//! with `--serve-child tcp|pty STORE`, in which case it runs `hil_sim::device::serve` and
+//! prints `listening on ADDR` (as `hil-sim serve` does), so that a test can stop one (kill)
+//! and start another on the same store. Without that argument it runs the tests in turn
+//! (`cargo test -p gms-tune --test e2e -- NAME` runs those whose name contains NAME).
 
-use std::path::Path;
-use std::process::Command;
+use std::io::{BufRead, BufReader, Write as _};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
 
-const SIM: &str = env!("CARGO_BIN_EXE_hil-sim");
 const TUNE: &str = env!("CARGO_BIN_EXE_gms-tune");
 
-mod common;
-use common::Server;
+/// A running virtual device (a child process of this binary), killed on drop.
+struct Server {
+    child: Child,
+    /// What it listens on: a TCP address or a PTY path.
+    addr: String,
+}
+
+impl Server {
+    /// `kind` is `tcp` or `pty`.
+    fn start(kind: &str, store: &Path) -> Server {
+        let mut child = Command::new(std::env::current_exe().unwrap())
+            .args(["--serve-child", kind])
+            .arg(store)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let addr = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| panic!("server said {line:?}"))
+            .to_string();
+        Server { child, addr }
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The server side: `hil-sim serve` on the default scenario, on TCP 127.0.0.1:0 or a PTY.
+fn serve_child(kind: &str, store: PathBuf) {
+    use hil_sim::device::{Endpoint, serve};
+    let endpoint = match kind {
+        "tcp" => Endpoint::Tcp(std::net::TcpListener::bind("127.0.0.1:0").unwrap()),
+        #[cfg(unix)]
+        "pty" => Endpoint::Pty,
+        _ => panic!("unknown endpoint {kind}"),
+    };
+    let sc = hil_sim::scenario::Scenario::default();
+    let r = serve(sc, endpoint, Some(store), |addr, _| {
+        println!("listening on {addr}");
+        let _ = std::io::stdout().flush();
+    });
+    panic!("serve ended: {r:?}");
+}
+
+/// Runs `cmd` to its end; returns (exit code, stdout, stderr).
+fn run(cmd: &mut Command) -> (i32, String, String) {
+    let out = cmd.output().expect("the command runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
 
 /// Runs gms-tune on `link` (`--tcp` or `--port`) to `srv`; returns (exit code, stdout,
 /// stderr).
 fn tune_on(srv: &Server, link: &str, args: &[&str], cwd: &Path) -> (i32, String, String) {
-    common::run(
-        Command::new(TUNE)
-            .args([link, &srv.addr])
-            .args(args)
-            .current_dir(cwd),
-    )
+    run(Command::new(TUNE)
+        .args([link, &srv.addr])
+        .args(args)
+        .current_dir(cwd))
 }
 
 /// gms-tune over TCP.
@@ -25,13 +91,52 @@ fn tune(srv: &Server, args: &[&str], cwd: &Path) -> (i32, String, String) {
     tune_on(srv, "--tcp", args, cwd)
 }
 
-#[test]
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("--serve-child") {
+        serve_child(&args[2], PathBuf::from(&args[3]));
+        return;
+    }
+    let tests: &[(&str, fn())] = &[
+        (
+            "set_save_restart_dump_and_load",
+            set_save_restart_dump_and_load,
+        ),
+        (
+            "record_and_step_test_write_their_files",
+            record_and_step_test_write_their_files,
+        ),
+        ("send_and_watch", send_and_watch),
+        (
+            "clear_errors_for_no_device_and_silence",
+            clear_errors_for_no_device_and_silence,
+        ),
+        #[cfg(unix)]
+        (
+            "over_a_pty_set_save_restart_and_survive_a_dropped_client",
+            over_a_pty_set_save_restart_and_survive_a_dropped_client,
+        ),
+    ];
+    let filter = args.iter().skip(1).find(|a| !a.starts_with('-'));
+    let mut n = 0;
+    for (name, f) in tests {
+        if filter.is_some_and(|p| !name.contains(p.as_str())) {
+            continue;
+        }
+        println!("test {name} ...");
+        f();
+        println!("test {name} ... ok");
+        n += 1;
+    }
+    println!("{n} end-to-end tests passed");
+}
+
 fn set_save_restart_dump_and_load() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let store = d.join("flash.toml");
     {
-        let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+        let srv = Server::start("tcp", &store);
         assert_eq!(tune(&srv, &["set", "pos.kd", "2.2e-4"], d).0, 0);
         assert_eq!(tune(&srv, &["set", "ff.gain", "0.9"], d).0, 0);
         let (code, _, err) = tune(&srv, &["set", "ff.gain", "-1"], d);
@@ -40,7 +145,7 @@ fn set_save_restart_dump_and_load() {
         assert_eq!(err.lines().count(), 1);
         assert_eq!(tune(&srv, &["save"], d).0, 0);
     }
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    let srv = Server::start("tcp", &store);
     assert_eq!(tune(&srv, &["get", "pos.kd"], d).1, "0.00022\n");
     assert_eq!(tune(&srv, &["get", "ff.gain"], d).1, "0.9\n");
     let (code, list, _) = tune(&srv, &["list"], d);
@@ -50,18 +155,10 @@ fn set_save_restart_dump_and_load() {
     let (code, dump, _) = tune(&srv, &["params", "dump"], d);
     assert_eq!(code, 0);
     std::fs::write(d.join("p.toml"), &dump).unwrap();
-    let fr = Command::new(SIM)
-        .args(["friction", "--params", "p.toml", "--input"])
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/trajectory.csv"))
-        .args(["--output", "o.csv"])
-        .current_dir(d)
-        .output()
-        .unwrap();
-    assert!(
-        fr.status.success(),
-        "{}",
-        String::from_utf8_lossy(&fr.stderr)
-    );
+    // `hil-sim friction`'s own code.
+    let traj = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/trajectory.csv");
+    let fr = hil_sim::friction_cmd::run(&d.join("p.toml"), &traj, &d.join("o.csv"));
+    assert!(fr.is_ok(), "{fr:?}");
     // Change things, load the dump back, and read the old values.
     assert_eq!(tune(&srv, &["set", "gms.fs", "300e-6"], d).0, 0);
     assert_eq!(tune(&srv, &["set", "pos.kd", "1e-4"], d).0, 0);
@@ -70,11 +167,10 @@ fn set_save_restart_dump_and_load() {
     assert_eq!(tune(&srv, &["get", "pos.kd"], d).1, "0.00022\n");
 }
 
-#[test]
 fn record_and_step_test_write_their_files() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &d.join("flash.toml"));
+    let srv = Server::start("tcp", &d.join("flash.toml"));
     let (code, _, err) = tune(
         &srv,
         &[
@@ -146,11 +242,10 @@ fn record_and_step_test_write_their_files() {
     );
 }
 
-#[test]
 fn send_and_watch() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &d.join("flash.toml"));
+    let srv = Server::start("tcp", &d.join("flash.toml"));
     assert_eq!(tune(&srv, &["send", "enable"], d).0, 0);
     assert_eq!(tune(&srv, &["send", "move", "-0.002"], d).0, 0);
     let (code, status, _) = tune(&srv, &["send", "status"], d);
@@ -170,7 +265,6 @@ fn send_and_watch() {
     assert!(err.contains("err 1"), "{err}");
 }
 
-#[test]
 fn clear_errors_for_no_device_and_silence() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -199,12 +293,11 @@ fn clear_errors_for_no_device_and_silence() {
 /// The same over a pseudo-terminal (`hil-sim serve --pty`), as the tool talks to the USB
 /// CDC-ACM port of the firmware.
 #[cfg(unix)]
-#[test]
 fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let store = d.join("flash.toml");
-    let start = || Server::start(&["--pty"], &store);
+    let start = || Server::start("pty", &store);
     let tune = |srv: &Server, args: &[&str]| {
         let (code, out, _) = tune_on(srv, "--port", args, d);
         (code, out)

@@ -6,8 +6,8 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
-use hil_sim::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
-use hil_sim::tune::{Link, LinkError, parse_telemetry};
+use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
+use gms_tune::{Link, LinkError, parse_telemetry};
 
 /// The gms bench tool.
 #[derive(Parser)]
@@ -278,7 +278,7 @@ fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
         text += &cells.join(",");
         text.push('\n');
     }
-    hil_sim::commands::write_atomic(path, text.as_bytes()).map_err(Fail::Usage)
+    gms_ident::io::write_atomic(path, text.as_bytes()).map_err(Fail::Usage)
 }
 
 fn run(cli: Cli) -> Result<(), Fail> {
@@ -360,9 +360,9 @@ fn run(cli: Cli) -> Result<(), Fail> {
             link.request("stream off")?;
             let rows = telemetry_rows(&link, fields);
             write_csv(&out.join("trace.csv"), fields, &rows)?;
-            let trace: Vec<hil_sim::sim::TraceRow> = rows
+            let trace: Vec<gms_ident::trace::TraceRow> = rows
                 .iter()
-                .map(|r| hil_sim::sim::TraceRow {
+                .map(|r| gms_ident::trace::TraceRow {
                     t: r[0],
                     reference: r[1],
                     position: r[2],
@@ -389,7 +389,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 jmax: MOVE_JMAX,
                 dwell: seconds as f32,
             };
-            let m = hil_sim::sim::metrics(&trace, &[seg], rpc);
+            let m = gms_ident::trace::metrics(&trace, &[seg], rpc);
             for (name, v) in m.named() {
                 if name != "sine_rms_error" {
                     println!("{name} {v:e}");
@@ -397,9 +397,9 @@ fn run(cli: Cli) -> Result<(), Fail> {
             }
             println!("samples {}", trace.len());
             let json = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
-            hil_sim::commands::write_atomic(&out.join("metrics.json"), json.as_bytes())
+            gms_ident::io::write_atomic(&out.join("metrics.json"), json.as_bytes())
                 .map_err(Fail::Usage)?;
-            hil_sim::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
+            gms_ident::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
                 .map_err(Fail::Usage)?;
         }
         Cmd::Watch {

@@ -875,7 +875,7 @@ pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, String> {
 pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let text: String = id.report.iter().map(|l| format!("{l}\n")).collect();
-    crate::commands::write_atomic(&dir.join("report.txt"), text.as_bytes())?;
+    crate::io::write_atomic(&dir.join("report.txt"), text.as_bytes())?;
     if let Some(v) = &id.virgin {
         let xmax = id.virgin_data.last().map_or(1.0, |p| p.0) * 1.2;
         let curve: Vec<(f64, f64)> = (0..=400)

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::sim::TraceRow;
+use crate::trace::TraceRow;
 
 /// Colours of the feedforward modes: none, static, gms, gms-adaptive.
 pub const MODE_COLOURS: [RGBColor; 4] = [
