@@ -1,0 +1,88 @@
+//! The control step's statistics: its duration (worst, mean) and the periods missed.
+
+/// Periods missed between two control steps `since_last` \[cycles\] apart, for a period of
+/// `period` \[cycles\]: the nearest whole number of periods, less the one expected (a step more
+/// than 1.5 periods after the last missed one). 0 when either is 0 (not measured).
+pub fn missed_periods(since_last: u32, period: u32) -> u32 {
+    if since_last == 0 || period == 0 {
+        return 0;
+    }
+    let periods = (since_last as u64 + period as u64 / 2) / period as u64;
+    periods.saturating_sub(1).min(u32::MAX as u64) as u32
+}
+
+/// Worst and mean duration of the control step \[cycles\], and the periods missed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct StepStats {
+    worst: u32,
+    last: u32,
+    sum: u64,
+    n: u64,
+    missed: u32,
+}
+
+impl StepStats {
+    /// No step recorded.
+    pub const fn new() -> Self {
+        StepStats {
+            worst: 0,
+            last: 0,
+            sum: 0,
+            n: 0,
+            missed: 0,
+        }
+    }
+
+    /// Records `n` missed periods.
+    pub fn record_missed(&mut self, n: u32) {
+        self.missed = self.missed.saturating_add(n);
+    }
+
+    /// Periods missed while the bridge drove.
+    pub fn missed(&self) -> u32 {
+        self.missed
+    }
+
+    /// Records one step of `cycles`.
+    pub fn record(&mut self, cycles: u32) {
+        self.last = cycles;
+        if cycles > self.worst {
+            self.worst = cycles;
+        }
+        self.sum = self.sum.saturating_add(cycles as u64);
+        self.n = self.n.saturating_add(1);
+    }
+
+    /// The longest step recorded \[cycles\].
+    pub fn worst(&self) -> u32 {
+        self.worst
+    }
+
+    /// The last step recorded \[cycles\].
+    pub fn last(&self) -> u32 {
+        self.last
+    }
+
+    /// Steps recorded.
+    pub fn count(&self) -> u64 {
+        self.n
+    }
+
+    /// The mean step \[cycles\] (0 before the first).
+    pub fn mean(&self) -> f32 {
+        if self.n == 0 {
+            0.0
+        } else {
+            (self.sum as f64 / self.n as f64) as f32
+        }
+    }
+}
+
+/// `cycles` of a `clock_hz` clock in microseconds \[us\].
+pub fn cycles_to_us(cycles: f32, clock_hz: u32) -> f32 {
+    if clock_hz == 0 {
+        0.0
+    } else {
+        cycles * (1e6 / clock_hz as f32)
+    }
+}
