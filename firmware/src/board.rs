@@ -9,7 +9,9 @@
 //! counter's bottom; it starts ADC1's regular sequence of 16 conversions of PC0, which DMA2
 //! stream 0 moves into a buffer; the DMA's transfer-complete interrupt is the control
 //! interrupt. The sampling instants are centred on the bottom, the middle of the bridge's
-//! on-time, where the current's PWM ripple is at its mean. Timers: TIM2 encoder, TIM8 PWM and
+//! slow-decay (brake) phase (`drive::bridge_compare`: both inputs high around the bottom, the
+//! drive phase centred on the top), where the current's triangular PWM ripple is
+//! point-symmetric about its mean, so the centred window's mean is the period's mean. Timers: TIM2 encoder, TIM8 PWM and
 //! sense trigger, TIM4 embassy's time driver (none shared).
 
 use core::cell::UnsafeCell;
@@ -137,7 +139,7 @@ impl ControlHw {
         sum
     }
 
-    /// Waits for the next sequence (at most about 10 ms) and returns its sum, for the
+    /// Waits for the next sequence (at most about 40 ms) and returns its sum, for the
     /// start-up calibration while the control interrupt is off. 0 if none came: the ADC is
     /// not running, which the calibration reports as a `current_sense` fault.
     pub fn next_current_codes(&mut self) -> u32 {
@@ -188,15 +190,14 @@ fn ack_sample() {
     });
 }
 
-/// Waits (at most about 5 ms, a few hundred periods) for TIM8's next update event; the
+/// Waits (at most about 40 ms, hundreds of periods) for TIM8's next update event; the
 /// counter's direction just after it: `Some(true)` counting up (the update was at the bottom),
 /// `Some(false)` down (at the top), `None` if none came.
 fn next_update_counting_up() -> Option<bool> {
     let t = pac::TIM8;
-    t.sr().write(|w| {
-        w.0 = !0;
-        w.set_uif(false)
-    });
+    // rc_w0 flags: 1 leaves a flag, 0 clears it; only UIF is cleared, reserved bits stay 0
+    // (TIMx_SR's flags: bits 0-7 and 9-12, RM0090 §17.4.5).
+    t.sr().write(|w| w.0 = 0x1EFE);
     for _ in 0..1_000_000u32 {
         if t.sr().read().uif() {
             return Some(t.cr1().read().dir() == pac::timer::vals::Dir::UP);
@@ -210,36 +211,30 @@ fn next_update_counting_up() -> Option<bool> {
 /// a turning point that finds it at 0 (RM0090 §17.3.3, figure "Update rate examples"): with
 /// RCR = 0 every turning point updates; RCR = 1 written just after an update at the top is
 /// loaded at the next update, the bottom, and from then on every other turning point — every
-/// bottom — updates. RM0090 also says the outcome depends on when RCR is written relative to
-/// the counter's start, so the result is checked on two updates, and the write is tried just
-/// after a bottom too if that is what this silicon needs. Run before the control interrupt,
-/// with the bridge off.
+/// bottom — updates (RM0090's "RCR written after the counter started: the update on the
+/// underflow"). Checked on two updates. Run before the control interrupt, with the bridge
+/// off.
 fn align_update_to_bottom() -> bool {
     let t = pac::TIM8;
-    for write_after_top in [true, false] {
-        t.rcr().write(|w| w.set_rep(0));
-        // Two updates: the repetition counter now reloads from 0 at every turning point.
-        let _ = next_update_counting_up();
-        let _ = next_update_counting_up();
-        // RCR = 1 right after the chosen turning point.
-        let mut written = false;
-        for _ in 0..4 {
-            if next_update_counting_up() == Some(!write_after_top) {
-                t.rcr().write(|w| w.set_rep(1));
-                written = true;
-                break;
-            }
-        }
-        if !written {
-            return false;
-        }
-        // One update to load it, then two that must both be at the bottom.
-        let _ = next_update_counting_up();
-        if next_update_counting_up() == Some(true) && next_update_counting_up() == Some(true) {
-            return true;
+    t.rcr().write(|w| w.set_rep(0));
+    // Two updates: the repetition counter now reloads from 0 at every turning point.
+    let _ = next_update_counting_up();
+    let _ = next_update_counting_up();
+    // RCR = 1 right after an update at the top (the counter then counts down).
+    let mut written = false;
+    for _ in 0..4 {
+        if next_update_counting_up() == Some(false) {
+            t.rcr().write(|w| w.set_rep(1));
+            written = true;
+            break;
         }
     }
-    false
+    if !written {
+        return false;
+    }
+    // One update to load it, then two that must both be at the bottom.
+    let _ = next_update_counting_up();
+    next_update_counting_up() == Some(true) && next_update_counting_up() == Some(true)
 }
 
 /// Sets up the hardware sampling of the motor current (see the module's notes): ADC1's regular
@@ -505,6 +500,9 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
 /// the top priority (`irq.rs`).
 pub fn start_control() {
     ack_sample();
+    // The NVIC kept the interrupt pending while it was masked: without this the handler
+    // would run once at once, mid-sequence.
+    interrupt::DMA2_STREAM0.unpend();
     interrupt::DMA2_STREAM0.set_priority(crate::irq::CONTROL);
     // SAFETY: the handler below only touches state it owns or takes through a critical
     // section; enabling it cannot break another critical section.

@@ -8,7 +8,9 @@
 //! close, `ACM` control request SET_CONTROL_LINE_STATE), or a packet is not taken within
 //! [`WRITE_TIMEOUT_MS`] (nobody reads: a closed port never polls the IN endpoint, and the
 //! write would wait forever). Then the stream stops and the partial request line is dropped,
-//! so the next session starts clean; the axis is not touched — it keeps holding or finishing
+//! so the next session starts without a stream or a half line (a packet already handed to
+//! the USB FIFO may still reach the next host: `gms-tune` discards what arrives in its first
+//! 30 ms); the axis is not touched — it keeps holding or finishing
 //! its move, the bridge as it was, every fault check running (`disable` is a request like any
 //! other).
 
@@ -18,7 +20,7 @@ use defmt::info;
 use embassy_futures::select::{Either3, select3};
 use embassy_stm32::peripherals::USB_OTG_FS;
 use embassy_stm32::usb::Driver;
-use embassy_time::{Duration, Instant, Timer, with_timeout};
+use embassy_time::{Duration, Instant, Ticker, with_timeout};
 use embassy_usb::class::cdc_acm::CdcAcmClass;
 use embassy_usb::driver::EndpointError;
 use gms_core::device::{Front, Link, Mailbox, Status};
@@ -145,16 +147,20 @@ pub async fn serve(
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];
     loop {
+        // Configured by the host (the port itself may not be open yet).
         class.wait_connection().await;
-        info!("USB host connected");
+        info!("USB session start");
         // A new session: no partial line from the last one.
         let mut reader = LineReader::default();
         let mut dtr_seen = false;
+        // One ticker for the session: a timer made anew in each select would never fire
+        // while telemetry arrives faster than it.
+        let mut dtr_poll = Ticker::every(Duration::from_millis(DTR_POLL_MS));
         loop {
             let event = select3(
                 class.read_packet(&mut packet),
                 TELEMETRY.receive(),
-                Timer::after_millis(DTR_POLL_MS),
+                dtr_poll.next(),
             )
             .await;
             match event {

@@ -165,4 +165,3 @@ pub fn fit_lag(
         samples,
     })
 }
-

@@ -337,4 +337,3 @@ pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, String> {
         stribeck,
     })
 }
-

@@ -177,4 +177,3 @@ pub fn fit_stribeck(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
     }
     Ok(fit)
 }
-

@@ -200,4 +200,3 @@ pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
         rms,
     })
 }
-
