@@ -1,0 +1,152 @@
+//! Request lines parsed into commands, and the protocol's error codes.
+
+/// Error codes of `err` replies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ErrorCode {
+    /// 1: the command is not known.
+    UnknownCommand = 1,
+    /// 2: missing, extra or malformed arguments.
+    BadArgument = 2,
+    /// 3: the line was longer than [`MAX_LINE`](super::MAX_LINE).
+    LineTooLong = 3,
+    /// 4: the line held bytes that are not printable ASCII.
+    NotText = 4,
+    /// 5: no parameter has this path.
+    UnknownPath = 5,
+    /// 6: the value is not a finite number within the parameter's range.
+    OutOfRange = 6,
+    /// 7: the value would make the parameter set invalid.
+    InvalidSet = 7,
+    /// 8: the device refuses now (e.g. `save` while enabled, a latched fault).
+    Refused = 8,
+}
+
+/// A parsed request.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command<'a> {
+    /// Empty line: no reply.
+    Empty,
+    /// `help`.
+    Help,
+    /// `list`.
+    List,
+    /// `get PATH`.
+    Get(&'a str),
+    /// `set PATH VALUE` (the value as text: numbers, or a mode name).
+    Set(&'a str, &'a str),
+    /// `save`.
+    Save,
+    /// `load`.
+    Load,
+    /// `defaults`.
+    Defaults,
+    /// `enable`.
+    Enable,
+    /// `disable`.
+    Disable,
+    /// `status`.
+    Status,
+    /// `clear`.
+    Clear,
+    /// `move POS [VEL]` [rad, rad/s].
+    Move {
+        /// Target \[rad\].
+        pos: f32,
+        /// Speed limit [rad/s].
+        vel: Option<f32>,
+    },
+    /// `stream FIELDS RATE_HZ`: comma-separated field names, rate \[Hz\].
+    Stream {
+        /// Field names, comma-separated.
+        fields: &'a str,
+        /// Rate \[Hz\].
+        rate_hz: f32,
+    },
+    /// `stream off`.
+    StreamOff,
+}
+
+/// Why a request line is not a command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ParseError {
+    /// The error code to reply with.
+    pub code: ErrorCode,
+    /// A short reason.
+    pub reason: &'static str,
+}
+
+fn bad(reason: &'static str) -> ParseError {
+    ParseError {
+        code: ErrorCode::BadArgument,
+        reason,
+    }
+}
+
+/// A finite f32 from text, or `None`.
+pub fn parse_f32(s: &str) -> Option<f32> {
+    crate::numtext::parse_f32(s)
+}
+
+/// Parses one request line.
+pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
+    let mut words = line.split_ascii_whitespace();
+    let Some(cmd) = words.next() else {
+        return Ok(Command::Empty);
+    };
+    let mut arg = || words.next();
+    let no_more = |w: Option<&str>| match w {
+        None => Ok(()),
+        Some(_) => Err(bad("too many arguments")),
+    };
+    let c = match cmd {
+        "help" => Command::Help,
+        "list" => Command::List,
+        "save" => Command::Save,
+        "load" => Command::Load,
+        "defaults" => Command::Defaults,
+        "enable" => Command::Enable,
+        "disable" => Command::Disable,
+        "status" => Command::Status,
+        "clear" => Command::Clear,
+        "get" => Command::Get(arg().ok_or(bad("usage: get PATH"))?),
+        "set" => {
+            let path = arg().ok_or(bad("usage: set PATH VALUE"))?;
+            let value = arg().ok_or(bad("usage: set PATH VALUE"))?;
+            Command::Set(path, value)
+        }
+        "move" => {
+            let pos = arg()
+                .and_then(parse_f32)
+                .ok_or(bad("usage: move POS [VEL]"))?;
+            let vel = match arg() {
+                None => None,
+                Some(v) => Some(
+                    parse_f32(v)
+                        .filter(|v| *v > 0.0)
+                        .ok_or(bad("VEL must be a number > 0"))?,
+                ),
+            };
+            Command::Move { pos, vel }
+        }
+        "stream" => match arg() {
+            Some("off") => Command::StreamOff,
+            Some(fields) => {
+                let rate_hz = arg()
+                    .and_then(parse_f32)
+                    .filter(|r| *r > 0.0)
+                    .ok_or(bad("usage: stream FIELDS RATE_HZ | stream off"))?;
+                Command::Stream { fields, rate_hz }
+            }
+            None => return Err(bad("usage: stream FIELDS RATE_HZ | stream off")),
+        },
+        _ => {
+            return Err(ParseError {
+                code: ErrorCode::UnknownCommand,
+                reason: "unknown command (try help)",
+            });
+        }
+    };
+    no_more(arg())?;
+    Ok(c)
+}

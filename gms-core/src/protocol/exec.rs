@@ -1,0 +1,119 @@
+//! Executing a request against a device and writing its reply.
+
+use super::*;
+
+/// What the device does for the commands that are not about parameters. Every command can
+/// be refused with a reason (the reply is then `err 8 <reason>` and nothing changed).
+pub trait Device {
+    /// The current settings.
+    fn settings(&self) -> &Settings;
+    /// Applies a validated set (between two control steps); refused when the device cannot
+    /// run it, and then nothing changes.
+    fn apply(&mut self, new: Settings) -> Result<(), &'static str>;
+    /// Persists the current set.
+    fn save(&mut self) -> Result<(), &'static str>;
+    /// Restores the persisted set.
+    fn load(&mut self) -> Result<(), &'static str>;
+    /// Restores the built-in defaults.
+    fn defaults(&mut self) -> Result<(), &'static str>;
+    /// Switches the bridge on (position control).
+    fn enable(&mut self) -> Result<(), &'static str>;
+    /// Switches the bridge off.
+    fn disable(&mut self) -> Result<(), &'static str>;
+    /// Writes the status (without the leading `ok `) on one line.
+    fn status(&mut self, out: &mut dyn Write) -> fmt::Result;
+    /// Clears latched faults.
+    fn clear(&mut self) -> Result<(), &'static str>;
+    /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
+    fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str>;
+    /// Starts telemetry of `fields` at `rate_hz`.
+    fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
+    /// Stops telemetry.
+    fn stream_off(&mut self) -> Result<(), &'static str>;
+    /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
+    /// without adaptation.
+    fn estimate(&mut self, which: Estimate) -> f32 {
+        match which {
+            Estimate::AdaptScale => 1.0,
+        }
+    }
+}
+
+/// The `help` text.
+pub const HELP: &str = "help | list | get PATH | set PATH VALUE | save | load | defaults | \
+enable | disable | status | clear | move POS [VEL] | stream FIELDS RATE_HZ | stream off";
+
+fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
+    writeln!(out, "err {} {}", code as u8, reason)
+}
+
+fn done(out: &mut impl Write, r: Result<(), &'static str>) -> fmt::Result {
+    match r {
+        Ok(()) => writeln!(out, "ok"),
+        Err(reason) => err(out, ErrorCode::Refused, reason),
+    }
+}
+
+/// Handles one received line: parses it, acts on `dev`, writes the reply to `out`.
+pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) -> fmt::Result {
+    let text = match line {
+        Line::Text(t) => t,
+        Line::TooLong => return err(out, ErrorCode::LineTooLong, "line too long"),
+        Line::NotText => return err(out, ErrorCode::NotText, "not printable ASCII"),
+    };
+    let cmd = match parse(text) {
+        Ok(c) => c,
+        Err(e) => return err(out, e.code, e.reason),
+    };
+    match cmd {
+        Command::Empty => Ok(()),
+        Command::Help => {
+            writeln!(out, "{HELP}")?;
+            writeln!(out, "ok")
+        }
+        Command::List => {
+            let s = *dev.settings();
+            for p in PARAMS {
+                write!(out, "{} ", p.path)?;
+                match p.access {
+                    Access::Number { min, max, .. } => {
+                        write_value(p, &s, out)?;
+                        writeln!(out, " {} [{}, {}]", p.unit, Num(min), Num(max))?
+                    }
+                    Access::Mode => {
+                        write_value(p, &s, out)?;
+                        writeln!(out, " - [none, static, gms, gms-adaptive]")?
+                    }
+                    Access::Estimate(e) => writeln!(out, "{} - [read-only]", Num(dev.estimate(e)))?,
+                }
+            }
+            writeln!(out, "ok")
+        }
+        Command::Get(path) => match find(path) {
+            Some(p) => {
+                out.write_str("ok ")?;
+                write_param(p, dev, out)?;
+                writeln!(out)
+            }
+            None => err(out, ErrorCode::UnknownPath, "unknown parameter (try list)"),
+        },
+        Command::Set(path, value) => match with_value(dev.settings(), path, value) {
+            Ok(new) => done(out, dev.apply(new)),
+            Err(e) => err(out, e.code, e.reason),
+        },
+        Command::Save => done(out, dev.save()),
+        Command::Load => done(out, dev.load()),
+        Command::Defaults => done(out, dev.defaults()),
+        Command::Enable => done(out, dev.enable()),
+        Command::Disable => done(out, dev.disable()),
+        Command::Status => {
+            out.write_str("ok ")?;
+            dev.status(out)?;
+            writeln!(out)
+        }
+        Command::Clear => done(out, dev.clear()),
+        Command::Move { pos, vel } => done(out, dev.move_to(pos, vel)),
+        Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
+        Command::StreamOff => done(out, dev.stream_off()),
+    }
+}

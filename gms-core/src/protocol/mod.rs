@@ -1,0 +1,41 @@
+//! The bench command protocol: line-based ASCII, typable in any serial terminal, shared by
+//! the firmware (USB CDC-ACM) and the simulator's virtual device. No allocation.
+//!
+//! One request per line (LF or CRLF). Every reply ends with one line that starts with `ok`
+//! or `err <code> <reason>`; telemetry lines start with `#` so they never mix with replies.
+//!
+//! | request | reply |
+//! |---|---|
+//! | `help` | the commands, then `ok` |
+//! | `list` | `PATH VALUE UNIT [MIN, MAX]` per parameter, then `ok` |
+//! | `get PATH` | `ok VALUE` |
+//! | `set PATH VALUE` | `ok`, or `err` (nothing changes) |
+//! | `save`, `load`, `defaults` | `ok` or `err` |
+//! | `enable`, `disable`, `status`, `clear` | `ok …` or `err` |
+//! | `move POS [VEL]` | `ok` or `err` (rad, rad/s) |
+//! | `stream FIELDS RATE_HZ`, `stream off` | `ok` or `err` |
+//!
+//! - `reader`: [`LineReader`] (bytes to lines).
+//! - `command`: [`parse`] (a line to a [`Command`]), [`ErrorCode`].
+//! - `params`: [`PARAMS`] (the one parameter table: paths, units, ranges), [`with_value`].
+//! - `exec`: [`Device`] (what a device offers), [`execute`] (a line to its reply).
+
+use core::fmt::{self, Write};
+
+use crate::controller::{ControllerParams, FfMode};
+use crate::numtext::Num;
+
+mod command;
+mod exec;
+mod params;
+mod reader;
+
+pub use command::*;
+pub use exec::*;
+pub use params::*;
+pub use reader::*;
+
+/// How long a device may take to answer `save` \[ms\]: a board's flash erases a sector during a
+/// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing
+/// meanwhile. Other requests are answered within a position period or two.
+pub const SAVE_REPLY_MS: u32 = 5000;

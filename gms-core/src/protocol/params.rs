@@ -1,0 +1,240 @@
+//! The parameter table: every settable path with its unit, range and access; reading and setting one, and a whole set validated.
+
+use super::*;
+
+/// The controller settings the protocol edits (the firmware's whole parameter set).
+pub type Settings = ControllerParams<6>;
+
+/// How a parameter is read and written.
+#[derive(Clone, Copy)]
+pub enum Access {
+    /// A number.
+    Number {
+        /// Reads it.
+        get: fn(&Settings) -> f32,
+        /// Writes it.
+        set: fn(&mut Settings, f32),
+        /// Smallest allowed value.
+        min: f32,
+        /// Largest allowed value.
+        max: f32,
+    },
+    /// The feedforward mode: `none`, `static`, `gms` or `gms-adaptive`.
+    Mode,
+    /// A read-only estimate of the device's state (see [`Device::estimate`]).
+    Estimate(Estimate),
+}
+
+/// The device's on-line estimates, readable with `get` (not settable).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Estimate {
+    /// The adaptive scale on the friction feedforward [-].
+    AdaptScale,
+}
+
+/// One parameter of the table: its path, unit and access.
+#[derive(Clone, Copy)]
+pub struct Param {
+    /// The path, e.g. `pos.kp`.
+    pub path: &'static str,
+    /// The unit, e.g. `N·m/rad` (`-` for none).
+    pub unit: &'static str,
+    /// How to read and write it.
+    pub access: Access,
+}
+
+macro_rules! num {
+    ($path:literal, $unit:literal, $min:expr, $max:expr, |$s:ident| $field:expr) => {
+        Param {
+            path: $path,
+            unit: $unit,
+            access: Access::Number {
+                get: |$s: &Settings| $field,
+                set: |$s: &mut Settings, v: f32| $field = v,
+                min: $min,
+                max: $max,
+            },
+        }
+    };
+}
+
+/// Every parameter, in `list` order. Ranges are the protocol's; the whole set must also pass
+/// [`ControllerParams::validate`].
+pub const PARAMS: &[Param] = &[
+    num!("rate.pos_hz", "Hz", 100.0, 50_000.0, |s| s.pos_rate_hz),
+    num!("rate.cur_hz", "Hz", 100.0, 100_000.0, |s| s.cur_rate_hz),
+    num!("pos.kp", "N·m/rad", 0.0, 1e3, |s| s.pid.kp),
+    num!("pos.ki", "N·m/(rad·s)", 0.0, 1e6, |s| s.pid.ki),
+    num!("pos.kd", "N·m·s/rad", 0.0, 1e3, |s| s.pid.kd),
+    num!("pos.d_filter_hz", "Hz", 1.0, 1e5, |s| s.pid.d_filter_hz),
+    num!("pos.i_limit", "N·m", 0.0, 1e3, |s| s.pid.i_limit),
+    num!("cur.kp", "V/A", 0.0, 1e4, |s| s.current.kp),
+    num!("cur.ki", "V/(A·s)", 0.0, 1e8, |s| s.current.ki),
+    num!("motor.k_m", "N·m/A", 1e-6, 10.0, |s| s.motor.k_m),
+    num!("motor.r", "ohm", 0.0, 1e4, |s| s.motor.r),
+    num!("motor.k_e", "V·s/rad", 0.0, 10.0, |s| s.motor.k_e),
+    num!("lim.i_max", "A", 1e-6, 100.0, |s| s.i_max),
+    num!("lim.v_supply", "V", 0.1, 1e3, |s| s.v_supply),
+    num!("lim.pos_min", "rad", -1e5, 1e5, |s| s.pos_min),
+    num!("lim.pos_max", "rad", -1e5, 1e5, |s| s.pos_max),
+    Param {
+        path: "ff.mode",
+        unit: "-",
+        access: Access::Mode,
+    },
+    num!("ff.gain", "-", 0.0, 2.0, |s| s.ff.gain),
+    num!("ff.inertia", "kg·m^2", 0.0, 1.0, |s| s.motor.inertia),
+    num!("ff.static_band", "rad/s", 0.0, 1e3, |s| s.ff.static_band),
+    num!("ff.adapt.gain", "1/s", 0.0, 1e4, |s| s.ff.adapt.gain),
+    num!("ff.adapt.min", "-", 0.0, 10.0, |s| s.ff.adapt.min),
+    num!("ff.adapt.max", "-", 0.0, 10.0, |s| s.ff.adapt.max),
+    num!("ff.adapt.deadzone", "N·m", 0.0, 1e3, |s| s
+        .ff
+        .adapt
+        .deadzone),
+    num!("ff.adapt.vmin", "rad/s", 0.0, 1e4, |s| s.ff.adapt.v_min),
+    Param {
+        path: "ff.adapt.scale",
+        unit: "-",
+        access: Access::Estimate(Estimate::AdaptScale),
+    },
+    num!("gms.fs", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fs),
+    num!("gms.fc", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fc),
+    num!("gms.vs", "rad/s", 1e-9, 1e4, |s| s.ff.actuator.stribeck.vs),
+    num!("gms.delta", "-", 0.01, 10.0, |s| s
+        .ff
+        .actuator
+        .stribeck
+        .delta),
+    num!("gms.sigma", "N·m·s/rad", 0.0, 10.0, |s| s
+        .ff
+        .actuator
+        .sigma),
+    num!("gms.c", "N·m/s", 1e-12, 1e6, |s| s.ff.actuator.c),
+    num!("gms.k1", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [0]
+    .k),
+    num!("gms.k2", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [1]
+    .k),
+    num!("gms.k3", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [2]
+    .k),
+    num!("gms.k4", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [3]
+    .k),
+    num!("gms.k5", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [4]
+    .k),
+    num!("gms.k6", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
+        [5]
+    .k),
+    num!("gms.a1", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[0].alpha),
+    num!("gms.a2", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[1].alpha),
+    num!("gms.a3", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[2].alpha),
+    num!("gms.a4", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[3].alpha),
+    num!("gms.a5", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[4].alpha),
+    num!("gms.a6", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[5].alpha),
+];
+
+const fn str_eq(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        if a[i] != b[i] {
+            return false;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// The range `(min, max)` of the numeric parameter `path` in [`PARAMS`], for use in constant
+/// context only (`const { range("pos.kp") }`): an unknown path fails the build.
+pub const fn range(path: &str) -> (f32, f32) {
+    let mut i = 0;
+    while i < PARAMS.len() {
+        if str_eq(PARAMS[i].path, path)
+            && let Access::Number { min, max, .. } = PARAMS[i].access
+        {
+            return (min, max);
+        }
+        i += 1;
+    }
+    panic!("not a numeric parameter of the table")
+}
+
+/// The parameter with this path.
+pub fn find(path: &str) -> Option<&'static Param> {
+    PARAMS.iter().find(|p| p.path == path)
+}
+
+/// Writes a parameter's value (an estimate reads as 1 here: use [`write_param`] for the
+/// device's own).
+pub fn write_value(p: &Param, s: &Settings, out: &mut impl Write) -> fmt::Result {
+    match p.access {
+        Access::Number { get, .. } => write!(out, "{}", Num(get(s))),
+        Access::Mode => out.write_str(s.ff.mode.name()),
+        Access::Estimate(_) => write!(out, "{}", Num(1.0)),
+    }
+}
+
+/// Writes a parameter's value as `dev` has it (settings and estimates).
+pub fn write_param<D: Device + ?Sized>(
+    p: &Param,
+    dev: &mut D,
+    out: &mut impl Write,
+) -> fmt::Result {
+    match p.access {
+        Access::Estimate(e) => write!(out, "{}", Num(dev.estimate(e))),
+        _ => write_value(p, dev.settings(), out),
+    }
+}
+
+/// Sets one parameter of `s` from its text (a number within the table's range, or a mode
+/// name), without validating the whole set (see [`with_value`]); on error `s` is unchanged.
+pub fn set_param(s: &mut Settings, p: &Param, value: &str) -> Result<(), ParseError> {
+    match p.access {
+        Access::Number { set, min, max, .. } => {
+            let v = parse_f32(value)
+                .filter(|v| *v >= min && *v <= max)
+                .ok_or(ParseError {
+                    code: ErrorCode::OutOfRange,
+                    reason: "not a finite number within the range (see list)",
+                })?;
+            set(s, v);
+        }
+        Access::Mode => {
+            s.ff.mode = FfMode::from_name(value).ok_or(ParseError {
+                code: ErrorCode::OutOfRange,
+                reason: "ff.mode is none, static, gms or gms-adaptive",
+            })?;
+        }
+        Access::Estimate(_) => {
+            return Err(ParseError {
+                code: ErrorCode::Refused,
+                reason: "read-only: an estimate of the device",
+            });
+        }
+    }
+    Ok(())
+}
+
+/// `set`: the settings with `path` set to `value`, validated as a whole; on error nothing is
+/// returned and the caller's settings stay as they are.
+pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
+    let p = find(path).ok_or(ParseError {
+        code: ErrorCode::UnknownPath,
+        reason: "unknown parameter (try list)",
+    })?;
+    let mut new = *s;
+    set_param(&mut new, p, value)?;
+    new.validate().map_err(|_| ParseError {
+        code: ErrorCode::InvalidSet,
+        reason: "the parameter set would be invalid",
+    })?;
+    Ok(new)
+}

@@ -1,0 +1,74 @@
+//! The line reader: bytes in, complete request lines out, without allocation; over-long and non-ASCII lines are reported, not passed on.
+
+/// The longest request line \[bytes\], without its line ending.
+pub const MAX_LINE: usize = 120;
+
+/// Accumulates received bytes into request lines.
+#[derive(Debug, Clone)]
+pub struct LineReader {
+    buf: [u8; MAX_LINE],
+    len: usize,
+    too_long: bool,
+    not_text: bool,
+}
+
+impl Default for LineReader {
+    fn default() -> Self {
+        LineReader {
+            buf: [0; MAX_LINE],
+            len: 0,
+            too_long: false,
+            not_text: false,
+        }
+    }
+}
+
+/// A complete request line, or why it cannot be one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Line<'a> {
+    /// A line of printable ASCII (trailing CR removed).
+    Text(&'a str),
+    /// The line was longer than [`MAX_LINE`] (the rest was discarded).
+    TooLong,
+    /// The line held other bytes than printable ASCII and tab.
+    NotText,
+}
+
+impl LineReader {
+    /// Feeds one byte; returns a line when `byte` ends one (LF).
+    pub fn push(&mut self, byte: u8) -> Option<Line<'_>> {
+        if byte == b'\n' {
+            let (too_long, not_text, len) = (self.too_long, self.not_text, self.len);
+            self.len = 0;
+            self.too_long = false;
+            self.not_text = false;
+            if too_long {
+                return Some(Line::TooLong);
+            }
+            if not_text {
+                return Some(Line::NotText);
+            }
+            let mut end = len;
+            if end > 0 && self.buf.get(end - 1) == Some(&b'\r') {
+                end -= 1;
+            }
+            let bytes = self.buf.get(..end).unwrap_or(&[]);
+            return Some(match core::str::from_utf8(bytes) {
+                Ok(s) => Line::Text(s),
+                Err(_) => Line::NotText,
+            });
+        }
+        let printable = byte == b'\t' || byte == b'\r' || (0x20..0x7f).contains(&byte);
+        if !printable {
+            self.not_text = true;
+        }
+        match self.buf.get_mut(self.len) {
+            Some(slot) if !self.too_long => {
+                *slot = byte;
+                self.len += 1;
+            }
+            _ => self.too_long = true,
+        }
+        None
+    }
+}
