@@ -1,4 +1,4 @@
-//! The Generalized Maxwell-Slip model (paper eqs 1-6, DESIGN §2).
+//! The Generalized Maxwell-Slip model (paper eqs 1-6, docs/design.md#the-gms-model).
 
 use crate::error::{Field, ParamError, finite};
 use crate::math;
@@ -75,7 +75,7 @@ impl<const N: usize> GmsParams<N> {
 
 /// A validated GMS model with `N` blocks and its state.
 ///
-/// Numerics (DESIGN §2): a sticking block follows the position increment, `F_i += k_i dx`; a
+/// Numerics (docs/design.md#numerics): a sticking block follows the position increment, `F_i += k_i dx`; a
 /// block that would pass `alpha_i |s(v)|` is clamped onto it; a slipping block relaxes
 /// exactly, `F_i = W + (F_i - W) exp(-C dt / |s(v)|)` with `W = alpha_i s(v)`; a block whose
 /// force points against the motion (just after a reversal) sticks. The result is exact for

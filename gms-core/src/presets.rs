@@ -1,7 +1,7 @@
 //! Parameter presets.
 //!
 //! - [`table1`]: the actuator-gearhead assembly of the paper's Table 1, read in SI as in
-//!   DESIGN §3 (torque motor-side in N·m, angle in rad).
+//!   docs/design.md#reading-table-1 (torque motor-side in N·m, angle in rad).
 //! - [`guideway`]: the linear guideways of the paper's Fig. 2 (force in N, displacement in m).
 
 use crate::gms::{Block, GmsParams};
@@ -9,7 +9,7 @@ use crate::stribeck::StribeckParams;
 
 /// The paper's Table 1 in SI, rotational units (N·m, rad, s), motor side.
 ///
-/// Table 1 prints units that disagree; this preset reads them as DESIGN §3 does:
+/// Table 1 prints units that disagree; this preset reads them as docs/design.md#reading-table-1 does:
 ///
 /// | paper | preset | reading |
 /// |---|---|---|

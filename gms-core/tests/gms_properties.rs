@@ -1,6 +1,6 @@
 //! Property tests of the GMS model over random valid parameter sets and random trajectories.
 //! Every expectation is computed independently in f64 from the paper's equations or from a
-//! physical law (DESIGN §2 lists them).
+//! physical law (docs/design.md#the-gms-model lists them).
 
 use gms_core::{Block, FrictionModel, Gms, GmsParams, StribeckParams};
 use proptest::prelude::*;

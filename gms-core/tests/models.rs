@@ -123,7 +123,7 @@ fn presets_are_valid_and_as_documented() {
         .iter()
         .map(|b| b.breakpoint(t.stribeck.fs))
         .collect();
-    // DESIGN §3: breakpoints from 0.11 to 7.8 mrad, 29 to 2000 counts of 3.8 urad.
+    // docs/design.md#reading-table-1: breakpoints from 0.11 to 7.8 mrad, 29 to 2000 counts of 3.8 urad.
     assert!((d[0] / 0.109e-3 - 1.0).abs() < 0.01, "{d:?}");
     assert!((d[5] / 7.78e-3 - 1.0).abs() < 0.01, "{d:?}");
     let g = presets::guideway();

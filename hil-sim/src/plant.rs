@@ -13,7 +13,7 @@
 //!   reflects to 16 uN·m at the motor, comparable to the actuator's ±15 % variability
 //!   (±33 uN·m); and their 40 um pre-sliding range is 2.2 rad of motor rotation, so while the
 //!   actuator slides (beyond its 7.8 mrad pre-sliding) the guideways stay in pre-sliding.
-//! - Encoder 3.8 urad/count (paper), on the motor side as DESIGN §3 reads Table 1.
+//! - Encoder 3.8 urad/count (paper), on the motor side as docs/design.md#reading-table-1 reads Table 1.
 //! - Current sense: 12-bit ADC over ±0.5 A (0.24 mA/LSB), 0.15 mA rms noise: a shunt
 //!   amplifier's ~0.6 mA rms averaged over 16 conversions per period. It matters: in
 //!   pre-sliding the actuator's stiffness (1.25 N·m/rad) turns 0.7 mA into one encoder count,

@@ -1,4 +1,4 @@
-//! An independent implementation of the paper's equations (eqs 1, 2, 4, 5, 6 with DESIGN §2's
+//! An independent implementation of the paper's equations (eqs 1, 2, 4, 5, 6 with docs/design.md#the-gms-model's
 //! reversal rule), integrated naively in f64 with tiny explicit-Euler steps, against what
 //! `hil-sim friction` computes with gms-core in f32 at the trajectory's own sampling.
 

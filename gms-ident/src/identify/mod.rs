@@ -78,7 +78,7 @@ pub struct Identified {
 /// over both directions as the paper does) and the sliding data (`v,f`, both directions
 /// pooled by magnitude) into a parameter table. With pre-sliding data only, the sliding
 /// values are placeholders (fc = fs: no Stribeck drop), with sliding only, a static map.
-/// C follows the paper's rule C = 1/Vs (in mN·m/s, DESIGN §3), printed as an assumption.
+/// C follows the paper's rule C = 1/Vs (in mN·m/s, docs/design.md#reading-table-1), printed as an assumption.
 pub fn identify(
     pre: Option<&std::path::Path>,
     slide: Option<&std::path::Path>,
@@ -269,7 +269,7 @@ pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, String> {
             };
             let c = 1e-3 / vs;
             report.push(format!(
-                "assumed: C = 1/Vs in mN·m/s (paper, DESIGN §3): c = {c:.4e}"
+                "assumed: C = 1/Vs in mN·m/s (paper, docs/design.md#reading-table-1): c = {c:.4e}"
             ));
             FrictionSpec {
                 model: ModelKind::Gms,
