@@ -19,6 +19,7 @@
 //! Units are SI and consistent (translational N, m or rotational N·m, rad; s). Unknown keys
 //! are errors; keys that the chosen model does not use are reported as warnings.
 
+use crate::Error;
 use std::fmt;
 use std::path::Path;
 
@@ -241,7 +242,11 @@ impl FrictionSpec {
     }
 
     /// The GMS parameters with exactly `N` blocks (unvalidated), or why not.
-    pub fn gms_params<const N: usize>(&self) -> Result<GmsParams<N>, String> {
+    pub fn gms_params<const N: usize>(&self) -> Result<GmsParams<N>, Error> {
+        self.gms_params_inner::<N>().map_err(Error::Params)
+    }
+
+    fn gms_params_inner<const N: usize>(&self) -> Result<GmsParams<N>, String> {
         let (stribeck, negative) = self.stribeck()?;
         let blocks = self.blocks.as_deref().unwrap_or(&[]);
         if blocks.len() != N {
@@ -274,7 +279,11 @@ impl FrictionSpec {
     }
 
     /// Builds and validates the model; the error names the offending key.
-    pub fn build(&self) -> Result<AnyModel, String> {
+    pub fn build(&self) -> Result<AnyModel, Error> {
+        self.build_inner().map_err(Error::Params)
+    }
+
+    fn build_inner(&self) -> Result<AnyModel, String> {
         let invalid = |e: gms_core::ParamError| format!("[friction] {e}");
         match self.model {
             ModelKind::Gms => {

@@ -187,6 +187,7 @@ fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
         )));
     }
     f.gms_params::<6>()
+        .map_err(|e| e.to_string())
         .and_then(|p| p.validate().map_err(|e| e.to_string()))
         .map_err(|e| Fail::Usage(format!("{}: [friction] {e}", file.display())))?;
     let mut sets: Vec<(String, String)> = Vec::new();
@@ -278,7 +279,7 @@ fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
         text += &cells.join(",");
         text.push('\n');
     }
-    gms_ident::io::write_atomic(path, text.as_bytes()).map_err(Fail::Usage)
+    gms_ident::io::write_atomic(path, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))
 }
 
 fn run(cli: Cli) -> Result<(), Fail> {
@@ -398,7 +399,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             println!("samples {}", trace.len());
             let json = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
             gms_ident::io::write_atomic(&out.join("metrics.json"), json.as_bytes())
-                .map_err(Fail::Usage)?;
+                .map_err(|e| Fail::Usage(e.to_string()))?;
             gms_ident::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
                 .map_err(Fail::Usage)?;
         }

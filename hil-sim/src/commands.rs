@@ -1,5 +1,6 @@
 //! The `run`, `compare` and `demo` commands.
 
+use crate::Error;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::Mutex;
@@ -17,7 +18,11 @@ use gms_ident::trace::{Metrics, TraceRow, trace_csv};
 
 /// `hil-sim run`: one run of the scenario with its own feedforward mode and seed; writes
 /// `trace.csv`, `metrics.json` and `plot.svg` into `out`.
-pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
+pub fn run(sc: &Scenario, out: &Path) -> Result<RunResult, Error> {
+    run_inner(sc, out).map_err(Error::Run)
+}
+
+fn run_inner(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
     let res = sim::run(sc, sc.mode(), sc.plant.seed)?;
     #[derive(Serialize)]
@@ -158,7 +163,8 @@ pub fn compare(
                         // The plot shows the modes' first draw; the oracle has no trace there.
                         let keep = r == 0 && m < FfMode::ALL.len();
                         (res.metrics, keep.then_some(res.trace))
-                    });
+                    })
+                    .map_err(String::from);
                     if let Ok(mut g) = results.lock() {
                         g[j] = Some(res);
                     }

@@ -11,6 +11,7 @@
 //! board, and a store written by one is read by the other. Without `--store` the store is in
 //! memory (lost at exit).
 
+use crate::Error;
 use std::collections::VecDeque;
 use std::fs::{File, OpenOptions};
 use std::io::{ErrorKind, Read, Seek, SeekFrom, Write};
@@ -280,7 +281,11 @@ impl HostFlash {
 
     /// The flash in `path`: created erased if missing; an existing file must be a store image
     /// ([`IMAGE_LEN`] bytes).
-    pub fn open(path: &Path) -> Result<HostFlash, String> {
+    pub fn open(path: &Path) -> Result<HostFlash, Error> {
+        Self::open_inner(path).map_err(Error::Device)
+    }
+
+    fn open_inner(path: &Path) -> Result<HostFlash, String> {
         let shown = path.display();
         let mut file = OpenOptions::new()
             .read(true)
@@ -455,6 +460,15 @@ pub fn serve(
     endpoint: Endpoint,
     store: Option<PathBuf>,
     on_ready: impl FnOnce(&str, Option<&str>),
+) -> Result<(), Error> {
+    serve_inner(sc, endpoint, store, on_ready).map_err(Error::Device)
+}
+
+fn serve_inner(
+    sc: Scenario,
+    endpoint: Endpoint,
+    store: Option<PathBuf>,
+    on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), String> {
     let flash = match &store {
         Some(path) => HostFlash::open(path)?,
@@ -579,13 +593,21 @@ impl LocalLink {
 
 impl LocalDevice {
     /// A device on the scenario `sc`, its store in memory (erased).
-    pub fn new(sc: &Scenario) -> Result<LocalDevice, String> {
-        Self::with_flash(sc, HostFlash::in_memory())
+    pub fn new(sc: &Scenario) -> Result<LocalDevice, Error> {
+        Self::new_inner(sc).map_err(Error::Device)
+    }
+
+    fn new_inner(sc: &Scenario) -> Result<LocalDevice, String> {
+        Self::with_flash_inner(sc, HostFlash::in_memory())
     }
 
     /// A device on the scenario `sc` starting on the store flash `flash` (what a board finds
     /// at power-up).
-    pub fn with_flash(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, String> {
+    pub fn with_flash(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, Error> {
+        Self::with_flash_inner(sc, flash).map_err(Error::Device)
+    }
+
+    fn with_flash_inner(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, String> {
         let p = power_up(sc, flash)?;
         let mailbox = Mailbox {
             status: p.sim.core.status(),

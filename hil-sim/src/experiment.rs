@@ -14,6 +14,7 @@
 //!   encoder angle and the torque. The friction lags the speed by the slip time constant
 //!   |s(v)|/C, which is what identifies C.
 
+use crate::Error;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -161,7 +162,11 @@ fn load_steps(
 
 /// Runs one experiment on the friction `spec` (drawn within ±variability with `seed`);
 /// returns the CSV text.
-pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<String, String> {
+pub fn run(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<String, Error> {
+    run_inner(kind, spec, setup, seed).map_err(Error::Run)
+}
+
+fn run_inner(kind: Kind, spec: &FrictionSpec, setup: &Setup, seed: u64) -> Result<String, String> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let drawn = draw_friction(spec, setup.variability, &mut rng);
     let mut model = drawn.build()?;

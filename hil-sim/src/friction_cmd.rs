@@ -6,6 +6,7 @@
 //! velocity of the motion that ended at this row and `f` the friction after it (row 0: the
 //! virgin state at rest, `v = f = 0`).
 
+use crate::Error;
 use std::io::Write;
 use std::path::Path;
 
@@ -162,7 +163,11 @@ pub fn write_rows(path: &Path, rows: &[FrictionRow]) -> std::io::Result<()> {
 
 /// Runs the whole command; returns the number of rows written and the warnings, or one line
 /// that names the file (and line or key) and the reason. Nothing is written on error.
-pub fn run(params: &Path, input: &Path, output: &Path) -> Result<(usize, Vec<String>), String> {
+pub fn run(params: &Path, input: &Path, output: &Path) -> Result<(usize, Vec<String>), Error> {
+    run_inner(params, input, output).map_err(Error::Run)
+}
+
+fn run_inner(params: &Path, input: &Path, output: &Path) -> Result<(usize, Vec<String>), String> {
     let pf = ParamFile::load(params).map_err(|e| e.to_string())?;
     let mut model = pf
         .friction

@@ -7,6 +7,8 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+use core::fmt;
+
 pub mod commands;
 pub mod device;
 pub mod experiment;
@@ -14,3 +16,33 @@ pub mod friction_cmd;
 pub mod plant;
 pub mod scenario;
 pub mod sim;
+
+/// What went wrong in the simulator. `Display` gives the one-line message the CLI prints; the
+/// variant says what kind of failure it is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Error {
+    /// A scenario (or the plant it describes) is invalid.
+    Scenario(String),
+    /// A run, an experiment or the friction command failed (bad input files, invalid
+    /// parameters, nothing written).
+    Run(String),
+    /// The virtual device could not start (its store, its endpoint, its parameters).
+    Device(String),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Error::Scenario(m) | Error::Run(m) | Error::Device(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for Error {}
+
+/// The message, for callers that report errors as text.
+impl From<Error> for String {
+    fn from(e: Error) -> String {
+        e.to_string()
+    }
+}

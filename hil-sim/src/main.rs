@@ -202,11 +202,13 @@ fn main() -> ExitCode {
             params,
             input,
             output,
-        } => friction_cmd::run(&params, &input, &output).map(|(_, warnings)| {
-            for w in warnings {
-                eprintln!("warning: {w}");
-            }
-        }),
+        } => friction_cmd::run(&params, &input, &output)
+            .map(|(_, warnings)| {
+                for w in warnings {
+                    eprintln!("warning: {w}");
+                }
+            })
+            .map_err(String::from),
         Cmd::Run {
             scenario,
             out,
@@ -269,6 +271,7 @@ fn main() -> ExitCode {
                 use std::io::Write as _;
                 let _ = std::io::stdout().flush();
             })
+            .map_err(String::from)
         }),
         Cmd::Experiment {
             kind,

@@ -27,6 +27,7 @@
 //! friction sources are gms-core models driven by each step's displacement. Energy is
 //! accounted in f64 for the balance check.
 
+use crate::Error;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -116,7 +117,11 @@ pub fn draw_friction(spec: &FrictionSpec, v: f64, rng: &mut impl Rng) -> Frictio
 
 impl Plant {
     /// Builds the plant at rest with friction drawn around the nominal (seed `seed`).
-    pub fn new(spec: &PlantSpec, seed: u64) -> Result<Plant, String> {
+    pub fn new(spec: &PlantSpec, seed: u64) -> Result<Plant, Error> {
+        Self::new_inner(spec, seed).map_err(Error::Scenario)
+    }
+
+    fn new_inner(spec: &PlantSpec, seed: u64) -> Result<Plant, String> {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let act = draw_friction(&spec.actuator, spec.variability, &mut rng);
         let gw = draw_friction(&spec.guideway, spec.variability, &mut rng);

@@ -4,6 +4,7 @@
 //! `hil-sim run --print-default-scenario`); a scenario file may leave out any key, which then
 //! takes that default, and an unknown key is an error naming it.
 
+use crate::Error;
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -293,16 +294,20 @@ impl Scenario {
                     },
                 }
             })?;
-        sc.check().map_err(|reason| FileError {
+        sc.check().map_err(|e| FileError {
             file: file.to_string(),
             at: None,
-            reason,
+            reason: e.to_string(),
         })?;
         Ok(sc)
     }
 
     /// Checks everything that the types do not: ranges, the friction models, the controller.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), Error> {
+        self.check_inner().map_err(Error::Scenario)
+    }
+
+    fn check_inner(&self) -> Result<(), String> {
         let p = &self.plant;
         let pos = [
             ("plant.supply_v", p.supply_v),
@@ -398,7 +403,11 @@ impl Scenario {
     /// friction (the compensator knows the nominal plant), then the `[controller]` table by
     /// protocol paths, each checked against the protocol's range table, and the whole set
     /// validated. Errors name the scenario key.
-    pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
+    pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, Error> {
+        self.controller_params_inner().map_err(Error::Scenario)
+    }
+
+    fn controller_params_inner(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
         let p = &self.plant;
         let gms = |spec: &FrictionSpec, what: &str| {
             if spec.model != gms_ident::paramfile::ModelKind::Gms {
@@ -460,7 +469,11 @@ impl Scenario {
     }
 
     /// The reference segments expanded into gms-core's form.
-    pub fn segments(&self) -> Result<Vec<Segment>, String> {
+    pub fn segments(&self) -> Result<Vec<Segment>, Error> {
+        self.segments_inner().map_err(Error::Scenario)
+    }
+
+    fn segments_inner(&self) -> Result<Vec<Segment>, String> {
         let rpc = self.plant.rad_per_count as f32;
         let mut out = Vec::new();
         for s in &self.reference.segments {

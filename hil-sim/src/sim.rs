@@ -1,5 +1,6 @@
 //! One closed-loop run: gms-core's controller (the firmware's code) against the plant.
 
+use crate::Error;
 use gms_core::controller::{Controller, FfMode};
 use gms_core::reference::{Reference, SUB_PER_COUNT, Segment};
 use gms_ident::trace::{Metrics, TraceRow, metrics};
@@ -20,14 +21,22 @@ pub struct RunResult {
 }
 
 /// Runs `sc` with feedforward `mode` and the friction draw `seed`.
-pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> {
+pub fn run(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, Error> {
+    run_inner(sc, mode, seed).map_err(Error::Run)
+}
+
+fn run_inner(sc: &Scenario, mode: FfMode, seed: u64) -> Result<RunResult, String> {
     run_with(sc, mode, seed, false)
 }
 
 /// The level oracle, a yardstick for `gms-adaptive` that only a simulation has: the GMS
 /// feedforward scaled at every step by the plant's true drift factor (no estimation, no
 /// lag). What it cannot gain over `gms`, no estimate of the friction level can.
-pub fn run_oracle(sc: &Scenario, seed: u64) -> Result<RunResult, String> {
+pub fn run_oracle(sc: &Scenario, seed: u64) -> Result<RunResult, Error> {
+    run_oracle_inner(sc, seed).map_err(Error::Run)
+}
+
+fn run_oracle_inner(sc: &Scenario, seed: u64) -> Result<RunResult, String> {
     run_with(sc, FfMode::GmsAdaptive, seed, true)
 }
 

@@ -1,6 +1,7 @@
 //! The frictional lag: the GMS attraction parameter C from a velocity oscillating through
 //! sliding, by a one-dimensional search of the residual in ln C.
 
+use crate::Error;
 /// The frictional-lag fit of C.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LagFit {
@@ -61,6 +62,15 @@ fn lag_sse(
 /// ln C, from 10^-4 to 10^4 × the paper's rule). The first second is the start-up and is
 /// not compared.
 pub fn fit_lag(
+    spec: &crate::paramfile::FrictionSpec,
+    t: &[f64],
+    x: &[f64],
+    f: &[f64],
+) -> Result<LagFit, Error> {
+    fit_lag_inner(spec, t, x, f).map_err(Error::Data)
+}
+
+fn fit_lag_inner(
     spec: &crate::paramfile::FrictionSpec,
     t: &[f64],
     x: &[f64],

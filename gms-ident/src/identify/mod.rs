@@ -2,6 +2,7 @@
 //! piecewise-linear concave function (eq. 3) and the sliding Stribeck curve with a viscous
 //! term (eq. 1 + sigma v) by nonlinear least squares.
 
+use crate::Error;
 mod lag;
 mod report;
 mod stribeck;
@@ -83,7 +84,7 @@ pub fn identify(
     pre: Option<&std::path::Path>,
     slide: Option<&std::path::Path>,
     blocks: usize,
-) -> Result<Identified, String> {
+) -> Result<Identified, Error> {
     identify_with(pre, slide, blocks, false)
 }
 
@@ -95,7 +96,7 @@ pub fn identify_with(
     slide: Option<&std::path::Path>,
     blocks: usize,
     asymmetric: bool,
-) -> Result<Identified, String> {
+) -> Result<Identified, Error> {
     identify_from(&Inputs {
         presliding: pre,
         sliding: slide,
@@ -122,7 +123,11 @@ pub struct Inputs<'a> {
 
 /// The whole identification: [`identify_with`] plus, when a frictional-lag record is given,
 /// C fitted to it by [`fit_lag`] (else the paper's rule, printed as an assumption).
-pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, String> {
+pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, Error> {
+    identify_from_inner(inp).map_err(Error::Data)
+}
+
+fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
     let (pre, slide, blocks, asymmetric) =
         (inp.presliding, inp.sliding, inp.blocks, inp.asymmetric);
     if inp.lag.is_some() && (pre.is_none() || slide.is_none()) {

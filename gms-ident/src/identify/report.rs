@@ -1,12 +1,17 @@
 //! The identification's report and plots.
 
 use super::Identified;
+use crate::Error;
 
 /// Writes `report.txt`, `virgin.svg` (the averaged virgin curve against the identified
 /// blocks, as the paper's Fig. 1 right and Fig. 2) and `stribeck.svg` (the sliding data against
 /// the fitted curve, over log10 of the speed) into `dir`; with a lag fit, `lag.svg` (the
 /// recorded friction against the fitted model over time).
-pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), String> {
+pub fn write_report(id: &Identified, dir: &std::path::Path) -> Result<(), Error> {
+    write_report_inner(id, dir).map_err(Error::Io)
+}
+
+fn write_report_inner(id: &Identified, dir: &std::path::Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let text: String = id.report.iter().map(|l| format!("{l}\n")).collect();
     crate::io::write_atomic(&dir.join("report.txt"), text.as_bytes())?;

@@ -1,6 +1,7 @@
 //! Sliding: the Stribeck curve with a viscous term (paper eq. 1 + sigma v) by nonlinear least
 //! squares (Levenberg-Marquardt), with the parameters' uncertainties.
 
+use crate::Error;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Dyn, Matrix, OMatrix, OVector, Owned, U5, Vector5};
 
@@ -83,7 +84,11 @@ impl LeastSquaresProblem<f64, Dyn, U5> for Problem<'_> {
 /// Fits `s(v) + sigma v` to steady sliding data (`v` > 0, `f` the friction at `v`) by
 /// Levenberg–Marquardt (the `levenberg-marquardt` crate), from a start read off the data.
 /// Errors: too few points, non-finite values, no speed beyond the knee of the curve.
-pub fn fit_stribeck(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
+pub fn fit_stribeck(v: &[f64], f: &[f64]) -> Result<StribeckFit, Error> {
+    fit_stribeck_inner(v, f).map_err(Error::Data)
+}
+
+fn fit_stribeck_inner(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
     if v.len() != f.len() {
         return Err("v and F have different lengths".into());
     }

@@ -1,6 +1,7 @@
 //! Pre-sliding: the virgin curve (paper eq. 3) as a piecewise-linear concave function whose
 //! segments give the GMS blocks' stiffnesses and weights.
 
+use crate::Error;
 use nalgebra::{Dyn, OMatrix, OVector};
 
 use crate::paramfile::BlockSpec;
@@ -37,8 +38,12 @@ fn chord_sse(x: &[f64], f: &[f64], a: usize, b: usize) -> f64 {
 /// chord reaches it); then the stiffnesses are refined by linear least squares on the
 /// basis `min(x, D_i)` (kept from the chords when that would break concavity). Errors: too few points, non-finite values,
 /// x not increasing, a curve that falls, a fit that is not concave.
+pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, Error> {
+    fit_virgin_inner(x, f, n).map_err(Error::Data)
+}
+
 #[allow(clippy::needless_range_loop)] // the dynamic programme reads best as indices
-pub fn fit_virgin(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
+fn fit_virgin_inner(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String> {
     if x.len() != f.len() {
         return Err("x and F have different lengths".into());
     }
