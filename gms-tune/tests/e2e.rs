@@ -60,7 +60,7 @@ fn serve_child(kind: &str, store: PathBuf) {
         _ => panic!("unknown endpoint {kind}"),
     };
     let sc = hil_sim::scenario::Scenario::default();
-    let r = serve(sc, endpoint, Some(store), |addr, _| {
+    let r = serve(sc, endpoint, Some(store), 1.0, |addr, _| {
         println!("listening on {addr}");
         let _ = std::io::stdout().flush();
     });

@@ -452,22 +452,31 @@ pub enum Endpoint {
 }
 
 /// Runs the device: the control loop and the plant in real time on their own thread, clients
-/// in turn. `on_ready` receives the address (TCP address or PTY path) and what the start-up
-/// found in the store (`Some` when the defaults run with `invalid_params` latched) before the
-/// first client.
+/// in turn. The simulated axis runs `speed` times faster than the wall clock (1: real time;
+/// above 1 it never skips simulated time, it falls behind the target speed when the host
+/// cannot keep up). `on_ready` receives the address (TCP address or PTY path) and what the
+/// start-up found in the store (`Some` when the defaults run with `invalid_params` latched)
+/// before the first client.
 pub fn serve(
     sc: Scenario,
     endpoint: Endpoint,
     store: Option<PathBuf>,
+    speed: f64,
     on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), Error> {
-    serve_inner(sc, endpoint, store, on_ready).map_err(Error::Device)
+    if !(speed.is_finite() && (0.01..=1000.0).contains(&speed)) {
+        return Err(Error::Device(format!(
+            "--speed {speed}: a factor from 0.01 to 1000"
+        )));
+    }
+    serve_inner(sc, endpoint, store, speed, on_ready).map_err(Error::Device)
 }
 
 fn serve_inner(
     sc: Scenario,
     endpoint: Endpoint,
     store: Option<PathBuf>,
+    speed: f64,
     on_ready: impl FnOnce(&str, Option<&str>),
 ) -> Result<(), String> {
     let flash = match &store {
@@ -492,19 +501,25 @@ fn serve_inner(
     });
     let rt = Arc::clone(&shared);
     std::thread::spawn(move || {
-        // Real time: advance by as many position periods as wall time allows.
+        // Advance by as many position periods as (scaled) wall time allows.
         let start = Instant::now();
         loop {
             let dt = sim.core.controller().dt_pos() as f64;
-            let due = start.elapsed().as_secs_f64();
+            let due = start.elapsed().as_secs_f64() * speed;
             let mut n = 0;
             while sim.t + dt <= due && n < 200 {
                 sim.tick(|st| rt.mailbox().exchange(st), &rt.telemetry, true);
                 n += 1;
             }
             if n == 200 {
-                // Cannot keep up: skip ahead rather than fall ever further behind.
-                sim.t = due;
+                if speed == 1.0 {
+                    // Real time and cannot keep up: skip ahead rather than fall ever further
+                    // behind.
+                    sim.t = due;
+                } else {
+                    // Faster than real time: never skip simulated time, just run on.
+                    continue;
+                }
             }
             std::thread::sleep(Duration::from_millis(1));
         }

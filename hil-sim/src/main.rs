@@ -85,6 +85,10 @@ enum Cmd {
         /// Scenario file for the plant (its reference is not used); default scenario without.
         #[arg(long, value_name = "SCENARIO.toml")]
         scenario: Option<PathBuf>,
+        /// Run the simulated axis this many times faster than the wall clock (0.01 to 1000;
+        /// above 1 for experiments in CI: it never skips simulated time).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
     },
     /// Simulate an identification experiment of the paper on the friction in P.toml.
     Experiment {
@@ -249,6 +253,7 @@ fn main() -> ExitCode {
             pty,
             store,
             scenario,
+            speed,
         } => load_scenario(scenario.as_deref()).and_then(|sc| {
             let endpoint = match (tcp, pty) {
                 (Some(tcp), _) => hil_sim::device::Endpoint::Tcp(
@@ -263,7 +268,7 @@ fn main() -> ExitCode {
                 }
                 _ => return Err("give --tcp ADDR or --pty".into()),
             };
-            hil_sim::device::serve(sc, endpoint, store, |addr, fault| {
+            hil_sim::device::serve(sc, endpoint, store, speed, |addr, fault| {
                 if let Some(f) = fault {
                     eprintln!("warning: {f} (fault invalid_params latched: clear to enable)");
                 }

@@ -228,3 +228,34 @@ fn the_adaptive_scale_is_read_kept_across_sets_and_read_only() {
     assert!(c.ask("set ff.adapt.scale 1").starts_with("err 8 "));
     assert_eq!(c.ask("get ff.adapt.scale"), format!("ok {scale}"));
 }
+
+/// Device time (`status` `t=`) [s].
+fn device_time(c: &mut Client) -> f64 {
+    let st = c.ask("status");
+    st.split_whitespace()
+        .find_map(|w| w.strip_prefix("t=")?.parse().ok())
+        .unwrap_or_else(|| panic!("no t in {st}"))
+}
+
+#[test]
+fn serve_faster_than_real_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start(
+        &["--tcp", "127.0.0.1:0", "--speed", "5"],
+        &dir.path().join("flash.img"),
+    );
+    let mut c = connect(&srv);
+    let (w0, t0) = (Instant::now(), device_time(&mut c));
+    std::thread::sleep(Duration::from_millis(400));
+    let (w1, t1) = (Instant::now(), device_time(&mut c));
+    let ratio = (t1 - t0) / (w1 - w0).as_secs_f64();
+    // 5 times the wall clock; a loaded host may fall behind (never ahead, never skipping).
+    assert!(ratio > 2.0 && ratio < 5.5, "device/wall time ratio {ratio}");
+    // Nonsense speeds are refused before anything starts.
+    let (code, _, err) = common::hil(
+        &["serve", "--tcp", "127.0.0.1:0", "--speed", "0"],
+        dir.path(),
+    );
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--speed 0"), "{err}");
+}
