@@ -420,6 +420,14 @@ impl<const N: usize> Controller<N> {
     }
 
     /// Clears every integrator, filter and friction state (the axis is at rest).
+    /// Current mode: the current loop holds `amps` \[A\] (clamped to `i_max`) with the
+    /// position loop off (no speed feedforward: the reference speed is taken as 0).
+    pub fn hold_current(&mut self, amps: f32) {
+        self.i_cmd = clamp(amps, self.p.i_max);
+        self.w_ref = 0.0;
+    }
+
+    /// Back to rest: integrators, filters, friction models and outputs cleared.
     pub fn reset(&mut self) {
         self.integ = 0.0;
         self.d_filt = 0.0;

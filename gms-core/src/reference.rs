@@ -314,6 +314,130 @@ impl<const S: usize> Reference<S> {
     }
 }
 
+/// The fastest reference of the protocol's `velocity` (mean plus sweep amplitude) [rad/s].
+pub const VELOCITY_MAX: f32 = 20.0;
+
+/// A sweep around the mean speed of a [`VelocityProfile`] (the frictional-lag experiment):
+/// `amp sin(2π (f0 t + (f1 - f0) t² / 2 T))`, its frequency going linearly from `f0` to `f1`
+/// over `seconds` (T).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sweep {
+    /// Amplitude [rad/s], `>= 0`.
+    pub amp: f32,
+    /// Start frequency \[Hz\], `> 0`.
+    pub f0: f32,
+    /// End frequency \[Hz\], `> 0`.
+    pub f1: f32,
+    /// Duration \[s\], `> 0`; the speed is the mean again after it.
+    pub seconds: f32,
+}
+
+/// The reference of the protocol's `velocity`: from the reference's own speed, the speed ramps
+/// to `vel` at up to `amax`; then, with a [`Sweep`], it oscillates around `vel` for the sweep's
+/// duration (starting at phase 0, so the speed is continuous), and stays at `vel` after. The
+/// position is the speed's exact integral (trapezoid per step, accumulated in f64 sub-counts,
+/// so that a long run at constant speed does not drift).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VelocityProfile {
+    pos: f64,
+    v: f32,
+    vel: f32,
+    amax: f32,
+    sweep: Option<Sweep>,
+    t_sweep: f32,
+    ramped: bool,
+    sub_per_rad: f64,
+}
+
+impl VelocityProfile {
+    /// The profile from the reference sample `from` to the speed `vel` [rad/s] (with a
+    /// `sweep`), speed changes at up to `amax` [rad/s²], for an encoder of `rad_per_count`
+    /// \[rad\]. Errors: a value not finite, a limit or a sweep figure not positive, or
+    /// |vel| + amp above [`VELOCITY_MAX`].
+    pub fn new(
+        from: RefSample,
+        vel: f32,
+        sweep: Option<Sweep>,
+        amax: f32,
+        rad_per_count: f32,
+    ) -> Result<Self, SegmentError> {
+        let amp = sweep.map_or(0.0, |s| s.amp);
+        let finite = [vel, amax, rad_per_count, amp, from.vel]
+            .iter()
+            .all(|x| x.is_finite());
+        if !finite {
+            return Err(SegmentError::NonFinite(0));
+        }
+        if let Some(s) = sweep
+            && !(s.f0.is_finite() && s.f1.is_finite() && s.seconds.is_finite())
+        {
+            return Err(SegmentError::NonFinite(0));
+        }
+        let bad_sweep =
+            sweep.is_some_and(|s| s.amp < 0.0 || s.f0 <= 0.0 || s.f1 <= 0.0 || s.seconds <= 0.0);
+        if amax <= 0.0 || rad_per_count <= 0.0 || bad_sweep || abs(vel) + amp > VELOCITY_MAX {
+            return Err(SegmentError::NotPositive(0));
+        }
+        Ok(VelocityProfile {
+            pos: from.pos as f64,
+            v: from.vel,
+            vel,
+            amax,
+            sweep,
+            t_sweep: 0.0,
+            ramped: false,
+            sub_per_rad: SUB_PER_COUNT as f64 / rad_per_count as f64,
+        })
+    }
+
+    /// The mean speed [rad/s].
+    pub fn speed(&self) -> f32 {
+        self.vel
+    }
+
+    /// The reference for the next step of `dt` \[s\].
+    pub fn next(&mut self, dt: f32) -> RefSample {
+        let v0 = self.v;
+        let acc;
+        if !self.ramped {
+            let dv = self.vel - self.v;
+            let step = self.amax * dt;
+            if abs(dv) <= step {
+                self.v = self.vel;
+                self.ramped = true;
+            } else {
+                self.v += if dv > 0.0 { step } else { -step };
+            }
+            acc = if dt > 0.0 { (self.v - v0) / dt } else { 0.0 };
+        } else if let Some(s) = self.sweep
+            && self.t_sweep < s.seconds
+        {
+            self.t_sweep += dt;
+            let t = self.t_sweep.min(s.seconds);
+            let tau = core::f32::consts::TAU;
+            let phase = tau * (s.f0 * t + (s.f1 - s.f0) * t * t / (2.0 * s.seconds));
+            let f = s.f0 + (s.f1 - s.f0) * t / s.seconds;
+            let (sin, cos) = sin_cos(phase);
+            if self.t_sweep >= s.seconds {
+                self.v = self.vel;
+                acc = 0.0;
+            } else {
+                self.v = self.vel + s.amp * sin;
+                acc = s.amp * cos * tau * f;
+            }
+        } else {
+            self.v = self.vel;
+            acc = 0.0;
+        }
+        self.pos += 0.5 * (v0 + self.v) as f64 * dt as f64 * self.sub_per_rad;
+        RefSample {
+            pos: self.pos as i64,
+            vel: self.v,
+            acc,
+        }
+    }
+}
+
 /// Speed limit of the protocol's `move` when none is given [rad/s].
 pub const MOVE_VMAX: f32 = 0.5;
 /// Acceleration limit of the protocol's `move` [rad/s^2].
@@ -522,6 +646,7 @@ impl MovePlan {
 pub struct Motion {
     hold: SubCounts,
     moving: Option<MovePlan>,
+    velocity: Option<VelocityProfile>,
 }
 
 impl Motion {
@@ -530,6 +655,7 @@ impl Motion {
         Motion {
             hold: pos,
             moving: None,
+            velocity: None,
         }
     }
 
@@ -546,20 +672,35 @@ impl Motion {
         MovePlan::new(from, pos, vmax, MOVE_AMAX, MOVE_JMAX, rad_per_count)
     }
 
-    /// Plays `m` from now on (replacing any move under way).
+    /// Plays `m` from now on (replacing any move or speed under way).
     pub fn start(&mut self, m: MovePlan) {
         self.moving = Some(m);
+        self.velocity = None;
+    }
+
+    /// Plays the speed profile `p` from now on (replacing any move under way); it runs
+    /// until replaced or stopped.
+    pub fn start_velocity(&mut self, p: VelocityProfile) {
+        self.velocity = Some(p);
+        self.moving = None;
+    }
+
+    /// True while a speed profile plays.
+    pub fn is_velocity(&self) -> bool {
+        self.velocity.is_some()
     }
 
     /// Drops any move under way and holds at `pos`.
     pub fn hold_at(&mut self, pos: SubCounts) {
         self.hold = pos;
         self.moving = None;
+        self.velocity = None;
     }
 
-    /// Drops any move under way; the reference holds where it last was.
+    /// Drops any move or speed under way; the reference holds where it last was.
     pub fn stop(&mut self) {
         self.moving = None;
+        self.velocity = None;
     }
 
     /// The reference position [1/65536 count] of the last step (where a finished move
@@ -568,14 +709,19 @@ impl Motion {
         self.hold
     }
 
-    /// True while a move plays.
+    /// True while a move or a speed profile plays.
     pub fn is_moving(&self) -> bool {
-        self.moving.is_some()
+        self.moving.is_some() || self.velocity.is_some()
     }
 
     /// The reference for this step; advances a move by `dt` \[s\]. A finished move becomes
     /// the hold position.
     pub fn next(&mut self, dt: f32) -> RefSample {
+        if let Some(p) = &mut self.velocity {
+            let r = p.next(dt);
+            self.hold = r.pos;
+            return r;
+        }
         if let Some(m) = &mut self.moving {
             let r = m.next(dt);
             self.hold = r.pos;

@@ -175,3 +175,79 @@ fn stop_holds_where_the_reference_was_and_hold_at_moves_it() {
     assert!(Motion::plan(at_rest(5), 1.0, Some(-1.0), 1e-3).is_err());
     assert!(Motion::plan(at_rest(5), f32::NAN, None, 1e-3).is_err());
 }
+
+#[test]
+fn a_velocity_profile_ramps_holds_and_sweeps() {
+    use gms_core::reference::{RefSample, SUB_PER_COUNT, Sweep, VelocityProfile};
+    let rpc = 3.8e-6f32;
+    let dt = 1e-4f32;
+    // From rest at count 1000 to 0.5 rad/s at 50 rad/s²: 10 ms of ramp.
+    let from = RefSample {
+        pos: 1000 * SUB_PER_COUNT as i64,
+        vel: 0.0,
+        acc: 0.0,
+    };
+    let sweep = Sweep {
+        amp: 0.2,
+        f0: 2.0,
+        f1: 10.0,
+        seconds: 1.0,
+    };
+    let mut p = VelocityProfile::new(from, 0.5, Some(sweep), 50.0, rpc).unwrap();
+    let mut prev = from;
+    let mut integral = 0.0f64;
+    let mut max_dv = 0.0f32;
+    let mut samples = Vec::new();
+    for k in 0..15_000 {
+        let r = p.next(dt);
+        let dv = (r.vel - prev.vel).abs();
+        if k < 100 {
+            // The ramp: no speed change beyond amax·dt.
+            assert!(dv <= 50.0 * dt * 1.0001, "step {k}: dv {dv}");
+        }
+        if k >= 100 {
+            max_dv = max_dv.max(dv);
+        }
+        integral += 0.5 * (prev.vel + r.vel) as f64 * dt as f64;
+        // The position is the speed's integral, to a sub-count.
+        let pos_rad = (r.pos - from.pos) as f64 / SUB_PER_COUNT as f64 * rpc as f64;
+        assert!((pos_rad - integral).abs() < 2.0 * rpc as f64 / SUB_PER_COUNT as f64 + 1e-12);
+        samples.push(r.vel);
+        prev = r;
+    }
+    // Ramp done after 100 steps (0.5 / 50 = 10 ms); the sweep then stays within mean ± amp,
+    // reaches both extremes, is continuous (no step above amp·2π·f1·dt), and ends at the mean.
+    assert!((samples[99] - 0.5).abs() < 1e-6);
+    let sweep_part = &samples[100..10_100];
+    let (lo, hi) = sweep_part
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+    assert!(lo > 0.3 - 1e-4 && lo < 0.31, "{lo}");
+    assert!(hi < 0.7 + 1e-4 && hi > 0.69, "{hi}");
+    assert!(
+        max_dv <= 0.2 * std::f32::consts::TAU * 10.0 * dt * 1.01 + 1e-6,
+        "{max_dv}"
+    );
+    assert!(samples[10_100..].iter().all(|v| (*v - 0.5).abs() < 1e-6));
+    // Zero crossings of (v - mean) in the sweep: the frequency rises from 2 to 10 Hz, so
+    // the mean frequency is 6 Hz: 2 × 6 crossings in the 1 s.
+    let crossings = sweep_part
+        .windows(2)
+        .filter(|w| (w[0] - 0.5).signum() != (w[1] - 0.5).signum())
+        .count();
+    assert!((11..=13).contains(&crossings), "{crossings}");
+    // Refused: too fast, nonsense sweep figures, non-finite values.
+    let bad = |vel: f32, s: Option<Sweep>| VelocityProfile::new(from, vel, s, 50.0, rpc).is_err();
+    assert!(bad(25.0, None));
+    assert!(bad(19.9, Some(Sweep { amp: 0.2, ..sweep })));
+    assert!(bad(0.5, Some(Sweep { f0: 0.0, ..sweep })));
+    assert!(bad(
+        0.5,
+        Some(Sweep {
+            seconds: -1.0,
+            ..sweep
+        })
+    ));
+    assert!(bad(f32::NAN, None));
+    assert!(!bad(-0.5, None));
+}

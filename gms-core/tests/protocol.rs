@@ -15,6 +15,8 @@ struct Mock {
     enabled: bool,
     moves: Vec<(f32, Option<f32>)>,
     stream: Option<(String, f32)>,
+    /// The experiment requests received, as text.
+    experiments: Vec<String>,
 }
 
 impl Mock {
@@ -25,6 +27,7 @@ impl Mock {
             enabled: false,
             moves: Vec::new(),
             stream: None,
+            experiments: Vec::new(),
         }
     }
 }
@@ -68,6 +71,22 @@ impl Device for Mock {
     }
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {
         self.moves.push((pos, vel));
+        Ok(())
+    }
+    fn current(&mut self, amps: f32) -> Result<(), &'static str> {
+        self.experiments.push(format!("current {amps}"));
+        Ok(())
+    }
+    fn velocity(
+        &mut self,
+        vel: f32,
+        sweep: Option<gms_core::reference::Sweep>,
+    ) -> Result<(), &'static str> {
+        self.experiments.push(format!("velocity {vel} {sweep:?}"));
+        Ok(())
+    }
+    fn hold(&mut self) -> Result<(), &'static str> {
+        self.experiments.push("hold".into());
         Ok(())
     }
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
@@ -281,4 +300,36 @@ fn every_mode_round_trips_by_name() {
         assert_eq!(FfMode::from_name(bad), None);
     }
     assert!(ask(&mut d, "set ff.mode lugre").starts_with("err 6 "));
+}
+
+#[test]
+fn experiment_commands_parse() {
+    let mut d = Mock::new();
+    assert_eq!(ask(&mut d, "current -0.05"), "ok\n");
+    assert_eq!(ask(&mut d, "velocity 0.2"), "ok\n");
+    assert_eq!(ask(&mut d, "velocity 0.3 0.1 1 5 2.5"), "ok\n");
+    assert_eq!(ask(&mut d, "hold"), "ok\n");
+    assert_eq!(
+        d.experiments,
+        [
+            "current -0.05",
+            "velocity 0.2 None",
+            "velocity 0.3 Some(Sweep { amp: 0.1, f0: 1.0, f1: 5.0, seconds: 2.5 })",
+            "hold",
+        ]
+    );
+    // Bad arguments: err 2, nothing asked of the device.
+    for bad in [
+        "current",
+        "current x",
+        "current 1 2",
+        "velocity",
+        "velocity 0.3 0.1",
+        "velocity 0.3 0.1 1 5",
+        "velocity 0.3 0.1 1 5 2 9",
+        "hold now",
+    ] {
+        assert!(ask(&mut d, bad).starts_with("err 2 "), "{bad}");
+    }
+    assert_eq!(d.experiments.len(), 4);
 }

@@ -658,6 +658,12 @@ impl LocalDevice {
         store.into_flash().unwrap_or_else(HostFlash::in_memory)
     }
 
+    /// The client went away (as a closed TCP connection or USB port): the stream ends, an
+    /// experiment (current or speed) ends with the bridge off.
+    pub fn disconnect(&mut self) {
+        self.dev.disconnected();
+    }
+
     /// Runs the device for `seconds` of simulated time.
     pub fn run(&mut self, seconds: f64) {
         let link = self.dev.link_mut();

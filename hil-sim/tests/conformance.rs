@@ -22,6 +22,8 @@ trait Dut {
     fn wait(&mut self, seconds: f64);
     /// Powers the device off and on again (its store kept).
     fn restart(&mut self);
+    /// The client goes away and a new one comes.
+    fn reconnect(&mut self);
     /// The reply line.
     fn ask(&mut self, line: &str) -> String {
         self.ask_all(line).pop().unwrap_or_default()
@@ -52,6 +54,9 @@ impl Dut for Local {
     fn restart(&mut self) {
         let flash = self.dev.take().unwrap().into_flash();
         self.dev = Some(LocalDevice::with_flash(&self.sc, flash).unwrap());
+    }
+    fn reconnect(&mut self) {
+        self.dev().disconnect();
     }
 }
 
@@ -103,6 +108,17 @@ impl Dut for Tcp {
     }
     fn wait(&mut self, seconds: f64) {
         std::thread::sleep(Duration::from_secs_f64(seconds));
+    }
+    fn reconnect(&mut self) {
+        let addr = self.srv.as_ref().unwrap().addr.clone();
+        self.s.shutdown(std::net::Shutdown::Both).unwrap();
+        // The device serves one client at a time: the new one is taken once the old one
+        // is seen gone.
+        self.s = TcpStream::connect(&addr).unwrap();
+        self.s
+            .set_read_timeout(Some(Duration::from_millis(20)))
+            .unwrap();
+        self.pending.clear();
     }
     fn restart(&mut self) {
         // The process ends (its store file stays, as a board's flash does).
@@ -183,6 +199,7 @@ fn status_keys_are_one_set() {
         "step_us_mean",
         "sense_offset",
         "missed",
+        "drive",
     ];
     both(|d| {
         let st = d.ask("status");
@@ -440,4 +457,87 @@ fn live_sets_are_bumpless_over_tcp() {
             "{set}: peak {e} counts against {base}"
         );
     }
+}
+
+/// The word after `key=` in a status line.
+fn word<'a>(line: &'a str, key: &str) -> &'a str {
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix(key).and_then(|v| v.strip_prefix('=')))
+        .unwrap_or_else(|| panic!("no {key} in {line}"))
+}
+
+#[test]
+fn current_mode_pushes_and_hold_takes_position_back() {
+    both(|d| {
+        assert!(
+            d.ask("current 0.05").starts_with("err 8 "),
+            "while disabled"
+        );
+        assert_eq!(d.ask("enable"), "ok");
+        // Above the current limit: refused, nothing changes.
+        assert!(d.ask("current 0.6").starts_with("err 8 "));
+        assert_eq!(word(&d.ask("status"), "drive"), "position");
+        let p0 = field(&d.ask("status"), "pos");
+        // 15 mA: 99 uN·m, below both the 220 uN·m breakaway and the 125 uN·m of Coulomb
+        // friction: the axis creeps in pre-sliding (about 100 urad on the virgin curve) and
+        // cannot slide away.
+        assert_eq!(d.ask("current 0.015"), "ok");
+        d.wait(0.1);
+        let st = d.ask("status");
+        assert_eq!(word(&st, "drive"), "current", "{st}");
+        assert!((field(&st, "current") - 0.015).abs() < 0.003, "{st}");
+        let moved = field(&st, "pos") - p0;
+        assert!(moved > 2e-5 && moved < 2e-3, "{moved} rad: {st}");
+        // hold: position control where the axis is, no fault.
+        assert_eq!(d.ask("hold"), "ok");
+        d.wait(0.1);
+        let st = d.ask("status");
+        assert_eq!(word(&st, "drive"), "position", "{st}");
+        assert_eq!(field(&st, "faults"), 0.0, "{st}");
+        assert!(field(&st, "error_counts").abs() < 20.0, "{st}");
+    });
+}
+
+#[test]
+fn velocity_mode_runs_and_hold_stops_it() {
+    both(|d| {
+        assert_eq!(d.ask("enable"), "ok");
+        assert!(d.ask("velocity 25").starts_with("err 8 "), "too fast");
+        let p0 = field(&d.ask("status"), "pos");
+        assert_eq!(d.ask("velocity 0.2"), "ok");
+        d.wait(0.3);
+        let st = d.ask("status");
+        assert_eq!(word(&st, "drive"), "velocity", "{st}");
+        assert_eq!(field(&st, "moving"), 1.0, "{st}");
+        // 0.2 rad/s for 0.3 s less the 4 ms ramp: about 0.06 rad, tracked within counts.
+        let moved = field(&st, "pos") - p0;
+        assert!(moved > 0.04 && moved < 0.08, "{moved}");
+        assert!(field(&st, "error_counts").abs() < 50.0, "{st}");
+        assert_eq!(d.ask("hold"), "ok");
+        d.wait(0.2);
+        let st = d.ask("status");
+        assert_eq!(word(&st, "drive"), "position", "{st}");
+        assert_eq!(field(&st, "moving"), 0.0, "{st}");
+        assert_eq!(field(&st, "faults"), 0.0, "{st}");
+        // Stopped: no further motion.
+        let p1 = field(&st, "pos");
+        d.wait(0.1);
+        assert!((field(&d.ask("status"), "pos") - p1).abs() < 1e-4);
+    });
+}
+
+#[test]
+fn a_lost_link_ends_an_experiment_but_not_a_hold() {
+    both(|d| {
+        assert_eq!(d.ask("enable"), "ok");
+        d.reconnect();
+        assert_eq!(field(&d.ask("status"), "enabled"), 1.0, "holding goes on");
+        assert_eq!(d.ask("velocity 0.1"), "ok");
+        d.wait(0.05);
+        d.reconnect();
+        d.wait(0.05);
+        let st = d.ask("status");
+        assert_eq!(field(&st, "enabled"), 0.0, "{st}");
+        assert_eq!(word(&st, "drive"), "position", "{st}");
+    });
 }

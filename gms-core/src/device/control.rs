@@ -4,7 +4,7 @@ use crate::controller::PositionOutput;
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
 use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
-use super::{Applied, Board, Ctrl, Requests, Sample, Status};
+use super::{Applied, Board, Ctrl, Drive, Requests, Sample, Status};
 
 /// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
 /// [`Board::sense_oversample`] conversions).
@@ -105,6 +105,8 @@ pub struct ControlLoop {
     stream_count: u32,
     /// PWM periods left of the bridge's wake-up after `enable` (brake, no control).
     wake_left: u32,
+    /// Current mode: the current held \[A\] (position loop off).
+    current_mode: Option<f32>,
 }
 
 impl ControlLoop {
@@ -142,6 +144,7 @@ impl ControlLoop {
             stream_every: 0,
             stream_count: 0,
             wake_left: 0,
+            current_mode: None,
         }
     }
 
@@ -173,7 +176,23 @@ impl ControlLoop {
     fn switch_off(&mut self) {
         self.enabled = false;
         self.motion.stop();
+        self.current_mode = None;
         self.duty = 0.0;
+    }
+
+    /// Position control holding where the axis is, from rest (entering or leaving current
+    /// mode, `enable`).
+    fn hold_here(&mut self) {
+        self.ctrl.reset();
+        self.current_mode = None;
+        let here = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
+        self.motion.hold_at(here);
+        self.r = RefSample {
+            pos: here,
+            vel: 0.0,
+            acc: 0.0,
+        };
+        self.last_pos = self.enc.count();
     }
 
     /// The status as of the last position step.
@@ -193,6 +212,11 @@ impl ControlLoop {
             stats: self.stats,
             sense_offset: self.sense.offset,
             adapt_scale: self.ctrl.adaptive_scale(),
+            drive: match self.current_mode {
+                Some(a) => Drive::Current(a),
+                None if self.motion.is_velocity() => Drive::Velocity,
+                None => Drive::Position,
+            },
         }
     }
 
@@ -235,28 +259,47 @@ impl ControlLoop {
             self.switch_off();
         }
         if req.enable && self.faults.is_empty() && !self.enabled {
-            self.ctrl.reset();
-            let here = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
-            self.motion.hold_at(here);
-            self.r = RefSample {
-                pos: here,
-                vel: 0.0,
-                acc: 0.0,
-            };
-            self.last_pos = self.enc.count();
+            self.hold_here();
             self.enabled = true;
             let wake = self.board.bridge_wake_s * self.ctrl.params().cur_rate_hz;
             // Float to int casts saturate (NaN gives 0).
             self.wake_left = (wake + 0.999) as u32;
         }
+        if req.hold_here && self.enabled {
+            self.hold_here();
+        }
+        if let Some(amps) = req.current
+            && self.enabled
+        {
+            self.motion.stop();
+            self.current_mode = Some(amps);
+        }
         if let Some(m) = req.motion
             && self.enabled
         {
+            if self.current_mode.is_some() {
+                // The plan starts at the axis's position (the reference in current mode).
+                self.hold_here();
+            }
             let mut plan = m.plan;
             // The plan starts at the reference of step `from_step`; this step is `steps + 1`.
             let behind = self.steps.saturating_add(1).saturating_sub(m.from_step);
             plan.skip(behind as f32 * self.ctrl.dt_pos());
             self.motion.start(plan);
+        }
+        if let Some(v) = req.velocity
+            && self.enabled
+        {
+            if self.current_mode.is_some() {
+                self.hold_here();
+            }
+            let mut p = v.profile;
+            // Catch up with the steps since `from_step`, as a move does.
+            let behind = self.steps.saturating_add(1).saturating_sub(v.from_step);
+            for _ in 0..behind.min(1000) {
+                p.next(self.ctrl.dt_pos());
+            }
+            self.motion.start_velocity(p);
         }
         timing
     }
@@ -288,7 +331,18 @@ impl ControlLoop {
             let pos = self.enc.count();
             let delta = pos.saturating_sub(self.last_pos);
             self.last_pos = pos;
-            if self.enabled && self.wake_left == 0 {
+            if let (true, Some(amps)) = (self.enabled, self.current_mode) {
+                // Current mode: the reference follows the axis, no position control.
+                self.r = RefSample {
+                    pos: pos.saturating_mul(SUB_PER_COUNT as i64),
+                    vel: 0.0,
+                    acc: 0.0,
+                };
+                self.out = PositionOutput::default();
+                if self.wake_left == 0 {
+                    self.ctrl.hold_current(amps);
+                }
+            } else if self.enabled && self.wake_left == 0 {
                 self.r = self.motion.next(self.ctrl.dt_pos());
                 self.out = self.ctrl.position_step(pos, &self.r);
             } else if self.enabled {

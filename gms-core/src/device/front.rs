@@ -6,10 +6,11 @@ use core::fmt::{self, Write};
 use crate::drive::{self, Faults, RECORD_LEN};
 use crate::numtext::Num;
 use crate::protocol::{self, Device, Settings};
-use crate::reference::{Motion, SUB_PER_COUNT};
+use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
-    Applied, Board, Ctrl, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status,
+    Applied, Board, Ctrl, Drive, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample,
+    Status, VelocityRequest,
 };
 
 /// How the protocol side reaches the loop.
@@ -176,6 +177,11 @@ impl<L: Link, S: ParamStore> Front<L, S> {
     /// The client went away: its stream ends (a new client starts without one).
     pub fn disconnected(&mut self) {
         let _ = self.stream_off();
+        // An experiment (current or speed) ends with its link: the bridge goes off. A held
+        // position or a move goes on.
+        if self.status_now().drive != Drive::Position {
+            let _ = self.disable();
+        }
     }
 
     /// Posts requests and waits until the loop has taken them and published a status after
@@ -310,18 +316,69 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         st.faults.write_names(out)?;
         write!(
             out,
-            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={}",
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={}",
             Num(st.ff),
             Num(st.duty),
             Num(drive::cycles_to_us(st.stats.worst() as f32, clock)),
             Num(drive::cycles_to_us(st.stats.mean(), clock)),
             Num(st.sense_offset),
             st.stats.missed(),
+            st.drive.name(),
         )
     }
 
     fn clear(&mut self) -> Result<(), &'static str> {
         self.post(|r| r.clear = true)
+    }
+
+    fn current(&mut self, amps: f32) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if !st.enabled {
+            return Err("disabled (enable first)");
+        }
+        if !(amps.is_finite() && amps.abs() <= self.settings.i_max) {
+            return Err("beyond lim.i_max");
+        }
+        self.post(|r| r.current = Some(amps))
+    }
+
+    fn velocity(&mut self, vel: f32, sweep: Option<Sweep>) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if !st.enabled {
+            return Err("disabled (enable first)");
+        }
+        let rpc = self.settings.rad_per_count;
+        let profile = VelocityProfile::new(st.reference, vel, sweep, MOVE_AMAX, rpc)
+            .map_err(|_| "bad velocity (|VEL| + AMP <= 20 rad/s; frequencies and duration > 0)")?;
+        let req = VelocityRequest {
+            profile,
+            from_step: st.steps,
+        };
+        self.post(|r| r.velocity = Some(req))
+    }
+
+    fn hold(&mut self) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if !st.enabled {
+            return Err("disabled (enable first)");
+        }
+        match st.drive {
+            Drive::Current(_) => self.post(|r| r.hold_here = true),
+            Drive::Velocity => {
+                // Stop where the acceleration limit allows, continuing from the reference.
+                let rpc = self.settings.rad_per_count;
+                let v = st.reference.vel;
+                let here = (st.reference.pos as f64 / SUB_PER_COUNT as f64 * rpc as f64) as f32;
+                let target = here + v * v.abs() / (2.0 * MOVE_AMAX);
+                let plan = Motion::plan(st.reference, target, None, rpc).map_err(|_| "bad stop")?;
+                let req = MoveRequest {
+                    plan,
+                    from_step: st.steps,
+                };
+                self.post(|r| r.motion = Some(req))
+            }
+            Drive::Position => Ok(()),
+        }
     }
 
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str> {

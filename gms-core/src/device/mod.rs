@@ -26,7 +26,7 @@ pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
 use crate::controller::Controller;
 use crate::drive::{BoardLimits, Faults, Limits, StepStats};
 use crate::protocol::Settings;
-use crate::reference::{MovePlan, RefSample};
+use crate::reference::{MovePlan, RefSample, VelocityProfile};
 
 /// The controller type a device runs (6 GMS blocks, as the protocol's settings).
 pub type Ctrl = Controller<6>;
@@ -95,6 +95,15 @@ pub struct MoveRequest {
     pub from_step: u64,
 }
 
+/// A speed profile planned on the protocol side from the reference published at `from_step`.
+#[derive(Debug, Clone, Copy)]
+pub struct VelocityRequest {
+    /// The profile; its time 0 is the reference of position step `from_step`.
+    pub profile: VelocityProfile,
+    /// The position step whose reference the profile starts from.
+    pub from_step: u64,
+}
+
 /// What the protocol side asks of the loop; taken whole at the start of a position step.
 #[derive(Debug, Clone, Default)]
 pub struct Requests {
@@ -111,6 +120,12 @@ pub struct Requests {
     pub latch: Faults,
     /// Start a move (ignored while disabled).
     pub motion: Option<MoveRequest>,
+    /// Start a speed profile (ignored while disabled).
+    pub velocity: Option<VelocityRequest>,
+    /// Hold a current \[A\] with the position loop off (ignored while disabled).
+    pub current: Option<f32>,
+    /// Leave current mode: hold the position where the axis is.
+    pub hold_here: bool,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -126,6 +141,9 @@ impl Requests {
             || self.clear
             || !self.latch.is_empty()
             || self.motion.is_some()
+            || self.velocity.is_some()
+            || self.current.is_some()
+            || self.hold_here
             || self.stream_every.is_some()
             || self.reset_stats
     }
@@ -162,6 +180,33 @@ pub struct Status {
     pub sense_offset: f32,
     /// The adaptive scale on the friction feedforward (`ff.adapt.scale`) [-].
     pub adapt_scale: f32,
+    /// What the loop controls (`status` `drive=`).
+    pub drive: Drive,
+}
+
+/// What the control loop controls while the bridge is on.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub enum Drive {
+    /// The position: holding, or a `move`: the normal mode.
+    #[default]
+    Position,
+    /// The position loop tracking a speed profile (`velocity`): the sliding and
+    /// frictional-lag experiments.
+    Velocity,
+    /// A held current \[A\] with the position loop off (`current`): the pre-sliding
+    /// experiment's torque.
+    Current(f32),
+}
+
+impl Drive {
+    /// The name in `status` `drive=`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Drive::Position => "position",
+            Drive::Velocity => "velocity",
+            Drive::Current(_) => "current",
+        }
+    }
 }
 
 /// One telemetry sample (one position step).
@@ -226,6 +271,9 @@ impl Mailbox {
                 clear: false,
                 latch: Faults::NONE,
                 motion: None,
+                velocity: None,
+                current: None,
+                hold_here: false,
                 stream_every: None,
                 reset_stats: false,
             },
@@ -248,6 +296,7 @@ impl Mailbox {
                 stats: StepStats::new(),
                 sense_offset: 0.0,
                 adapt_scale: 1.0,
+                drive: Drive::Position,
             },
             taken_at: 0,
         }

@@ -56,6 +56,17 @@ pub enum Command<'a> {
         /// Speed limit [rad/s].
         vel: Option<f32>,
     },
+    /// `current AMPS`: hold a current \[A\] with the position loop off.
+    Current(f32),
+    /// `velocity VEL [AMP F0 F1 SECONDS]`: a constant speed [rad/s], with a sweep around it.
+    Velocity {
+        /// Mean speed [rad/s].
+        vel: f32,
+        /// The sweep, if given.
+        sweep: Option<crate::reference::Sweep>,
+    },
+    /// `hold`: back to position control.
+    Hold,
     /// `stream FIELDS RATE_HZ`: comma-separated field names, rate \[Hz\].
     Stream {
         /// Field names, comma-separated.
@@ -128,6 +139,33 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                 ),
             };
             Command::Move { pos, vel }
+        }
+        "hold" => Command::Hold,
+        "current" => Command::Current(
+            arg()
+                .and_then(parse_f32)
+                .ok_or(bad("usage: current AMPS"))?,
+        ),
+        "velocity" => {
+            let usage = "usage: velocity VEL [AMP F0 F1 SECONDS]";
+            let vel = arg().and_then(parse_f32).ok_or(bad(usage))?;
+            let sweep = match arg() {
+                None => None,
+                Some(a) => {
+                    let num = |w: Option<&str>| w.and_then(parse_f32).ok_or(bad(usage));
+                    let amp = num(Some(a))?;
+                    let f0 = num(arg())?;
+                    let f1 = num(arg())?;
+                    let seconds = num(arg())?;
+                    Some(crate::reference::Sweep {
+                        amp,
+                        f0,
+                        f1,
+                        seconds,
+                    })
+                }
+            };
+            Command::Velocity { vel, sweep }
         }
         "stream" => match arg() {
             Some("off") => Command::StreamOff,

@@ -26,6 +26,17 @@ pub trait Device {
     fn clear(&mut self) -> Result<(), &'static str>;
     /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str>;
+    /// Holds the current `amps` \[A\] with the position loop off.
+    fn current(&mut self, amps: f32) -> Result<(), &'static str>;
+    /// Runs at the speed `vel` [rad/s], with a `sweep` around it.
+    fn velocity(
+        &mut self,
+        vel: f32,
+        sweep: Option<crate::reference::Sweep>,
+    ) -> Result<(), &'static str>;
+    /// Back to position control: from a speed, stopping as the acceleration limit allows;
+    /// from current mode, holding where the axis is.
+    fn hold(&mut self) -> Result<(), &'static str>;
     /// Starts telemetry of `fields` at `rate_hz`.
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
     /// Stops telemetry.
@@ -41,7 +52,8 @@ pub trait Device {
 
 /// The `help` text.
 pub const HELP: &str = "help | list | get PATH | set PATH VALUE | save | load | defaults | \
-enable | disable | status | clear | move POS [VEL] | stream FIELDS RATE_HZ | stream off";
+enable | disable | status | clear | move POS [VEL] | current AMPS | \
+velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
     writeln!(out, "err {} {}", code as u8, reason)
@@ -113,6 +125,9 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         }
         Command::Clear => done(out, dev.clear()),
         Command::Move { pos, vel } => done(out, dev.move_to(pos, vel)),
+        Command::Current(amps) => done(out, dev.current(amps)),
+        Command::Velocity { vel, sweep } => done(out, dev.velocity(vel, sweep)),
+        Command::Hold => done(out, dev.hold()),
         Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
         Command::StreamOff => done(out, dev.stream_off()),
     }

@@ -13,6 +13,9 @@
 //! | `save`, `load`, `defaults` | `ok` or `err` |
 //! | `enable`, `disable`, `status`, `clear` | `ok …` or `err` |
 //! | `move POS [VEL]` | `ok` or `err` (rad, rad/s) |
+//! | `current AMPS` | `ok` or `err`: hold a current (A), the position loop off |
+//! | `velocity VEL [AMP F0 F1 SECONDS]` | `ok` or `err`: a constant speed (rad/s), or a sweep around it (rad/s, Hz, Hz, s) |
+//! | `hold` | `ok` or `err`: back to position control, stopping where the axis can |
 //! | `stream FIELDS RATE_HZ`, `stream off` | `ok` or `err` |
 //!
 //! - `reader`: [`LineReader`] (bytes to lines).
