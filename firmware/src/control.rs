@@ -77,9 +77,9 @@ impl Loop {
             current_codes: self.hw.current_codes(),
             since_last,
         };
-        let out = self
-            .core
-            .step(inp, |st| MAILBOX.lock(|m| m.borrow_mut().exchange(st)));
+        let out = self.core.step(inp, |st, chunk| {
+            MAILBOX.lock(|m| m.borrow_mut().exchange(st, chunk))
+        });
         if let Some((psc, arr)) = out.timing {
             self.hw.set_bridge(0, 0);
             self.hw.set_pwm_timing(psc, arr);

@@ -33,7 +33,7 @@ use embassy_usb::UsbDevice;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use gms_core::device::{self, ControlLoop, ParamStore as _};
 use gms_core::drive::Faults;
-use static_cell::StaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::control::Loop;
 
@@ -96,7 +96,12 @@ async fn main(spawner: Spawner) {
     let sense = zero.sense;
 
     let encoder = hw.encoder_raw();
-    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder);
+    // The capture buffer: a zeroed static (in .bss, never copied through the stack) that the
+    // loop owns from here on.
+    static CAPTURE: ConstStaticCell<[f32; board::CAPTURE_VALUES as usize]> =
+        ConstStaticCell::new([0.0; board::CAPTURE_VALUES as usize]);
+    let capture = CAPTURE.take();
+    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture);
     Loop::new(hw, core).hand_over();
     board::start_control();
     info!("control loop running");

@@ -27,7 +27,13 @@ fn board() -> Board {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     }
+}
+
+/// A capture buffer for a test's loop.
+fn buffer() -> &'static mut [f32] {
+    Box::leak(vec![0.0; 8192].into_boxed_slice())
 }
 
 /// A loop at rest at count 0, zero current.
@@ -35,7 +41,7 @@ fn rest() -> ControlLoop {
     let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, || 16 * 2048);
-    ControlLoop::new(b, a, zero.sense, zero.faults, 0)
+    ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer())
 }
 
 fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
@@ -45,7 +51,7 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
         current_codes: 16 * 2048,
         since_last,
     };
-    lp.step(inp, |_| req.take());
+    lp.step(inp, |_, _| req.take());
     lp.finish(1000);
 }
 
@@ -82,7 +88,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     b.bridge_wake_s = 1e-3;
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, || 16 * 2048);
-    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0);
+    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer());
     let period = 168_000_000 / 20_000;
     let mut req = Some(Requests {
         enable: true,
@@ -96,7 +102,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
             current_codes: 16 * 2048,
             since_last: period,
         };
-        let o = lp.step(inp, |_| req.take());
+        let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000);
         outs.push(o);
     }
@@ -115,4 +121,65 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     // Then the loop controls: the 5-count error gives a duty.
     assert!(outs[20..].iter().any(|o| o.duty != 0.0));
     assert_eq!(lp.faults(), Faults::NONE);
+}
+
+#[test]
+fn capture_field_lists() {
+    use gms_core::device::capture_fields;
+    assert_eq!(capture_fields("t,pos,current"), Ok(([0, 1, 5, 0], 3)));
+    assert_eq!(capture_fields("friction"), Ok(([6, 0, 0, 0], 1)));
+    assert_eq!(capture_fields("t,ref,error,ff"), Ok(([0, 2, 3, 4], 4)));
+    for bad in ["", "t,", ",t", "t,,pos", "speed", "t,pos,ref,error,ff", "T"] {
+        assert!(capture_fields(bad).is_err(), "{bad:?}");
+    }
+}
+
+#[test]
+fn a_capture_records_what_the_loop_saw() {
+    use gms_core::device::{CaptureRequest, CaptureSpec, CaptureState};
+    let period = 168_000_000 / 20_000;
+    let mut lp = rest();
+    // Every 2nd position step, pos and current, 10 samples, at once.
+    let spec = CaptureSpec {
+        fields: [1, 5, 0, 0],
+        nfields: 2,
+        every: 2,
+        samples: 10,
+        on_next: false,
+    };
+    step(
+        &mut lp,
+        period,
+        Some(Requests {
+            capture: Some(CaptureRequest::Arm(spec)),
+            ..Requests::default()
+        }),
+    );
+    for _ in 0..60 {
+        step(&mut lp, period, None);
+    }
+    let st = lp.status();
+    assert_eq!((st.capture, st.captured), (CaptureState::Done, 10));
+    // Read back through the mailbox's chunk: position 0 (at rest), current 0.
+    let mut chunk = None;
+    let mut req = Some(Requests {
+        capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
+        ..Requests::default()
+    });
+    for _ in 0..4 {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: 16 * 2048,
+            since_last: period,
+        };
+        lp.step(inp, |_, c| {
+            if let Some(c) = c {
+                chunk = Some(*c);
+            }
+            req.take()
+        });
+    }
+    let c = chunk.expect("a chunk");
+    assert_eq!((c.start, c.samples, c.nfields), (0, 10, 2));
+    assert!(c.values[..20].iter().all(|v| *v == 0.0));
 }

@@ -369,6 +369,7 @@ fn sense_zero_at_start() {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     };
     // Sums of two conversions alternating 2100+2101 and 2100+2100: the zero is 2100.25 codes.
     let mut i = 0u32;
@@ -557,6 +558,7 @@ fn rates_the_current_sense_cannot_sample_are_refused() {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     };
     // 20.67 us of window against 2 × 0.4 × period: 20 kHz (40 us) and 30 kHz (26.7 us) run,
     // 40 kHz (20 us) does not.

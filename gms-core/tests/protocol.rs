@@ -89,6 +89,35 @@ impl Device for Mock {
         self.experiments.push("hold".into());
         Ok(())
     }
+    fn capture_arm(
+        &mut self,
+        fields: &str,
+        every: u32,
+        samples: u32,
+        on_next: bool,
+    ) -> Result<(), &'static str> {
+        self.experiments
+            .push(format!("capture {fields} {every} {samples} {on_next}"));
+        Ok(())
+    }
+    fn capture_off(&mut self) -> Result<(), &'static str> {
+        self.experiments.push("capture off".into());
+        Ok(())
+    }
+    fn capture_status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
+        write!(out, "state=idle")
+    }
+    fn capture_read(
+        &mut self,
+        start: u32,
+        count: u32,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str> {
+        for i in start..start + count.min(2) {
+            writeln!(out, "{i},0").map_err(|_| "too long")?;
+        }
+        Ok(())
+    }
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str> {
         self.stream = Some((fields.to_string(), rate_hz));
         Ok(())
@@ -332,4 +361,35 @@ fn experiment_commands_parse() {
         assert!(ask(&mut d, bad).starts_with("err 2 "), "{bad}");
     }
     assert_eq!(d.experiments.len(), 4);
+}
+
+#[test]
+fn capture_commands_parse() {
+    let mut d = Mock::new();
+    assert_eq!(ask(&mut d, "capture"), "ok state=idle\n");
+    assert_eq!(ask(&mut d, "capture t,pos,current 2 500"), "ok\n");
+    assert_eq!(ask(&mut d, "capture pos 1 100 next"), "ok\n");
+    assert_eq!(ask(&mut d, "capture off"), "ok\n");
+    assert_eq!(ask(&mut d, "capture read 10 5"), "10,0\n11,0\nok\n");
+    assert_eq!(
+        d.experiments,
+        [
+            "capture t,pos,current 2 500 false",
+            "capture pos 1 100 true",
+            "capture off"
+        ]
+    );
+    for bad in [
+        "capture pos",
+        "capture pos 0 10",
+        "capture pos 1 0",
+        "capture pos 1 -5",
+        "capture pos 1 10 later",
+        "capture read 0",
+        "capture read 0 65",
+        "capture read x 1",
+    ] {
+        assert!(ask(&mut d, bad).starts_with("err 2 "), "{bad}");
+    }
+    assert_eq!(d.experiments.len(), 3);
 }

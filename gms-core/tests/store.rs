@@ -271,6 +271,7 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     };
     let defaults = default_settings();
     let (mut tried, mut found_old, mut found_new) = (0, 0, 0);

@@ -24,7 +24,7 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Requests, Sample,
+    self, Board, Chunk, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, Requests, Sample,
     SenseChain, Status,
 };
 use gms_core::drive::BoardLimits;
@@ -33,6 +33,9 @@ use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
 use crate::plant::Plant;
 use crate::scenario::Scenario;
+
+/// The virtual device's capture buffer (values), the board's.
+pub const CAPTURE_VALUES: u32 = 8192;
 
 /// Telemetry samples kept for the client (0.4 s at 10 kHz; older ones are dropped).
 pub const QUEUE: usize = 4000;
@@ -66,6 +69,7 @@ pub fn board(sc: &Scenario) -> Board {
         },
         has_truth: true,
         bridge_wake_s: 0.0,
+        capture_values: CAPTURE_VALUES,
     }
 }
 
@@ -110,7 +114,7 @@ impl Sim {
     /// host when `timed` (real time), else counted as 0 (simulated time).
     fn tick(
         &mut self,
-        mut exchange: impl FnMut(Status) -> Option<Requests>,
+        mut exchange: impl FnMut(Status, Option<&Chunk>) -> Option<Requests>,
         queue: &Mutex<VecDeque<Sample>>,
         timed: bool,
     ) {
@@ -182,7 +186,15 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let encoder = plant.encoder() as u32;
     Ok(PowerUp {
         sim: Sim {
-            core: ControlLoop::new(board, start.applied, zero.sense, faults, encoder),
+            core: ControlLoop::new(
+                board,
+                start.applied,
+                zero.sense,
+                faults,
+                encoder,
+                // One buffer per power-up of a virtual device (a board's is a static).
+                Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
+            ),
             plant,
             adc,
             substeps: sc.plant.substeps,
@@ -508,7 +520,7 @@ fn serve_inner(
             let due = start.elapsed().as_secs_f64() * speed;
             let mut n = 0;
             while sim.t + dt <= due && n < 200 {
-                sim.tick(|st| rt.mailbox().exchange(st), &rt.telemetry, true);
+                sim.tick(|st, c| rt.mailbox().exchange(st, c), &rt.telemetry, true);
                 n += 1;
             }
             if n == 200 {
@@ -602,7 +614,8 @@ impl Link for LocalLink {
 impl LocalLink {
     fn tick(&mut self) {
         let mb = &mut self.mailbox;
-        self.sim.tick(|st| mb.exchange(st), &self.queue, false);
+        self.sim
+            .tick(|st, c| mb.exchange(st, c), &self.queue, false);
     }
 }
 

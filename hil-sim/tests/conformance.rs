@@ -541,3 +541,72 @@ fn a_lost_link_ends_an_experiment_but_not_a_hold() {
         assert_eq!(word(&st, "drive"), "position", "{st}");
     });
 }
+
+#[test]
+fn capture_records_at_the_control_rate_and_reads_back() {
+    both(|d| {
+        assert_eq!(d.ask("enable"), "ok");
+        // 3 fields × 1000 samples, every position step (10 kHz), from the next request.
+        assert!(
+            d.ask("capture t,pos,current 1 3000").starts_with("err 8 "),
+            "too big"
+        );
+        assert!(
+            d.ask("capture t,speed 1 10").starts_with("err 8 "),
+            "unknown field"
+        );
+        assert_eq!(d.ask("capture t,pos,current 1 1000 next"), "ok");
+        assert!(d.ask("capture").starts_with("ok state=armed samples=0"));
+        d.wait(0.05);
+        assert!(
+            d.ask("capture").starts_with("ok state=armed"),
+            "waits for its trigger"
+        );
+        assert!(
+            d.ask("capture read 0 10").starts_with("err 8 "),
+            "nothing to read yet"
+        );
+        assert_eq!(d.ask("velocity 0.2"), "ok");
+        d.wait(0.2);
+        assert!(
+            d.ask("capture").starts_with("ok state=done samples=1000"),
+            "{}",
+            d.ask("capture")
+        );
+        let mut rows: Vec<Vec<f64>> = Vec::new();
+        let mut start = 0;
+        while start < 1000 {
+            let lines = d.ask_all(&format!("capture read {start} 64"));
+            assert_eq!(lines.last().map(String::as_str), Some("ok"));
+            let body: Vec<&String> = lines.iter().filter(|l| !l.starts_with('#')).collect();
+            let n = body.len() - 1;
+            assert_eq!(n, 64.min(1000 - start) as usize);
+            for l in &body[..n] {
+                rows.push(l.split(',').map(|v| v.parse().unwrap()).collect());
+            }
+            start += n as u32;
+        }
+        assert_eq!(rows.len(), 1000);
+        // Time: every position step (0.1 ms), from 0 at the trigger.
+        for (k, r) in rows.iter().enumerate() {
+            assert_eq!(r.len(), 3);
+            assert!((r[0] - k as f64 * 1e-4).abs() < 1e-7, "row {k}: {r:?}");
+        }
+        // Position from 0 at the trigger, following the 0.2 rad/s ramp: after the 4 ms ramp
+        // it advances 0.2 rad/s × 0.1 ms = 20 urad (5 counts) per sample on average.
+        assert!(rows[0][1].abs() < 4e-5, "{:?}", rows[0]);
+        let late = (rows[999][1] - rows[500][1]) / (499.0 * 1e-4);
+        assert!((late - 0.2).abs() < 0.02, "speed {late}");
+        // The current is the loop's, within the sense range.
+        assert!(rows.iter().all(|r| r[2].abs() < 0.5));
+        // Reading past the end returns what there is: 10 samples and `ok`.
+        let tail = d.ask_all("capture read 990 20");
+        assert_eq!(
+            tail.iter().filter(|l| !l.starts_with('#')).count(),
+            11,
+            "{tail:?}"
+        );
+        assert_eq!(d.ask("capture off"), "ok");
+        assert!(d.ask("capture").starts_with("ok state=idle"));
+    });
+}

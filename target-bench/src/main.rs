@@ -126,6 +126,7 @@ fn device_period(out: &mut hio::HostStream) {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     };
     let settings = device::default_settings();
     let Ok(a) = device::prepare(&settings, &board) else {
@@ -133,7 +134,10 @@ fn device_period(out: &mut hio::HostStream) {
     };
     let zero = device::calibrate_sense(&board, || 2 * 2048);
     let rpc = settings.rad_per_count;
-    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0);
+    static mut CAPTURE: [f32; 256] = [0.0; 256];
+    // SAFETY: the benchmark's only reference to the buffer, taken once.
+    let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
+    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture);
     let mut mb = Mailbox::new();
     // About 0.02 A: two conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
     let codes = 2 * (2048 + 84);
@@ -148,7 +152,7 @@ fn device_period(out: &mut hio::HostStream) {
             current_codes: codes,
             since_last: 0,
         },
-        |_| first.take(),
+        |_, _| first.take(),
     );
     let st = lp.status();
     let Ok(plan) = Motion::plan(st.reference, 0.5, Some(0.3), rpc) else {
@@ -169,7 +173,7 @@ fn device_period(out: &mut hio::HostStream) {
                 current_codes: codes,
                 since_last: 0,
             },
-            |_| mv.take(),
+            |_, _| mv.take(),
         );
     }
     let reference = core::cell::Cell::new(0i64);
@@ -183,9 +187,9 @@ fn device_period(out: &mut hio::HostStream) {
                         current_codes: black_box(codes),
                         since_last: black_box(8400),
                     },
-                    |st| {
+                    |st, c| {
                         reference.set(st.reference.pos);
-                        mb.exchange(st)
+                        mb.exchange(st, c)
                     },
                 );
                 black_box((o.compare, o.sample.map(|s| s.error)));

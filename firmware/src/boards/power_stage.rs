@@ -76,6 +76,10 @@ pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
 /// confirmed at bring-up: an `enable` that jolts means it is too short).
 pub const BRIDGE_WAKE_S: f32 = 1.0e-3;
 
+/// The capture buffer (values): 32 KiB of the F4's 128 KiB of RAM (the firmware's statics
+/// are about 20 KiB), e.g. 8192 samples of one field, 2048 of four.
+pub const CAPTURE_VALUES: u32 = 8192;
+
 /// Watchdog timeout \[us\], at the LSI's nominal 32 kHz (2.72 s at its 47 kHz maximum): above a
 /// 128 KiB sector erase at ×32 (2 s at most, during which nothing runs from flash; the store
 /// reloads the watchdog right before each, see `storage.rs`).
@@ -113,5 +117,6 @@ pub const fn board(clocks: &F4Clocks) -> Board {
         limits: limits(clocks),
         has_truth: false,
         bridge_wake_s: BRIDGE_WAKE_S,
+        capture_values: CAPTURE_VALUES,
     }
 }

@@ -4,7 +4,10 @@ use crate::controller::PositionOutput;
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
 use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
-use super::{Applied, Board, Ctrl, Drive, Requests, Sample, Status};
+use super::{
+    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, Requests, Sample, Status,
+    StepValues,
+};
 
 /// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
 /// [`Board::sense_oversample`] conversions).
@@ -78,8 +81,11 @@ pub struct Outputs {
     pub sample: Option<Sample>,
 }
 
+/// The buffer a control loop records its captures into (the shell's: a static on the board).
+pub type CaptureBuf = &'static mut [f32];
+
 /// The device's control loop and everything it owns.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct ControlLoop {
     board: Board,
     ctrl: Ctrl,
@@ -107,17 +113,22 @@ pub struct ControlLoop {
     wake_left: u32,
     /// Current mode: the current held \[A\] (position loop off).
     current_mode: Option<f32>,
+    capture: Capture<CaptureBuf>,
+    /// A chunk read for the protocol side, handed over at the next exchange.
+    chunk: Option<Chunk>,
 }
 
 impl ControlLoop {
     /// A loop at rest (bridge off) running the parameter set `a` on `board`, with the current
-    /// sense `sense`, the faults found at start-up and the encoder counter's value now.
+    /// sense `sense`, the faults found at start-up, the encoder counter's value now, and the
+    /// buffer for captures (`Board::capture_values` long).
     pub fn new(
         board: Board,
         a: Applied,
         sense: CurrentSense,
         faults: Faults,
         encoder: u32,
+        capture: CaptureBuf,
     ) -> Self {
         let ratio = a.ctrl.params().ratio().max(1);
         ControlLoop {
@@ -145,6 +156,8 @@ impl ControlLoop {
             stream_count: 0,
             wake_left: 0,
             current_mode: None,
+            capture: Capture::new(capture),
+            chunk: None,
         }
     }
 
@@ -217,6 +230,8 @@ impl ControlLoop {
                 None if self.motion.is_velocity() => Drive::Velocity,
                 None => Drive::Position,
             },
+            capture: self.capture.state().0,
+            captured: self.capture.state().1,
         }
     }
 
@@ -265,6 +280,21 @@ impl ControlLoop {
             // Float to int casts saturate (NaN gives 0).
             self.wake_left = (wake + 0.999) as u32;
         }
+        match req.capture {
+            Some(CaptureRequest::Arm(spec)) => self.capture.arm(spec),
+            Some(CaptureRequest::Off) => self.capture.off(),
+            Some(CaptureRequest::Read { start, max }) => {
+                self.chunk = Some(self.capture.read(start, max));
+            }
+            None => {}
+        }
+        let experiment = req.hold_here
+            || req.current.is_some()
+            || req.motion.is_some()
+            || req.velocity.is_some();
+        if experiment && self.enabled {
+            self.capture.experiment_started();
+        }
         if req.hold_here && self.enabled {
             self.hold_here();
         }
@@ -309,7 +339,7 @@ impl ControlLoop {
     pub fn step(
         &mut self,
         inp: Inputs,
-        exchange: impl FnOnce(Status) -> Option<Requests>,
+        exchange: impl FnOnce(Status, Option<&Chunk>) -> Option<Requests>,
     ) -> Outputs {
         self.enc.update(inp.encoder);
         self.current = self
@@ -324,7 +354,8 @@ impl ControlLoop {
             new_faults.latch(Faults::OVERRUN);
         }
         if self.phase == 0 {
-            if let Some(req) = exchange(self.status()) {
+            let chunk = self.chunk.take();
+            if let Some(req) = exchange(self.status(), chunk.as_ref()) {
                 timing = self.take(req);
             }
             self.steps = self.steps.wrapping_add(1);
@@ -365,6 +396,18 @@ impl ControlLoop {
             };
             new_faults.latch(drive::check(&m, &self.limits, self.enabled));
             sample = self.telemetry(pos);
+            let p = self.ctrl.params();
+            self.capture.step(&StepValues {
+                steps: self.steps,
+                dt: self.ctrl.dt_pos(),
+                pos,
+                reference: self.r.pos,
+                rad_per_count: p.rad_per_count,
+                error: self.out.error,
+                ff: self.out.ff_friction,
+                current: self.current,
+                friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
+            });
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
             // Over-current is checked at every current step.
             new_faults.latch(Faults::OVER_CURRENT);

@@ -9,8 +9,8 @@ use crate::protocol::{self, Device, Settings};
 use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
-    Applied, Board, Ctrl, Drive, FIELDS, MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample,
-    Status, VelocityRequest,
+    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, MAX_STREAM_HZ,
+    Mailbox, MoveRequest, Requests, Sample, Status, VelocityRequest, capture_fields,
 };
 
 /// How the protocol side reaches the loop.
@@ -329,6 +329,81 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
 
     fn clear(&mut self) -> Result<(), &'static str> {
         self.post(|r| r.clear = true)
+    }
+
+    fn capture_arm(
+        &mut self,
+        fields: &str,
+        every: u32,
+        samples: u32,
+        on_next: bool,
+    ) -> Result<(), &'static str> {
+        let (idx, n) = capture_fields(fields)?;
+        if u64::from(samples) * u64::from(n) > u64::from(self.board.capture_values) {
+            return Err("more than the capture buffer holds (samples × fields)");
+        }
+        let spec = CaptureSpec {
+            fields: idx,
+            nfields: n,
+            every,
+            samples,
+            on_next,
+        };
+        self.post(|r| r.capture = Some(CaptureRequest::Arm(spec)))
+    }
+
+    fn capture_off(&mut self) -> Result<(), &'static str> {
+        self.post(|r| r.capture = Some(CaptureRequest::Off))
+    }
+
+    fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        let st = self.status_now();
+        write!(
+            out,
+            "state={} samples={} capacity={}",
+            st.capture.name(),
+            st.captured,
+            self.board.capture_values
+        )
+    }
+
+    fn capture_read(
+        &mut self,
+        start: u32,
+        count: u32,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if st.capture != CaptureState::Done {
+            return Err("no capture to read (capture: state)");
+        }
+        let end = start.saturating_add(count).min(st.captured);
+        let mut at = start;
+        while at < end {
+            self.post(|r| {
+                r.capture = Some(CaptureRequest::Read {
+                    start: at,
+                    max: end - at,
+                })
+            })?;
+            let c = self.link.with_mailbox(|m| m.chunk);
+            if c.start != at || c.samples == 0 {
+                return Err("capture read failed");
+            }
+            let n = c.nfields as usize;
+            for s in 0..c.samples as usize {
+                let row = c.values.get(s * n..(s + 1) * n).unwrap_or(&[]);
+                for (k, v) in row.iter().enumerate() {
+                    if k > 0 {
+                        out.write_str(",").map_err(|_| "reply too long")?;
+                    }
+                    write!(out, "{}", Num(*v)).map_err(|_| "reply too long")?;
+                }
+                writeln!(out).map_err(|_| "reply too long")?;
+            }
+            at += c.samples;
+        }
+        Ok(())
     }
 
     fn current(&mut self, amps: f32) -> Result<(), &'static str> {

@@ -17,8 +17,14 @@
 //! through [`Inputs`], the [`Link`] (how the front reaches the mailbox and waits) and the
 //! [`ParamStore`] (where the parameter record lives); what a board is comes as a [`Board`].
 
+mod capture;
 mod control;
 mod front;
+
+pub use capture::{
+    CAPTURE_FIELDS, CAPTURE_NAMES, CHUNK_VALUES, Capture, CaptureSpec, CaptureState, Chunk,
+    StepValues, capture_field, capture_fields,
+};
 
 pub use control::{ControlLoop, Inputs, Outputs, SenseStart, ZERO_SAMPLES, calibrate_sense};
 pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
@@ -53,6 +59,8 @@ pub struct Board {
     /// it starts controlling, so that no command is lost while the driver wakes (which the
     /// integrators would make up for with a jolt). 0: drives at once.
     pub bridge_wake_s: f32,
+    /// The capture buffer's size (values) (the loop's `CaptureBuf`).
+    pub capture_values: u32,
 }
 
 /// A board's current-sense chain, as the start-up calibration needs it.
@@ -95,6 +103,22 @@ pub struct MoveRequest {
     pub from_step: u64,
 }
 
+/// What the protocol side asks of the capture.
+#[derive(Debug, Clone, Copy)]
+pub enum CaptureRequest {
+    /// Arm a capture (the data of the last one is dropped).
+    Arm(CaptureSpec),
+    /// Stop and drop.
+    Off,
+    /// Copy samples from `start` (at most `max`) into the mailbox's chunk.
+    Read {
+        /// First sample.
+        start: u32,
+        /// Samples at most.
+        max: u32,
+    },
+}
+
 /// A speed profile planned on the protocol side from the reference published at `from_step`.
 #[derive(Debug, Clone, Copy)]
 pub struct VelocityRequest {
@@ -126,6 +150,8 @@ pub struct Requests {
     pub current: Option<f32>,
     /// Leave current mode: hold the position where the axis is.
     pub hold_here: bool,
+    /// Arm, stop or read the capture.
+    pub capture: Option<CaptureRequest>,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -144,6 +170,7 @@ impl Requests {
             || self.velocity.is_some()
             || self.current.is_some()
             || self.hold_here
+            || self.capture.is_some()
             || self.stream_every.is_some()
             || self.reset_stats
     }
@@ -182,6 +209,10 @@ pub struct Status {
     pub adapt_scale: f32,
     /// What the loop controls (`status` `drive=`).
     pub drive: Drive,
+    /// The capture's state.
+    pub capture: CaptureState,
+    /// Samples captured.
+    pub captured: u32,
 }
 
 /// What the control loop controls while the bridge is on.
@@ -258,6 +289,8 @@ pub struct Mailbox {
     pub status: Status,
     /// The position step at which the loop last took requests.
     pub taken_at: u64,
+    /// The last chunk of captured samples read (`CaptureRequest::Read`).
+    pub chunk: Chunk,
 }
 
 impl Mailbox {
@@ -274,6 +307,7 @@ impl Mailbox {
                 velocity: None,
                 current: None,
                 hold_here: false,
+                capture: None,
                 stream_every: None,
                 reset_stats: false,
             },
@@ -297,14 +331,25 @@ impl Mailbox {
                 sense_offset: 0.0,
                 adapt_scale: 1.0,
                 drive: Drive::Position,
+                capture: CaptureState::Idle,
+                captured: 0,
             },
             taken_at: 0,
+            chunk: Chunk {
+                start: 0,
+                samples: 0,
+                nfields: 0,
+                values: [0.0; CHUNK_VALUES],
+            },
         }
     }
 
     /// The loop's side: publishes `status` and takes the pending requests, if any.
-    pub fn exchange(&mut self, status: Status) -> Option<Requests> {
+    pub fn exchange(&mut self, status: Status, chunk: Option<&Chunk>) -> Option<Requests> {
         self.status = status;
+        if let Some(c) = chunk {
+            self.chunk = *c;
+        }
         if self.requests.pending() {
             self.taken_at = status.steps;
             Some(core::mem::take(&mut self.requests))

@@ -1,5 +1,52 @@
 //! Request lines parsed into commands, and the protocol's error codes.
 
+/// The capture buffer's commands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CaptureCmd<'a> {
+    /// `capture`: its state.
+    Status,
+    /// `capture off`: stop and drop.
+    Off,
+    /// `capture FIELDS EVERY SAMPLES [next]`: record FIELDS (comma-separated) every EVERY
+    /// position steps, SAMPLES of them, from now or from the next experiment request.
+    Arm {
+        /// Field names, comma-separated.
+        fields: &'a str,
+        /// Position steps per sample.
+        every: u32,
+        /// Samples.
+        samples: u32,
+        /// Start at the next experiment request.
+        on_next: bool,
+    },
+    /// `capture read START COUNT`: samples START.. (COUNT at most [`MAX_READ`]), one line each.
+    Read {
+        /// First sample.
+        start: u32,
+        /// Samples.
+        count: u32,
+    },
+}
+
+/// A decimal `u32` (digits only), without core's parser (whose error path the no-panic link
+/// check cannot see through).
+fn parse_u32(s: &str) -> Option<u32> {
+    if s.is_empty() || s.len() > 10 {
+        return None;
+    }
+    let mut v: u64 = 0;
+    for b in s.bytes() {
+        if !b.is_ascii_digit() {
+            return None;
+        }
+        v = v * 10 + u64::from(b - b'0');
+    }
+    u32::try_from(v).ok()
+}
+
+/// The most samples one `capture read` returns (a reply stays under the firmware's 4 KiB).
+pub const MAX_READ: u32 = 64;
+
 /// Error codes of `err` replies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -67,6 +114,8 @@ pub enum Command<'a> {
     },
     /// `hold`: back to position control.
     Hold,
+    /// `capture …`.
+    Capture(CaptureCmd<'a>),
     /// `stream FIELDS RATE_HZ`: comma-separated field names, rate \[Hz\].
     Stream {
         /// Field names, comma-separated.
@@ -141,6 +190,40 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
             Command::Move { pos, vel }
         }
         "hold" => Command::Hold,
+        "capture" => {
+            let usage = "usage: capture | capture off | capture FIELDS EVERY SAMPLES [next] | capture read START COUNT";
+            let int = |w: Option<&str>| w.and_then(parse_u32).ok_or(bad(usage));
+            match arg() {
+                None => Command::Capture(CaptureCmd::Status),
+                Some("off") => Command::Capture(CaptureCmd::Off),
+                Some("read") => {
+                    let start = int(arg())?;
+                    let count = int(arg())?;
+                    if count == 0 || count > MAX_READ {
+                        return Err(bad("COUNT from 1 to 64"));
+                    }
+                    Command::Capture(CaptureCmd::Read { start, count })
+                }
+                Some(fields) => {
+                    let every = int(arg())?;
+                    let samples = int(arg())?;
+                    let on_next = match arg() {
+                        None => false,
+                        Some("next") => true,
+                        Some(_) => return Err(bad(usage)),
+                    };
+                    if every == 0 || samples == 0 {
+                        return Err(bad("EVERY and SAMPLES must be >= 1"));
+                    }
+                    Command::Capture(CaptureCmd::Arm {
+                        fields,
+                        every,
+                        samples,
+                        on_next,
+                    })
+                }
+            }
+        }
         "current" => Command::Current(
             arg()
                 .and_then(parse_f32)

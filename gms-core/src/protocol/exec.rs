@@ -37,6 +37,27 @@ pub trait Device {
     /// Back to position control: from a speed, stopping as the acceleration limit allows;
     /// from current mode, holding where the axis is.
     fn hold(&mut self) -> Result<(), &'static str>;
+    /// Arms a capture of `fields` (comma-separated names) every `every` position steps,
+    /// `samples` of them, from now or (`on_next`) from the next experiment request.
+    fn capture_arm(
+        &mut self,
+        fields: &str,
+        every: u32,
+        samples: u32,
+        on_next: bool,
+    ) -> Result<(), &'static str>;
+    /// Stops the capture and drops its data.
+    fn capture_off(&mut self) -> Result<(), &'static str>;
+    /// Writes the capture's state (without the leading `ok `) on one line.
+    fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result;
+    /// Writes samples `start`.. (`count` at most) of the capture, one line each, values
+    /// comma-separated in SI units.
+    fn capture_read(
+        &mut self,
+        start: u32,
+        count: u32,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str>;
     /// Starts telemetry of `fields` at `rate_hz`.
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
     /// Stops telemetry.
@@ -53,7 +74,8 @@ pub trait Device {
 /// The `help` text.
 pub const HELP: &str = "help | list | get PATH | set PATH VALUE | save | load | defaults | \
 enable | disable | status | clear | move POS [VEL] | current AMPS | \
-velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off";
+velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
+capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT]";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
     writeln!(out, "err {} {}", code as u8, reason)
@@ -128,6 +150,24 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::Current(amps) => done(out, dev.current(amps)),
         Command::Velocity { vel, sweep } => done(out, dev.velocity(vel, sweep)),
         Command::Hold => done(out, dev.hold()),
+        Command::Capture(c) => match c {
+            CaptureCmd::Status => {
+                out.write_str("ok ")?;
+                dev.capture_status(out)?;
+                writeln!(out)
+            }
+            CaptureCmd::Off => done(out, dev.capture_off()),
+            CaptureCmd::Arm {
+                fields,
+                every,
+                samples,
+                on_next,
+            } => done(out, dev.capture_arm(fields, every, samples, on_next)),
+            CaptureCmd::Read { start, count } => {
+                let r = dev.capture_read(start, count, out);
+                done(out, r)
+            }
+        },
         Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
         Command::StreamOff => done(out, dev.stream_off()),
     }

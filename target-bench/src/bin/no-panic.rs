@@ -54,7 +54,7 @@ impl Link for CheckLink {
             since_last: black_box(8400),
         };
         let mb = &mut self.mailbox;
-        let out = self.core.step(inp, |st| mb.exchange(st));
+        let out = self.core.step(inp, |st, c| mb.exchange(st, c));
         black_box((
             out.compare,
             out.duty,
@@ -154,6 +154,7 @@ fn main() -> ! {
         },
         has_truth: false,
         bridge_wake_s: 0.0,
+        capture_values: 8192,
     };
     let limits = drive::limits_for(&selftest::controller_params(), black_box(&board.limits));
     let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
@@ -168,7 +169,17 @@ fn main() -> ! {
         }
     };
     let zero = device::calibrate_sense(black_box(&board), || black_box(4096));
-    let core = ControlLoop::new(board, start.applied, zero.sense, zero.faults, black_box(0));
+    static mut CAPTURE: [f32; 256] = [0.0; 256];
+    // SAFETY: the check's only reference to the buffer, taken once.
+    let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
+    let core = ControlLoop::new(
+        board,
+        start.applied,
+        zero.sense,
+        zero.faults,
+        black_box(0),
+        capture,
+    );
     let link = CheckLink {
         mailbox: Mailbox::new(),
         core,
