@@ -144,6 +144,80 @@ impl Link {
     }
 }
 
+/// A capture's state as `capture` reports it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CaptureStatus {
+    /// `idle`, `armed`, `recording` or `done`.
+    pub state: String,
+    /// Samples recorded.
+    pub samples: u32,
+    /// The buffer's size (values).
+    pub capacity: u32,
+}
+
+impl Link {
+    /// The capture's state.
+    pub fn capture_status(&mut self) -> Result<CaptureStatus, LinkError> {
+        let (_, text) = self.request("capture")?;
+        let get = |k: &str| {
+            text.split_whitespace()
+                .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
+                .map(String::from)
+        };
+        let num = |k: &str| get(k).and_then(|v| v.parse().ok());
+        match (get("state"), num("samples"), num("capacity")) {
+            (Some(state), Some(samples), Some(capacity)) => Ok(CaptureStatus {
+                state,
+                samples,
+                capacity,
+            }),
+            _ => Err(LinkError::Io(format!("unexpected capture reply: {text}"))),
+        }
+    }
+
+    /// Waits until the capture is `done` (polling every 20 ms, at most `max`).
+    pub fn capture_wait(&mut self, max: Duration) -> Result<CaptureStatus, LinkError> {
+        let deadline = Instant::now() + max;
+        loop {
+            let st = self.capture_status()?;
+            if st.state == "done" {
+                return Ok(st);
+            }
+            if Instant::now() >= deadline {
+                return Err(LinkError::Timeout(max));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Every sample of a finished capture, as rows of its fields (SI), read in chunks of
+    /// [`gms_core::protocol::MAX_READ`].
+    pub fn capture_read_all(&mut self) -> Result<Vec<Vec<f64>>, LinkError> {
+        let st = self.capture_status()?;
+        if st.state != "done" {
+            return Err(LinkError::Io(format!(
+                "no finished capture (state {})",
+                st.state
+            )));
+        }
+        let mut rows = Vec::with_capacity(st.samples as usize);
+        let chunk = gms_core::protocol::MAX_READ;
+        let mut start = 0;
+        while start < st.samples {
+            let (lines, _) = self.request(&format!("capture read {start} {chunk}"))?;
+            if lines.is_empty() {
+                return Err(LinkError::Io(format!("capture read {start}: no samples")));
+            }
+            for l in &lines {
+                let row: Result<Vec<f64>, _> = l.split(',').map(str::parse).collect();
+                rows.push(row.map_err(|_| LinkError::Io(format!("bad capture line: {l}")))?);
+            }
+            start += lines.len() as u32;
+        }
+        Ok(rows)
+    }
+}
+
 /// Parses a telemetry line `name=value name=value …`.
 pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
     line.split_whitespace()

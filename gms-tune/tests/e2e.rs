@@ -23,9 +23,15 @@ struct Server {
 impl Server {
     /// `kind` is `tcp` or `pty`.
     fn start(kind: &str, store: &Path) -> Server {
+        Server::start_at(kind, store, 1.0)
+    }
+
+    /// The same, the simulated axis running `speed` times faster than the wall clock.
+    fn start_at(kind: &str, store: &Path, speed: f64) -> Server {
         let mut child = Command::new(std::env::current_exe().unwrap())
             .args(["--serve-child", kind])
             .arg(store)
+            .arg(speed.to_string())
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -51,7 +57,7 @@ impl Drop for Server {
 }
 
 /// The server side: `hil-sim serve` on the default scenario, on TCP 127.0.0.1:0 or a PTY.
-fn serve_child(kind: &str, store: PathBuf) {
+fn serve_child(kind: &str, store: PathBuf, speed: f64) {
     use hil_sim::device::{Endpoint, serve};
     let endpoint = match kind {
         "tcp" => Endpoint::Tcp(std::net::TcpListener::bind("127.0.0.1:0").unwrap()),
@@ -60,7 +66,7 @@ fn serve_child(kind: &str, store: PathBuf) {
         _ => panic!("unknown endpoint {kind}"),
     };
     let sc = hil_sim::scenario::Scenario::default();
-    let r = serve(sc, endpoint, Some(store), 1.0, |addr, _| {
+    let r = serve(sc, endpoint, Some(store), speed, |addr, _| {
         println!("listening on {addr}");
         let _ = std::io::stdout().flush();
     });
@@ -94,7 +100,7 @@ fn tune(srv: &Server, args: &[&str], cwd: &Path) -> (i32, String, String) {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("--serve-child") {
-        serve_child(&args[2], PathBuf::from(&args[3]));
+        serve_child(&args[2], PathBuf::from(&args[3]), args[4].parse().unwrap());
         return;
     }
     let tests: &[(&str, fn())] = &[
@@ -107,6 +113,10 @@ fn main() {
             record_and_step_test_write_their_files,
         ),
         ("send_and_watch", send_and_watch),
+        (
+            "the_library_captures_a_velocity_run",
+            the_library_captures_a_velocity_run,
+        ),
         (
             "clear_errors_for_no_device_and_silence",
             clear_errors_for_no_device_and_silence,
@@ -321,4 +331,31 @@ fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
     }
     let srv = start();
     assert_eq!(tune(&srv, &["get", "pos.kp"]), (0, "0.27\n".into()));
+}
+
+/// The bench client library (`gms_tune::Link`) arms a capture, starts a velocity run and
+/// reads every sample back, on a virtual device four times faster than real time.
+fn the_library_captures_a_velocity_run() {
+    use std::time::Duration;
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start_at("tcp", &dir.path().join("flash.img"), 4.0);
+    let mut link = gms_tune::Link::tcp(&srv.addr, Duration::from_secs(2)).unwrap();
+    link.request("enable").unwrap();
+    link.request("capture t,pos,current 1 2000 next").unwrap();
+    assert_eq!(link.capture_status().unwrap().state, "armed");
+    link.request("velocity 0.3").unwrap();
+    let st = link.capture_wait(Duration::from_secs(10)).unwrap();
+    assert_eq!((st.samples, st.capacity), (2000, 8192));
+    let rows = link.capture_read_all().unwrap();
+    assert_eq!(rows.len(), 2000);
+    for (k, r) in rows.iter().enumerate() {
+        assert_eq!(r.len(), 3);
+        assert!((r[0] - k as f64 * 1e-4).abs() < 1e-7, "row {k}: {r:?}");
+    }
+    // After the 6 ms ramp the axis follows 0.3 rad/s.
+    let speed = (rows[1999][1] - rows[1000][1]) / (999.0 * 1e-4);
+    assert!((speed - 0.3).abs() < 0.03, "speed {speed}");
+    link.request("hold").unwrap();
+    // A second read of the same capture gives the same data.
+    assert_eq!(link.capture_read_all().unwrap(), rows);
 }
