@@ -250,7 +250,7 @@ fn serve_faster_than_real_time() {
     let (w1, t1) = (Instant::now(), device_time(&mut c));
     let ratio = (t1 - t0) / (w1 - w0).as_secs_f64();
     // 5 times the wall clock; a loaded host may fall behind (never ahead, never skipping).
-    assert!(ratio > 2.0 && ratio < 5.5, "device/wall time ratio {ratio}");
+    assert!(ratio > 1.5 && ratio < 5.5, "device/wall time ratio {ratio}");
     // Nonsense speeds are refused before anything starts.
     let (code, _, err) = common::hil(
         &["serve", "--tcp", "127.0.0.1:0", "--speed", "0"],
