@@ -10,6 +10,7 @@
 
 use core::fmt;
 
+pub mod bench;
 pub mod identify;
 pub mod io;
 pub mod paramfile;
@@ -27,12 +28,15 @@ pub enum Error {
     Params(String),
     /// A file could not be read or written.
     Io(String),
+    /// A device did not do what an experiment asked (its `err` reply, a lost link, an
+    /// unexpected reply).
+    Device(String),
 }
 
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Error::Data(m) | Error::Params(m) | Error::Io(m) => f.write_str(m),
+            Error::Data(m) | Error::Params(m) | Error::Io(m) | Error::Device(m) => f.write_str(m),
         }
     }
 }

@@ -144,77 +144,18 @@ impl Link {
     }
 }
 
-/// A capture's state as `capture` reports it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct CaptureStatus {
-    /// `idle`, `armed`, `recording` or `done`.
-    pub state: String,
-    /// Samples recorded.
-    pub samples: u32,
-    /// The buffer's size (values).
-    pub capacity: u32,
-}
-
-impl Link {
-    /// The capture's state.
-    pub fn capture_status(&mut self) -> Result<CaptureStatus, LinkError> {
-        let (_, text) = self.request("capture")?;
-        let get = |k: &str| {
-            text.split_whitespace()
-                .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
-                .map(String::from)
-        };
-        let num = |k: &str| get(k).and_then(|v| v.parse().ok());
-        match (get("state"), num("samples"), num("capacity")) {
-            (Some(state), Some(samples), Some(capacity)) => Ok(CaptureStatus {
-                state,
-                samples,
-                capacity,
-            }),
-            _ => Err(LinkError::Io(format!("unexpected capture reply: {text}"))),
-        }
+/// The link as an abstract bench, for the experiments of `gms_ident::bench` (captures read
+/// back with `gms_ident::bench::capture_rows`, the sliding experiment, …). Waiting is in wall
+/// time, which is device time on a board and at least as much on a faster virtual device.
+impl gms_ident::bench::Bench for Link {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        Link::request(self, line).map_err(|e| gms_ident::Error::Device(e.to_string()))
     }
 
-    /// Waits until the capture is `done` (polling every 20 ms, at most `max`).
-    pub fn capture_wait(&mut self, max: Duration) -> Result<CaptureStatus, LinkError> {
-        let deadline = Instant::now() + max;
-        loop {
-            let st = self.capture_status()?;
-            if st.state == "done" {
-                return Ok(st);
-            }
-            if Instant::now() >= deadline {
-                return Err(LinkError::Timeout(max));
-            }
-            std::thread::sleep(Duration::from_millis(20));
+    fn wait(&mut self, seconds: f64) {
+        if seconds.is_finite() && seconds > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(seconds.min(60.0)));
         }
-    }
-
-    /// Every sample of a finished capture, as rows of its fields (SI), read in chunks of
-    /// [`gms_core::protocol::MAX_READ`].
-    pub fn capture_read_all(&mut self) -> Result<Vec<Vec<f64>>, LinkError> {
-        let st = self.capture_status()?;
-        if st.state != "done" {
-            return Err(LinkError::Io(format!(
-                "no finished capture (state {})",
-                st.state
-            )));
-        }
-        let mut rows = Vec::with_capacity(st.samples as usize);
-        let chunk = gms_core::protocol::MAX_READ;
-        let mut start = 0;
-        while start < st.samples {
-            let (lines, _) = self.request(&format!("capture read {start} {chunk}"))?;
-            if lines.is_empty() {
-                return Err(LinkError::Io(format!("capture read {start}: no samples")));
-            }
-            for l in &lines {
-                let row: Result<Vec<f64>, _> = l.split(',').map(str::parse).collect();
-                rows.push(row.map_err(|_| LinkError::Io(format!("bad capture line: {l}")))?);
-            }
-            start += lines.len() as u32;
-        }
-        Ok(rows)
     }
 }
 

@@ -333,20 +333,21 @@ fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
     assert_eq!(tune(&srv, &["get", "pos.kp"]), (0, "0.27\n".into()));
 }
 
-/// The bench client library (`gms_tune::Link`) arms a capture, starts a velocity run and
+/// The bench client (`gms_tune::Link` as a `gms_ident::bench::Bench`) arms a capture, starts a velocity run and
 /// reads every sample back, on a virtual device four times faster than real time.
 fn the_library_captures_a_velocity_run() {
     use std::time::Duration;
     let dir = tempfile::tempdir().unwrap();
     let srv = Server::start_at("tcp", &dir.path().join("flash.img"), 4.0);
+    use gms_ident::bench::{capture_rows, capture_status, capture_wait};
     let mut link = gms_tune::Link::tcp(&srv.addr, Duration::from_secs(2)).unwrap();
     link.request("enable").unwrap();
     link.request("capture t,pos,current 1 2000 next").unwrap();
-    assert_eq!(link.capture_status().unwrap().state, "armed");
+    assert_eq!(capture_status(&mut link).unwrap().state, "armed");
     link.request("velocity 0.3").unwrap();
-    let st = link.capture_wait(Duration::from_secs(10)).unwrap();
+    let st = capture_wait(&mut link, 0.02, 500).unwrap();
     assert_eq!((st.samples, st.capacity), (2000, 8192));
-    let rows = link.capture_read_all().unwrap();
+    let rows = capture_rows(&mut link).unwrap();
     assert_eq!(rows.len(), 2000);
     for (k, r) in rows.iter().enumerate() {
         assert_eq!(r.len(), 3);
@@ -357,5 +358,5 @@ fn the_library_captures_a_velocity_run() {
     assert!((speed - 0.3).abs() < 0.03, "speed {speed}");
     link.request("hold").unwrap();
     // A second read of the same capture gives the same data.
-    assert_eq!(link.capture_read_all().unwrap(), rows);
+    assert_eq!(capture_rows(&mut link).unwrap(), rows);
 }

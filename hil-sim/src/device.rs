@@ -699,3 +699,25 @@ impl LocalDevice {
         text.lines().map(String::from).collect()
     }
 }
+
+/// The device as an abstract bench (`gms_ident::bench`): experiments run on it in simulated
+/// time, through the same protocol as on a board.
+impl gms_ident::bench::Bench for LocalDevice {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        let reply = self.ask(line);
+        let mut lines: Vec<String> = reply.lines().map(String::from).collect();
+        match lines.pop() {
+            Some(l) if l == "ok" || l.starts_with("ok ") => {
+                Ok((lines, l.get(3..).unwrap_or("").to_string()))
+            }
+            Some(l) => Err(gms_ident::Error::Device(format!("device answered: {l}"))),
+            None => Err(gms_ident::Error::Device("no reply".into())),
+        }
+    }
+
+    fn wait(&mut self, seconds: f64) {
+        if seconds.is_finite() && seconds > 0.0 {
+            self.run(seconds);
+        }
+    }
+}
