@@ -95,6 +95,14 @@ pub fn capture_now(
     capture_rows(b)
 }
 
+/// A numeric parameter of the device (`get PATH`).
+pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
+    let (_, v) = b.request(&format!("get {path}"))?;
+    v.trim()
+        .parse()
+        .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
+}
+
 /// The sliding experiment's settings.
 #[derive(Debug, Clone)]
 pub struct SlidingPlan {
@@ -130,17 +138,8 @@ impl SlidingPlan {
 /// constant speed the whole of the motor torque) and the measured speed (the encoder over the
 /// window). Returns `(v, f)` pairs as `hil-sim experiment sliding` writes them, and ends holding.
 pub fn sliding(b: &mut impl Bench, plan: &SlidingPlan) -> Result<Vec<(f64, f64)>, Error> {
-    let (_, k_m) = b.request("get motor.k_m")?;
-    let k_m: f64 = k_m
-        .trim()
-        .parse()
-        .map_err(|_| Error::Device(format!("motor.k_m: {k_m}")))?;
-    let (_, rate) = b.request("get rate.pos_hz")?;
-    let rate: f64 = rate
-        .trim()
-        .parse()
-        .map_err(|_| Error::Device(format!("rate.pos_hz: {rate}")))?;
-    let dt = 1.0 / rate;
+    let k_m = get_param(b, "motor.k_m")?;
+    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
     b.request("enable")?;
     let mut out = Vec::new();
     for &v in &plan.speeds {
@@ -160,6 +159,86 @@ pub fn sliding(b: &mut impl Bench, plan: &SlidingPlan) -> Result<Vec<(f64, f64)>
             let i_mean = rows.iter().map(|r| r[2]).sum::<f64>() / rows.len() as f64;
             out.push((v_meas, k_m * i_mean));
         }
+    }
+    b.request("hold")?;
+    Ok(out)
+}
+
+/// The pre-sliding experiment's settings.
+#[derive(Debug, Clone)]
+pub struct PreslidingPlan {
+    /// The current step \\[A\\] (the torque step is this × k_M): small, so that no step
+    /// overshoots past breakaway.
+    pub step: f64,
+    /// The most steps before giving up \\[-\\].
+    pub max_steps: u32,
+    /// The wait after each step before measuring \\[s\\].
+    pub dwell: f64,
+    /// Samples averaged per step (position steps).
+    pub samples: u32,
+    /// Motion from the start that counts as breakaway: the experiment ends there \\[rad\\].
+    pub breakaway: f64,
+}
+
+impl PreslidingPlan {
+    /// Steps of `step` \\[A\\], 20 ms of dwell, 100 samples, up to `max_steps`, breakaway at
+    /// 20 mrad.
+    pub fn new(step: f64, max_steps: u32) -> PreslidingPlan {
+        PreslidingPlan {
+            step,
+            max_steps,
+            dwell: 0.02,
+            samples: 100,
+            breakaway: 0.008,
+        }
+    }
+}
+
+/// The mean position (absolute, from the capture's origin) \\[rad\\] and mean current \\[A\\] of a
+/// `samples`-step capture taken now.
+fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<(f64, f64), Error> {
+    let rows = capture_now(b, "pos,current", samples, dt)?;
+    let (_, text) = b.request("capture")?;
+    let origin: f64 = text
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("origin="))
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| Error::Device(format!("no capture origin in: {text}")))?;
+    let n = rows.len().max(1) as f64;
+    let x = rows.iter().map(|r| r[0]).sum::<f64>() / n;
+    let i = rows.iter().map(|r| r[1]).sum::<f64>() / n;
+    Ok((origin + x, i))
+}
+
+/// The pre-sliding experiment (paper §3, the torque staircase): from rest (a virgin friction
+/// state: right after power-up), the current held in current mode is raised by `plan.step`
+/// at a time; after each dwell, the mean position and torque (k_M × the measured current)
+/// are recorded, relative to the start, until the axis has moved `plan.breakaway` (it broke
+/// away) or `max_steps` were taken. Returns `(x, f)` pairs as `hil-sim experiment presliding`
+/// writes them, and ends holding where the axis is.
+pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64, f64)>, Error> {
+    let k_m = get_param(b, "motor.k_m")?;
+    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
+    b.request("enable")?;
+    b.request("current 0")?;
+    b.wait(plan.dwell);
+    // The start (no torque): the origin of the displacements, not a point of the curve.
+    let (x0, _) = settled(b, plan.samples, dt)?;
+    let mut out = Vec::new();
+    for k in 1..=plan.max_steps {
+        // Raised in ten small increments, not one: a torque step rings the axis on its
+        // pre-sliding stiffness, and the overshoot slips blocks that then hold less than the
+        // virgin curve (the paper loads quasi-statically).
+        for j in 1..=10 {
+            let amps = plan.step * ((k - 1) as f64 + j as f64 / 10.0);
+            b.request(&format!("current {amps}"))?;
+            b.wait(plan.dwell / 10.0);
+        }
+        let (x, i) = settled(b, plan.samples, dt)?;
+        if (x - x0).abs() > plan.breakaway {
+            break;
+        }
+        out.push((x - x0, k_m * i));
     }
     b.request("hold")?;
     Ok(out)

@@ -49,3 +49,67 @@ fn the_sliding_experiment_on_the_device_finds_the_hidden_stribeck_curve() {
         assert!(rel(fit.sigma, 10.5e-6) < 0.10, "sigma {}", fit.sigma);
     }
 }
+
+/// The virgin curve of blocks `(k, alpha)` for a breakaway `fs`: Σ min(k x, alpha fs).
+fn virgin(blocks: &[(f64, f64)], fs: f64, x: f64) -> f64 {
+    blocks.iter().map(|(k, a)| (k * x).min(a * fs)).sum()
+}
+
+#[test]
+#[ignore = "work in progress (issue 17): the identified virgin curve is 2.27 % of Fs from the \
+            hidden one against the 2 % aimed at; the data themselves are 1.34 % off"]
+fn the_presliding_staircase_on_the_device_finds_the_hidden_virgin_curve() {
+    use gms_ident::bench::{PreslidingPlan, presliding};
+    use gms_ident::identify::fit_virgin;
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    // Steps of Fs / 100 of torque (0.33 mA at k_M = 6.6 mN·m/A), from the virgin state.
+    let plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
+    let data = presliding(&mut dev, &plan).unwrap();
+    // It broke away before 150 steps (near Fs: about 100).
+    assert!(data.len() > 80 && data.len() < 150, "{} steps", data.len());
+    let (x, f): (Vec<f64>, Vec<f64>) = data.iter().copied().unzip();
+    let fit = fit_virgin(&x, &f, 6).unwrap();
+    // Table 1 (docs/design.md#reading-table-1).
+    let fs = 220e-6;
+    let truth = [
+        (1.159, 0.575),
+        (64.417e-3, 0.160),
+        (13.066e-3, 0.059),
+        (8.027e-3, 0.12),
+        (2.043e-3, 0.051),
+        (0.961e-3, 0.034),
+    ];
+    let found: Vec<(f64, f64)> = fit.blocks.iter().map(|b| (b.k, b.alpha)).collect();
+    let data_rms = (data
+        .iter()
+        .map(|(x, f)| (f - virgin(&truth, fs, *x)).powi(2))
+        .sum::<f64>()
+        / data.len() as f64)
+        .sqrt();
+    eprintln!("data vs truth rms {:.3} % of Fs", data_rms / fs * 100.0);
+    // The identified virgin curve against the hidden one over the measured range: RMS within
+    // 2 % of Fs.
+    let n = 200;
+    let xmax = x.iter().cloned().fold(0.0, f64::max);
+    let rms = ((0..=n)
+        .map(|i| {
+            let xi = xmax * i as f64 / n as f64;
+            (virgin(&found, fit.fs, xi) - virgin(&truth, fs, xi)).powi(2)
+        })
+        .sum::<f64>()
+        / (n + 1) as f64)
+        .sqrt();
+    eprintln!(
+        "{} steps to {:.2} mrad; fs {:.4e}; rms {:.3} % of Fs; blocks {found:?}",
+        data.len(),
+        xmax * 1e3,
+        fit.fs,
+        rms / fs * 100.0
+    );
+    assert!(
+        rms < 0.02 * fs,
+        "virgin curve rms {} % of Fs",
+        rms / fs * 100.0
+    );
+}

@@ -181,6 +181,11 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         (self.state, self.count)
     }
 
+    /// The encoder position at the trigger \[counts\] (the origin of `pos` and `ref`).
+    pub fn origin(&self) -> i64 {
+        self.pos0
+    }
+
     /// Arms `spec` (checked by the caller against [`Capture::capacity`]; a spec that does not
     /// fit is cut to what fits); armed at once unless `on_next`.
     pub fn arm(&mut self, mut spec: CaptureSpec) {

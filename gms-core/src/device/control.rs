@@ -232,6 +232,7 @@ impl ControlLoop {
             },
             capture: self.capture.state().0,
             captured: self.capture.state().1,
+            capture_origin: self.capture.origin(),
         }
     }
 

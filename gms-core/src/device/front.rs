@@ -358,12 +358,14 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
 
     fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result {
         let st = self.status_now();
+        let origin = st.capture_origin as f64 * self.settings.rad_per_count as f64;
         write!(
             out,
-            "state={} samples={} capacity={}",
+            "state={} samples={} capacity={} origin={}",
             st.capture.name(),
             st.captured,
-            self.board.capture_values
+            self.board.capture_values,
+            Num(origin as f32)
         )
     }
 

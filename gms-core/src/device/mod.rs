@@ -213,6 +213,8 @@ pub struct Status {
     pub capture: CaptureState,
     /// Samples captured.
     pub captured: u32,
+    /// The encoder position at the capture's trigger \[counts\].
+    pub capture_origin: i64,
 }
 
 /// What the control loop controls while the bridge is on.
@@ -333,6 +335,7 @@ impl Mailbox {
                 drive: Drive::Position,
                 capture: CaptureState::Idle,
                 captured: 0,
+                capture_origin: 0,
             },
             taken_at: 0,
             chunk: Chunk {
