@@ -243,3 +243,51 @@ pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64,
     b.request("hold")?;
     Ok(out)
 }
+
+/// The frictional-lag run's settings: the speed swings `mean ± amp` [rad/s] at a frequency
+/// rising linearly from `f0` to `f1` \\[Hz\\] over `seconds`, recorded every `every` position
+/// steps.
+#[derive(Debug, Clone)]
+pub struct LagPlan {
+    /// Mean speed [rad/s] (in sliding: above the Stribeck velocity).
+    pub mean: f64,
+    /// Swing [rad/s] (below `mean`, so that the axis keeps sliding one way).
+    pub amp: f64,
+    /// Start frequency \\[Hz\\].
+    pub f0: f64,
+    /// End frequency \\[Hz\\].
+    pub f1: f64,
+    /// Duration \\[s\\].
+    pub seconds: f64,
+    /// Position steps per recorded sample.
+    pub every: u32,
+}
+
+/// The frictional-lag run (paper §3): a velocity run at `plan.mean`, then the sweep, recorded
+/// (position and the loop's friction estimate, k_M × current − J × reference acceleration)
+/// from its start. Returns `(t, x, f)` as `hil-sim experiment lag` writes them (t from the
+/// sweep's start \\[s\\], x from there \\[rad\\], f [N·m]), and ends holding.
+#[allow(clippy::type_complexity)]
+pub fn lag(b: &mut impl Bench, plan: &LagPlan) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), Error> {
+    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
+    let every = plan.every.max(1);
+    let samples = (plan.seconds / (dt * every as f64)).floor() as u32;
+    b.request("enable")?;
+    b.request(&format!("velocity {}", plan.mean))?;
+    b.wait(1.0);
+    b.request(&format!("capture pos,friction {every} {samples} next"))?;
+    b.request(&format!(
+        "velocity {} {} {} {} {}",
+        plan.mean, plan.amp, plan.f0, plan.f1, plan.seconds
+    ))?;
+    b.wait(plan.seconds);
+    capture_wait(b, 0.05, 400)?;
+    let rows = capture_rows(b)?;
+    b.request("hold")?;
+    let t = (0..rows.len())
+        .map(|k| k as f64 * every as f64 * dt)
+        .collect();
+    let x = rows.iter().map(|r| r[0]).collect();
+    let f = rows.iter().map(|r| r[1]).collect();
+    Ok((t, x, f))
+}

@@ -113,3 +113,35 @@ fn the_presliding_staircase_on_the_device_finds_the_hidden_virgin_curve() {
         rms / fs * 100.0
     );
 }
+
+#[test]
+fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
+    use gms_ident::bench::{LagPlan, lag};
+    use gms_ident::identify::fit_lag;
+    use gms_ident::paramfile::ParamFile;
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    // Around 1.5 Vs, ± 1.2 Vs (0.06 to 0.54 rad/s), 0.2 to 20 Hz over 4 s, at 1 kHz.
+    let plan = LagPlan {
+        mean: 0.3,
+        amp: 0.24,
+        f0: 0.2,
+        f1: 20.0,
+        seconds: 4.0,
+        every: 10,
+    };
+    let (t, x, f) = lag(&mut dev, &plan).unwrap();
+    assert_eq!(t.len(), 4000);
+    // The rest of the friction as the other fits would give it: Table 1 (the file the
+    // examples use), C to be found.
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/table1.toml");
+    let spec = ParamFile::load(std::path::Path::new(root))
+        .unwrap()
+        .friction;
+    let fit = fit_lag(&spec, &t, &x, &f).unwrap();
+    eprintln!(
+        "C {:.4e} (hidden 5e-3), rel err {:?}, rms {:.3e}",
+        fit.c, fit.rel_err, fit.rms
+    );
+    assert!((fit.c - 5e-3).abs() / 5e-3 < 0.15, "C {}", fit.c);
+}
