@@ -176,46 +176,68 @@ pub struct PreslidingPlan {
     pub dwell: f64,
     /// Samples averaged per step (position steps).
     pub samples: u32,
-    /// Motion from the start that counts as breakaway: the experiment ends there \\[rad\\].
-    pub breakaway: f64,
+    /// The stroke the run may use from its start \\[rad\\]: beyond it the axis has broken
+    /// away (or never holds) and the run ends.
+    pub window: f64,
+    /// The creep speed that counts as breakaway \\[rad/s\\]: an axis still moving this fast
+    /// after the dwell (over the averaged samples) slides; the run ends there.
+    pub creep: f64,
 }
 
 impl PreslidingPlan {
-    /// Steps of `step` \\[A\\], 20 ms of dwell, 100 samples, up to `max_steps`, breakaway at
-    /// 20 mrad.
+    /// Steps of `step` \\[A\\], 20 ms of dwell, 100 samples, up to `max_steps`, a stroke window
+    /// of 20 mrad, breakaway above 30 mrad/s of creep.
     pub fn new(step: f64, max_steps: u32) -> PreslidingPlan {
         PreslidingPlan {
             step,
             max_steps,
             dwell: 0.02,
             samples: 100,
-            breakaway: 0.008,
+            window: 0.02,
+            creep: 0.03,
         }
     }
 }
 
-/// The mean position (absolute, from the capture's origin) \\[rad\\] and mean current \\[A\\] of a
-/// `samples`-step capture taken now.
-fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<(f64, f64), Error> {
-    let rows = capture_now(b, "pos,current", samples, dt)?;
+/// What a settled dwell gives.
+struct Settled {
+    /// Mean position, absolute (from the capture's origin) \\[rad\\].
+    x: f64,
+    /// Mean current \\[A\\].
+    i: f64,
+    /// Speed over the samples (second half's mean position against the first's) \\[rad/s\\].
+    creep: f64,
+}
+
+/// The means of a `samples`-step capture taken now.
+fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<Settled, Error> {
+    let rows = capture_now(b, "pos,current", samples.max(2), dt)?;
     let (_, text) = b.request("capture")?;
     let origin: f64 = text
         .split_whitespace()
         .find_map(|w| w.strip_prefix("origin="))
         .and_then(|v| v.parse().ok())
         .ok_or_else(|| Error::Device(format!("no capture origin in: {text}")))?;
-    let n = rows.len().max(1) as f64;
-    let x = rows.iter().map(|r| r[0]).sum::<f64>() / n;
-    let i = rows.iter().map(|r| r[1]).sum::<f64>() / n;
-    Ok((origin + x, i))
+    let mean =
+        |r: &[Vec<f64>], c: usize| r.iter().map(|r| r[c]).sum::<f64>() / r.len().max(1) as f64;
+    let half = rows.len() / 2;
+    let (first, second) = rows.split_at(half);
+    let creep = (mean(second, 0) - mean(first, 0)) / (half.max(1) as f64 * dt);
+    Ok(Settled {
+        x: origin + mean(&rows, 0),
+        i: mean(&rows, 1),
+        creep,
+    })
 }
 
 /// The pre-sliding experiment (paper §3, the torque staircase): from rest (a virgin friction
 /// state: right after power-up), the current held in current mode is raised by `plan.step`
-/// at a time; after each dwell, the mean position and torque (k_M × the measured current)
-/// are recorded, relative to the start, until the axis has moved `plan.breakaway` (it broke
-/// away) or `max_steps` were taken. Returns `(x, f)` pairs as `hil-sim experiment presliding`
-/// writes them, and ends holding where the axis is.
+/// at a time (in ten sub-steps, quasi-statically); after each dwell, the mean position and
+/// torque (k_M × the measured current) are recorded, relative to the start, until the axis
+/// slides (it creeps faster than `plan.creep` or leaves `plan.window`: that step is not
+/// recorded) or `max_steps` were taken. Returns `(x, f)` pairs as `hil-sim experiment
+/// presliding` writes them (one direction: only the power-up state is virgin), and ends holding
+/// where the axis is.
 pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64, f64)>, Error> {
     let k_m = get_param(b, "motor.k_m")?;
     let dt = 1.0 / get_param(b, "rate.pos_hz")?;
@@ -223,7 +245,7 @@ pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64,
     b.request("current 0")?;
     b.wait(plan.dwell);
     // The start (no torque): the origin of the displacements, not a point of the curve.
-    let (x0, _) = settled(b, plan.samples, dt)?;
+    let x0 = settled(b, plan.samples, dt)?.x;
     let mut out = Vec::new();
     for k in 1..=plan.max_steps {
         // Raised in ten small increments, not one: a torque step rings the axis on its
@@ -234,11 +256,11 @@ pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64,
             b.request(&format!("current {amps}"))?;
             b.wait(plan.dwell / 10.0);
         }
-        let (x, i) = settled(b, plan.samples, dt)?;
-        if (x - x0).abs() > plan.breakaway {
+        let s = settled(b, plan.samples, dt)?;
+        if (s.x - x0).abs() > plan.window || s.creep.abs() > plan.creep {
             break;
         }
-        out.push((x - x0, k_m * i));
+        out.push((s.x - x0, k_m * s.i));
     }
     b.request("hold")?;
     Ok(out)
@@ -290,4 +312,33 @@ pub fn lag(b: &mut impl Bench, plan: &LagPlan) -> Result<(Vec<f64>, Vec<f64>, Ve
     let x = rows.iter().map(|r| r[0]).collect();
     let f = rows.iter().map(|r| r[1]).collect();
     Ok((t, x, f))
+}
+
+/// The pre-sliding CSV (`x,f,dir`, as `hil-sim experiment presliding` writes it) of a
+/// staircase in the positive direction.
+pub fn presliding_csv(data: &[(f64, f64)]) -> String {
+    let mut text = String::from("x,f,dir\n");
+    for (x, f) in data {
+        let dir = if *f < 0.0 { -1 } else { 1 };
+        text += &format!("{x},{f},{dir}\n");
+    }
+    text
+}
+
+/// The sliding CSV (`v,f`).
+pub fn sliding_csv(data: &[(f64, f64)]) -> String {
+    let mut text = String::from("v,f\n");
+    for (v, f) in data {
+        text += &format!("{v},{f}\n");
+    }
+    text
+}
+
+/// The frictional-lag CSV (`t,x,f`).
+pub fn lag_csv(t: &[f64], x: &[f64], f: &[f64]) -> String {
+    let mut text = String::from("t,x,f\n");
+    for ((t, x), f) in t.iter().zip(x).zip(f) {
+        text += &format!("{t},{x},{f}\n");
+    }
+    text
 }

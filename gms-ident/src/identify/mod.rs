@@ -106,6 +106,25 @@ pub fn identify_with(
     })
 }
 
+/// The virgin fit's blocks for a model whose static friction is `fs` (from the sliding fit):
+/// where the measured curve ends below `fs` (it broke away early), each measured block keeps
+/// its saturation force `alpha_i F_virgin` and the last block takes the rest, so the model
+/// reproduces the measured curve and reaches `fs` beyond it on the last block's stiffness;
+/// where it ends above, the weights are kept (the curve scaled to `fs`).
+pub fn blocks_for(vf: &VirginFit, fs: f64) -> Vec<crate::paramfile::BlockSpec> {
+    let mut blocks = vf.blocks.clone();
+    if fs > vf.fs && vf.fs > 0.0 && fs.is_finite() {
+        let r = vf.fs / fs;
+        for b in &mut blocks {
+            b.alpha *= r;
+        }
+        if let Some(last) = blocks.last_mut() {
+            last.alpha += 1.0 - r;
+        }
+    }
+    blocks
+}
+
 /// What `hil-sim identify` is given.
 #[derive(Debug, Clone, Copy)]
 pub struct Inputs<'a> {
@@ -169,8 +188,10 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
             } else {
                 (xp, fp)
             };
-            // The encoder reads the same count for several small loads: one point per
-            // count (mean load); rest (x = 0) is the origin the fit adds itself.
+            // The encoder reads the same count for several small loads, and on a bench a
+            // later load can read a count less (noise, creep): points are pooled until the
+            // displacements increase (pool-adjacent-violators on x: means of x and of the
+            // load). Rest (x = 0) is the origin the fit adds itself.
             let mut xm: Vec<f64> = Vec::new();
             let mut fm: Vec<f64> = Vec::new();
             let mut nm: Vec<f64> = Vec::new();
@@ -178,21 +199,20 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
                 if x <= 0.0 {
                     continue;
                 }
-                match xm.last() {
-                    Some(&last) if x == last => {
-                        let i = xm.len() - 1;
-                        fm[i] += f;
-                        nm[i] += 1.0;
-                    }
-                    _ => {
-                        xm.push(x);
-                        fm.push(f);
-                        nm.push(1.0);
-                    }
+                xm.push(x);
+                fm.push(f);
+                nm.push(1.0);
+                while xm.len() >= 2 && xm[xm.len() - 1] <= xm[xm.len() - 2] {
+                    let (x1, f1, n1) = (xm.pop(), fm.pop(), nm.pop());
+                    let (Some(x1), Some(f1), Some(n1)) = (x1, f1, n1) else {
+                        break;
+                    };
+                    let i = xm.len() - 1;
+                    let n = nm[i] + n1;
+                    xm[i] = (xm[i] * nm[i] + x1 * n1) / n;
+                    fm[i] = (fm[i] * nm[i] + f1 * n1) / n;
+                    nm[i] = n;
                 }
-            }
-            for (f, n) in fm.iter_mut().zip(&nm) {
-                *f /= n;
             }
             let (xa, fa) = (xm, fm);
             virgin_data = xa.iter().copied().zip(fa.iter().copied()).collect();
@@ -265,6 +285,12 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
                             100.0 * vf.fs / s.fs
                         ));
                     }
+                    if vf.fs < s.fs {
+                        report.push(format!(
+                            "the measured blocks keep their saturation forces; the last block takes the remaining {:.1} % of Fs with its own stiffness (its breakpoint moves out)",
+                            100.0 * (1.0 - vf.fs / s.fs)
+                        ));
+                    }
                     (s.fs, s.fc, s.vs, s.delta, s.sigma)
                 }
                 None => {
@@ -284,7 +310,7 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
                 delta: Some(delta),
                 sigma: Some(sigma),
                 c: Some(c),
-                blocks: Some(vf.blocks.clone()),
+                blocks: Some(blocks_for(vf, fs)),
                 ..FrictionSpec::default()
             }
         }
