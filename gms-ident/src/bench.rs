@@ -10,8 +10,9 @@ pub trait Bench {
     /// Sends one request line; returns the lines before its `ok` and the text after `ok`, or
     /// the device's `err` line as [`Error::Device`].
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error>;
-    /// Lets at least `seconds` of device time pass.
-    fn wait(&mut self, seconds: f64);
+    /// Lets at least `seconds` of device time pass; fails when the run must stop (the link
+    /// is lost, the user interrupted it).
+    fn wait(&mut self, seconds: f64) -> Result<(), Error>;
 }
 
 /// A capture's state as `capture` reports it.
@@ -52,7 +53,7 @@ pub fn capture_wait(b: &mut impl Bench, step: f64, tries: u32) -> Result<Capture
         if st.state == "done" {
             return Ok(st);
         }
-        b.wait(step);
+        b.wait(step)?;
     }
     Err(Error::Device("the capture did not finish".into()))
 }
@@ -90,7 +91,7 @@ pub fn capture_now(
     step_s: f64,
 ) -> Result<Vec<Vec<f64>>, Error> {
     b.request(&format!("capture {fields} 1 {samples}"))?;
-    b.wait(samples as f64 * step_s);
+    b.wait(samples as f64 * step_s)?;
     capture_wait(b, 0.01, 200)?;
     capture_rows(b)
 }
@@ -101,6 +102,89 @@ pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
     v.trim()
         .parse()
         .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
+}
+
+/// What the experiments need to know of the device, read with `get` (SI).
+#[derive(Debug, Clone, Copy)]
+pub struct DeviceInfo {
+    /// Torque constant k_M [N·m/A].
+    pub k_m: f64,
+    /// Position-loop rate \\[Hz\\].
+    pub pos_hz: f64,
+    /// Current limit \\[A\\].
+    pub i_max: f64,
+    /// The compensator's static friction, the expected breakaway torque [N·m].
+    pub fs: f64,
+    /// The compensator's Stribeck velocity [rad/s].
+    pub vs: f64,
+}
+
+impl DeviceInfo {
+    /// Reads the parameters from the device.
+    pub fn read(b: &mut impl Bench) -> Result<DeviceInfo, Error> {
+        let info = DeviceInfo {
+            k_m: get_param(b, "motor.k_m")?,
+            pos_hz: get_param(b, "rate.pos_hz")?,
+            i_max: get_param(b, "lim.i_max")?,
+            fs: get_param(b, "gms.fs")?,
+            vs: get_param(b, "gms.vs")?,
+        };
+        let ok = |v: f64| v.is_finite() && v > 0.0;
+        if !(ok(info.k_m) && ok(info.pos_hz) && ok(info.i_max) && ok(info.fs) && ok(info.vs)) {
+            return Err(Error::Device(format!(
+                "the device's parameters cannot plan an experiment: {info:?}"
+            )));
+        }
+        Ok(info)
+    }
+
+    /// One position step \\[s\\].
+    pub fn dt(&self) -> f64 {
+        1.0 / self.pos_hz
+    }
+}
+
+/// The device's latched faults, as an error naming them, if any.
+pub fn check_faults(b: &mut impl Bench) -> Result<(), Error> {
+    let (_, text) = b.request("status")?;
+    let get = |k: &str| {
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
+    };
+    match (get("faults"), get("fault_names")) {
+        (Some("0"), _) => Ok(()),
+        (Some(_), Some(names)) => Err(Error::Device(format!(
+            "the device latched a fault ({names}); the bridge is off"
+        ))),
+        _ => Err(Error::Device(format!("unexpected status reply: {text}"))),
+    }
+}
+
+/// Runs `f`; if it fails, switches the bridge off (best effort: the link may be gone) and
+/// passes the error on.
+pub fn guarded<B: Bench, T>(
+    b: &mut B,
+    f: impl FnOnce(&mut B) -> Result<T, Error>,
+) -> Result<T, Error> {
+    let r = f(b);
+    if r.is_err() {
+        let _ = b.request("disable");
+    }
+    r
+}
+
+/// A request of a bench primitive, with a clear error when the device does not know it (a
+/// firmware older than the primitives).
+fn primitive(b: &mut impl Bench, line: &str) -> Result<(), Error> {
+    match b.request(line) {
+        Ok(_) => Ok(()),
+        Err(Error::Device(e)) if e.contains("unknown command") => Err(Error::Device(format!(
+            "the device does not know `{}` ({e}): its firmware predates the bench experiments; \
+             update it",
+            line.split_whitespace().next().unwrap_or(line)
+        ))),
+        Err(e) => Err(e),
+    }
 }
 
 /// The sliding experiment's settings.
@@ -131,37 +215,82 @@ impl SlidingPlan {
             samples: 200,
         }
     }
+
+    /// The settling time at speed `v` \\[s\\].
+    fn settle(&self, v: f64) -> f64 {
+        (self.settle_stroke / v.abs()).max(self.settle_min)
+    }
+
+    /// The device time the run takes, about \\[s\\] (the ramps between speeds and the
+    /// exchanges not counted).
+    pub fn duration(&self, dt: f64) -> f64 {
+        2.0 * self
+            .speeds
+            .iter()
+            .map(|&v| self.settle(v) + self.samples as f64 * dt)
+            .sum::<f64>()
+    }
+
+    /// The farthest the axis goes from where a speed's run starts \\[rad\\] (each run goes one
+    /// way, the next the other way back).
+    pub fn stroke(&self, dt: f64) -> f64 {
+        self.speeds
+            .iter()
+            .map(|&v| v.abs() * (self.settle(v) + self.samples as f64 * dt))
+            .fold(0.0, f64::max)
+    }
 }
 
 /// The sliding experiment (paper §3): at each speed, in both directions, a velocity run; once
 /// settled, the mean friction torque (current × k_M, the loop's own torque constant, at
 /// constant speed the whole of the motor torque) and the measured speed (the encoder over the
-/// window). Returns `(v, f)` pairs as `hil-sim experiment sliding` writes them, and ends holding.
-pub fn sliding(b: &mut impl Bench, plan: &SlidingPlan) -> Result<Vec<(f64, f64)>, Error> {
-    let k_m = get_param(b, "motor.k_m")?;
-    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
-    b.request("enable")?;
-    let mut out = Vec::new();
-    for &v in &plan.speeds {
-        for dir in [1.0, -1.0] {
-            let v = dir * v;
-            b.request(&format!("velocity {v}"))?;
-            b.wait((plan.settle_stroke / v.abs()).max(plan.settle_min));
-            let rows = capture_now(b, "t,pos,current", plan.samples, dt)?;
-            let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
-                return Err(Error::Device("an empty capture".into()));
-            };
-            let span = last[0] - first[0];
-            if span <= 0.0 {
-                return Err(Error::Device("a capture without time".into()));
+/// window). Pushes `(v, f)` pairs as `hil-sim experiment sliding` writes them onto `out` as
+/// they are measured (so that a run cut short keeps them), and ends holding. Fails (the bridge
+/// off) when the axis does not follow the speed (measured below half of it, or the other way)
+/// or the device latches a fault.
+pub fn sliding(
+    b: &mut impl Bench,
+    plan: &SlidingPlan,
+    out: &mut Vec<(f64, f64)>,
+) -> Result<(), Error> {
+    guarded(b, |b| {
+        let dev = DeviceInfo::read(b)?;
+        let dt = dev.dt();
+        b.request("enable")?;
+        for &v in &plan.speeds {
+            for dir in [1.0, -1.0] {
+                let v = dir * v;
+                primitive(b, &format!("velocity {v}"))?;
+                b.wait(plan.settle(v))?;
+                let rows = capture_now(b, "t,pos,current", plan.samples, dt)?;
+                check_faults(b)?;
+                let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+                    return Err(Error::Device("an empty capture".into()));
+                };
+                let span = last[0] - first[0];
+                if span <= 0.0 {
+                    return Err(Error::Device("a capture without time".into()));
+                }
+                let v_meas = (last[1] - first[1]) / span;
+                if v_meas * v < 0.0 {
+                    return Err(Error::Device(format!(
+                        "commanded {v} rad/s, the encoder counts {v_meas:.4} rad/s: it counts \
+                         against the motor (reverse it; see commissioning)"
+                    )));
+                }
+                if v_meas.abs() < 0.5 * v.abs() {
+                    return Err(Error::Device(format!(
+                        "commanded {v} rad/s, the axis moves at {v_meas:.4} rad/s: it does not \
+                         follow (blocked, the motor not connected, or the current limit too low)"
+                    )));
+                }
+                let i_mean = rows.iter().map(|r| r[2]).sum::<f64>() / rows.len() as f64;
+                out.push((v_meas, dev.k_m * i_mean));
             }
-            let v_meas = (last[1] - first[1]) / span;
-            let i_mean = rows.iter().map(|r| r[2]).sum::<f64>() / rows.len() as f64;
-            out.push((v_meas, k_m * i_mean));
         }
-    }
-    b.request("hold")?;
-    Ok(out)
+        b.request("hold")?;
+        Ok(())
+    })
 }
 
 /// The pre-sliding experiment's settings.
@@ -170,7 +299,8 @@ pub struct PreslidingPlan {
     /// The current step \\[A\\] (the torque step is this × k_M): small, so that no step
     /// overshoots past breakaway.
     pub step: f64,
-    /// The most steps before giving up \\[-\\].
+    /// The most steps before giving up \\[-\\]: the axis that has not broken away by then does
+    /// not move (blocked, or the motor not connected).
     pub max_steps: u32,
     /// The wait after each step before measuring \\[s\\].
     pub dwell: f64,
@@ -196,6 +326,11 @@ impl PreslidingPlan {
             window: 0.02,
             creep: 0.03,
         }
+    }
+
+    /// The device time of `steps` steps, about \\[s\\].
+    pub fn duration(&self, steps: u32, dt: f64) -> f64 {
+        steps as f64 * (self.dwell + self.samples as f64 * dt)
     }
 }
 
@@ -235,35 +370,76 @@ fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<Settled, Error> 
 /// at a time (in ten sub-steps, quasi-statically); after each dwell, the mean position and
 /// torque (k_M × the measured current) are recorded, relative to the start, until the axis
 /// slides (it creeps faster than `plan.creep` or leaves `plan.window`: that step is not
-/// recorded) or `max_steps` were taken. Returns `(x, f)` pairs as `hil-sim experiment
-/// presliding` writes them (one direction: only the power-up state is virgin), and ends holding
-/// where the axis is.
-pub fn presliding(b: &mut impl Bench, plan: &PreslidingPlan) -> Result<Vec<(f64, f64)>, Error> {
-    let k_m = get_param(b, "motor.k_m")?;
-    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
-    b.request("enable")?;
-    b.request("current 0")?;
-    b.wait(plan.dwell);
-    // The start (no torque): the origin of the displacements, not a point of the curve.
-    let x0 = settled(b, plan.samples, dt)?.x;
-    let mut out = Vec::new();
-    for k in 1..=plan.max_steps {
-        // Raised in ten small increments, not one: a torque step rings the axis on its
-        // pre-sliding stiffness, and the overshoot slips blocks that then hold less than the
-        // virgin curve (the paper loads quasi-statically).
-        for j in 1..=10 {
-            let amps = plan.step * ((k - 1) as f64 + j as f64 / 10.0);
-            b.request(&format!("current {amps}"))?;
-            b.wait(plan.dwell / 10.0);
+/// recorded). Pushes `(x, f)` pairs as `hil-sim experiment presliding` writes them (one
+/// direction: only the power-up state is virgin) onto `out` as they come, and ends holding
+/// where the axis is. Fails (the bridge off) when the current does not flow (below half the
+/// command: the motor not connected), when the axis moves against the torque (the encoder
+/// reversed), when it has not broken away after `max_steps`, or on a fault.
+pub fn presliding(
+    b: &mut impl Bench,
+    plan: &PreslidingPlan,
+    out: &mut Vec<(f64, f64)>,
+) -> Result<(), Error> {
+    guarded(b, |b| {
+        let dev = DeviceInfo::read(b)?;
+        let dt = dev.dt();
+        b.request("enable")?;
+        primitive(b, "current 0")?;
+        b.wait(plan.dwell)?;
+        // The start (no torque): the origin of the displacements, not a point of the curve.
+        let x0 = settled(b, plan.samples, dt)?.x;
+        // A thousandth of the window (20 µrad by default, five counts of a 3.8 µrad
+        // encoder): beyond noise and quantisation.
+        let against = plan.window / 1000.0;
+        for k in 1..=plan.max_steps {
+            let amps = plan.step * k as f64;
+            if amps > dev.i_max {
+                return Err(Error::Device(format!(
+                    "the axis did not break away below the current limit ({} A, {:.3e} N·m): \
+                     blocked, or the motor not connected?",
+                    dev.i_max,
+                    dev.k_m * dev.i_max
+                )));
+            }
+            // Raised in ten small increments, not one: a torque step rings the axis on its
+            // pre-sliding stiffness, and the overshoot slips blocks that then hold less than
+            // the virgin curve (the paper loads quasi-statically).
+            for j in 1..=10 {
+                let amps = plan.step * ((k - 1) as f64 + j as f64 / 10.0);
+                b.request(&format!("current {amps}"))?;
+                b.wait(plan.dwell / 10.0)?;
+            }
+            let s = settled(b, plan.samples, dt)?;
+            check_faults(b)?;
+            let dx = s.x - x0;
+            if k >= 10 && s.i < 0.5 * amps {
+                return Err(Error::Device(format!(
+                    "commanded {amps:.4e} A, measured {:.4e} A: no current flows (the motor \
+                     not connected?)",
+                    s.i
+                )));
+            }
+            if dx < -against {
+                return Err(Error::Device(format!(
+                    "the axis moved {dx:.3e} rad under +{amps:.3e} A: the encoder counts \
+                     against the motor (reverse it; see commissioning)"
+                )));
+            }
+            if dx.abs() > plan.window || s.creep.abs() > plan.creep {
+                b.request("hold")?;
+                return Ok(());
+            }
+            out.push((dx, dev.k_m * s.i));
         }
-        let s = settled(b, plan.samples, dt)?;
-        if (s.x - x0).abs() > plan.window || s.creep.abs() > plan.creep {
-            break;
-        }
-        out.push((s.x - x0, k_m * s.i));
-    }
-    b.request("hold")?;
-    Ok(out)
+        Err(Error::Device(format!(
+            "the axis did not break away after {} steps ({:.3e} N·m, {:.1} × the expected Fs \
+             {:.3e} N·m): blocked, or the motor not connected?",
+            plan.max_steps,
+            dev.k_m * plan.step * plan.max_steps as f64,
+            dev.k_m * plan.step * plan.max_steps as f64 / dev.fs,
+            dev.fs
+        )))
+    })
 }
 
 /// The frictional-lag run's settings: the speed swings `mean ± amp` [rad/s] at a frequency
@@ -285,33 +461,61 @@ pub struct LagPlan {
     pub every: u32,
 }
 
+impl LagPlan {
+    /// The paper's run for a Stribeck velocity `vs` [rad/s]: around 1.5 Vs, ± 1.2 Vs, 0.2 to
+    /// 20 Hz over 4 s, recorded at 1 kHz for a position loop at `pos_hz` \\[Hz\\].
+    pub fn for_vs(vs: f64, pos_hz: f64) -> LagPlan {
+        LagPlan {
+            mean: 1.5 * vs,
+            amp: 1.2 * vs,
+            f0: 0.2,
+            f1: 20.0,
+            seconds: 4.0,
+            every: (pos_hz / 1000.0).round().max(1.0) as u32,
+        }
+    }
+
+    /// The device time the run takes, about \\[s\\] (1 s at the mean speed first).
+    pub fn duration(&self) -> f64 {
+        1.0 + self.seconds
+    }
+
+    /// The stroke it covers \\[rad\\] (one way).
+    pub fn stroke(&self) -> f64 {
+        self.mean * self.duration()
+    }
+}
+
 /// The frictional-lag run (paper §3): a velocity run at `plan.mean`, then the sweep, recorded
 /// (position and the loop's friction estimate, k_M × current − J × reference acceleration)
 /// from its start. Returns `(t, x, f)` as `hil-sim experiment lag` writes them (t from the
 /// sweep's start \\[s\\], x from there \\[rad\\], f [N·m]), and ends holding.
 #[allow(clippy::type_complexity)]
 pub fn lag(b: &mut impl Bench, plan: &LagPlan) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), Error> {
-    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
-    let every = plan.every.max(1);
-    let samples = (plan.seconds / (dt * every as f64)).floor() as u32;
-    b.request("enable")?;
-    b.request(&format!("velocity {}", plan.mean))?;
-    b.wait(1.0);
-    b.request(&format!("capture pos,friction {every} {samples} next"))?;
-    b.request(&format!(
-        "velocity {} {} {} {} {}",
-        plan.mean, plan.amp, plan.f0, plan.f1, plan.seconds
-    ))?;
-    b.wait(plan.seconds);
-    capture_wait(b, 0.05, 400)?;
-    let rows = capture_rows(b)?;
-    b.request("hold")?;
-    let t = (0..rows.len())
-        .map(|k| k as f64 * every as f64 * dt)
-        .collect();
-    let x = rows.iter().map(|r| r[0]).collect();
-    let f = rows.iter().map(|r| r[1]).collect();
-    Ok((t, x, f))
+    guarded(b, |b| {
+        let dt = DeviceInfo::read(b)?.dt();
+        let every = plan.every.max(1);
+        let samples = (plan.seconds / (dt * every as f64)).floor() as u32;
+        b.request("enable")?;
+        primitive(b, &format!("velocity {}", plan.mean))?;
+        b.wait(1.0)?;
+        b.request(&format!("capture pos,friction {every} {samples} next"))?;
+        b.request(&format!(
+            "velocity {} {} {} {} {}",
+            plan.mean, plan.amp, plan.f0, plan.f1, plan.seconds
+        ))?;
+        b.wait(plan.seconds)?;
+        capture_wait(b, 0.05, 400)?;
+        check_faults(b)?;
+        let rows = capture_rows(b)?;
+        b.request("hold")?;
+        let t = (0..rows.len())
+            .map(|k| k as f64 * every as f64 * dt)
+            .collect();
+        let x = rows.iter().map(|r| r[0]).collect();
+        let f = rows.iter().map(|r| r[1]).collect();
+        Ok((t, x, f))
+    })
 }
 
 /// The pre-sliding CSV (`x,f,dir`, as `hil-sim experiment presliding` writes it) of a

@@ -15,6 +15,9 @@ pub struct Link {
     timeout: Duration,
     /// Telemetry lines received while waiting for replies (without the `#`).
     pub telemetry: Vec<(Instant, String)>,
+    /// Device seconds per wall second, as last seen by [`Link::wait_device`] (1 on a board,
+    /// F on `hil-sim serve --speed F`).
+    pub speed: f64,
 }
 
 /// What went wrong talking to the device.
@@ -66,6 +69,7 @@ impl Link {
             pending: Vec::new(),
             timeout,
             telemetry: Vec::new(),
+            speed: 1.0,
         };
         // Whatever that provokes (an `err` for the half line) is not ours: discard it.
         let _ = link.listen(Duration::from_millis(30));
@@ -133,6 +137,41 @@ impl Link {
         }
     }
 
+    /// The device's clock (`status` key `t`) \[s\].
+    pub fn device_time(&mut self) -> Result<f64, LinkError> {
+        let (_, text) = self.request("status")?;
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix("t="))
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| LinkError::Io(format!("no device time in the status: {text}")))
+    }
+
+    /// Waits until `seconds` of device time have passed, reading the device's clock: on a
+    /// board that is wall time, on a faster virtual device less (its speed is learnt as it
+    /// goes, [`Link::speed`]). Sleeps at most 50 ms between looks.
+    pub fn wait_device(&mut self, seconds: f64) -> Result<(), LinkError> {
+        if !(seconds.is_finite() && seconds > 0.0) {
+            return Ok(());
+        }
+        let t0 = self.device_time()?;
+        let (mut wall, mut dev) = (Instant::now(), t0);
+        loop {
+            let left = seconds - (dev - t0);
+            if left <= 0.0 {
+                return Ok(());
+            }
+            let nap = (left / self.speed).clamp(0.0002, 0.05);
+            std::thread::sleep(Duration::from_secs_f64(nap));
+            let now = self.device_time()?;
+            let el = wall.elapsed().as_secs_f64();
+            if el > 0.0 && now > dev {
+                // Smoothed, and kept within what `hil-sim serve --speed` allows.
+                self.speed = (0.5 * self.speed + 0.5 * (now - dev) / el).clamp(0.01, 1000.0);
+            }
+            (wall, dev) = (Instant::now(), now);
+        }
+    }
+
     /// Collects telemetry for `d`.
     pub fn listen(&mut self, d: Duration) -> Result<(), LinkError> {
         let deadline = Instant::now() + d;
@@ -145,17 +184,16 @@ impl Link {
 }
 
 /// The link as an abstract bench, for the experiments of `gms_ident::bench` (captures read
-/// back with `gms_ident::bench::capture_rows`, the sliding experiment, …). Waiting is in wall
-/// time, which is device time on a board and at least as much on a faster virtual device.
+/// back with `gms_ident::bench::capture_rows`, the sliding experiment, …). Waiting is in
+/// device time ([`Link::wait_device`]).
 impl gms_ident::bench::Bench for Link {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
         Link::request(self, line).map_err(|e| gms_ident::Error::Device(e.to_string()))
     }
 
-    fn wait(&mut self, seconds: f64) {
-        if seconds.is_finite() && seconds > 0.0 {
-            std::thread::sleep(Duration::from_secs_f64(seconds.min(60.0)));
-        }
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+        self.wait_device(seconds)
+            .map_err(|e| gms_ident::Error::Device(e.to_string()))
     }
 }
 

@@ -715,9 +715,10 @@ impl gms_ident::bench::Bench for LocalDevice {
         }
     }
 
-    fn wait(&mut self, seconds: f64) {
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
         if seconds.is_finite() && seconds > 0.0 {
             self.run(seconds);
         }
+        Ok(())
     }
 }

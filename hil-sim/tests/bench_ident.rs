@@ -24,7 +24,8 @@ fn the_sliding_experiment_on_the_device_finds_the_hidden_stribeck_curve() {
     let mut dev = LocalDevice::new(&sc).unwrap();
     // 10 speeds from Vs/10 to 30 Vs (0.02 to 6 rad/s), each way.
     let plan = SlidingPlan::log_spaced(0.02, 6.0, 10);
-    let data = sliding(&mut dev, &plan).unwrap();
+    let mut data = Vec::new();
+    sliding(&mut dev, &plan, &mut data).unwrap();
     assert_eq!(data.len(), 20);
     // The motor's torque opposes the friction, so it has its speed's sign.
     assert!(
@@ -77,14 +78,21 @@ fn staircase(scenario: &str, with_sliding: bool) -> (f64, f64) {
     let mut dev = LocalDevice::new(&sc).unwrap();
     // Steps of Fs / 100 of torque (0.33 mA at k_M = 6.6 mN·m/A), from the virgin state.
     let plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
-    let pre = presliding(&mut dev, &plan).unwrap();
+    let mut pre = Vec::new();
+    presliding(&mut dev, &plan, &mut pre).unwrap();
     // It broke away before 150 steps (near Fs: about 100).
     assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());
     let dir = tempfile::tempdir().unwrap();
     let (pp, sp) = (dir.path().join("pre.csv"), dir.path().join("slide.csv"));
     std::fs::write(&pp, gms_ident::bench::presliding_csv(&pre)).unwrap();
     if with_sliding {
-        let slide = sliding(&mut dev, &SlidingPlan::log_spaced(0.02, 6.0, 10)).unwrap();
+        let mut slide = Vec::new();
+        sliding(
+            &mut dev,
+            &SlidingPlan::log_spaced(0.02, 6.0, 10),
+            &mut slide,
+        )
+        .unwrap();
         std::fs::write(&sp, gms_ident::bench::sliding_csv(&slide)).unwrap();
     }
     let id = identify_from(&Inputs {
