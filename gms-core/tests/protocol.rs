@@ -12,6 +12,7 @@ use proptest::prelude::*;
 struct Mock {
     s: Settings,
     saved: Option<Settings>,
+    staged: Option<Settings>,
     enabled: bool,
     moves: Vec<(f32, Option<f32>)>,
     stream: Option<(String, f32)>,
@@ -24,6 +25,7 @@ impl Mock {
         Mock {
             s: selftest::controller_params(),
             saved: None,
+            staged: None,
             enabled: false,
             moves: Vec::new(),
             stream: None,
@@ -35,6 +37,9 @@ impl Mock {
 impl Device for Mock {
     fn settings(&self) -> &Settings {
         &self.s
+    }
+    fn staged(&mut self) -> &mut Option<Settings> {
+        &mut self.staged
     }
     fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         self.s = new;
@@ -392,4 +397,42 @@ fn capture_commands_parse() {
         assert!(ask(&mut d, bad).starts_with("err 2 "), "{bad}");
     }
     assert_eq!(d.experiments.len(), 3);
+}
+
+/// Weights that must sum to 1 cannot be changed one `set` at a time; staged, they change
+/// together at `commit`, validated as a whole, or not at all.
+#[test]
+fn staged_changes_apply_together_or_not_at_all() {
+    let mut d = Mock::new();
+    let a1: f32 = ask(&mut d, "get gms.a1")[3..].trim().parse().unwrap();
+    let a2: f32 = ask(&mut d, "get gms.a2")[3..].trim().parse().unwrap();
+    // Moving 0.1 of weight from block 1 to block 2: each half alone breaks the sum.
+    let (n1, n2) = (a1 - 0.1, a2 + 0.1);
+    assert!(ask(&mut d, &format!("set gms.a1 {n1}")).starts_with("err 7 "));
+    let before = d.s;
+    assert_eq!(ask(&mut d, &format!("stage gms.a1 {n1}")), "ok\n");
+    assert_eq!(ask(&mut d, &format!("stage gms.a2 {n2}")), "ok\n");
+    // Nothing changed until the commit.
+    assert_eq!(d.s, before);
+    assert_eq!(ask(&mut d, "commit"), "ok\n");
+    assert_eq!(ask(&mut d, "get gms.a1"), format!("ok {n1}\n"));
+    assert_eq!(ask(&mut d, "get gms.a2"), format!("ok {n2}\n"));
+    // A staged set that is invalid as a whole: refused at commit, nothing changed, dropped.
+    let before = d.s;
+    assert_eq!(ask(&mut d, "stage gms.a1 0.9"), "ok\n");
+    assert!(ask(&mut d, "commit").starts_with("err 7 "));
+    assert_eq!(d.s, before);
+    assert!(ask(&mut d, "commit").starts_with("err 8 nothing staged"));
+    // A value out of its range is refused at once; a bad path too.
+    assert!(ask(&mut d, "stage gms.a1 -1").starts_with("err 6 "));
+    assert!(ask(&mut d, "stage gms.nope 1").starts_with("err 5 "));
+    // A `set` beside a staging drops it (its commit would undo the set); so does `discard`.
+    assert_eq!(ask(&mut d, "stage pos.kp 0.3"), "ok\n");
+    assert_eq!(ask(&mut d, "set pos.ki 100"), "ok\n");
+    assert!(ask(&mut d, "commit").starts_with("err 8 nothing staged"));
+    assert_eq!(ask(&mut d, "stage pos.kp 0.3"), "ok\n");
+    assert_eq!(ask(&mut d, "discard"), "ok\n");
+    assert!(ask(&mut d, "commit").starts_with("err 8 nothing staged"));
+    assert_eq!(ask(&mut d, "get pos.ki"), "ok 100\n");
+    assert_ne!(ask(&mut d, "get pos.kp"), "ok 0.3\n");
 }

@@ -154,7 +154,7 @@ pub fn check_faults(b: &mut impl Bench) -> Result<(), Error> {
     match (get("faults"), get("fault_names")) {
         (Some("0"), _) => Ok(()),
         (Some(_), Some(names)) => Err(Error::Device(format!(
-            "the device latched a fault ({names}); the bridge is off"
+            "the device latched a fault ({names})"
         ))),
         _ => Err(Error::Device(format!("unexpected status reply: {text}"))),
     }
@@ -166,11 +166,20 @@ pub fn guarded<B: Bench, T>(
     b: &mut B,
     f: impl FnOnce(&mut B) -> Result<T, Error>,
 ) -> Result<T, Error> {
-    let r = f(b);
-    if r.is_err() {
-        let _ = b.request("disable");
+    match f(b) {
+        Ok(v) => Ok(v),
+        Err(e) => {
+            // A latched fault is the reason a later request failed: say which.
+            let e = match check_faults(b) {
+                Err(Error::Device(fault)) if fault.starts_with("the device latched") => {
+                    Error::Device(format!("{fault}: {e}"))
+                }
+                _ => e,
+            };
+            let _ = b.request("disable");
+            Err(e)
+        }
     }
-    r
 }
 
 /// A request of a bench primitive, with a clear error when the device does not know it (a
@@ -232,11 +241,15 @@ impl SlidingPlan {
     }
 
     /// The farthest the axis goes from where a speed's run starts \\[rad\\] (each run goes one
-    /// way, the next the other way back).
+    /// way from rest, the next the other way back): the run, the ramps up and down at the
+    /// velocity mode's 50 rad/s², and 20 % for the exchanges while it runs.
     pub fn stroke(&self, dt: f64) -> f64 {
         self.speeds
             .iter()
-            .map(|&v| v.abs() * (self.settle(v) + self.samples as f64 * dt))
+            .map(|&v| {
+                let v = v.abs();
+                1.2 * (v * (self.settle(v) + self.samples as f64 * dt) + v * v / 50.0)
+            })
             .fold(0.0, f64::max)
     }
 }
@@ -262,8 +275,18 @@ pub fn sliding(
                 let v = dir * v;
                 primitive(b, &format!("velocity {v}"))?;
                 b.wait(plan.settle(v))?;
-                let rows = capture_now(b, "t,pos,current", plan.samples, dt)?;
+                b.request(&format!("capture t,pos,current 1 {}", plan.samples))?;
+                b.wait(plan.samples as f64 * dt)?;
+                capture_wait(b, 0.01, 200)?;
+                // Stop before reading back (reading takes exchanges, each device time at
+                // speed): the axis stays within the stroke planned, and each run starts from
+                // rest. The velocity mode's own ramp (50 rad/s²) stops it in v²/100 rad; a
+                // `hold` from speed would take longer (a move plan to rest).
+                b.request("velocity 0")?;
+                b.wait(v.abs() / 50.0 + 0.005)?;
+                b.request("hold")?;
                 check_faults(b)?;
+                let rows = capture_rows(b)?;
                 let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
                     return Err(Error::Device("an empty capture".into()));
                 };
@@ -545,4 +568,100 @@ pub fn lag_csv(t: &[f64], x: &[f64], f: &[f64]) -> String {
         text += &format!("{t},{x},{f}\n");
     }
     text
+}
+
+/// The axis's position from `status` \\[rad\\] (from the power-up position, as the stroke
+/// limits `lim.pos_min`/`lim.pos_max` are).
+pub fn position(b: &mut impl Bench) -> Result<f64, Error> {
+    let (_, text) = b.request("status")?;
+    text.split_whitespace()
+        .find_map(|w| w.strip_prefix("pos="))
+        .and_then(|v| v.parse().ok())
+        .ok_or_else(|| Error::Device(format!("no position in the status: {text}")))
+}
+
+/// The experiments' ranges as a user gives them; `None`: derived from the device's
+/// parameters (its compensator's Fs and Vs).
+#[derive(Debug, Clone, Default)]
+pub struct Ranges {
+    /// The staircase's torque step [N·m] (default: the device's Fs / 100).
+    pub torque_step: Option<f64>,
+    /// The slowest sliding speed [rad/s] (default: the device's Vs / 10).
+    pub v_min: Option<f64>,
+    /// The fastest sliding speed [rad/s] (default: 30 × the device's Vs).
+    pub v_max: Option<f64>,
+    /// The number of sliding speeds (default 10).
+    pub speeds: Option<usize>,
+    /// The stroke window around the start, each way \\[rad\\] (default 5): the device's stroke
+    /// limits are narrowed to it while the experiments run.
+    pub window: Option<f64>,
+}
+
+/// The three experiments planned for a device.
+#[derive(Debug, Clone)]
+pub struct Plans {
+    /// The torque staircase.
+    pub presliding: PreslidingPlan,
+    /// The velocity sweep.
+    pub sliding: SlidingPlan,
+    /// The stroke window each way \\[rad\\].
+    pub window: f64,
+}
+
+impl Plans {
+    /// Plans from `ranges` and the device's parameters; refuses ranges that are not positive
+    /// and finite, a torque step the staircase would take over 1000 steps or under 10 to
+    /// climb to the expected Fs, speeds the window cannot hold, or speeds above the device's
+    /// velocity mode (20 rad/s).
+    pub fn new(dev: &DeviceInfo, ranges: &Ranges) -> Result<Plans, Error> {
+        let bad = |what: &str, v: f64| {
+            Error::Params(format!("{what} = {v}: not a positive finite number"))
+        };
+        let pos = |what: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(v)
+            } else {
+                Err(bad(what, v))
+            }
+        };
+        let step_t = pos("torque step", ranges.torque_step.unwrap_or(dev.fs / 100.0))?;
+        let steps_to_fs = dev.fs / step_t;
+        if !(10.0..=1000.0).contains(&steps_to_fs) {
+            return Err(Error::Params(format!(
+                "torque step {step_t:.3e} N·m: the staircase would take {steps_to_fs:.0} steps to \
+                 the expected Fs {:.3e} N·m (10 to 1000)",
+                dev.fs
+            )));
+        }
+        let v_min = pos("slowest speed", ranges.v_min.unwrap_or(dev.vs / 10.0))?;
+        let v_max = pos("fastest speed", ranges.v_max.unwrap_or(30.0 * dev.vs))?;
+        if v_min >= v_max || v_max > 20.0 {
+            return Err(Error::Params(format!(
+                "speeds {v_min} to {v_max} rad/s: the slowest must be below the fastest, the \
+                 fastest at most 20 rad/s"
+            )));
+        }
+        let n = ranges.speeds.unwrap_or(10);
+        if !(4..=50).contains(&n) {
+            return Err(Error::Params(format!("{n} speeds: 4 to 50")));
+        }
+        let window = pos("stroke window", ranges.window.unwrap_or(5.0))?;
+        let mut presliding = PreslidingPlan::new(step_t / dev.k_m, 0);
+        // Up to three times the expected breakaway: an axis that holds more is blocked.
+        presliding.max_steps = (3.0 * steps_to_fs).ceil() as u32;
+        presliding.window = presliding.window.min(window);
+        let sliding = SlidingPlan::log_spaced(v_min, v_max, n);
+        let need = sliding.stroke(dev.dt());
+        if need > window {
+            return Err(Error::Params(format!(
+                "the sliding run at {v_max} rad/s needs {need:.2} rad of stroke, more than the \
+                 window {window} rad: lower the fastest speed or widen the window"
+            )));
+        }
+        Ok(Plans {
+            presliding,
+            sliding,
+            window,
+        })
+    }
 }

@@ -9,6 +9,8 @@ use clap::{Parser, Subcommand};
 use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
 use gms_tune::{Link, LinkError, parse_telemetry};
 
+mod identify;
+
 /// The gms bench tool.
 #[derive(Parser)]
 #[command(name = "gms-tune", version, about)]
@@ -94,6 +96,47 @@ enum Cmd {
         #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(20..=10_000))]
         refresh_ms: u64,
     },
+    /// Identify the axis's friction on the device: the pre-sliding torque staircase (from
+    /// rest; right after power-up it starts from the virgin state), the sliding velocity sweep
+    /// both ways and the frictional-lag run, within a stroke window around where the axis is;
+    /// writes their CSVs (for `hil-sim identify`), the report and its plots, the parameter
+    /// file. Ctrl-C or a fault ends it with the bridge off, keeping the data so far.
+    Identify {
+        /// The identified parameter file.
+        #[arg(long, default_value = "identified.toml", value_name = "FILE.toml")]
+        out: PathBuf,
+        /// Directory for the experiments' CSVs, report.txt and the plots.
+        #[arg(long, default_value = "identify-report", value_name = "DIR")]
+        report: PathBuf,
+        /// Maxwell-slip blocks fitted (6 for the device's compensator).
+        #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=32))]
+        blocks: u32,
+        /// Fit each sliding direction separately ([friction.negative]).
+        #[arg(long)]
+        asymmetric: bool,
+        /// Load the identified set into the device.
+        #[arg(long)]
+        apply: bool,
+        /// Load it and save it on the device (implies --apply).
+        #[arg(long)]
+        save: bool,
+        /// The staircase's torque step [N·m] (default: the device's gms.fs / 100).
+        #[arg(long)]
+        torque_step: Option<f64>,
+        /// The slowest sliding speed [rad/s] (default: the device's gms.vs / 10).
+        #[arg(long)]
+        v_min: Option<f64>,
+        /// The fastest sliding speed [rad/s] (default: 30 × the device's gms.vs).
+        #[arg(long)]
+        v_max: Option<f64>,
+        /// Sliding speeds, log-spaced (4 to 50).
+        #[arg(long, default_value_t = 10)]
+        speeds: usize,
+        /// Stroke window around the start, each way \[rad\]: the device's stroke limits are
+        /// narrowed to it while the experiments run.
+        #[arg(long, default_value_t = 5.0)]
+        window: f64,
+    },
 }
 
 #[derive(Subcommand)]
@@ -109,7 +152,7 @@ enum ParamsCmd {
 }
 
 /// Exit 1: the device refused or did not answer; exit 2: bad arguments or no link.
-enum Fail {
+pub(crate) enum Fail {
     Device(String),
     Usage(String),
 }
@@ -177,7 +220,7 @@ fn dump(link: &mut Link) -> Result<String, Fail> {
     Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
 }
 
-fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
+pub(crate) fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
     let pf = ParamFile::load(file).map_err(|e| Fail::Usage(e.to_string()))?;
     let f = &pf.friction;
     if f.model != ModelKind::Gms || f.blocks.as_ref().map_or(0, Vec::len) != 6 {
@@ -221,9 +264,29 @@ fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
         };
         sets.push((k.clone(), v));
     }
+    // Staged and committed as one set (the weights must sum to 1 at every step, so they
+    // cannot change one `set` at a time): the device takes all or nothing.
+    let n = sets.len();
+    match link.request("discard") {
+        Ok(_) => {
+            for (k, v) in &sets {
+                if let Err(e) = link.request(&format!("stage {k} {v}")) {
+                    let _ = link.request("discard");
+                    return Err(Fail::Device(format!(
+                        "stage {k} {v}: {e} (nothing changed)"
+                    )));
+                }
+            }
+            link.request("commit")
+                .map_err(|e| Fail::Device(format!("commit: {e} (nothing changed)")))?;
+            return Ok(n);
+        }
+        // A firmware without staging: one `set` at a time, as before.
+        Err(LinkError::Device(e)) if e.starts_with("err 1 ") => {}
+        Err(e) => return Err(e.into()),
+    }
     // A set may be refused while others are pending (fs below the old fc, say): retry until
     // no progress.
-    let n = sets.len();
     let mut last_err = String::new();
     while !sets.is_empty() {
         let before = sets.len();
@@ -407,6 +470,36 @@ fn run(cli: Cli) -> Result<(), Fail> {
             seconds,
             refresh_ms,
         } => watch(&mut link, seconds, Duration::from_millis(refresh_ms))?,
+        Cmd::Identify {
+            out,
+            report,
+            blocks,
+            asymmetric,
+            apply,
+            save,
+            torque_step,
+            v_min,
+            v_max,
+            speeds,
+            window,
+        } => identify::run(
+            &mut link,
+            &identify::Args {
+                out,
+                report,
+                blocks: blocks as usize,
+                asymmetric,
+                apply,
+                save,
+                ranges: gms_ident::bench::Ranges {
+                    torque_step,
+                    v_min,
+                    v_max,
+                    speeds: Some(speeds),
+                    window: Some(window),
+                },
+            },
+        )?,
     }
     Ok(())
 }

@@ -130,6 +130,7 @@ pub struct Front<L: Link, S: ParamStore> {
     board: Board,
     settings: Settings,
     defaults: Settings,
+    staged: Option<Settings>,
     fields: [u8; FIELDS.len()],
     nfields: usize,
 }
@@ -144,6 +145,7 @@ impl<L: Link, S: ParamStore> Front<L, S> {
             board,
             settings,
             defaults,
+            staged: None,
             fields: [0; FIELDS.len()],
             nfields: 0,
         }
@@ -241,6 +243,10 @@ impl<L: Link, S: ParamStore> Front<L, S> {
 impl<L: Link, S: ParamStore> Device for Front<L, S> {
     fn settings(&self) -> &Settings {
         &self.settings
+    }
+
+    fn staged(&mut self) -> &mut Option<Settings> {
+        &mut self.staged
     }
 
     fn apply(&mut self, new: Settings) -> Result<(), &'static str> {

@@ -82,6 +82,12 @@ pub enum Command<'a> {
     Get(&'a str),
     /// `set PATH VALUE` (the value as text: numbers, or a mode name).
     Set(&'a str, &'a str),
+    /// `stage PATH VALUE`: a change kept aside (range-checked) until `commit`.
+    Stage(&'a str, &'a str),
+    /// `commit`: the staged changes applied as one set, validated as a whole.
+    Commit,
+    /// `discard`: the staged changes dropped.
+    Discard,
     /// `save`.
     Save,
     /// `load`.
@@ -175,6 +181,13 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
             let value = arg().ok_or(bad("usage: set PATH VALUE"))?;
             Command::Set(path, value)
         }
+        "stage" => {
+            let path = arg().ok_or(bad("usage: stage PATH VALUE"))?;
+            let value = arg().ok_or(bad("usage: stage PATH VALUE"))?;
+            Command::Stage(path, value)
+        }
+        "commit" => Command::Commit,
+        "discard" => Command::Discard,
         "move" => {
             let pos = arg()
                 .and_then(parse_f32)

@@ -7,6 +7,9 @@ use super::*;
 pub trait Device {
     /// The current settings.
     fn settings(&self) -> &Settings;
+    /// The set being staged by `stage` (the current settings with the staged changes), if
+    /// any.
+    fn staged(&mut self) -> &mut Option<Settings>;
     /// Applies a validated set (between two control steps); refused when the device cannot
     /// run it, and then nothing changes.
     fn apply(&mut self, new: Settings) -> Result<(), &'static str>;
@@ -72,7 +75,8 @@ pub trait Device {
 }
 
 /// The `help` text.
-pub const HELP: &str = "help | list | get PATH | set PATH VALUE | save | load | defaults | \
+pub const HELP: &str = "help | list | get PATH | set PATH VALUE | stage PATH VALUE | commit | \
+discard | save | load | defaults | \
 enable | disable | status | clear | move POS [VEL] | current AMPS | \
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
 capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT]";
@@ -132,12 +136,47 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             None => err(out, ErrorCode::UnknownPath, "unknown parameter (try list)"),
         },
         Command::Set(path, value) => match with_value(dev.settings(), path, value) {
-            Ok(new) => done(out, dev.apply(new)),
+            Ok(new) => {
+                // A set made beside a staging would be undone by its commit: drop it.
+                *dev.staged() = None;
+                done(out, dev.apply(new))
+            }
             Err(e) => err(out, e.code, e.reason),
         },
+        Command::Stage(path, value) => {
+            let base = dev.staged().unwrap_or(*dev.settings());
+            match with_value_staged(&base, path, value) {
+                Ok(new) => {
+                    *dev.staged() = Some(new);
+                    writeln!(out, "ok")
+                }
+                Err(e) => err(out, e.code, e.reason),
+            }
+        }
+        Command::Commit => match dev.staged().take() {
+            None => err(out, ErrorCode::Refused, "nothing staged"),
+            Some(new) => match new.validate() {
+                Ok(()) => done(out, dev.apply(new)),
+                Err(_) => err(
+                    out,
+                    ErrorCode::InvalidSet,
+                    "the staged set would be invalid (dropped, nothing changed)",
+                ),
+            },
+        },
+        Command::Discard => {
+            *dev.staged() = None;
+            writeln!(out, "ok")
+        }
         Command::Save => done(out, dev.save()),
-        Command::Load => done(out, dev.load()),
-        Command::Defaults => done(out, dev.defaults()),
+        Command::Load => {
+            *dev.staged() = None;
+            done(out, dev.load())
+        }
+        Command::Defaults => {
+            *dev.staged() = None;
+            done(out, dev.defaults())
+        }
         Command::Enable => done(out, dev.enable()),
         Command::Disable => done(out, dev.disable()),
         Command::Status => {

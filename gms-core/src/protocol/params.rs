@@ -223,6 +223,19 @@ pub fn set_param(s: &mut Settings, p: &Param, value: &str) -> Result<(), ParseEr
     Ok(())
 }
 
+/// `stage`: the settings with `path` set to `value`, the value checked against its range but
+/// the set not validated as a whole (that waits for `commit`: weights that must sum to 1 are
+/// changed one at a time).
+pub fn with_value_staged(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
+    let p = find(path).ok_or(ParseError {
+        code: ErrorCode::UnknownPath,
+        reason: "unknown parameter (try list)",
+    })?;
+    let mut new = *s;
+    set_param(&mut new, p, value)?;
+    Ok(new)
+}
+
 /// `set`: the settings with `path` set to `value`, validated as a whole; on error nothing is
 /// returned and the caller's settings stay as they are.
 pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
