@@ -206,8 +206,11 @@ pub struct SlidingPlan {
     pub settle_stroke: f64,
     /// The shortest settling time \\[s\\] (the loop and the slip time constants).
     pub settle_min: f64,
-    /// Samples averaged per speed (position steps).
+    /// The shortest averaging window (position steps).
     pub samples: u32,
+    /// The stroke averaged over at least \\[rad\\]: at low speeds the window grows to cover
+    /// it (the loop's hunting and the encoder counts average out).
+    pub window_stroke: f64,
 }
 
 impl SlidingPlan {
@@ -222,6 +225,7 @@ impl SlidingPlan {
             settle_stroke: 0.05,
             settle_min: 0.3,
             samples: 200,
+            window_stroke: 5e-3,
         }
     }
 
@@ -230,13 +234,18 @@ impl SlidingPlan {
         (self.settle_stroke / v.abs()).max(self.settle_min)
     }
 
+    /// The averaging window at speed `v` \\[s\\].
+    fn window(&self, v: f64, dt: f64) -> f64 {
+        (self.window_stroke / v.abs()).max(self.samples as f64 * dt)
+    }
+
     /// The device time the run takes, about \\[s\\] (the ramps between speeds and the
     /// exchanges not counted).
     pub fn duration(&self, dt: f64) -> f64 {
         2.0 * self
             .speeds
             .iter()
-            .map(|&v| self.settle(v) + self.samples as f64 * dt)
+            .map(|&v| self.settle(v) + self.window(v, dt))
             .sum::<f64>()
     }
 
@@ -248,7 +257,7 @@ impl SlidingPlan {
             .iter()
             .map(|&v| {
                 let v = v.abs();
-                1.2 * (v * (self.settle(v) + self.samples as f64 * dt) + v * v / 50.0)
+                1.2 * (v * (self.settle(v) + self.window(v, dt)) + v * v / 50.0)
             })
             .fold(0.0, f64::max)
     }
@@ -275,8 +284,12 @@ pub fn sliding(
                 let v = dir * v;
                 primitive(b, &format!("velocity {v}"))?;
                 b.wait(plan.settle(v))?;
-                b.request(&format!("capture t,pos,current 1 {}", plan.samples))?;
-                b.wait(plan.samples as f64 * dt)?;
+                // Three fields per sample within the 8192 values of the buffer.
+                let steps = (plan.window(v, dt) / dt).ceil();
+                let every = (steps * 3.0 / 8100.0).ceil().max(1.0);
+                let n = (steps / every).ceil() as u32;
+                b.request(&format!("capture t,pos,current {every} {n}"))?;
+                b.wait(n as f64 * every * dt)?;
                 capture_wait(b, 0.01, 200)?;
                 // Stop before reading back (reading takes exchanges, each device time at
                 // speed): the axis stays within the stroke planned, and each run starts from
@@ -664,4 +677,242 @@ impl Plans {
             window,
         })
     }
+}
+
+/// A sine test with reversals: the axis swings `amp` \\[rad\\] to and fro from where it is
+/// (velocity mode, a sweep of one frequency `freq` \\[Hz\\] around zero speed) for `seconds`;
+/// the position error is captured and its RMS \\[rad\\] returned, leaving out the first period.
+/// The same test on the same device gives the same reference: compensations compare on it.
+/// Ends holding.
+pub fn sine_test(b: &mut impl Bench, amp: f64, freq: f64, seconds: f64) -> Result<f64, Error> {
+    if !(amp > 0.0 && amp.is_finite() && freq > 0.0 && freq.is_finite() && seconds * freq >= 2.0) {
+        return Err(Error::Params(format!(
+            "sine test: amplitude {amp} rad, {freq} Hz, {seconds} s: positive, and at least two \
+             periods"
+        )));
+    }
+    guarded(b, |b| {
+        let dev = DeviceInfo::read(b)?;
+        let every = (seconds * dev.pos_hz / 8000.0).ceil().max(1.0) as u32;
+        let samples = (seconds * dev.pos_hz / every as f64).floor() as u32;
+        let v_amp = amp * 2.0 * std::f64::consts::PI * freq;
+        b.request("enable")?;
+        b.request(&format!("capture error {every} {samples} next"))?;
+        primitive(b, &format!("velocity 0 {v_amp} {freq} {freq} {seconds}"))?;
+        b.wait(seconds)?;
+        capture_wait(b, 0.05, 400)?;
+        check_faults(b)?;
+        b.request("hold")?;
+        let rows = capture_rows(b)?;
+        let skip = ((dev.pos_hz / freq) / every as f64).ceil() as usize;
+        let e: Vec<f64> = rows.iter().skip(skip).map(|r| r[0]).collect();
+        if e.is_empty() {
+            return Err(Error::Device("the sine test recorded nothing".into()));
+        }
+        Ok((e.iter().map(|v| v * v).sum::<f64>() / e.len() as f64).sqrt())
+    })
+}
+
+/// The device's stroke limits narrowed to `window` each way around where the axis is;
+/// returns the previous ones.
+pub fn narrow_limits(b: &mut impl Bench, window: f64) -> Result<(f64, f64), Error> {
+    let (lo, hi) = (get_param(b, "lim.pos_min")?, get_param(b, "lim.pos_max")?);
+    let x = position(b)?;
+    let (nlo, nhi) = ((x - window).max(lo), (x + window).min(hi));
+    // Narrowing each side keeps pos_min < pos_max after each set.
+    b.request(&format!("set lim.pos_min {nlo}"))?;
+    b.request(&format!("set lim.pos_max {nhi}"))?;
+    Ok((lo, hi))
+}
+
+/// What a bench identification gathered.
+#[derive(Debug, Clone, Default)]
+pub struct Gathered {
+    /// Pre-sliding `(x, f)` points.
+    pub presliding: Vec<(f64, f64)>,
+    /// Sliding `(v, f)` points.
+    pub sliding: Vec<(f64, f64)>,
+    /// The lag run `(t, x, f)`, once done.
+    pub lag: Option<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+}
+
+/// The whole bench identification: the stroke limits narrowed to the plans' window, the
+/// pre-sliding staircase, the sliding sweep, the lag run around the Vs just measured; then,
+/// whatever happened, the bridge off, the limits back and the data written to `dir`
+/// (`presliding.csv`, `sliding.csv`, `lag.csv`: what `hil-sim identify` reads), and on
+/// success the identification of those files (`blocks`, `asymmetric` as `hil-sim identify`
+/// takes them). `stage(b, name, seconds)` is called as each experiment starts, with its
+/// expected device time (for progress). A failure says how much data was kept, and where.
+pub fn identify_on<B: Bench>(
+    b: &mut B,
+    plans: &Plans,
+    dir: &std::path::Path,
+    blocks: usize,
+    asymmetric: bool,
+    stage: &mut dyn FnMut(&mut B, &str, f64),
+) -> Result<(Gathered, crate::identify::Identified), Error> {
+    let mut g = Gathered::default();
+    let dev = DeviceInfo::read(b)?;
+    let dt = dev.dt();
+    let limits = narrow_limits(b, plans.window);
+    let result = limits.clone().map(|_| ()).and_then(|_| {
+        let steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
+        stage(b, "pre-sliding", plans.presliding.duration(steps, dt));
+        presliding(b, &plans.presliding, &mut g.presliding)?;
+        stage(b, "sliding", plans.sliding.duration(dt));
+        sliding(b, &plans.sliding, &mut g.sliding)?;
+        // The lag run around the Vs just measured.
+        let (v, f): (Vec<f64>, Vec<f64>) =
+            g.sliding.iter().map(|(v, f)| (v.abs(), f.abs())).unzip();
+        let vs = crate::identify::fit_stribeck(&v, &f)
+            .map_err(|e| Error::Data(format!("the sliding data do not fit: {e}")))?
+            .vs;
+        let plan = LagPlan::for_vs(vs, dev.pos_hz);
+        if plan.stroke() > plans.window {
+            return Err(Error::Params(format!(
+                "the lag run needs {:.2} rad of stroke, more than the window {} rad: widen it",
+                plan.stroke(),
+                plans.window
+            )));
+        }
+        stage(b, "lag", plan.duration());
+        g.lag = Some(lag(b, &plan)?);
+        Ok(())
+    });
+    // Whatever happened: the bridge off, the limits back (best effort: the link may be gone).
+    let _ = b.request("disable");
+    if let Ok((lo, hi)) = limits {
+        let _ = b.request(&format!("set lim.pos_min {lo}"));
+        let _ = b.request(&format!("set lim.pos_max {hi}"));
+    }
+    let written = (|| {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| format!("{}: cannot create: {e}", dir.display()))?;
+        let w = |name: &str, text: &str| {
+            let p = dir.join(name);
+            crate::io::write_atomic(&p, text.as_bytes()).map(|_| p)
+        };
+        let pre = w("presliding.csv", &presliding_csv(&g.presliding))?;
+        let slide = w("sliding.csv", &sliding_csv(&g.sliding))?;
+        let lag = match &g.lag {
+            Some((t, x, f)) => Some(w("lag.csv", &lag_csv(t, x, f))?),
+            None => None,
+        };
+        Ok::<_, String>((pre, slide, lag))
+    })();
+    let kept = || {
+        format!(
+            "the bridge is off; the data so far ({} pre-sliding points, {} sliding points) is in {}",
+            g.presliding.len(),
+            g.sliding.len(),
+            dir.display()
+        )
+    };
+    if let Err(e) = result {
+        let kept = match &written {
+            Ok(_) => kept(),
+            Err(w) => format!("the bridge is off; the data could not be written: {w}"),
+        };
+        return Err(match e {
+            Error::Device(m) => Error::Device(format!("{m}; {kept}")),
+            Error::Params(m) => Error::Params(format!("{m}; {kept}")),
+            Error::Data(m) => Error::Data(format!("{m}; {kept}")),
+            Error::Io(m) => Error::Io(format!("{m}; {kept}")),
+        });
+    }
+    let (pre, slide, lag) = written.map_err(Error::Io)?;
+    let id = crate::identify::identify_from(&crate::identify::Inputs {
+        presliding: Some(&pre),
+        sliding: Some(&slide),
+        lag: lag.as_deref(),
+        blocks,
+        asymmetric,
+    })?;
+    Ok((g, id))
+}
+
+/// Sends a parameter file to the device: its `[friction]` (a 6-block GMS model, the
+/// compensator's) as `gms.*`, its `[device]` table by protocol path, staged and committed as
+/// one set (weights that must sum to 1 cannot change one `set` at a time), so the device
+/// takes all or nothing. A firmware without staging gets one `set` at a time, retried while
+/// that makes progress. Returns the number of parameters sent.
+pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Result<usize, Error> {
+    use crate::paramfile::ModelKind;
+    let f = &pf.friction;
+    if f.model != ModelKind::Gms || f.blocks.as_ref().map_or(0, Vec::len) != 6 {
+        return Err(Error::Params(
+            "[friction] must be a 6-block gms model for the device's compensator".into(),
+        ));
+    }
+    f.gms_params::<6>()
+        .map_err(|e| e.to_string())
+        .and_then(|p| p.validate().map_err(|e| e.to_string()))
+        .map_err(|e| Error::Params(format!("[friction] {e}")))?;
+    let mut sets: Vec<(String, String)> = Vec::new();
+    for (k, v) in [
+        ("fs", f.fs),
+        ("fc", f.fc),
+        ("vs", f.vs),
+        ("delta", f.delta.or(Some(1.0))),
+        ("sigma", f.sigma.or(Some(0.0))),
+        ("c", f.c),
+    ] {
+        if let Some(v) = v {
+            sets.push((format!("gms.{k}"), format!("{v}")));
+        }
+    }
+    for (i, blk) in f.blocks.iter().flatten().enumerate() {
+        sets.push((format!("gms.k{}", i + 1), format!("{}", blk.k)));
+        sets.push((format!("gms.a{}", i + 1), format!("{}", blk.alpha)));
+    }
+    for (k, v) in pf.device.iter().flatten() {
+        let v = match v {
+            toml::Value::Float(x) => format!("{x}"),
+            toml::Value::Integer(x) => format!("{x}"),
+            toml::Value::String(s) => s.clone(),
+            _ => return Err(Error::Params(format!("[device] `{k}` is not a value"))),
+        };
+        sets.push((k.clone(), v));
+    }
+    let n = sets.len();
+    match b.request("discard") {
+        Ok(_) => {
+            for (k, v) in &sets {
+                if let Err(e) = b.request(&format!("stage {k} {v}")) {
+                    let _ = b.request("discard");
+                    return Err(Error::Device(format!(
+                        "stage {k} {v}: {e} (nothing changed)"
+                    )));
+                }
+            }
+            b.request("commit")
+                .map_err(|e| Error::Device(format!("commit: {e} (nothing changed)")))?;
+            return Ok(n);
+        }
+        // A firmware without staging: one `set` at a time.
+        Err(Error::Device(e)) if e.contains("err 1 ") => {}
+        Err(e) => return Err(e),
+    }
+    // A set may be refused while others are pending (fs below the old fc, say): retry until
+    // no progress.
+    let mut last_err = String::new();
+    while !sets.is_empty() {
+        let before = sets.len();
+        let mut rest = Vec::new();
+        for (k, v) in sets {
+            match b.request(&format!("set {k} {v}")) {
+                Ok(_) => {}
+                Err(Error::Device(e)) => {
+                    last_err = format!("set {k} {v}: {e}");
+                    rest.push((k, v));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        if rest.len() == before {
+            return Err(Error::Device(last_err));
+        }
+        sets = rest;
+    }
+    Ok(n)
 }

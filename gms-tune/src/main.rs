@@ -220,93 +220,13 @@ fn dump(link: &mut Link) -> Result<String, Fail> {
     Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
 }
 
+/// `params load FILE`: the file sent as one set (`gms_ident::bench::load_params`).
 pub(crate) fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
     let pf = ParamFile::load(file).map_err(|e| Fail::Usage(e.to_string()))?;
-    let f = &pf.friction;
-    if f.model != ModelKind::Gms || f.blocks.as_ref().map_or(0, Vec::len) != 6 {
-        return Err(Fail::Usage(format!(
-            "{}: [friction] must be a 6-block gms model for the device's compensator",
-            file.display()
-        )));
-    }
-    f.gms_params::<6>()
-        .map_err(|e| e.to_string())
-        .and_then(|p| p.validate().map_err(|e| e.to_string()))
-        .map_err(|e| Fail::Usage(format!("{}: [friction] {e}", file.display())))?;
-    let mut sets: Vec<(String, String)> = Vec::new();
-    for (k, v) in [
-        ("fs", f.fs),
-        ("fc", f.fc),
-        ("vs", f.vs),
-        ("delta", f.delta.or(Some(1.0))),
-        ("sigma", f.sigma.or(Some(0.0))),
-        ("c", f.c),
-    ] {
-        if let Some(v) = v {
-            sets.push((format!("gms.{k}"), format!("{v}")));
-        }
-    }
-    for (i, b) in f.blocks.iter().flatten().enumerate() {
-        sets.push((format!("gms.k{}", i + 1), format!("{}", b.k)));
-        sets.push((format!("gms.a{}", i + 1), format!("{}", b.alpha)));
-    }
-    for (k, v) in pf.device.iter().flatten() {
-        let v = match v {
-            toml::Value::Float(x) => format!("{x}"),
-            toml::Value::Integer(x) => format!("{x}"),
-            toml::Value::String(s) => s.clone(),
-            _ => {
-                return Err(Fail::Usage(format!(
-                    "{}: [device] `{k}` is not a value",
-                    file.display()
-                )));
-            }
-        };
-        sets.push((k.clone(), v));
-    }
-    // Staged and committed as one set (the weights must sum to 1 at every step, so they
-    // cannot change one `set` at a time): the device takes all or nothing.
-    let n = sets.len();
-    match link.request("discard") {
-        Ok(_) => {
-            for (k, v) in &sets {
-                if let Err(e) = link.request(&format!("stage {k} {v}")) {
-                    let _ = link.request("discard");
-                    return Err(Fail::Device(format!(
-                        "stage {k} {v}: {e} (nothing changed)"
-                    )));
-                }
-            }
-            link.request("commit")
-                .map_err(|e| Fail::Device(format!("commit: {e} (nothing changed)")))?;
-            return Ok(n);
-        }
-        // A firmware without staging: one `set` at a time, as before.
-        Err(LinkError::Device(e)) if e.starts_with("err 1 ") => {}
-        Err(e) => return Err(e.into()),
-    }
-    // A set may be refused while others are pending (fs below the old fc, say): retry until
-    // no progress.
-    let mut last_err = String::new();
-    while !sets.is_empty() {
-        let before = sets.len();
-        let mut rest = Vec::new();
-        for (k, v) in sets {
-            match link.request(&format!("set {k} {v}")) {
-                Ok(_) => {}
-                Err(LinkError::Device(e)) => {
-                    last_err = format!("set {k} {v}: {e}");
-                    rest.push((k, v));
-                }
-                Err(e) => return Err(e.into()),
-            }
-        }
-        if rest.len() == before {
-            return Err(Fail::Device(last_err));
-        }
-        sets = rest;
-    }
-    Ok(n)
+    gms_ident::bench::load_params(link, &pf).map_err(|e| match e {
+        gms_ident::Error::Params(m) => Fail::Usage(format!("{}: {m}", file.display())),
+        e => Fail::Device(e.to_string()),
+    })
 }
 
 fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<Vec<f64>>, Fail> {
