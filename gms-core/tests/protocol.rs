@@ -64,6 +64,11 @@ impl Device for Mock {
         self.enabled = true;
         Ok(())
     }
+    fn enable_current(&mut self) -> Result<(), &'static str> {
+        self.enabled = true;
+        self.experiments.push("current 0".into());
+        Ok(())
+    }
     fn disable(&mut self) -> Result<(), &'static str> {
         self.enabled = false;
         Ok(())

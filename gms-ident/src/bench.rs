@@ -187,11 +187,16 @@ pub fn guarded<B: Bench, T>(
 fn primitive(b: &mut impl Bench, line: &str) -> Result<(), Error> {
     match b.request(line) {
         Ok(_) => Ok(()),
-        Err(Error::Device(e)) if e.contains("unknown command") => Err(Error::Device(format!(
-            "the device does not know `{}` ({e}): its firmware predates the bench experiments; \
+        // An older parser: the command unknown, or its new argument extra.
+        Err(Error::Device(e))
+            if e.contains("unknown command") || e.contains("too many arguments") =>
+        {
+            Err(Error::Device(format!(
+                "the device does not know `{}` ({e}): its firmware predates the bench experiments; \
              update it",
-            line.split_whitespace().next().unwrap_or(line)
-        ))),
+                line.split_whitespace().next().unwrap_or(line)
+            )))
+        }
         Err(e) => Err(e),
     }
 }
@@ -311,7 +316,7 @@ pub fn sliding(
                 if v_meas * v < 0.0 {
                     return Err(Error::Device(format!(
                         "commanded {v} rad/s, the encoder counts {v_meas:.4} rad/s: it counts \
-                         against the motor (reverse it; see commissioning)"
+                         against the motor (swap its A and B channels, or the motor leads)"
                     )));
                 }
                 if v_meas.abs() < 0.5 * v.abs() {
@@ -419,8 +424,9 @@ pub fn presliding(
     guarded(b, |b| {
         let dev = DeviceInfo::read(b)?;
         let dt = dev.dt();
-        b.request("enable")?;
-        primitive(b, "current 0")?;
+        // Straight into current mode: the position loop never closes before the direction
+        // is known (with the encoder reversed it would run away at once).
+        primitive(b, "enable current")?;
         b.wait(plan.dwell)?;
         // The start (no torque): the origin of the displacements, not a point of the curve.
         let x0 = settled(b, plan.samples, dt)?.x;
@@ -458,7 +464,7 @@ pub fn presliding(
             if dx < -against {
                 return Err(Error::Device(format!(
                     "the axis moved {dx:.3e} rad under +{amps:.3e} A: the encoder counts \
-                     against the motor (reverse it; see commissioning)"
+                     against the motor (swap its A and B channels, or the motor leads)"
                 )));
             }
             if dx.abs() > plan.window || s.creep.abs() > plan.creep {

@@ -28,10 +28,16 @@ impl Server {
 
     /// The same, the simulated axis running `speed` times faster than the wall clock.
     fn start_at(kind: &str, store: &Path, speed: f64) -> Server {
+        Server::start_with(kind, store, speed, None)
+    }
+
+    /// The same on the plant of a scenario file.
+    fn start_with(kind: &str, store: &Path, speed: f64, scenario: Option<&Path>) -> Server {
         let mut child = Command::new(std::env::current_exe().unwrap())
             .args(["--serve-child", kind])
             .arg(store)
             .arg(speed.to_string())
+            .args(scenario)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -56,8 +62,9 @@ impl Drop for Server {
     }
 }
 
-/// The server side: `hil-sim serve` on the default scenario, on TCP 127.0.0.1:0 or a PTY.
-fn serve_child(kind: &str, store: PathBuf, speed: f64) {
+/// The server side: `hil-sim serve` on the default scenario (or `scenario`), on TCP
+/// 127.0.0.1:0 or a PTY.
+fn serve_child(kind: &str, store: PathBuf, speed: f64, scenario: Option<&str>) {
     use hil_sim::device::{Endpoint, serve};
     let endpoint = match kind {
         "tcp" => Endpoint::Tcp(std::net::TcpListener::bind("127.0.0.1:0").unwrap()),
@@ -65,7 +72,10 @@ fn serve_child(kind: &str, store: PathBuf, speed: f64) {
         "pty" => Endpoint::Pty,
         _ => panic!("unknown endpoint {kind}"),
     };
-    let sc = hil_sim::scenario::Scenario::default();
+    let sc = match scenario {
+        Some(p) => hil_sim::scenario::Scenario::load(Path::new(p)).unwrap(),
+        None => hil_sim::scenario::Scenario::default(),
+    };
     let r = serve(sc, endpoint, Some(store), speed, |addr, _| {
         println!("listening on {addr}");
         let _ = std::io::stdout().flush();
@@ -100,7 +110,12 @@ fn tune(srv: &Server, args: &[&str], cwd: &Path) -> (i32, String, String) {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("--serve-child") {
-        serve_child(&args[2], PathBuf::from(&args[3]), args[4].parse().unwrap());
+        serve_child(
+            &args[2],
+            PathBuf::from(&args[3]),
+            args[4].parse().unwrap(),
+            args.get(5).map(String::as_str),
+        );
         return;
     }
     let tests: &[(&str, fn())] = &[
@@ -120,6 +135,26 @@ fn main() {
         (
             "clear_errors_for_no_device_and_silence",
             clear_errors_for_no_device_and_silence,
+        ),
+        (
+            "identify_finds_the_hidden_friction_and_applies_it",
+            identify_finds_the_hidden_friction_and_applies_it,
+        ),
+        (
+            "identify_refuses_an_older_firmware",
+            identify_refuses_an_older_firmware,
+        ),
+        (
+            "identify_keeps_the_data_when_the_link_is_lost",
+            identify_keeps_the_data_when_the_link_is_lost,
+        ),
+        (
+            "identify_says_when_the_axis_does_not_move",
+            identify_says_when_the_axis_does_not_move,
+        ),
+        (
+            "identify_says_when_the_encoder_is_reversed",
+            identify_says_when_the_encoder_is_reversed,
         ),
         #[cfg(unix)]
         (
@@ -359,4 +394,218 @@ fn the_library_captures_a_velocity_run() {
     link.request("hold").unwrap();
     // A second read of the same capture gives the same data.
     assert_eq!(capture_rows(&mut link).unwrap(), rows);
+}
+
+/// The default plant with its friction exactly nominal (no draw) and the guideway negligible:
+/// the device sees the actuator's Table 1 friction alone (`extra` appended to the file).
+fn quiet_scenario(dir: &Path, extra: &str) -> PathBuf {
+    let p = dir.join("scenario.toml");
+    std::fs::write(
+        &p,
+        format!("[plant]\nvariability = 0.0\n{extra}\n[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n"),
+    )
+    .unwrap();
+    p
+}
+
+/// `gms-tune identify --apply` against a virtual device 20× faster than real time whose
+/// plant has Table 1's friction: the files, the figures, and the set loaded.
+fn identify_finds_the_hidden_friction_and_applies_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = quiet_scenario(dir.path(), "");
+    let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 20.0, Some(&sc));
+    // The compensator starts at a wrong model (Fs 30 % high), so --apply visibly changes it.
+    assert_eq!(tune(&srv, &["set", "gms.fs", "286e-6"], dir.path()).0, 0);
+    let (code, out, err) = tune(
+        &srv,
+        &["identify", "--out", "id.toml", "--report", "rep", "--apply"],
+        dir.path(),
+    );
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(err.contains("experiments done in"), "{err}");
+    for f in [
+        "presliding.csv",
+        "sliding.csv",
+        "lag.csv",
+        "report.txt",
+        "virgin.svg",
+        "stribeck.svg",
+        "lag.svg",
+    ] {
+        assert!(dir.path().join("rep").join(f).exists(), "{f}");
+    }
+    let pf = gms_ident::paramfile::ParamFile::load(&dir.path().join("id.toml")).unwrap();
+    let fs = pf.friction.fs.unwrap();
+    let fc = pf.friction.fc.unwrap();
+    // Table 1: Fs 220e-6, Fc 125e-6 N·m; the staircase's steps came from the wrong 286e-6.
+    assert!((fs / 220e-6 - 1.0).abs() < 0.03, "fs {fs}");
+    assert!((fc / 125e-6 - 1.0).abs() < 0.03, "fc {fc}");
+    // The device runs the file's set now.
+    let (_, got, _) = tune(&srv, &["get", "gms.fs"], dir.path());
+    let got: f64 = got.trim().parse().unwrap();
+    assert!((got / fs - 1.0).abs() < 1e-6, "device {got} vs file {fs}");
+    // The CSVs are what `hil-sim identify` reads: the same fit again gives the same set.
+    let rep = dir.path().join("rep");
+    let again = gms_ident::identify::identify_from(&gms_ident::identify::Inputs {
+        presliding: Some(&rep.join("presliding.csv")),
+        sliding: Some(&rep.join("sliding.csv")),
+        lag: Some(&rep.join("lag.csv")),
+        blocks: 6,
+        asymmetric: false,
+    })
+    .unwrap();
+    assert_eq!(again.spec.fs, Some(fs));
+    // The bridge is off at the end, the stroke limits are the device's own again.
+    let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
+    assert!(
+        status.contains("enabled=0") && status.contains("faults=0"),
+        "{status}"
+    );
+    assert_eq!(tune(&srv, &["get", "lim.pos_max"], dir.path()).1, "50\n");
+}
+
+/// A device that answers everything but the bench primitives (an older firmware): records
+/// the requests it saw.
+fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
+    use std::io::Read as _;
+    let seen = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap().to_string();
+    let log = seen.clone();
+    std::thread::spawn(move || {
+        for conn in l.incoming() {
+            let Ok(mut c) = conn else { return };
+            let mut buf = Vec::new();
+            let mut byte = [0u8; 1];
+            while let Ok(1) = c.read(&mut byte) {
+                if byte[0] != b'\n' {
+                    buf.push(byte[0]);
+                    continue;
+                }
+                let line = String::from_utf8_lossy(&buf).trim().to_string();
+                buf.clear();
+                if line.is_empty() {
+                    continue;
+                }
+                log.lock().unwrap().push(line.clone());
+                let w: Vec<&str> = line.split_whitespace().collect();
+                let reply = match w.as_slice() {
+                    ["get", p] => match *p {
+                        "motor.k_m" => "ok 0.0066".to_string(),
+                        "rate.pos_hz" => "ok 10000".into(),
+                        "lim.i_max" => "ok 0.5".into(),
+                        "gms.fs" => "ok 0.00022".into(),
+                        "gms.vs" => "ok 0.2".into(),
+                        "lim.pos_min" => "ok -50".into(),
+                        "lim.pos_max" => "ok 50".into(),
+                        _ => "err 5 unknown parameter (try list)".into(),
+                    },
+                    ["status"] => {
+                        "ok mode=gms enabled=0 faults=0 t=1 pos=0 fault_names=none".into()
+                    }
+                    ["set", ..] | ["enable"] | ["disable"] => "ok".into(),
+                    ["enable", _] => "err 2 too many arguments".into(),
+                    _ => "err 1 unknown command".into(),
+                };
+                if c.write_all(format!("{reply}\n").as_bytes()).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    (addr, seen)
+}
+
+/// An older firmware without the bench primitives: a clear error, exit 1, the bridge off
+/// (`disable` sent), the stroke limits put back, the (empty) data files written.
+fn identify_refuses_an_older_firmware() {
+    let dir = tempfile::tempdir().unwrap();
+    let (addr, seen) = old_firmware();
+    let (code, out, err) = run(Command::new(TUNE)
+        .args(["--tcp", &addr, "identify", "--report", "rep"])
+        .current_dir(dir.path()));
+    assert_eq!(code, 1, "{out}\n{err}");
+    assert!(
+        err.contains("does not know `enable`") && err.contains("predates"),
+        "{err}"
+    );
+    assert!(err.contains("the bridge is off"), "{err}");
+    // One line of error after the plan.
+    let last = err.trim().lines().last().unwrap_or("");
+    assert!(
+        last.starts_with("error: ") && last.contains("predates"),
+        "{err}"
+    );
+    let seen = seen.lock().unwrap().clone();
+    assert!(seen.iter().any(|l| l == "disable"), "{seen:?}");
+    assert!(seen.iter().any(|l| l == "set lim.pos_max 50"), "{seen:?}");
+    assert!(dir.path().join("rep/presliding.csv").exists());
+}
+
+/// The link lost mid-run (the device gone): exit 1, a clear error, the data so far kept.
+fn identify_keeps_the_data_when_the_link_is_lost() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = quiet_scenario(dir.path(), "");
+    let mut srv = Server::start_with("tcp", &dir.path().join("flash.img"), 1.0, Some(&sc));
+    let child = Command::new(TUNE)
+        .args(["--tcp", &srv.addr, "identify", "--report", "rep"])
+        .current_dir(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Some seconds into the staircase (about 100 steps of some 30 ms each in real time).
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let _ = srv.child.kill();
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("link:") && err.contains("the data so far"),
+        "{err}"
+    );
+    let kept = std::fs::read_to_string(dir.path().join("rep/presliding.csv")).unwrap();
+    assert!(kept.lines().count() > 5, "{kept}");
+}
+
+/// An axis that does not move: the motor not connected (no current flows), or blocked
+/// (it never breaks away): a clear error, exit 1, the bridge off; the current stops at
+/// three times the expected breakaway.
+fn identify_says_when_the_axis_does_not_move() {
+    for (extra, says) in [
+        // An open winding: the device still believes its 10 Ω motor is there.
+        (
+            "resistance = 1e5\n[controller.motor]\nr = 10.0",
+            "no current flows",
+        ),
+        (
+            // Blocked: 100 times the friction the device's compensator (Table 1) expects.
+            "[plant.actuator]\nfs = 2.2e-2\nfc = 1.25e-2\n[controller.gms]\nfs = 220e-6\nfc = 125e-6",
+            "did not break away after 300 steps",
+        ),
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let sc = quiet_scenario(dir.path(), extra);
+        let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 20.0, Some(&sc));
+        let (code, out, err) = tune(&srv, &["identify", "--report", "rep"], dir.path());
+        assert_eq!(code, 1, "{extra}: {out}\n{err}");
+        assert!(
+            err.contains(says) && err.contains("the bridge is off"),
+            "{err}"
+        );
+        let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
+        assert!(status.contains("enabled=0"), "{status}");
+    }
+}
+
+/// An encoder counting against the motor: a clear error, exit 1, the bridge off.
+fn identify_says_when_the_encoder_is_reversed() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = quiet_scenario(dir.path(), "encoder_reversed = true");
+    let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 20.0, Some(&sc));
+    let (code, out, err) = tune(&srv, &["identify", "--report", "rep"], dir.path());
+    assert_eq!(code, 1, "{out}\n{err}");
+    assert!(err.contains("counts against the motor"), "{err}");
+    let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
+    assert!(status.contains("enabled=0"), "{status}");
 }

@@ -71,6 +71,8 @@ pub struct Plant {
     guideway: AnyModel,
     drift: crate::scenario::Drift,
     glitch: crate::scenario::Glitch,
+    /// -1 when the encoder is wired the other way round, else 1.
+    enc_sign: f64,
     /// Time since the start \[s\].
     pub t: f64,
     /// Current \[A\].
@@ -146,6 +148,7 @@ impl Plant {
             guideway,
             drift: spec.drift.clone(),
             glitch: spec.encoder_glitch,
+            enc_sign: if spec.encoder_reversed { -1.0 } else { 1.0 },
             t: 0.0,
             i: 0.0,
             omega: 0.0,
@@ -162,15 +165,15 @@ impl Plant {
         self.drift.factor(self.t, self.theta)
     }
 
-    /// The encoder count now (floor of angle / resolution, plus the injected glitch once it
-    /// is due).
+    /// The encoder count now (floor of angle / resolution, negated for an encoder wired the
+    /// other way, plus the injected glitch once it is due).
     pub fn encoder(&self) -> i64 {
         let glitch = if self.t >= self.glitch.at {
             self.glitch.counts
         } else {
             0
         };
-        ((self.theta / self.rad_per_count).floor() as i64).saturating_add(glitch)
+        ((self.enc_sign * self.theta / self.rad_per_count).floor() as i64).saturating_add(glitch)
     }
 
     /// The current-sense reading now \[A\]: noise, then quantisation and clipping.

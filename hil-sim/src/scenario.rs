@@ -108,6 +108,9 @@ pub struct Plant {
     pub drift: Drift,
     /// An injected encoder fault (none by default).
     pub encoder_glitch: Glitch,
+    /// The encoder wired the other way round: it counts down when the motor turns forward
+    /// (a wiring fault for the bench tools to detect).
+    pub encoder_reversed: bool,
 }
 
 /// Fault injection for testing what the device does about a bad encoder signal (a burst of

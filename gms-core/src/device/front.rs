@@ -297,6 +297,22 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         }
     }
 
+    fn enable_current(&mut self) -> Result<(), &'static str> {
+        if !self.status_now().faults.is_empty() {
+            return Err("fault latched (clear first)");
+        }
+        // One exchange: the loop takes the enable and the current in the same step.
+        self.post(|r| {
+            r.enable = true;
+            r.current = Some(0.0);
+        })?;
+        if self.status_now().enabled {
+            Ok(())
+        } else {
+            Err("not enabled (fault)")
+        }
+    }
+
     fn disable(&mut self) -> Result<(), &'static str> {
         self.post(|r| r.disable = true)
     }

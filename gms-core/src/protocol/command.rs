@@ -94,8 +94,13 @@ pub enum Command<'a> {
     Load,
     /// `defaults`.
     Defaults,
-    /// `enable`.
-    Enable,
+    /// `enable`: position control holding where the axis is; `enable current`: straight into
+    /// current mode at 0 A, the position loop never closed (the first step of an experiment
+    /// on an axis whose encoder direction is not yet known).
+    Enable {
+        /// `enable current`.
+        current: bool,
+    },
     /// `disable`.
     Disable,
     /// `status`.
@@ -171,7 +176,11 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
         "save" => Command::Save,
         "load" => Command::Load,
         "defaults" => Command::Defaults,
-        "enable" => Command::Enable,
+        "enable" => match arg() {
+            None => Command::Enable { current: false },
+            Some("current") => Command::Enable { current: true },
+            Some(_) => return Err(bad("usage: enable [current]")),
+        },
         "disable" => Command::Disable,
         "status" => Command::Status,
         "clear" => Command::Clear,

@@ -21,6 +21,8 @@ pub trait Device {
     fn defaults(&mut self) -> Result<(), &'static str>;
     /// Switches the bridge on (position control).
     fn enable(&mut self) -> Result<(), &'static str>;
+    /// Switches the bridge on straight into current mode at 0 A (no position control).
+    fn enable_current(&mut self) -> Result<(), &'static str>;
     /// Switches the bridge off.
     fn disable(&mut self) -> Result<(), &'static str>;
     /// Writes the status (without the leading `ok `) on one line.
@@ -77,7 +79,7 @@ pub trait Device {
 /// The `help` text.
 pub const HELP: &str = "help | list | get PATH | set PATH VALUE | stage PATH VALUE | commit | \
 discard | save | load | defaults | \
-enable | disable | status | clear | move POS [VEL] | current AMPS | \
+enable [current] | disable | status | clear | move POS [VEL] | current AMPS | \
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
 capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT]";
 
@@ -177,7 +179,8 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             *dev.staged() = None;
             done(out, dev.defaults())
         }
-        Command::Enable => done(out, dev.enable()),
+        Command::Enable { current: false } => done(out, dev.enable()),
+        Command::Enable { current: true } => done(out, dev.enable_current()),
         Command::Disable => done(out, dev.disable()),
         Command::Status => {
             out.write_str("ok ")?;
