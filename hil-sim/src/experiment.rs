@@ -262,3 +262,69 @@ fn lag_run(model: &mut AnyModel, vs: f64, s: &Setup, rng: &mut ChaCha8Rng) -> St
     }
     text
 }
+
+/// Where `hil-sim experiment` runs an experiment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rig {
+    /// On the device core driving the simulated axis (the default plant with the actuator
+    /// friction of the parameter file, the guideway negligible), through the protocol: the
+    /// bench experiments of `gms_ident::bench`, exactly what `gms-tune identify` runs on a
+    /// board.
+    Device,
+    /// On the friction model alone, the paper's idealised set-up (`run`): an imposed torque
+    /// or velocity, the rig's damping, no control loop. What the fits' accuracy figures are
+    /// measured on; the guideway experiment is always this.
+    Ideal,
+}
+
+/// Runs `kind` (pre-sliding, sliding or lag) on the device core with the actuator friction
+/// `spec` (drawn within ±variability with `seed`); returns the CSV text, in the formats of
+/// [`run`]. The device's compensator holds the nominal `spec` (so the experiments' ranges come
+/// from it, as on a bench from the values the user set), which must therefore be a 6-block
+/// GMS model.
+pub fn run_on_device(
+    kind: Kind,
+    spec: &FrictionSpec,
+    variability: f64,
+    seed: u64,
+) -> Result<String, Error> {
+    use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges};
+    if kind == Kind::Guideway {
+        return Err(Error::Run(
+            "the guideway experiment needs the slide's rig (--rig ideal)".into(),
+        ));
+    }
+    let mut sc = crate::scenario::Scenario::parse(
+        "[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n",
+        "hil-sim experiment",
+    )
+    .map_err(|e| Error::Run(e.to_string()))?;
+    sc.plant.actuator = spec.clone();
+    sc.plant.variability = variability;
+    sc.plant.seed = seed;
+    let mut dev = crate::device::LocalDevice::new(&sc).map_err(|e| {
+        Error::Run(format!(
+            "{e} (the device rig's compensator takes a 6-block GMS model; --rig ideal takes any)"
+        ))
+    })?;
+    let info = DeviceInfo::read(&mut dev).map_err(|e| Error::Run(e.to_string()))?;
+    let plans = Plans::new(&info, &Ranges::default()).map_err(|e| Error::Run(e.to_string()))?;
+    let run = |e: gms_ident::Error| Error::Run(e.to_string());
+    Ok(match kind {
+        Kind::Presliding => {
+            let mut out = Vec::new();
+            bench::presliding(&mut dev, &plans.presliding, &mut out).map_err(run)?;
+            bench::presliding_csv(&out)
+        }
+        Kind::Sliding => {
+            let mut out = Vec::new();
+            bench::sliding(&mut dev, &plans.sliding, &mut out).map_err(run)?;
+            bench::sliding_csv(&out)
+        }
+        _ => {
+            let (t, x, f) =
+                bench::lag(&mut dev, &LagPlan::for_vs(info.vs, info.pos_hz)).map_err(run)?;
+            bench::lag_csv(&t, &x, &f)
+        }
+    })
+}

@@ -107,6 +107,11 @@ enum Cmd {
         /// Friction variability per run, ± fraction (the paper saw 0.15).
         #[arg(long, default_value_t = 0.0)]
         variability: f64,
+        /// `device`: the bench experiments (those `gms-tune identify` runs) through the
+        /// protocol on the device core driving the simulated axis; `ideal`: the paper's
+        /// idealised set-up on the friction model alone (any model; always for guideway).
+        #[arg(long, default_value = "device", value_parser = ["device", "ideal"])]
+        rig: String,
     },
     /// Identify GMS parameters from experiment data; writes a parameter file.
     Identify {
@@ -284,8 +289,9 @@ fn main() -> ExitCode {
             out,
             seed,
             variability,
+            rig,
         } => (|| {
-            use hil_sim::experiment::{Kind, Setup, run};
+            use hil_sim::experiment::{Kind, Setup, run, run_on_device};
             if !(0.0..0.9).contains(&variability) {
                 return Err("--variability must be in [0, 0.9)".to_string());
             }
@@ -299,8 +305,16 @@ fn main() -> ExitCode {
                 "lag" => Kind::Lag,
                 _ => Kind::Guideway,
             };
-            let setup = Setup::paper(k, &pf.friction, variability);
-            let text = run(k, &pf.friction, &setup, seed)?;
+            let text = if rig == "device" && k != Kind::Guideway {
+                run_on_device(k, &pf.friction, variability, seed)?
+            } else {
+                run(
+                    k,
+                    &pf.friction,
+                    &Setup::paper(k, &pf.friction, variability),
+                    seed,
+                )?
+            };
             gms_ident::io::write_atomic(&out, text.as_bytes())?;
             println!("{} rows to {}", text.lines().count() - 1, out.display());
             Ok(())

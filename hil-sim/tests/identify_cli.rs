@@ -232,3 +232,57 @@ fn bad_data_exits_2_and_writes_nothing() {
         2
     );
 }
+
+/// `hil-sim experiment` runs the bench experiments on the device core by default (the CSV
+/// formats of the idealised rig, which `--rig ideal` still runs); a friction the device's
+/// compensator cannot hold is refused on the device rig in one line and taken by the ideal one.
+#[test]
+fn experiments_run_on_the_device_rig_or_the_ideal_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/table1.toml");
+    let p = p.to_str().unwrap();
+    for rig in ["device", "ideal"] {
+        let out = format!("pre-{rig}.csv");
+        let args = [
+            "experiment",
+            "presliding",
+            "--params",
+            p,
+            "--out",
+            &out,
+            "--rig",
+            rig,
+        ];
+        assert_eq!(hil(&args, d).0, 0, "{rig}");
+        let text = std::fs::read_to_string(d.join(&out)).unwrap();
+        assert!(text.starts_with("x,f,dir\n"), "{rig}");
+        // Up to about Fs from rest in Fs/100 steps: 80-110 points each way.
+        let n = text.lines().count() - 1;
+        let per_dir = if rig == "device" { n } else { n / 2 };
+        assert!((80..=110).contains(&per_dir), "{rig}: {n} points");
+    }
+    // Four blocks: the ideal rig takes it, the device's 6-block compensator cannot.
+    std::fs::write(
+        d.join("four.toml"),
+        "[friction]\nmodel = \"gms\"\nfs = 220e-6\nfc = 125e-6\nvs = 0.2\ndelta = 0.9\n\
+         sigma = 10.5e-6\nc = 5e-3\nblocks = [{ k = 1.0, alpha = 0.5 }, { k = 0.1, alpha = 0.2 }, \
+         { k = 0.01, alpha = 0.2 }, { k = 0.002, alpha = 0.1 }]\n",
+    )
+    .unwrap();
+    let args = [
+        "experiment",
+        "sliding",
+        "--params",
+        "four.toml",
+        "--out",
+        "s.csv",
+    ];
+    let (code, err) = hil(&args, d);
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(err.contains("6-block"), "{err}");
+    assert!(!d.join("s.csv").exists());
+    let (code, err) = hil(&[&args[..], &["--rig", "ideal"]].concat(), d);
+    assert_eq!(code, 0, "{err}");
+}
