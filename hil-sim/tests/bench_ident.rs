@@ -475,3 +475,75 @@ fn on_the_default_plant_the_bench_sees_both_sources() {
     assert!((fc / (125e-6 + g_fc) - 1.0).abs() < 0.03, "fc {fc}");
     assert!(fc > 125e-6 * 1.05, "fc {fc}");
 }
+
+/// A bench that notes where the axis is after every wait.
+struct Tracking<'a> {
+    dev: &'a mut LocalDevice,
+    lo: f64,
+    hi: f64,
+}
+
+impl gms_ident::bench::Bench for Tracking<'_> {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        self.dev.request(line)
+    }
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+        // In slices, so that a run's far end is seen.
+        let mut left = seconds;
+        while left > 0.0 {
+            let s = left.min(0.01);
+            self.dev.wait(s)?;
+            left -= s;
+            let x = gms_ident::bench::position(&mut *self.dev)?;
+            self.lo = self.lo.min(x);
+            self.hi = self.hi.max(x);
+        }
+        Ok(())
+    }
+}
+
+/// The stroke a bench identification uses stays within what its plans say (and so within
+/// the window the device's limits are narrowed to); the figure for the docs.
+#[test]
+fn a_bench_identification_stays_within_its_planned_stroke() {
+    use gms_ident::bench::{Bench, DeviceInfo, LagPlan, Plans, Ranges, identify_on};
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let info = DeviceInfo::read(&mut dev).unwrap();
+    let plans = Plans::new(&info, &Ranges::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let t0: f64 = {
+        let (_, st) = dev.request("status").unwrap();
+        st.split_whitespace()
+            .find_map(|w| w.strip_prefix("t="))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let mut b = Tracking {
+        dev: &mut dev,
+        lo: 0.0,
+        hi: 0.0,
+    };
+    identify_on(&mut b, &plans, dir.path(), 6, false, &mut |_, _, _| {}).unwrap();
+    let (lo, hi) = (b.lo, b.hi);
+    let t1: f64 = {
+        let (_, st) = dev.request("status").unwrap();
+        st.split_whitespace()
+            .find_map(|w| w.strip_prefix("t="))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let planned = plans
+        .sliding
+        .stroke(info.dt())
+        .max(LagPlan::for_vs(info.vs, info.pos_hz).stroke());
+    eprintln!(
+        "stroke used: {lo:.3} to {hi:.3} rad from the start (planned at most ±{planned:.2} rad, \
+         window ±{} rad); device time {:.1} s",
+        plans.window,
+        t1 - t0
+    );
+    assert!(lo > -planned && hi < planned, "{lo} {hi} vs {planned}");
+}
