@@ -328,13 +328,14 @@ pub struct Sweep {
     pub f0: f32,
     /// End frequency \[Hz\], `> 0`.
     pub f1: f32,
-    /// Duration \[s\], `> 0`; the speed is the mean again after it.
+    /// Duration \[s\], `> 0`; after it the speed ramps to rest and stays there.
     pub seconds: f32,
 }
 
 /// The reference of the protocol's `velocity`: from the reference's own speed, the speed ramps
 /// to `vel` at up to `amax`; then, with a [`Sweep`], it oscillates around `vel` for the sweep's
-/// duration (starting at phase 0, so the speed is continuous), and stays at `vel` after. The
+/// duration (starting at phase 0, so the speed is continuous), then ramps to rest and stays
+/// there (a run that ends on the device: with an amplitude of 0, a timed constant speed). The
 /// position is the speed's exact integral (trapezoid per step, accumulated in f64 sub-counts,
 /// so that a long run at constant speed does not drift).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -419,7 +420,11 @@ impl VelocityProfile {
             let f = s.f0 + (s.f1 - s.f0) * t / s.seconds;
             let (sin, cos) = sin_cos(phase);
             if self.t_sweep >= s.seconds {
+                // The run is over: the speed ramps to rest (and stays there), so a timed run
+                // ends on the device whatever the link does.
                 self.v = self.vel;
+                self.vel = 0.0;
+                self.ramped = false;
                 acc = 0.0;
             } else {
                 self.v = self.vel + s.amp * sin;

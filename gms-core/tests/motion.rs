@@ -201,11 +201,11 @@ fn a_velocity_profile_ramps_holds_and_sweeps() {
     for k in 0..15_000 {
         let r = p.next(dt);
         let dv = (r.vel - prev.vel).abs();
-        if k < 100 {
-            // The ramp: no speed change beyond amax·dt.
+        if !(100..10_100).contains(&k) {
+            // The ramps, up and (after the sweep) down to rest: no speed change beyond
+            // amax·dt.
             assert!(dv <= 50.0 * dt * 1.0001, "step {k}: dv {dv}");
-        }
-        if k >= 100 {
+        } else {
             max_dv = max_dv.max(dv);
         }
         integral += 0.5 * (prev.vel + r.vel) as f64 * dt as f64;
@@ -216,7 +216,9 @@ fn a_velocity_profile_ramps_holds_and_sweeps() {
         prev = r;
     }
     // Ramp done after 100 steps (0.5 / 50 = 10 ms); the sweep then stays within mean ± amp,
-    // reaches both extremes, is continuous (no step above amp·2π·f1·dt), and ends at the mean.
+    // reaches both extremes, is continuous (no step above amp·2π·f1·dt), and ends: the speed
+    // ramps from the mean to rest (another 100 steps) and stays there (a run that ends on the
+    // device).
     assert!((samples[99] - 0.5).abs() < 1e-6);
     let sweep_part = &samples[100..10_100];
     let (lo, hi) = sweep_part
@@ -228,7 +230,9 @@ fn a_velocity_profile_ramps_holds_and_sweeps() {
         max_dv <= 0.2 * std::f32::consts::TAU * 10.0 * dt * 1.01 + 1e-6,
         "{max_dv}"
     );
-    assert!(samples[10_100..].iter().all(|v| (*v - 0.5).abs() < 1e-6));
+    assert!((samples[10_100] - 0.5).abs() < 1e-6, "{}", samples[10_100]);
+    assert!(samples[10_100..10_201].windows(2).all(|w| w[1] <= w[0]));
+    assert!(samples[10_201..].iter().all(|v| *v == 0.0));
     // Zero crossings of (v - mean) in the sweep: the frequency rises from 2 to 10 Hz, so
     // the mean frequency is 6 Hz: 2 × 6 crossings in the 1 s.
     let crossings = sweep_part

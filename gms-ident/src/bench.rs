@@ -104,6 +104,9 @@ pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
         .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
 }
 
+/// The velocity mode's ramp [rad/s²] (the device's `velocity` ramps at `MOVE_AMAX`).
+const VELOCITY_ACC: f64 = gms_core::reference::MOVE_AMAX as f64;
+
 /// What the experiments need to know of the device, read with `get` (SI).
 #[derive(Debug, Clone, Copy)]
 pub struct DeviceInfo {
@@ -255,26 +258,27 @@ impl SlidingPlan {
     }
 
     /// The farthest the axis goes from where a speed's run starts \\[rad\\] (each run goes one
-    /// way from rest, the next the other way back): the run, the ramps up and down at the
-    /// velocity mode's 50 rad/s², and 20 % for the exchanges while it runs.
+    /// way from rest, the next the other way back): the run and its ramps, with 20 % to spare.
     pub fn stroke(&self, dt: f64) -> f64 {
         self.speeds
             .iter()
             .map(|&v| {
                 let v = v.abs();
-                1.2 * (v * (self.settle(v) + self.window(v, dt)) + v * v / 50.0)
+                1.2 * (v * (self.settle(v) + self.window(v, dt) + 0.02) + v * v / VELOCITY_ACC)
             })
             .fold(0.0, f64::max)
     }
 }
 
-/// The sliding experiment (paper §3): at each speed, in both directions, a velocity run; once
-/// settled, the mean friction torque (current × k_M, the loop's own torque constant, at
-/// constant speed the whole of the motor torque) and the measured speed (the encoder over the
-/// window). Pushes `(v, f)` pairs as `hil-sim experiment sliding` writes them onto `out` as
-/// they are measured (so that a run cut short keeps them), and ends holding. Fails (the bridge
-/// off) when the axis does not follow the speed (measured below half of it, or the other way)
-/// or the device latches a fault.
+/// The sliding experiment (paper §3): at each speed, in both directions, a timed velocity run
+/// from rest (the device ends it by itself, so the stroke never depends on the link's
+/// timing), captured whole; after the ramp and the settling stroke, the mean friction
+/// torque (current × k_M, the loop's own torque constant, at constant speed the whole of the
+/// motor torque) and the measured speed (the encoder over the window). Pushes `(v, f)` pairs
+/// as `hil-sim experiment sliding` writes them onto `out` as they are measured (so that a run
+/// cut short keeps them), and ends holding. Fails (the bridge off) when the axis does not
+/// follow the speed (measured below half of it, or the other way) or the device latches a
+/// fault.
 pub fn sliding(
     b: &mut impl Bench,
     plan: &SlidingPlan,
@@ -287,24 +291,33 @@ pub fn sliding(
         for &v in &plan.speeds {
             for dir in [1.0, -1.0] {
                 let v = dir * v;
-                primitive(b, &format!("velocity {v}"))?;
-                b.wait(plan.settle(v))?;
+                // A timed run (`velocity V 0 1 1 SECONDS`: no swing, then a ramp to rest that
+                // the device makes by itself, so the stroke never depends on the link's
+                // timing: a late stop over a slow link, or on a virtual device faster than
+                // real time, would overrun the window), captured whole.
+                let t_acc = v.abs() / VELOCITY_ACC;
+                let run = plan.settle(v) + plan.window(v, dt) + 0.02;
+                let total = run + 2.0 * t_acc + 0.01;
                 // Three fields per sample within the 8192 values of the buffer.
-                let steps = (plan.window(v, dt) / dt).ceil();
+                let steps = (total / dt).ceil();
                 let every = (steps * 3.0 / 8100.0).ceil().max(1.0);
                 let n = (steps / every).ceil() as u32;
-                b.request(&format!("capture t,pos,current {every} {n}"))?;
+                b.request(&format!("capture t,pos,current {every} {n} next"))?;
+                primitive(b, &format!("velocity {v} 0 1 1 {run}"))?;
                 b.wait(n as f64 * every * dt)?;
                 capture_wait(b, 0.01, 200)?;
-                // Stop before reading back (reading takes exchanges, each device time at
-                // speed): the axis stays within the stroke planned, and each run starts from
-                // rest. The velocity mode's own ramp (50 rad/s²) stops it in v²/100 rad; a
-                // `hold` from speed would take longer (a move plan to rest).
-                b.request("velocity 0")?;
-                b.wait(v.abs() / 50.0 + 0.005)?;
-                b.request("hold")?;
                 check_faults(b)?;
-                let rows = capture_rows(b)?;
+                b.request("hold")?;
+                let all = capture_rows(b)?;
+                // The averaging window: after the ramp and the settling stroke.
+                let (from, to) = (
+                    t_acc + plan.settle(v),
+                    t_acc + plan.settle(v) + plan.window(v, dt),
+                );
+                let rows: Vec<Vec<f64>> = all
+                    .into_iter()
+                    .filter(|r| r[0] >= from && r[0] <= to)
+                    .collect();
                 let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
                     return Err(Error::Device("an empty capture".into()));
                 };
