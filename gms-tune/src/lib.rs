@@ -106,7 +106,12 @@ impl Link {
             match self.io.read(&mut buf) {
                 Ok(0) => return Err(LinkError::Io("the device closed the connection".into())),
                 Ok(n) => self.pending.extend_from_slice(&buf[..n]),
-                Err(e) if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) => {}
+                // A signal (Ctrl-C, whose handler decides what to do) is not a link failure.
+                Err(e)
+                    if matches!(
+                        e.kind(),
+                        ErrorKind::WouldBlock | ErrorKind::TimedOut | ErrorKind::Interrupted
+                    ) => {}
                 Err(e) => return Err(LinkError::Io(e.to_string())),
             }
         }

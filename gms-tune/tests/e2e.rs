@@ -148,6 +148,11 @@ fn main() {
             "identify_keeps_the_data_when_the_link_is_lost",
             identify_keeps_the_data_when_the_link_is_lost,
         ),
+        #[cfg(unix)]
+        (
+            "identify_stops_on_ctrl_c_with_the_bridge_off",
+            identify_stops_on_ctrl_c_with_the_bridge_off,
+        ),
         (
             "identify_says_when_the_axis_does_not_move",
             identify_says_when_the_axis_does_not_move,
@@ -608,4 +613,38 @@ fn identify_says_when_the_encoder_is_reversed() {
     assert!(err.contains("counts against the motor"), "{err}");
     let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
     assert!(status.contains("enabled=0"), "{status}");
+}
+
+/// Ctrl-C (SIGINT) mid-run: exit 1, "interrupted", the bridge off, the stroke limits back,
+/// the data so far written.
+#[cfg(unix)]
+fn identify_stops_on_ctrl_c_with_the_bridge_off() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = quiet_scenario(dir.path(), "");
+    let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 1.0, Some(&sc));
+    let child = Command::new(TUNE)
+        .args(["--tcp", &srv.addr, "identify", "--report", "rep"])
+        .current_dir(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(2000));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("interrupted (Ctrl-C)") && err.contains("the bridge is off"),
+        "{err}"
+    );
+    let kept = std::fs::read_to_string(dir.path().join("rep/presliding.csv")).unwrap();
+    assert!(kept.lines().count() > 5, "{kept}");
+    let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
+    assert!(status.contains("enabled=0"), "{status}");
+    assert_eq!(tune(&srv, &["get", "lim.pos_max"], dir.path()).1, "50\n");
 }
