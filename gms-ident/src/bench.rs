@@ -935,3 +935,154 @@ pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Resu
     }
     Ok(n)
 }
+
+/// The feedforward-gain sweep's settings: the sine test (amplitude \\[rad\\], frequency \\[Hz\\],
+/// duration \\[s\\]) repeated at `steps` gains from `from` to `to` \\[-\\].
+#[derive(Debug, Clone)]
+pub struct TuneFfPlan {
+    /// Sine amplitude \\[rad\\].
+    pub amp: f64,
+    /// Sine frequency \\[Hz\\].
+    pub freq: f64,
+    /// Each test's duration \\[s\\].
+    pub seconds: f64,
+    /// The lowest gain \\[-\\].
+    pub from: f64,
+    /// The highest gain \\[-\\].
+    pub to: f64,
+    /// Gains tried, evenly spaced (≥ 3).
+    pub steps: usize,
+}
+
+impl TuneFfPlan {
+    /// Checks the plan: a valid sine test, 0 ≤ from < to ≤ 2 (the protocol's range of
+    /// `ff.gain`), 3 to 101 steps.
+    pub fn check(&self) -> Result<(), Error> {
+        let sine_ok = self.amp > 0.0
+            && self.amp.is_finite()
+            && self.freq > 0.0
+            && self.freq.is_finite()
+            && self.seconds * self.freq >= 2.0
+            && self.seconds <= 60.0;
+        if !sine_ok {
+            return Err(Error::Params(format!(
+                "sine test {} rad, {} Hz, {} s: positive, at least two periods, at most 60 s",
+                self.amp, self.freq, self.seconds
+            )));
+        }
+        let range_ok = 0.0 <= self.from && self.from < self.to && self.to <= 2.0;
+        if !(range_ok && (3..=101).contains(&self.steps)) {
+            return Err(Error::Params(format!(
+                "gains {} to {} in {} steps: 0 <= from < to <= 2, 3 to 101 steps",
+                self.from, self.to, self.steps
+            )));
+        }
+        Ok(())
+    }
+
+    /// The gains tried.
+    pub fn gains(&self) -> Vec<f64> {
+        (0..self.steps)
+            .map(|i| self.from + (self.to - self.from) * i as f64 / (self.steps - 1) as f64)
+            .collect()
+    }
+}
+
+/// What the sweep found.
+#[derive(Debug, Clone)]
+pub struct TuneFf {
+    /// `(gain, RMS error [rad])` for each gain tried.
+    pub curve: Vec<(f64, f64)>,
+    /// The chosen gain \\[-\\]: [`choose_gain`] of the curve.
+    pub chosen: f64,
+    /// The gain the device had before \\[-\\].
+    pub before: f64,
+}
+
+/// The feedforward gain by experiment: the same sine test with reversals at each gain of the
+/// plan, the RMS error of each, the best gain from a parabola fitted around the minimum
+/// ([`choose_gain`]). Leaves the device at `before` (the caller applies `chosen` if asked), holding; on
+/// a failure the gain goes back and the bridge off.
+pub fn tune_ff(
+    b: &mut impl Bench,
+    plan: &TuneFfPlan,
+    mut progress: impl FnMut(usize, f64, f64),
+) -> Result<TuneFf, Error> {
+    plan.check()?;
+    let before = get_param(b, "ff.gain")?;
+    let r = guarded(b, |b| {
+        let mut curve = Vec::new();
+        for (i, g) in plan.gains().into_iter().enumerate() {
+            b.request(&format!("set ff.gain {g}"))?;
+            let rms = sine_test(b, plan.amp, plan.freq, plan.seconds)?;
+            progress(i, g, rms);
+            curve.push((g, rms));
+        }
+        Ok(curve)
+    });
+    // The gain as it was, whatever happened (best effort after a failure).
+    let restored = b.request(&format!("set ff.gain {before}"));
+    let curve = r?;
+    restored?;
+    let chosen = choose_gain(&curve);
+    Ok(TuneFf {
+        curve,
+        chosen,
+        before,
+    })
+}
+
+/// The gain at the minimum of a measured `(gain, RMS)` curve: the vertex of a least-squares
+/// parabola through the points within 1.5 × the lowest RMS (the test's scatter of a few %
+/// makes the single lowest point a poor estimate on a flat bottom), kept within those points;
+/// the lowest point if fewer than three qualify or the parabola opens downwards.
+pub fn choose_gain(curve: &[(f64, f64)]) -> f64 {
+    let Some(&(g_best, r_best)) = curve.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return f64::NAN;
+    };
+    let near: Vec<(f64, f64)> = curve
+        .iter()
+        .copied()
+        .filter(|p| p.1 <= 1.5 * r_best)
+        .collect();
+    if near.len() < 3 {
+        return g_best;
+    }
+    // Centred on the best gain for conditioning: y = a + b u + c u², u = g - g_best.
+    let mut m = [[0.0f64; 3]; 3];
+    let mut v = [0.0f64; 3];
+    for &(g, r) in &near {
+        let u = g - g_best;
+        let basis = [1.0, u, u * u];
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += basis[i] * basis[j];
+            }
+            v[i] += basis[i] * r;
+        }
+    }
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&m);
+    if d.abs() < 1e-300 {
+        return g_best;
+    }
+    // Cramer's rule for b and c.
+    let col = |k: usize| {
+        let mut mk = m;
+        for i in 0..3 {
+            mk[i][k] = v[i];
+        }
+        det(&mk) / d
+    };
+    let (bl, c) = (col(1), col(2));
+    if c <= 0.0 {
+        return g_best;
+    }
+    let lo = near.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+    let hi = near.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+    (g_best - bl / (2.0 * c)).clamp(lo, hi)
+}

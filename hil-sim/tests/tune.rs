@@ -1,0 +1,76 @@
+//! Tuning on the device (`gms_ident::bench`, what `gms-tune tune-ff` runs), in-process on the
+//! device core and the simulated plant.
+
+use gms_ident::bench::{Bench, TuneFfPlan, get_param, tune_ff};
+use hil_sim::device::LocalDevice;
+use hil_sim::scenario::Scenario;
+
+const QUIET: &str = "[plant]
+variability = 0.0
+
+[plant.guideway]
+fs = 1e-6
+fc = 1e-6
+";
+
+/// The coarse sweep's choice (11 gains, a parabola fitted around the minimum) lands within 5 %
+/// of the optimum of a fine sweep (41 gains) of the same test (its fitted minimum: its single
+/// lowest point scatters with the test's repeatability: measured 0.894 against a lowest point
+/// at 0.95), the error at the chosen gain well below the range's ends (measured 0.881 counts,
+/// the fine sweep's lowest point 0.792); the device's gain is left as it was.
+#[test]
+fn tune_ff_finds_the_optimum_of_a_fine_sweep() {
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let mut plan = TuneFfPlan {
+        amp: 2e-3,
+        freq: 1.0,
+        seconds: 3.0,
+        from: 0.7,
+        to: 1.2,
+        steps: 11,
+    };
+    let coarse = tune_ff(&mut dev, &plan, |_, _, _| {}).unwrap();
+    assert_eq!(get_param(&mut dev, "ff.gain").unwrap(), coarse.before);
+    plan.steps = 41;
+    let fine = tune_ff(&mut dev, &plan, |_, _, _| {}).unwrap();
+    let (g_opt, rms_opt) = fine
+        .curve
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    let rpc = 3.8e-6;
+    for (g, r) in &coarse.curve {
+        eprintln!("gain {g:.3}: {:.3} counts", r / rpc);
+    }
+    eprintln!(
+        "chosen {:.4} (coarse), fine sweep: lowest point {g_opt:.4} at {:.3} counts, fitted \
+         minimum {:.4}",
+        coarse.chosen,
+        rms_opt / rpc,
+        fine.chosen
+    );
+    assert!(
+        (coarse.chosen - fine.chosen).abs() < 0.05 * fine.chosen,
+        "{} vs {}",
+        coarse.chosen,
+        fine.chosen
+    );
+    // The curve has a minimum inside the range: the error rises on both sides.
+    let (first, last) = (fine.curve[0].1, fine.curve[40].1);
+    assert!(
+        first > 1.1 * rms_opt && last > 1.1 * rms_opt,
+        "{first} {last} {rms_opt}"
+    );
+    dev.request(&format!("set ff.gain {}", coarse.chosen))
+        .unwrap();
+    let at_chosen =
+        gms_ident::bench::sine_test(&mut dev, plan.amp, plan.freq, plan.seconds).unwrap();
+    eprintln!("at the chosen gain: {:.3} counts", at_chosen / rpc);
+    assert!(
+        at_chosen < 0.8 * first.min(last),
+        "{at_chosen} vs {first} {last}"
+    );
+    let _ = dev.request("disable");
+}
