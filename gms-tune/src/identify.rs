@@ -4,18 +4,16 @@
 //! loaded into the device and saved.
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use gms_ident::Error;
-use gms_ident::bench::{self, Bench, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
+use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
 use gms_ident::identify::write_report;
 use gms_ident::paramfile::ParamFile;
 use gms_tune::Link;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::Fail;
+use crate::tracked::Tracked;
 
 /// What `gms-tune identify` is asked.
 pub struct Args {
@@ -35,61 +33,6 @@ pub struct Args {
     pub ranges: Ranges,
 }
 
-/// The link as a bench whose waits move a progress bar (in device milliseconds) and whose
-/// requests stop once the user pressed Ctrl-C.
-struct Tracked<'a> {
-    link: &'a mut Link,
-    bar: ProgressBar,
-    stop: Arc<AtomicBool>,
-}
-
-impl Tracked<'_> {
-    fn interrupted(&self) -> Result<(), Error> {
-        if self.stop.load(Ordering::SeqCst) {
-            Err(Error::Device("interrupted (Ctrl-C)".into()))
-        } else {
-            Ok(())
-        }
-    }
-
-    /// A new bar for `what`, `seconds` of device time long.
-    fn start(&mut self, what: &str, seconds: f64) {
-        self.bar.finish_and_clear();
-        let bar = ProgressBar::with_draw_target(
-            Some((seconds * 1000.0).max(1.0) as u64),
-            ProgressDrawTarget::stderr(),
-        );
-        if let Ok(style) = ProgressStyle::with_template(
-            "{prefix:>11} [{bar:32}] {percent:>3} %  {elapsed_precise} elapsed, about {eta} left",
-        ) {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar.set_prefix(what.to_string());
-        bar.enable_steady_tick(Duration::from_millis(200));
-        self.bar = bar;
-    }
-}
-
-impl Bench for Tracked<'_> {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        // What an interrupted run sends to end safely goes out even after Ctrl-C.
-        let safe = line == "disable" || line == "status" || line.starts_with("set lim.pos_");
-        if !safe {
-            self.interrupted()?;
-        }
-        Bench::request(&mut *self.link, line)
-    }
-
-    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
-        self.interrupted()?;
-        Bench::wait(&mut *self.link, seconds)?;
-        if seconds.is_finite() && seconds > 0.0 {
-            self.bar.inc((seconds * 1000.0) as u64);
-        }
-        self.interrupted()
-    }
-}
-
 /// Runs the experiments, writes the data, fits, writes the results; on any failure the bridge
 /// is off, the stroke limits are back, and the data gathered so far is on disk.
 pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
@@ -97,13 +40,6 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         return Err(Fail::Usage(
             "--apply/--save need --blocks 6: the device's compensator has 6 blocks".into(),
         ));
-    }
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second handler cannot be set (a second run in one process): the run then ends
-        // only on its own.
-        let _ = ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst));
     }
     let dev = DeviceInfo::read(link).map_err(|e| Fail::Device(e.to_string()))?;
     check_faults(link).map_err(|e| Fail::Device(format!("{e}: `clear` it first")))?;
@@ -125,11 +61,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         plans.window,
     );
     let started = Instant::now();
-    let mut bench = Tracked {
-        link,
-        bar: ProgressBar::hidden(),
-        stop,
-    };
+    let mut bench = Tracked::new(link);
     let r = bench::identify_on(
         &mut bench,
         &plans,

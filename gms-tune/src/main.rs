@@ -10,6 +10,8 @@ use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
 use gms_tune::{Link, LinkError, parse_telemetry};
 
 mod identify;
+mod tracked;
+mod tune_ff;
 
 /// The gms bench tool.
 #[derive(Parser)]
@@ -136,6 +138,39 @@ enum Cmd {
         /// narrowed to it while the experiments run.
         #[arg(long, default_value_t = 5.0)]
         window: f64,
+    },
+    /// Tune the friction feedforward's gain: the same sine test with reversals at each gain
+    /// of a sweep, the RMS error of each, the best gain from a parabola fitted around the
+    /// minimum; prints the curve and the choice, writes curve.csv and curve.svg. The device's
+    /// gain is left as it was unless --apply/--save.
+    TuneFf {
+        /// Sine amplitude \[rad\] (the axis swings this far from where it is, and back).
+        #[arg(long, default_value_t = 2e-3)]
+        amplitude: f64,
+        /// Sine frequency \[Hz\].
+        #[arg(long, default_value_t = 1.0)]
+        freq: f64,
+        /// Each test's duration \[s\] (the first period is left out of the RMS).
+        #[arg(long, default_value_t = 3.0)]
+        seconds: f64,
+        /// The lowest gain tried.
+        #[arg(long, default_value_t = 0.7)]
+        from: f64,
+        /// The highest gain tried.
+        #[arg(long, default_value_t = 1.2)]
+        to: f64,
+        /// Gains tried, evenly spaced (3 to 101).
+        #[arg(long, default_value_t = 11)]
+        steps: usize,
+        /// Output directory.
+        #[arg(long, default_value = "tune-ff")]
+        out: PathBuf,
+        /// Set the chosen gain.
+        #[arg(long)]
+        apply: bool,
+        /// Set it and save it (the bridge is switched off to save).
+        #[arg(long)]
+        save: bool,
     },
 }
 
@@ -390,6 +425,32 @@ fn run(cli: Cli) -> Result<(), Fail> {
             seconds,
             refresh_ms,
         } => watch(&mut link, seconds, Duration::from_millis(refresh_ms))?,
+        Cmd::TuneFf {
+            amplitude,
+            freq,
+            seconds,
+            from,
+            to,
+            steps,
+            out,
+            apply,
+            save,
+        } => tune_ff::run(
+            &mut link,
+            &tune_ff::Args {
+                plan: gms_ident::bench::TuneFfPlan {
+                    amp: amplitude,
+                    freq,
+                    seconds,
+                    from,
+                    to,
+                    steps,
+                },
+                out,
+                apply,
+                save,
+            },
+        )?,
         Cmd::Identify {
             out,
             report,

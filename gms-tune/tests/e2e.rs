@@ -148,6 +148,10 @@ fn main() {
             "identify_keeps_the_data_when_the_link_is_lost",
             identify_keeps_the_data_when_the_link_is_lost,
         ),
+        (
+            "tune_ff_sweeps_chooses_and_applies_on_request",
+            tune_ff_sweeps_chooses_and_applies_on_request,
+        ),
         #[cfg(unix)]
         (
             "identify_stops_on_ctrl_c_with_the_bridge_off",
@@ -647,4 +651,60 @@ fn identify_stops_on_ctrl_c_with_the_bridge_off() {
     let (_, status, _) = tune(&srv, &["send", "status"], dir.path());
     assert!(status.contains("enabled=0"), "{status}");
     assert_eq!(tune(&srv, &["get", "lim.pos_max"], dir.path()).1, "50\n");
+}
+
+/// `tune-ff` on a virtual device 20× faster than real time: the curve printed and written, the
+/// gain left alone without --apply and set to the choice with it; a bad range refused (exit 2)
+/// with nothing changed.
+fn tune_ff_sweeps_chooses_and_applies_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = quiet_scenario(dir.path(), "");
+    let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 20.0, Some(&sc));
+    let d = dir.path();
+    let gain = |srv: &Server| {
+        tune(srv, &["get", "ff.gain"], d)
+            .1
+            .trim()
+            .parse::<f64>()
+            .unwrap()
+    };
+    let before = gain(&srv);
+    let (code, out, err) = tune(&srv, &["tune-ff", "--steps", "5", "--out", "tf"], d);
+    assert_eq!(code, 0, "{out}\n{err}");
+    // Five lines of the curve and the choice.
+    assert_eq!(
+        out.lines()
+            .filter(|l| l.starts_with(" 0.") || l.starts_with(" 1."))
+            .count(),
+        5,
+        "{out}"
+    );
+    let chosen: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("chosen ff.gain "))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!((0.7..=1.2).contains(&chosen), "{chosen}");
+    assert!(d.join("tf/curve.csv").exists() && d.join("tf/curve.svg").exists());
+    assert_eq!(gain(&srv), before);
+    let (code, out, err) = tune(
+        &srv,
+        &["tune-ff", "--steps", "5", "--out", "tf", "--apply"],
+        d,
+    );
+    assert_eq!(code, 0, "{out}\n{err}");
+    let chosen: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("set ff.gain "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(
+        (gain(&srv) - chosen).abs() < 1e-4,
+        "{} vs {chosen}",
+        gain(&srv)
+    );
+    let (code, _, err) = tune(&srv, &["tune-ff", "--from", "1.5", "--to", "1.0"], d);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("0 <= from < to <= 2"), "{err}");
 }
