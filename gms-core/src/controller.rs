@@ -146,6 +146,12 @@ pub struct ControllerParams<const N: usize> {
     pub pos_min: f32,
     /// Soft stroke limit, high side \[rad\] from the power-up position (see `pos_min`).
     pub pos_max: f32,
+    /// Encoder direction \[-\], 1 or -1: -1 counts the other way (an encoder wired against the
+    /// motor, fixed by a parameter instead of a rewiring).
+    pub enc_dir: f32,
+    /// Current-sense polarity \[-\], 1 or -1: -1 reads the other way (a sense amplifier or
+    /// shunt wired the other way round).
+    pub sense_dir: f32,
     /// Friction feedforward.
     pub ff: FeedforwardParams<N>,
 }
@@ -225,6 +231,12 @@ impl<const N: usize> ControllerParams<N> {
         }
         if self.pos_min >= self.pos_max {
             return Err(ControllerError::Invalid("lim.pos_min"));
+        }
+        if self.enc_dir != 1.0 && self.enc_dir != -1.0 {
+            return Err(ControllerError::Invalid("enc.dir"));
+        }
+        if self.sense_dir != 1.0 && self.sense_dir != -1.0 {
+            return Err(ControllerError::Invalid("sense.dir"));
         }
         const K: (f32, f32) = range("gms.k1");
         const ALPHA: (f32, f32) = range("gms.a1");

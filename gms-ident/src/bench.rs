@@ -1086,3 +1086,254 @@ pub fn choose_gain(curve: &[(f64, f64)]) -> f64 {
     let hi = near.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
     (g_best - bl / (2.0 * c)).clamp(lo, hi)
 }
+
+/// What commissioning measured and decided.
+#[derive(Debug, Clone, Default)]
+pub struct Commissioned {
+    /// The current sense's residual offset at rest, bridge off \\[A\\] (after the start-up zero).
+    pub sense_offset: f64,
+    /// Its noise at rest, one standard deviation per position step \\[A\\].
+    pub sense_noise: f64,
+    /// The current-sense polarity found (`sense.dir`) \\[-\\].
+    pub sense_dir: f64,
+    /// The encoder direction found (`enc.dir`) \\[-\\].
+    pub enc_dir: f64,
+    /// Winding resistance \\[ohm\\].
+    pub r: f64,
+    /// Back-EMF constant [V·s/rad] (= k_M in SI).
+    pub k_e: f64,
+    /// What was done, a line per step.
+    pub lines: Vec<String>,
+}
+
+impl Commissioned {
+    /// The `[device]` settings by protocol path.
+    pub fn settings(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("sense.dir", self.sense_dir),
+            ("enc.dir", self.enc_dir),
+            ("motor.r", self.r),
+            ("motor.k_e", self.k_e),
+            ("motor.k_m", self.k_e),
+        ]
+    }
+}
+
+/// The means of the columns of `rows`.
+fn means(rows: &[Vec<f64>]) -> Vec<f64> {
+    let n = rows.len().max(1) as f64;
+    let w = rows.first().map_or(0, Vec::len);
+    (0..w)
+        .map(|c| rows.iter().map(|r| r[c]).sum::<f64>() / n)
+        .collect()
+}
+
+/// Holds `amps` in current mode for `seconds` and returns the mean current \\[A\\] and voltage
+/// \\[V\\] over its second half, and the position change \\[rad\\] over the whole.
+fn hold_current(
+    b: &mut impl Bench,
+    amps: f64,
+    seconds: f64,
+    dt: f64,
+) -> Result<(f64, f64, f64), Error> {
+    let x0 = position(b)?;
+    b.request(&format!("current {amps}"))?;
+    b.wait(seconds / 2.0)?;
+    let n = ((seconds / 2.0) / dt).ceil().clamp(2.0, 2700.0) as u32;
+    let rows = capture_now(b, "current,volts", n, dt)?;
+    check_faults(b)?;
+    let m = means(&rows);
+    Ok((m[0], m[1], position(b)? - x0))
+}
+
+/// Commissioning a motor on the bench: the current sense at rest (offset, noise); its
+/// polarity (a reversed sense makes the current loop run away at once: `over_current`, then
+/// `sense.dir` flipped and tried again); the encoder's direction (current steps of a quarter
+/// of the expected Fs until the axis moves 100 µrad, which way the counts say; flipped by
+/// `enc.dir`); the winding resistance (current mode at ±40 % of the expected breakaway, the
+/// axis held by friction: R from the voltage and current differences, offsets cancelled); the
+/// back-EMF constant (timed velocity runs at 1, 2 and 3 × `speed` each way: the voltage less
+/// R × current against the speed, the slope). The direction settings it changes to go on are
+/// put back at the end (and on failure, with the bridge off): the caller applies the result.
+pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error> {
+    if !(speed > 0.0 && speed * 3.0 <= VELOCITY_MAX_BENCH) {
+        return Err(Error::Params(format!(
+            "speed {speed} rad/s: positive, three times it at most {VELOCITY_MAX_BENCH} rad/s"
+        )));
+    }
+    let dev = DeviceInfo::read(b)?;
+    let dt = dev.dt();
+    check_faults(b)?;
+    let dirs0 = (get_param(b, "sense.dir")?, get_param(b, "enc.dir")?);
+    let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, speed));
+    // The directions as they were (the caller applies what was found).
+    let _ = b.request("disable");
+    let _ = b.request(&format!("set sense.dir {}", dirs0.0));
+    let _ = b.request(&format!("set enc.dir {}", dirs0.1));
+    r
+}
+
+/// The fastest speed commissioning uses [rad/s] (the velocity mode allows 20).
+const VELOCITY_MAX_BENCH: f64 = 20.0;
+
+fn commission_steps(
+    b: &mut impl Bench,
+    dev: &DeviceInfo,
+    dt: f64,
+    (sense0, enc0): (f64, f64),
+    speed: f64,
+) -> Result<Commissioned, Error> {
+    let mut c = Commissioned {
+        sense_dir: sense0,
+        enc_dir: enc0,
+        ..Commissioned::default()
+    };
+    let i_fs = dev.fs / dev.k_m;
+    // 1. The sense at rest, bridge off.
+    b.request("disable")?;
+    let rows = capture_now(b, "current", 2000, dt)?;
+    let m = means(&rows)[0];
+    let var = rows.iter().map(|r| (r[0] - m).powi(2)).sum::<f64>() / rows.len().max(1) as f64;
+    (c.sense_offset, c.sense_noise) = (m, var.sqrt());
+    c.lines.push(format!(
+        "current sense at rest: offset {:+.3e} A, noise {:.3e} A rms",
+        c.sense_offset, c.sense_noise
+    ));
+    // 2. Its polarity: a small current in current mode.
+    let mut polarity_ok = false;
+    for attempt in 0..2 {
+        primitive(b, "enable current")?;
+        b.request(&format!("current {}", 0.4 * i_fs))?;
+        b.wait(0.02)?;
+        match check_faults(b) {
+            Ok(()) => {
+                polarity_ok = true;
+                break;
+            }
+            Err(e) if attempt == 0 && e.to_string().contains("over_current") => {
+                c.sense_dir = -c.sense_dir;
+                b.request("clear")?;
+                b.request(&format!("set sense.dir {}", c.sense_dir))?;
+                c.lines.push(
+                    "current sense: reversed (the current loop ran away: over_current); sense.dir flipped"
+                        .into(),
+                );
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    if !polarity_ok {
+        return Err(Error::Device(
+            "the current loop runs away either way".into(),
+        ));
+    }
+    if c.sense_dir == sense0 {
+        c.lines.push(format!(
+            "current sense: polarity right (sense.dir {})",
+            c.sense_dir
+        ));
+    }
+    // 3. The encoder's direction: raise the current until the axis moves.
+    b.request("current 0")?;
+    let x0 = position(b)?;
+    let mut moved = 0.0;
+    for k in 2..=12 {
+        let amps = 0.25 * k as f64 * i_fs;
+        if amps > dev.i_max {
+            break;
+        }
+        b.request(&format!("current {amps}"))?;
+        b.wait(0.005)?;
+        moved = position(b)? - x0;
+        if moved.abs() > 1e-4 {
+            break;
+        }
+    }
+    b.request("current 0")?;
+    b.wait(0.2)?;
+    check_faults(b)?;
+    if moved.abs() <= 1e-4 {
+        return Err(Error::Device(format!(
+            "the axis did not move with up to 3 × the expected breakaway ({:.3e} N·m): blocked, \
+             or the motor not connected?",
+            3.0 * dev.fs
+        )));
+    }
+    if moved < 0.0 {
+        c.enc_dir = -c.enc_dir;
+        // The bridge goes off with the change; back into current mode.
+        b.request(&format!("set enc.dir {}", c.enc_dir))?;
+        primitive(b, "enable current")?;
+        c.lines.push(format!(
+            "encoder: counted {moved:.2e} rad under a positive current: reversed; enc.dir flipped"
+        ));
+    } else {
+        c.lines.push(format!(
+            "encoder: direction right ({moved:.2e} rad under a positive current)"
+        ));
+    }
+    // 4. R at standstill: ±40 % of the expected breakaway, friction holds the axis.
+    let (ip, vp, _) = hold_current(b, 0.4 * i_fs, 0.2, dt)?;
+    let (in_, vn, _) = hold_current(b, -0.4 * i_fs, 0.2, dt)?;
+    b.request("current 0")?;
+    if (ip - in_).abs() < 0.2 * i_fs {
+        return Err(Error::Device(format!(
+            "commanded ±{:.3e} A, measured {ip:.3e} and {in_:.3e} A: no current flows (the motor \
+             not connected?)",
+            0.4 * i_fs
+        )));
+    }
+    c.r = (vp - vn) / (ip - in_);
+    c.lines.push(format!(
+        "winding resistance: {:.4} ohm ({vp:.4} V at {ip:.4e} A, {vn:.4} V at {in_:.4e} A)",
+        c.r
+    ));
+    // 5. k_e from timed runs both ways: V - R i against the speed.
+    b.request("hold")?;
+    let mut pts = Vec::new();
+    for k in 1..=3 {
+        for dir in [1.0, -1.0] {
+            let v = dir * speed * k as f64;
+            let t_acc = v.abs() / VELOCITY_ACC;
+            let run = 0.15 + 0.05;
+            let steps = ((run + 2.0 * t_acc + 0.01) / dt).ceil();
+            let every = (steps * 4.0 / 8100.0).ceil().max(1.0);
+            let n = (steps / every).ceil() as u32;
+            b.request(&format!("capture t,pos,current,volts {every} {n} next"))?;
+            primitive(b, &format!("velocity {v} 0 1 1 {run}"))?;
+            b.wait(n as f64 * every * dt)?;
+            capture_wait(b, 0.01, 200)?;
+            check_faults(b)?;
+            b.request("hold")?;
+            let rows: Vec<Vec<f64>> = capture_rows(b)?
+                .into_iter()
+                .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
+                .collect();
+            let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+                return Err(Error::Device("an empty capture".into()));
+            };
+            let w = (last[1] - first[1]) / (last[0] - first[0]).max(dt);
+            let m = means(&rows);
+            pts.push((w, m[3] - c.r * m[2]));
+        }
+    }
+    let n = pts.len() as f64;
+    let (mw, me) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sww = pts.iter().map(|p| (p.0 - mw).powi(2)).sum::<f64>();
+    let swe = pts.iter().map(|p| (p.0 - mw) * (p.1 - me)).sum::<f64>();
+    if sww <= 0.0 {
+        return Err(Error::Device("the speed runs did not move the axis".into()));
+    }
+    c.k_e = swe / sww;
+    c.lines.push(format!(
+        "back-EMF constant: {:.4e} V·s/rad from {} runs up to {} rad/s (k_M = k_e in SI)",
+        c.k_e,
+        pts.len(),
+        3.0 * speed
+    ));
+    b.request("disable")?;
+    Ok(c)
+}

@@ -73,6 +73,8 @@ pub struct Plant {
     glitch: crate::scenario::Glitch,
     /// -1 when the encoder is wired the other way round, else 1.
     enc_sign: f64,
+    /// -1 when the current sense is wired the other way round, else 1.
+    sense_sign: f64,
     /// Time since the start \[s\].
     pub t: f64,
     /// Current \[A\].
@@ -149,6 +151,7 @@ impl Plant {
             drift: spec.drift.clone(),
             glitch: spec.encoder_glitch,
             enc_sign: if spec.encoder_reversed { -1.0 } else { 1.0 },
+            sense_sign: if spec.sense_reversed { -1.0 } else { 1.0 },
             t: 0.0,
             i: 0.0,
             omega: 0.0,
@@ -178,7 +181,7 @@ impl Plant {
 
     /// The current-sense reading now \[A\]: noise, then quantisation and clipping.
     pub fn adc(&mut self) -> f32 {
-        let raw = self.i + self.noise.sample(&mut self.rng);
+        let raw = self.sense_sign * self.i + self.noise.sample(&mut self.rng);
         let q = (raw / self.adc_lsb).round() * self.adc_lsb;
         q.clamp(-self.adc_max, self.adc_max - self.adc_lsb) as f32
     }

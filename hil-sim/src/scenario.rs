@@ -111,6 +111,9 @@ pub struct Plant {
     /// The encoder wired the other way round: it counts down when the motor turns forward
     /// (a wiring fault for the bench tools to detect).
     pub encoder_reversed: bool,
+    /// The current sense wired the other way round: it reads the current negated (a wiring
+    /// fault for the bench tools to detect).
+    pub sense_reversed: bool,
 }
 
 /// Fault injection for testing what the device does about a bad encoder signal (a burst of

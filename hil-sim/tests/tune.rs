@@ -74,3 +74,50 @@ fn tune_ff_finds_the_optimum_of_a_fine_sweep() {
     );
     let _ = dev.request("disable");
 }
+
+/// A plant whose motor the device does not know (`r`, `k` = k_e = k_M, inertia `j`), with
+/// the encoder and the sense reversed or not; the device believes the default motor.
+fn hidden_motor(r: f64, k: f64, j: f64, enc_rev: bool, sense_rev: bool) -> LocalDevice {
+    let text = format!(
+        "{QUIET}\n[plant]\nresistance = {r}\nk_m = {k}\nk_e = {k}\ninertia = {j}\n\
+         encoder_reversed = {enc_rev}\nsense_reversed = {sense_rev}\n\
+         [controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n[controller.ff]\ninertia = 6e-8\n"
+    );
+    // QUIET's [plant] table and this one merge: write them as one.
+    let text = text
+        .replacen("[plant]\nvariability = 0.0\n", "", 1)
+        .replacen("[plant]\n", "[plant]\nvariability = 0.0\n", 1);
+    LocalDevice::new(&Scenario::parse(&text, "test").unwrap()).unwrap()
+}
+
+#[test]
+fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
+    use gms_ident::bench::commission;
+    for (r, k, j, enc_rev, sense_rev) in [
+        (10.0, 6.6e-3, 6e-8, false, false),
+        (7.5, 8.0e-3, 9e-8, true, false),
+        (14.0, 5.5e-3, 4e-8, false, true),
+        (12.0, 7.0e-3, 7e-8, true, true),
+    ] {
+        let mut dev = hidden_motor(r, k, j, enc_rev, sense_rev);
+        let c = commission(&mut dev, 1.0).unwrap();
+        for l in &c.lines {
+            eprintln!("  {l}");
+        }
+        eprintln!(
+            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), dirs {} {}",
+            c.r,
+            (c.r / r - 1.0) * 100.0,
+            c.k_e,
+            (c.k_e / k - 1.0) * 100.0,
+            c.enc_dir,
+            c.sense_dir
+        );
+        assert_eq!(c.enc_dir, if enc_rev { -1.0 } else { 1.0 });
+        assert_eq!(c.sense_dir, if sense_rev { -1.0 } else { 1.0 });
+        assert!((c.r / r - 1.0).abs() < 0.05, "R {}", c.r);
+        assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
+        // The device's directions are as they were (the caller applies the result).
+        assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
+    }
+}

@@ -11,8 +11,11 @@ pub const CHUNK_VALUES: usize = 128;
 
 /// The fields a capture may record (the telemetry's, without the simulator's truth): time
 /// since the trigger \[s\], position and reference since the trigger \[rad\], error \[rad\],
-/// feedforward and estimated friction [N·m], current \[A\].
-pub const CAPTURE_NAMES: [&str; 7] = ["t", "pos", "ref", "error", "ff", "current", "friction"];
+/// feedforward and estimated friction [N·m], current \[A\], the bridge voltage commanded
+/// (duty × supply) \[V\].
+pub const CAPTURE_NAMES: [&str; 8] = [
+    "t", "pos", "ref", "error", "ff", "current", "friction", "volts",
+];
 
 /// The index in [`CAPTURE_NAMES`] of the field `name`.
 pub fn capture_field(name: &str) -> Option<u8> {
@@ -26,6 +29,7 @@ pub fn capture_field(name: &str) -> Option<u8> {
         "ff" => Some(4),
         "current" => Some(5),
         "friction" => Some(6),
+        "volts" => Some(7),
         _ => None,
     }
 }
@@ -44,7 +48,7 @@ pub fn capture_fields(list: &str) -> Result<([u8; CAPTURE_FIELDS], u8), &'static
         if end_of_name {
             let name = list.get(start..at).unwrap_or("");
             let i = capture_field(name)
-                .ok_or("unknown field (t, pos, ref, error, ff, current, friction)")?;
+                .ok_or("unknown field (t, pos, ref, error, ff, current, friction, volts)")?;
             let slot = idx.get_mut(n).ok_or("at most 4 fields")?;
             *slot = i;
             n += 1;
@@ -143,6 +147,8 @@ pub struct StepValues {
     pub current: f32,
     /// Estimated friction [N·m].
     pub friction: f32,
+    /// The bridge voltage commanded \[V\] (0 while off).
+    pub volts: f32,
 }
 
 /// A capture in progress over a buffer of `B`.
@@ -250,7 +256,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
                 3 => v.error,
                 4 => v.ff,
                 5 => v.current,
-                _ => v.friction,
+                6 => v.friction,
+                _ => v.volts,
             };
             if let Some(slot) = buf.get_mut(at + k) {
                 *slot = x;

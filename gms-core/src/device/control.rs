@@ -95,6 +95,8 @@ pub struct ControlLoop {
     ratio: u32,
     phase: u32,
     enc: CountExtender,
+    /// The encoder counter's last raw reading, before the direction is applied.
+    last_raw: u32,
     last_pos: i64,
     sense: CurrentSense,
     faults: Faults,
@@ -131,6 +133,7 @@ impl ControlLoop {
         capture: CaptureBuf,
     ) -> Self {
         let ratio = a.ctrl.params().ratio().max(1);
+        let enc_dir = a.ctrl.params().enc_dir;
         ControlLoop {
             board,
             ratio,
@@ -139,7 +142,8 @@ impl ControlLoop {
             psc: a.psc,
             arr: a.arr,
             phase: 0,
-            enc: CountExtender::new(board.encoder_bits, encoder),
+            enc: CountExtender::new(board.encoder_bits, directed(encoder, enc_dir)),
+            last_raw: encoder,
             last_pos: 0,
             sense,
             faults,
@@ -259,6 +263,15 @@ impl ControlLoop {
             // controller starts at rest, keeping what the adaptation learned about the axis.
             let mut next = a.ctrl;
             next.take_state_from(&self.ctrl);
+            let (old, new) = (self.ctrl.params(), next.params());
+            let dirs = old.enc_dir != new.enc_dir || old.sense_dir != new.sense_dir;
+            let new_enc_dir = new.enc_dir;
+            if dirs {
+                // A direction changed: the bridge goes off (the loop's feedback changes sign),
+                // and the count goes on from where it is, counting the new way.
+                self.switch_off();
+                self.enc.rebase(directed(self.last_raw, new_enc_dir));
+            }
             if rates {
                 // The bridge goes off for the change.
                 self.switch_off();
@@ -342,10 +355,13 @@ impl ControlLoop {
         inp: Inputs,
         exchange: impl FnOnce(Status, Option<&Chunk>) -> Option<Requests>,
     ) -> Outputs {
-        self.enc.update(inp.encoder);
-        self.current = self
-            .sense
-            .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
+        self.last_raw = inp.encoder;
+        self.enc
+            .update(directed(inp.encoder, self.ctrl.params().enc_dir));
+        self.current = self.ctrl.params().sense_dir
+            * self
+                .sense
+                .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
         let mut timing = None;
         let mut sample = None;
         let mut new_faults = Faults::NONE;
@@ -408,6 +424,11 @@ impl ControlLoop {
                 ff: self.out.ff_friction,
                 current: self.current,
                 friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
+                volts: if self.enabled {
+                    self.duty * p.v_supply
+                } else {
+                    0.0
+                },
             });
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
             // Over-current is checked at every current step.
@@ -471,4 +492,10 @@ impl ControlLoop {
             friction_true: f32::NAN,
         })
     }
+}
+
+/// The encoder counter's reading counted the way `dir` says (negated, modulo the counter's
+/// width, for -1: the count extension works on the top bits, so any width wraps alike).
+fn directed(raw: u32, dir: f32) -> u32 {
+    if dir < 0.0 { raw.wrapping_neg() } else { raw }
 }

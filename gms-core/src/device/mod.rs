@@ -398,6 +398,8 @@ pub fn default_settings() -> Settings {
         // ±50 rad of the motor: ±0.9 mm of the slide through the gearhead and lead screw.
         pos_min: -50.0,
         pos_max: 50.0,
+        enc_dir: 1.0,
+        sense_dir: 1.0,
         ff: FeedforwardParams {
             mode: FfMode::Gms,
             gain: 0.94,

@@ -32,6 +32,12 @@ impl CountExtender {
         }
     }
 
+    /// Takes `raw` as the counter's reading now without counting anything (after the reading's
+    /// meaning changed, e.g. its direction): the extended count goes on from where it is.
+    pub fn rebase(&mut self, raw: u32) {
+        self.last = raw;
+    }
+
     /// Takes a new raw reading; returns the increment since the last one \[counts\].
     pub fn update(&mut self, raw: u32) -> i64 {
         let d = wrapping_delta(self.last, raw, self.bits);

@@ -77,6 +77,8 @@ pub const PARAMS: &[Param] = &[
     num!("lim.v_supply", "V", 0.1, 1e3, |s| s.v_supply),
     num!("lim.pos_min", "rad", -1e5, 1e5, |s| s.pos_min),
     num!("lim.pos_max", "rad", -1e5, 1e5, |s| s.pos_max),
+    num!("enc.dir", "-", -1.0, 1.0, |s| s.enc_dir),
+    num!("sense.dir", "-", -1.0, 1.0, |s| s.sense_dir),
     Param {
         path: "ff.mode",
         unit: "-",
