@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
 use gms_tune::{Link, LinkError, parse_telemetry};
 
+mod commission;
 mod identify;
 mod tracked;
 mod tune_ff;
@@ -139,6 +140,25 @@ enum Cmd {
         #[arg(long, default_value_t = 5.0)]
         window: f64,
     },
+    /// Commission a motor: the current sense at rest, its polarity and the encoder's direction
+    /// (fixed by `sense.dir`/`enc.dir`), the winding resistance at standstill, the back-EMF
+    /// constant from timed runs both ways; a line per step and a summary; writes a parameter
+    /// file whose `[device]` table holds what was found (`params load` takes it). The device is
+    /// left as it was unless --apply/--save, which come only after every step succeeded.
+    Commission {
+        /// The parameter file written.
+        #[arg(long, default_value = "motor.toml", value_name = "FILE.toml")]
+        out: PathBuf,
+        /// The back-EMF runs' base speed [rad/s] (runs at 1, 2 and 3 times it, each way).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+        /// Load what was found into the device.
+        #[arg(long)]
+        apply: bool,
+        /// Load it and save it (implies --apply).
+        #[arg(long)]
+        save: bool,
+    },
     /// Tune the friction feedforward's gain: the same sine test with reversals at each gain
     /// of a sweep, the RMS error of each, the best gain from a parabola fitted around the
     /// minimum; prints the curve and the choice, writes curve.csv and curve.svg. The device's
@@ -212,6 +232,13 @@ fn list(link: &mut Link) -> Result<Vec<(String, String)>, Fail> {
 }
 
 fn dump(link: &mut Link) -> Result<String, Fail> {
+    let file = device_params(link)?;
+    Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
+}
+
+/// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
+/// and `[device]` (everything else, by protocol path).
+pub(crate) fn device_params(link: &mut Link) -> Result<ParamFile, Fail> {
     let params = list(link)?;
     let num = |k: &str| {
         params
@@ -248,11 +275,10 @@ fn dump(link: &mut Link) -> Result<String, Fail> {
         };
         device.insert(k.clone(), value);
     }
-    let file = ParamFile {
+    Ok(ParamFile {
         friction,
         device: Some(device),
-    };
-    Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
+    })
 }
 
 /// `params load FILE`: the file sent as one set (`gms_ident::bench::load_params`).
@@ -425,6 +451,12 @@ fn run(cli: Cli) -> Result<(), Fail> {
             seconds,
             refresh_ms,
         } => watch(&mut link, seconds, Duration::from_millis(refresh_ms))?,
+        Cmd::Commission {
+            out,
+            speed,
+            apply,
+            save,
+        } => commission::run(&mut link, &out, speed, apply, save)?,
         Cmd::TuneFf {
             amplitude,
             freq,

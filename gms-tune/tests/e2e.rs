@@ -149,6 +149,10 @@ fn main() {
             identify_keeps_the_data_when_the_link_is_lost,
         ),
         (
+            "commission_measures_a_hidden_motor_and_applies_it",
+            commission_measures_a_hidden_motor_and_applies_it,
+        ),
+        (
             "tune_ff_sweeps_chooses_and_applies_on_request",
             tune_ff_sweeps_chooses_and_applies_on_request,
         ),
@@ -707,4 +711,55 @@ fn tune_ff_sweeps_chooses_and_applies_on_request() {
     let (code, _, err) = tune(&srv, &["tune-ff", "--from", "1.5", "--to", "1.0"], d);
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("0 <= from < to <= 2"), "{err}");
+}
+
+/// `commission --apply` on a virtual device 10× faster than real time whose motor the device
+/// does not know (R 7.5 Ω, k 8 mN·m/A) and whose encoder and sense are both wired the other
+/// way: found, written, applied; a blocked axis: exit 1, nothing changed.
+fn commission_measures_a_hidden_motor_and_applies_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sc = quiet_scenario(
+        d,
+        "resistance = 7.5\nk_m = 8e-3\nk_e = 8e-3\nencoder_reversed = true\nsense_reversed = true\n\
+         [controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3",
+    );
+    let srv = Server::start_with("tcp", &d.join("flash.img"), 10.0, Some(&sc));
+    let (code, out, err) = tune(&srv, &["commission", "--out", "m.toml", "--apply"], d);
+    assert_eq!(code, 0, "{out}\n{err}");
+    assert!(out.contains("reversed; enc.dir flipped"), "{out}");
+    assert!(out.contains("current sense: reversed"), "{out}");
+    let get = |p: &str| tune(&srv, &["get", p], d).1.trim().parse::<f64>().unwrap();
+    assert_eq!((get("enc.dir"), get("sense.dir")), (-1.0, -1.0));
+    assert!(
+        (get("motor.r") / 7.5 - 1.0).abs() < 0.05,
+        "{}",
+        get("motor.r")
+    );
+    assert!(
+        (get("motor.k_e") / 8e-3 - 1.0).abs() < 0.05,
+        "{}",
+        get("motor.k_e")
+    );
+    let text = std::fs::read_to_string(d.join("m.toml")).unwrap();
+    assert!(text.contains("\"enc.dir\" = -1.0"), "{text}");
+    // The file loads back (`params load`) as it is.
+    assert_eq!(tune(&srv, &["params", "load", "m.toml"], d).0, 0);
+    drop(srv);
+    let dir2 = tempfile::tempdir().unwrap();
+    let d2 = dir2.path();
+    let sc = quiet_scenario(
+        d2,
+        "[plant.actuator]\nfs = 2.2e-2\nfc = 1.25e-2\n[controller.gms]\nfs = 220e-6\nfc = 125e-6",
+    );
+    let srv = Server::start_with("tcp", &d2.join("flash.img"), 10.0, Some(&sc));
+    let (code, _, err) = tune(&srv, &["commission", "--out", "m.toml", "--apply"], d2);
+    assert_eq!(code, 1, "{err}");
+    assert!(
+        err.contains("did not move") && err.contains("nothing changed"),
+        "{err}"
+    );
+    assert!(!d2.join("m.toml").exists());
+    let (_, status, _) = tune(&srv, &["send", "status"], d2);
+    assert!(status.contains("enabled=0"), "{status}");
 }

@@ -1,0 +1,57 @@
+//! `gms-tune commission`: `gms_ident::bench::commission` on the link, its lines and summary,
+//! the parameter file, and — only after every step succeeded — the settings loaded and saved.
+
+use std::path::Path;
+
+use gms_ident::Error;
+use gms_ident::bench::{commission, load_params};
+use gms_tune::Link;
+
+use crate::Fail;
+use crate::tracked::Tracked;
+
+/// Runs the commissioning; writes `out`; applies/saves on request.
+pub fn run(link: &mut Link, out: &Path, speed: f64, apply: bool, save: bool) -> Result<(), Fail> {
+    let mut pf = crate::device_params(link)?;
+    let mut bench = Tracked::new(link);
+    let r = commission(&mut bench, speed);
+    let link = bench.link;
+    let c = r.map_err(|e| match e {
+        Error::Params(m) => Fail::Usage(m),
+        e => Fail::Device(format!("{e}; the bridge is off, nothing changed")),
+    })?;
+    for l in &c.lines {
+        println!("{l}");
+    }
+    let mut device = toml::Table::new();
+    for (k, v) in c.settings() {
+        device.insert(k.to_string(), toml::Value::Float(v));
+    }
+    pf.device = Some(device);
+    let text = format!(
+        "# commissioned by gms-tune commission\n{}{}",
+        c.lines
+            .iter()
+            .map(|l| format!("# {l}\n"))
+            .collect::<String>(),
+        pf.to_toml()
+    );
+    gms_ident::io::write_atomic(out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
+    println!(
+        "summary: sense.dir {} enc.dir {} motor.r {:.4} ohm motor.k_e = motor.k_m {:.4e}; wrote {}",
+        c.sense_dir,
+        c.enc_dir,
+        c.r,
+        c.k_e,
+        out.display()
+    );
+    if apply || save {
+        let n = load_params(link, &pf).map_err(|e| Fail::Device(e.to_string()))?;
+        println!("loaded {n} parameters into the device");
+        if save {
+            link.request("save")?;
+            println!("saved");
+        }
+    }
+    Ok(())
+}
