@@ -273,6 +273,27 @@ impl SlidingPlan {
     }
 }
 
+/// A timed velocity run from rest, captured whole (`fields`, beginning with `t`): `velocity V
+/// 0 1 1 SECONDS` — no swing, then a ramp to rest the device makes by itself, so the stroke
+/// never depends on the link's timing (a late stop over a slow link, or on a virtual device
+/// faster than real time, would overrun the window). Waits for it and its ramps, checks the
+/// faults, holds; the rows are then read with [`capture_rows`].
+fn timed_run(b: &mut impl Bench, v: f64, seconds: f64, fields: &str, dt: f64) -> Result<(), Error> {
+    let t_acc = v.abs() / VELOCITY_ACC;
+    let steps = ((seconds + 2.0 * t_acc + 0.01) / dt).ceil();
+    // The fields per sample within the 8192 values of the buffer.
+    let nf = fields.split(',').count() as f64;
+    let every = (steps * nf / 8100.0).ceil().max(1.0);
+    let n = (steps / every).ceil() as u32;
+    b.request(&format!("capture {fields} {every} {n} next"))?;
+    primitive(b, &format!("velocity {v} 0 1 1 {seconds}"))?;
+    b.wait(n as f64 * every * dt)?;
+    capture_wait(b, 0.01, 200)?;
+    check_faults(b)?;
+    b.request("hold")?;
+    Ok(())
+}
+
 /// The sliding experiment (paper §3): at each speed, in both directions, a timed velocity run
 /// from rest (the device ends it by itself, so the stroke never depends on the link's
 /// timing), captured whole; after the ramp and the settling stroke, the mean friction
@@ -299,18 +320,13 @@ pub fn sliding(
                 // timing: a late stop over a slow link, or on a virtual device faster than
                 // real time, would overrun the window), captured whole.
                 let t_acc = v.abs() / VELOCITY_ACC;
-                let run = plan.settle(v) + plan.window(v, dt) + 0.02;
-                let total = run + 2.0 * t_acc + 0.01;
-                // Three fields per sample within the 8192 values of the buffer.
-                let steps = (total / dt).ceil();
-                let every = (steps * 3.0 / 8100.0).ceil().max(1.0);
-                let n = (steps / every).ceil() as u32;
-                b.request(&format!("capture t,pos,current {every} {n} next"))?;
-                primitive(b, &format!("velocity {v} 0 1 1 {run}"))?;
-                b.wait(n as f64 * every * dt)?;
-                capture_wait(b, 0.01, 200)?;
-                check_faults(b)?;
-                b.request("hold")?;
+                timed_run(
+                    b,
+                    v,
+                    plan.settle(v) + plan.window(v, dt) + 0.02,
+                    "t,pos,current",
+                    dt,
+                )?;
                 let all = capture_rows(b)?;
                 // The averaging window: after the ramp and the settling stroke.
                 let (from, to) = (
@@ -1305,15 +1321,7 @@ fn commission_steps(
             let v = dir * speed * k as f64;
             let t_acc = v.abs() / VELOCITY_ACC;
             let run = 0.15 + 0.05;
-            let steps = ((run + 2.0 * t_acc + 0.01) / dt).ceil();
-            let every = (steps * 4.0 / 8100.0).ceil().max(1.0);
-            let n = (steps / every).ceil() as u32;
-            b.request(&format!("capture t,pos,current,volts {every} {n} next"))?;
-            primitive(b, &format!("velocity {v} 0 1 1 {run}"))?;
-            b.wait(n as f64 * every * dt)?;
-            capture_wait(b, 0.01, 200)?;
-            check_faults(b)?;
-            b.request("hold")?;
+            timed_run(b, v, run, "t,pos,current,volts", dt)?;
             let rows: Vec<Vec<f64>> = capture_rows(b)?
                 .into_iter()
                 .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)

@@ -555,18 +555,23 @@ fn identify_refuses_an_older_firmware() {
     assert!(dir.path().join("rep/presliding.csv").exists());
 }
 
+/// `gms-tune identify --report rep` on `srv` in `cwd`, running in the background.
+fn spawn_identify(srv: &Server, cwd: &Path) -> Child {
+    Command::new(TUNE)
+        .args(["--tcp", &srv.addr, "identify", "--report", "rep"])
+        .current_dir(cwd)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 /// The link lost mid-run (the device gone): exit 1, a clear error, the data so far kept.
 fn identify_keeps_the_data_when_the_link_is_lost() {
     let dir = tempfile::tempdir().unwrap();
     let sc = quiet_scenario(dir.path(), "");
     let mut srv = Server::start_with("tcp", &dir.path().join("flash.img"), 1.0, Some(&sc));
-    let child = Command::new(TUNE)
-        .args(["--tcp", &srv.addr, "identify", "--report", "rep"])
-        .current_dir(dir.path())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_identify(&srv, dir.path());
     // Some seconds into the staircase (about 100 steps of some 30 ms each in real time).
     std::thread::sleep(std::time::Duration::from_millis(2500));
     let _ = srv.child.kill();
@@ -630,13 +635,7 @@ fn identify_stops_on_ctrl_c_with_the_bridge_off() {
     let dir = tempfile::tempdir().unwrap();
     let sc = quiet_scenario(dir.path(), "");
     let srv = Server::start_with("tcp", &dir.path().join("flash.img"), 1.0, Some(&sc));
-    let child = Command::new(TUNE)
-        .args(["--tcp", &srv.addr, "identify", "--report", "rep"])
-        .current_dir(dir.path())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_identify(&srv, dir.path());
     std::thread::sleep(std::time::Duration::from_millis(2000));
     let kill = Command::new("kill")
         .args(["-INT", &child.id().to_string()])

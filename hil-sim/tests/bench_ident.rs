@@ -3,20 +3,12 @@
 //! identified with the same fits as the simulated experiments: the bench sees the plant's
 //! hidden friction.
 
+mod common;
+use common::QUIET;
 use gms_ident::bench::{SlidingPlan, sliding};
 use gms_ident::identify::fit_stribeck;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
-
-/// The default plant with its friction exactly nominal (no draw) and the guideway negligible:
-/// the bench sees the actuator's Table 1 friction alone.
-const QUIET: &str = "[plant]
-variability = 0.0
-
-[plant.guideway]
-fs = 1e-6
-fc = 1e-6
-";
 
 #[test]
 fn the_sliding_experiment_on_the_device_finds_the_hidden_stribeck_curve() {
@@ -476,6 +468,17 @@ fn on_the_default_plant_the_bench_sees_both_sources() {
     assert!(fc > 125e-6 * 1.05, "fc {fc}");
 }
 
+/// The device's clock (`status` key `t`) \[s\].
+fn device_time(dev: &mut LocalDevice) -> f64 {
+    use gms_ident::bench::Bench;
+    let (_, st) = dev.request("status").unwrap();
+    st.split_whitespace()
+        .find_map(|w| w.strip_prefix("t="))
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
 /// A bench that notes where the axis is after every wait.
 struct Tracking<'a> {
     dev: &'a mut LocalDevice,
@@ -506,20 +509,13 @@ impl gms_ident::bench::Bench for Tracking<'_> {
 /// the window the device's limits are narrowed to); the figure for the docs.
 #[test]
 fn a_bench_identification_stays_within_its_planned_stroke() {
-    use gms_ident::bench::{Bench, DeviceInfo, LagPlan, Plans, Ranges, identify_on};
+    use gms_ident::bench::{DeviceInfo, LagPlan, Plans, Ranges, identify_on};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     let info = DeviceInfo::read(&mut dev).unwrap();
     let plans = Plans::new(&info, &Ranges::default()).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let t0: f64 = {
-        let (_, st) = dev.request("status").unwrap();
-        st.split_whitespace()
-            .find_map(|w| w.strip_prefix("t="))
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let t0 = device_time(&mut dev);
     let mut b = Tracking {
         dev: &mut dev,
         lo: 0.0,
@@ -527,14 +523,7 @@ fn a_bench_identification_stays_within_its_planned_stroke() {
     };
     identify_on(&mut b, &plans, dir.path(), 6, false, &mut |_, _, _| {}).unwrap();
     let (lo, hi) = (b.lo, b.hi);
-    let t1: f64 = {
-        let (_, st) = dev.request("status").unwrap();
-        st.split_whitespace()
-            .find_map(|w| w.strip_prefix("t="))
-            .unwrap()
-            .parse()
-            .unwrap()
-    };
+    let t1 = device_time(&mut dev);
     let planned = plans
         .sliding
         .stroke(info.dt())

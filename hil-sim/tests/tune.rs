@@ -1,17 +1,11 @@
 //! Tuning on the device (`gms_ident::bench`, what `gms-tune tune-ff` runs), in-process on the
 //! device core and the simulated plant.
 
+mod common;
+use common::QUIET;
 use gms_ident::bench::{Bench, TuneFfPlan, get_param, tune_ff};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
-
-const QUIET: &str = "[plant]
-variability = 0.0
-
-[plant.guideway]
-fs = 1e-6
-fc = 1e-6
-";
 
 /// The coarse sweep's choice (11 gains, a parabola fitted around the minimum) lands within 5 %
 /// of the optimum of a fine sweep (41 gains) of the same test (its fitted minimum: its single

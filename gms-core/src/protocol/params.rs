@@ -241,12 +241,7 @@ pub fn with_value_staged(s: &Settings, path: &str, value: &str) -> Result<Settin
 /// `set`: the settings with `path` set to `value`, validated as a whole; on error nothing is
 /// returned and the caller's settings stay as they are.
 pub fn with_value(s: &Settings, path: &str, value: &str) -> Result<Settings, ParseError> {
-    let p = find(path).ok_or(ParseError {
-        code: ErrorCode::UnknownPath,
-        reason: "unknown parameter (try list)",
-    })?;
-    let mut new = *s;
-    set_param(&mut new, p, value)?;
+    let new = with_value_staged(s, path, value)?;
     new.validate().map_err(|_| ParseError {
         code: ErrorCode::InvalidSet,
         reason: "the parameter set would be invalid",

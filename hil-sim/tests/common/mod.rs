@@ -6,6 +6,16 @@ use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
+/// The default plant with its friction exactly nominal (no draw) and the guideway negligible:
+/// a bench sees the actuator's Table 1 friction alone.
+pub const QUIET: &str = "[plant]
+variability = 0.0
+
+[plant.guideway]
+fs = 1e-6
+fc = 1e-6
+";
+
 /// Runs `cmd` to its end; returns (exit code, stdout, stderr).
 pub fn run(cmd: &mut Command) -> (i32, String, String) {
     let out = cmd.output().expect("the command runs");
