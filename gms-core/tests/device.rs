@@ -183,3 +183,49 @@ fn a_capture_records_what_the_loop_saw() {
     assert_eq!((c.start, c.samples, c.nfields), (0, 10, 2));
     assert!(c.values[..20].iter().all(|v| *v == 0.0));
 }
+
+/// `current AMPS SECONDS`: the current held for so many position steps, then 0 A, still in
+/// current mode (a pulse the device ends whatever the link does).
+#[test]
+fn a_timed_current_ends_on_the_device() {
+    let mut lp = rest();
+    let period = 168_000_000 / 20_000;
+    step(
+        &mut lp,
+        period,
+        Some(Requests {
+            enable: true,
+            current: Some(0.0),
+            ..Requests::default()
+        }),
+    );
+    // (Requests are taken at a position step: every other call.)
+    step(&mut lp, period, None);
+    // 0.1 A for 25 position steps (2.5 ms at 10 kHz; two PWM periods per step).
+    step(
+        &mut lp,
+        period,
+        Some(Requests {
+            current: Some(0.1),
+            current_steps: Some(25),
+            ..Requests::default()
+        }),
+    );
+    let mut cmds = Vec::new();
+    for _ in 0..120 {
+        step(&mut lp, period, None);
+        cmds.push(lp.status().drive);
+    }
+    let held: Vec<f32> = cmds
+        .iter()
+        .map(|d| match d {
+            gms_core::device::Drive::Current(a) => *a,
+            _ => f32::NAN,
+        })
+        .collect();
+    // Two PWM periods (calls) per position step: 25 steps are 50 calls at 0.1 A.
+    let on = held.iter().filter(|a| **a == 0.1).count();
+    assert!((48..=52).contains(&on), "{on} periods at 0.1 A: {held:?}");
+    assert!(held[60..].iter().all(|a| *a == 0.0), "{held:?}");
+    assert!(lp.enabled());
+}

@@ -83,8 +83,11 @@ impl Device for Mock {
         self.moves.push((pos, vel));
         Ok(())
     }
-    fn current(&mut self, amps: f32) -> Result<(), &'static str> {
-        self.experiments.push(format!("current {amps}"));
+    fn current(&mut self, amps: f32, seconds: Option<f32>) -> Result<(), &'static str> {
+        self.experiments.push(match seconds {
+            None => format!("current {amps}"),
+            Some(s) => format!("current {amps} for {s}"),
+        });
         Ok(())
     }
     fn velocity(
@@ -345,6 +348,7 @@ fn every_mode_round_trips_by_name() {
 fn experiment_commands_parse() {
     let mut d = Mock::new();
     assert_eq!(ask(&mut d, "current -0.05"), "ok\n");
+    assert_eq!(ask(&mut d, "current 0.1 0.002"), "ok\n");
     assert_eq!(ask(&mut d, "velocity 0.2"), "ok\n");
     assert_eq!(ask(&mut d, "velocity 0.3 0.1 1 5 2.5"), "ok\n");
     assert_eq!(ask(&mut d, "hold"), "ok\n");
@@ -352,6 +356,7 @@ fn experiment_commands_parse() {
         d.experiments,
         [
             "current -0.05",
+            "current 0.1 for 0.002",
             "velocity 0.2 None",
             "velocity 0.3 Some(Sweep { amp: 0.1, f0: 1.0, f1: 5.0, seconds: 2.5 })",
             "hold",
@@ -361,7 +366,8 @@ fn experiment_commands_parse() {
     for bad in [
         "current",
         "current x",
-        "current 1 2",
+        "current 1 x",
+        "current 1 2 3",
         "velocity",
         "velocity 0.3 0.1",
         "velocity 0.3 0.1 1 5",
@@ -370,7 +376,7 @@ fn experiment_commands_parse() {
     ] {
         assert!(ask(&mut d, bad).starts_with("err 2 "), "{bad}");
     }
-    assert_eq!(d.experiments.len(), 4);
+    assert_eq!(d.experiments.len(), 5);
 }
 
 #[test]

@@ -1121,6 +1121,8 @@ pub struct Commissioned {
     pub r: f64,
     /// Back-EMF constant [V·s/rad] (= k_M in SI).
     pub k_e: f64,
+    /// Reflected inertia [kg·m²].
+    pub inertia: f64,
     /// What was done, a line per step.
     pub lines: Vec<String>,
 }
@@ -1134,6 +1136,7 @@ impl Commissioned {
             ("motor.r", self.r),
             ("motor.k_e", self.k_e),
             ("motor.k_m", self.k_e),
+            ("ff.inertia", self.inertia),
         ]
     }
 }
@@ -1172,7 +1175,8 @@ fn hold_current(
 /// `enc.dir`); the winding resistance (current mode at ±40 % of the expected breakaway, the
 /// axis held by friction: R from the voltage and current differences, offsets cancelled); the
 /// back-EMF constant (timed velocity runs at 1, 2 and 3 × `speed` each way: the voltage less
-/// R × current against the speed, the slope). The direction settings it changes to go on are
+/// R × current against the speed, the slope); the reflected inertia (timed current pulses and
+/// the coasts after them). The direction settings it changes to go on are
 /// put back at the end (and on failure, with the bridge off): the caller applies the result.
 pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error> {
     if !(speed > 0.0 && speed * 3.0 <= VELOCITY_MAX_BENCH) {
@@ -1351,6 +1355,109 @@ fn commission_steps(
         pts.len(),
         3.0 * speed
     ));
+    // 6. The inertia: current pulses that the device ends by itself, and the coast after.
+    c.inertia = inertia(b, &mut c, dev, dt, i_fs)?;
     b.request("disable")?;
     Ok(c)
+}
+
+/// The reflected inertia from current pulses (3 × the expected breakaway current for 2 ms,
+/// timed on the device, each way twice) and the coast that follows: at the same speed the
+/// friction is the same in both, so J = k_M × i / (a_pulse − a_coast), the accelerations from
+/// local parabolas through the captured positions, compared at 30-80 % of the top speed.
+fn inertia(
+    b: &mut impl Bench,
+    c: &mut Commissioned,
+    dev: &DeviceInfo,
+    dt: f64,
+    i_fs: f64,
+) -> Result<f64, Error> {
+    let k_m = c.k_e;
+    let amps = (3.0 * i_fs).min(0.8 * dev.i_max);
+    let pulse = 0.002;
+    let mut js = Vec::new();
+    primitive(b, "enable current")?;
+    b.wait(0.05)?;
+    for dir in [1.0, -1.0, 1.0, -1.0] {
+        let n = (0.03 / dt).ceil() as u32;
+        b.request(&format!("capture t,pos,current 1 {n} next"))?;
+        primitive(b, &format!("current {} {pulse}", dir * amps))?;
+        b.wait(n as f64 * dt)?;
+        capture_wait(b, 0.01, 200)?;
+        check_faults(b)?;
+        let rows = capture_rows(b)?;
+        b.wait(0.05)?;
+        // Local parabolas over 7 samples: speed and acceleration at each sample.
+        let h = 3usize;
+        let mut va = Vec::new();
+        for k in h..rows.len().saturating_sub(h) {
+            let (mut s0, mut s1, mut s2, mut s3, mut s4) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            let (mut y0, mut y1, mut y2) = (0.0, 0.0, 0.0);
+            for j in k - h..=k + h {
+                let u = rows[j][0] - rows[k][0];
+                let y = dir * rows[j][1];
+                s0 += 1.0;
+                s1 += u;
+                s2 += u * u;
+                s3 += u * u * u;
+                s4 += u * u * u * u;
+                y0 += y;
+                y1 += u * y;
+                y2 += u * u * y;
+            }
+            // Normal equations of y = p0 + p1 u + p2 u² (symmetric window: s1 = s3 = 0).
+            let det =
+                s2 * (s0 * s4 - s2 * s2) - s1 * (s1 * s4 - s2 * s3) + s3 * (s1 * s3 - s2 * s2);
+            if det.abs() < 1e-300 {
+                continue;
+            }
+            let p1 = (y1 - s1 * y0 / s0) / (s2 - s1 * s1 / s0);
+            let p2 = (s0 * y2 - s2 * y0) / (s0 * s4 - s2 * s2);
+            va.push((rows[k][0], p1, 2.0 * p2, dir * rows[k][2]));
+        }
+        let top = va.iter().map(|p| p.1).fold(0.0, f64::max);
+        if top <= 0.0 {
+            return Err(Error::Device(
+                "the current pulses did not move the axis".into(),
+            ));
+        }
+        let band = |p: &&(f64, f64, f64, f64)| p.1 > 0.3 * top && p.1 < 0.8 * top;
+        // The pulse's samples after the current has settled (0.4 ms), the coast's after it.
+        let push: Vec<_> = va
+            .iter()
+            .filter(|p| p.0 > 0.0004 && p.0 < pulse - 0.0002)
+            .filter(band)
+            .collect();
+        let coast: Vec<_> = va
+            .iter()
+            .filter(|p| p.0 > pulse + 0.0004)
+            .filter(band)
+            .collect();
+        if push.is_empty() || coast.is_empty() {
+            return Err(Error::Device(
+                "the current pulses were too short to measure the inertia".into(),
+            ));
+        }
+        let mean = |v: &[&(f64, f64, f64, f64)], f: fn(&(f64, f64, f64, f64)) -> f64| {
+            v.iter().map(|p| f(p)).sum::<f64>() / v.len() as f64
+        };
+        let (a_p, i_p) = (mean(&push, |p| p.2), mean(&push, |p| p.3));
+        let (a_c, i_c) = (mean(&coast, |p| p.2), mean(&coast, |p| p.3));
+        if a_p - a_c <= 0.0 {
+            return Err(Error::Device(
+                "the current pulses gave no acceleration".into(),
+            ));
+        }
+        js.push(k_m * (i_p - i_c) / (a_p - a_c));
+    }
+    b.request("current 0")?;
+    let j = js.iter().sum::<f64>() / js.len() as f64;
+    c.lines.push(format!(
+        "reflected inertia: {j:.4e} kg·m² from four current pulses of {amps:.3e} A for {} ms \
+         and the coasts after (each {:.3e} … {:.3e})",
+        pulse * 1e3,
+        js.iter().cloned().fold(f64::INFINITY, f64::min),
+        js.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+    ));
+    Ok(j)
 }

@@ -99,11 +99,13 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
             eprintln!("  {l}");
         }
         eprintln!(
-            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), dirs {} {}",
+            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), J {j} -> {:.3e} ({:+.1} %), dirs {} {}",
             c.r,
             (c.r / r - 1.0) * 100.0,
             c.k_e,
             (c.k_e / k - 1.0) * 100.0,
+            c.inertia,
+            (c.inertia / j - 1.0) * 100.0,
             c.enc_dir,
             c.sense_dir
         );
@@ -111,6 +113,7 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         assert_eq!(c.sense_dir, if sense_rev { -1.0 } else { 1.0 });
         assert!((c.r / r - 1.0).abs() < 0.05, "R {}", c.r);
         assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
+        assert!((c.inertia / j - 1.0).abs() < 0.15, "J {}", c.inertia);
         // The device's directions are as they were (the caller applies the result).
         assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
     }

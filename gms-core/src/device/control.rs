@@ -115,6 +115,8 @@ pub struct ControlLoop {
     wake_left: u32,
     /// Current mode: the current held \[A\] (position loop off).
     current_mode: Option<f32>,
+    /// The step at which a timed current ends (0 A from then on).
+    current_until: Option<u64>,
     capture: Capture<CaptureBuf>,
     /// A chunk read for the protocol side, handed over at the next exchange.
     chunk: Option<Chunk>,
@@ -160,6 +162,7 @@ impl ControlLoop {
             stream_count: 0,
             wake_left: 0,
             current_mode: None,
+            current_until: None,
             capture: Capture::new(capture),
             chunk: None,
         }
@@ -317,6 +320,10 @@ impl ControlLoop {
         {
             self.motion.stop();
             self.current_mode = Some(amps);
+            // The pulse counts from the step that takes it.
+            self.current_until = req
+                .current_steps
+                .map(|n| self.steps.saturating_add(1).saturating_add(n as u64));
         }
         if let Some(m) = req.motion
             && self.enabled
@@ -379,6 +386,11 @@ impl ControlLoop {
             let pos = self.enc.count();
             let delta = pos.saturating_sub(self.last_pos);
             self.last_pos = pos;
+            if self.current_until.is_some_and(|end| self.steps >= end) {
+                // A timed current is over: 0 A, still in current mode.
+                self.current_mode = self.current_mode.map(|_| 0.0);
+                self.current_until = None;
+            }
             if let (true, Some(amps)) = (self.enabled, self.current_mode) {
                 // Current mode: the reference follows the axis, no position control.
                 self.r = RefSample {

@@ -305,6 +305,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         self.post(|r| {
             r.enable = true;
             r.current = Some(0.0);
+            r.current_steps = None;
         })?;
         if self.status_now().enabled {
             Ok(())
@@ -430,7 +431,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         Ok(())
     }
 
-    fn current(&mut self, amps: f32) -> Result<(), &'static str> {
+    fn current(&mut self, amps: f32, seconds: Option<f32>) -> Result<(), &'static str> {
         let st = self.status_now();
         if !st.enabled {
             return Err("disabled (enable first)");
@@ -438,7 +439,18 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         if !(amps.is_finite() && amps.abs() <= self.settings.i_max) {
             return Err("beyond lim.i_max");
         }
-        self.post(|r| r.current = Some(amps))
+        let steps = match seconds {
+            None => None,
+            Some(s) if s > 0.0 && s <= 60.0 => {
+                // Float to int casts saturate; at most 60 s of steps.
+                Some((s * self.settings.pos_rate_hz + 0.5) as u32)
+            }
+            Some(_) => return Err("SECONDS must be in (0, 60]"),
+        };
+        self.post(|r| {
+            r.current = Some(amps);
+            r.current_steps = steps;
+        })
     }
 
     fn velocity(&mut self, vel: f32, sweep: Option<Sweep>) -> Result<(), &'static str> {

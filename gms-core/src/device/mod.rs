@@ -148,6 +148,8 @@ pub struct Requests {
     pub velocity: Option<VelocityRequest>,
     /// Hold a current \[A\] with the position loop off (ignored while disabled).
     pub current: Option<f32>,
+    /// For so many position steps, then 0 A (with `current`); `None`: until the next request.
+    pub current_steps: Option<u32>,
     /// Leave current mode: hold the position where the axis is.
     pub hold_here: bool,
     /// Arm, stop or read the capture.
@@ -308,6 +310,7 @@ impl Mailbox {
                 motion: None,
                 velocity: None,
                 current: None,
+                current_steps: None,
                 hold_here: false,
                 capture: None,
                 stream_every: None,

@@ -115,7 +115,13 @@ pub enum Command<'a> {
         vel: Option<f32>,
     },
     /// `current AMPS`: hold a current \[A\] with the position loop off.
-    Current(f32),
+    Current {
+        /// The current \[A\].
+        amps: f32,
+        /// For how long \[s\] (then 0 A, still in current mode): a pulse the device ends by
+        /// itself; `None`: until the next request.
+        seconds: Option<f32>,
+    },
     /// `velocity VEL [AMP F0 F1 SECONDS]`: a constant speed [rad/s], with a sweep around it.
     Velocity {
         /// Mean speed [rad/s].
@@ -246,11 +252,15 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                 }
             }
         }
-        "current" => Command::Current(
-            arg()
-                .and_then(parse_f32)
-                .ok_or(bad("usage: current AMPS"))?,
-        ),
+        "current" => {
+            let usage = "usage: current AMPS [SECONDS]";
+            let amps = arg().and_then(parse_f32).ok_or(bad(usage))?;
+            let seconds = match arg() {
+                None => None,
+                Some(w) => Some(parse_f32(w).ok_or(bad(usage))?),
+            };
+            Command::Current { amps, seconds }
+        }
         "velocity" => {
             let usage = "usage: velocity VEL [AMP F0 F1 SECONDS]";
             let vel = arg().and_then(parse_f32).ok_or(bad(usage))?;

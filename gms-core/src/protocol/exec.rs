@@ -32,7 +32,7 @@ pub trait Device {
     /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
     fn move_to(&mut self, pos: f32, vel: Option<f32>) -> Result<(), &'static str>;
     /// Holds the current `amps` \[A\] with the position loop off.
-    fn current(&mut self, amps: f32) -> Result<(), &'static str>;
+    fn current(&mut self, amps: f32, seconds: Option<f32>) -> Result<(), &'static str>;
     /// Runs at the speed `vel` [rad/s], with a `sweep` around it.
     fn velocity(
         &mut self,
@@ -79,7 +79,7 @@ pub trait Device {
 /// The `help` text.
 pub const HELP: &str = "help | list | get PATH | set PATH VALUE | stage PATH VALUE | commit | \
 discard | save | load | defaults | \
-enable [current] | disable | status | clear | move POS [VEL] | current AMPS | \
+enable [current] | disable | status | clear | move POS [VEL] | current AMPS [SECONDS] | \
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
 capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT]";
 
@@ -189,7 +189,7 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         }
         Command::Clear => done(out, dev.clear()),
         Command::Move { pos, vel } => done(out, dev.move_to(pos, vel)),
-        Command::Current(amps) => done(out, dev.current(amps)),
+        Command::Current { amps, seconds } => done(out, dev.current(amps, seconds)),
         Command::Velocity { vel, sweep } => done(out, dev.velocity(vel, sweep)),
         Command::Hold => done(out, dev.hold()),
         Command::Capture(c) => match c {
