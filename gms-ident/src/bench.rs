@@ -1123,6 +1123,10 @@ pub struct Commissioned {
     pub k_e: f64,
     /// Reflected inertia [kg·m²].
     pub inertia: f64,
+    /// Winding inductance \\[H\\].
+    pub inductance: f64,
+    /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
+    pub cur_pi: (f64, f64),
     /// What was done, a line per step.
     pub lines: Vec<String>,
 }
@@ -1137,6 +1141,8 @@ impl Commissioned {
             ("motor.k_e", self.k_e),
             ("motor.k_m", self.k_e),
             ("ff.inertia", self.inertia),
+            ("cur.kp", self.cur_pi.0),
+            ("cur.ki", self.cur_pi.1),
         ]
     }
 }
@@ -1195,6 +1201,10 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
     let _ = b.request(&format!("set enc.dir {}", dirs0.1));
     r
 }
+
+/// The current loop's bandwidth as a fraction of its rate \\[-\\]: 1/20 (1 kHz at 20 kHz),
+/// which leaves about 63° of phase margin against the loop's 1.5 periods of delay.
+pub const CURRENT_BW_FRACTION: f64 = 0.05;
 
 /// The fastest speed commissioning uses [rad/s] (the velocity mode allows 20).
 const VELOCITY_MAX_BENCH: f64 = 20.0;
@@ -1357,6 +1367,23 @@ fn commission_steps(
     ));
     // 6. The inertia: current pulses that the device ends by itself, and the coast after.
     c.inertia = inertia(b, &mut c, dev, dt, i_fs)?;
+    // 7. The inductance: the current loop's step response at standstill.
+    c.inductance = inductance(b, &mut c, dt, i_fs)?;
+    // 8. The current loop's PI for a bandwidth of CURRENT_BW_FRACTION of its rate: kp = ω L,
+    //    ki = ω R (the PI's zero on the winding's pole: a first-order loop of bandwidth ω).
+    let cur_hz = get_param(b, "rate.cur_hz")?;
+    let w = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * cur_hz;
+    c.cur_pi = (w * c.inductance, w * c.r);
+    // The loop's delay: the sample, the computation and the update, about 1.5 periods.
+    let margin = 90.0 - 360.0 * CURRENT_BW_FRACTION * 1.5;
+    c.lines.push(format!(
+        "current loop: bandwidth {:.0} Hz ({} of its rate): cur.kp {:.4} V/A, cur.ki {:.4e} V/(A·s); \
+         phase margin about {margin:.0}° (1.5 periods of delay)",
+        CURRENT_BW_FRACTION * cur_hz,
+        CURRENT_BW_FRACTION,
+        c.cur_pi.0,
+        c.cur_pi.1
+    ));
     b.request("disable")?;
     Ok(c)
 }
@@ -1460,4 +1487,91 @@ fn inertia(
         js.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
     ));
     Ok(j)
+}
+
+/// The winding inductance from the current loop's response to current steps at standstill
+/// (±40 % of the expected breakaway current: friction holds the axis, no back-EMF), averaged
+/// over four steps, against the device's own current loop (`gms_core`'s controller with the
+/// device's gains, rates, supply and feedforward R) driving an R-L winding whose voltage is
+/// applied one current period late, as the bridge does: the L whose simulated response is
+/// closest (least squares over the first 2 ms, golden-section search over ln L).
+fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> Result<f64, Error> {
+    let amps = 0.4 * i_fs;
+    let n = 20u32;
+    let mut avg = vec![0.0f64; n as usize];
+    primitive(b, "enable current")?;
+    for dir in [1.0, -1.0, 1.0, -1.0] {
+        b.request("current 0")?;
+        b.wait(0.01)?;
+        b.request(&format!("capture current 1 {n} next"))?;
+        b.request(&format!("current {}", dir * amps))?;
+        b.wait(n as f64 * dt)?;
+        capture_wait(b, 0.01, 200)?;
+        check_faults(b)?;
+        for (a, r) in avg.iter_mut().zip(capture_rows(b)?) {
+            *a += dir * r[0] / 4.0;
+        }
+    }
+    b.request("current 0")?;
+    // The device's current loop, as it runs.
+    let mut p = gms_core::device::default_settings();
+    p.current.kp = get_param(b, "cur.kp")? as f32;
+    p.current.ki = get_param(b, "cur.ki")? as f32;
+    p.cur_rate_hz = get_param(b, "rate.cur_hz")? as f32;
+    p.pos_rate_hz = get_param(b, "rate.pos_hz")? as f32;
+    p.v_supply = get_param(b, "lim.v_supply")? as f32;
+    p.motor.r = get_param(b, "motor.r")? as f32;
+    let r = c.r;
+    let ratio = (p.cur_rate_hz / p.pos_rate_hz).round().max(1.0) as usize;
+    let h = 1.0 / p.cur_rate_hz as f64;
+    let model = |l: f64| -> Option<f64> {
+        let mut ctrl = gms_core::controller::Controller::try_new(p).ok()?;
+        ctrl.hold_current(amps as f32);
+        let (mut i, mut v_prev) = (0.0f64, 0.0f64);
+        let mut sse = 0.0;
+        for k in 0..(n as usize * ratio) {
+            if k % ratio == 0 {
+                sse += (i - avg[k / ratio]).powi(2);
+            }
+            let v = ctrl.current_step(i as f32).voltage as f64;
+            // The voltage computed now drives the next period.
+            let e = (-r * h / l).exp();
+            let i_ss = v_prev / r;
+            i = i_ss + (i - i_ss) * e;
+            v_prev = v;
+        }
+        Some(sse)
+    };
+    // Golden-section search over ln L in [1 µH, 1 H].
+    let (mut lo, mut hi) = (1e-6f64.ln(), 1.0f64.ln());
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    let f = |x: f64| model(x.exp()).unwrap_or(f64::INFINITY);
+    let (mut x1, mut x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..80 {
+        if f1 < f2 {
+            hi = x2;
+            (x2, f2) = (x1, f1);
+            x1 = hi - g * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            (x1, f1) = (x2, f2);
+            x2 = lo + g * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    let l = (0.5 * (lo + hi)).exp();
+    if !l.is_finite() || f1.is_infinite() {
+        return Err(Error::Device(
+            "the current steps could not be fitted".into(),
+        ));
+    }
+    c.lines.push(format!(
+        "winding inductance: {:.4e} H from the current loop's response to four steps of {amps:.3e} A \
+         (L/R {:.1} µs)",
+        l,
+        l / r * 1e6
+    ));
+    Ok(l)
 }

@@ -69,11 +69,12 @@ fn tune_ff_finds_the_optimum_of_a_fine_sweep() {
     let _ = dev.request("disable");
 }
 
-/// A plant whose motor the device does not know (`r`, `k` = k_e = k_M, inertia `j`), with
-/// the encoder and the sense reversed or not; the device believes the default motor.
-fn hidden_motor(r: f64, k: f64, j: f64, enc_rev: bool, sense_rev: bool) -> LocalDevice {
+/// A plant whose motor the device does not know (`r`, `k` = k_e = k_M, inertia `j`,
+/// inductance `l`), with the encoder and the sense reversed or not; the device believes the
+/// default motor.
+fn hidden_motor(r: f64, k: f64, j: f64, l: f64, enc_rev: bool, sense_rev: bool) -> LocalDevice {
     let text = format!(
-        "{QUIET}\n[plant]\nresistance = {r}\nk_m = {k}\nk_e = {k}\ninertia = {j}\n\
+        "{QUIET}\n[plant]\nresistance = {r}\nk_m = {k}\nk_e = {k}\ninertia = {j}\ninductance = {l}\n\
          encoder_reversed = {enc_rev}\nsense_reversed = {sense_rev}\n\
          [controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n[controller.ff]\ninertia = 6e-8\n"
     );
@@ -87,25 +88,27 @@ fn hidden_motor(r: f64, k: f64, j: f64, enc_rev: bool, sense_rev: bool) -> Local
 #[test]
 fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
     use gms_ident::bench::commission;
-    for (r, k, j, enc_rev, sense_rev) in [
-        (10.0, 6.6e-3, 6e-8, false, false),
-        (7.5, 8.0e-3, 9e-8, true, false),
-        (14.0, 5.5e-3, 4e-8, false, true),
-        (12.0, 7.0e-3, 7e-8, true, true),
+    for (r, k, j, l, enc_rev, sense_rev) in [
+        (10.0, 6.6e-3, 6e-8, 0.25e-3, false, false),
+        (7.5, 8.0e-3, 9e-8, 0.4e-3, true, false),
+        (14.0, 5.5e-3, 4e-8, 0.18e-3, false, true),
+        (12.0, 7.0e-3, 7e-8, 0.3e-3, true, true),
     ] {
-        let mut dev = hidden_motor(r, k, j, enc_rev, sense_rev);
+        let mut dev = hidden_motor(r, k, j, l, enc_rev, sense_rev);
         let c = commission(&mut dev, 1.0).unwrap();
         for l in &c.lines {
             eprintln!("  {l}");
         }
         eprintln!(
-            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), J {j} -> {:.3e} ({:+.1} %), dirs {} {}",
+            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), J {j} -> {:.3e} ({:+.1} %), L {l} -> {:.3e} ({:+.1} %), dirs {} {}",
             c.r,
             (c.r / r - 1.0) * 100.0,
             c.k_e,
             (c.k_e / k - 1.0) * 100.0,
             c.inertia,
             (c.inertia / j - 1.0) * 100.0,
+            c.inductance,
+            (c.inductance / l - 1.0) * 100.0,
             c.enc_dir,
             c.sense_dir
         );
@@ -114,6 +117,12 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         assert!((c.r / r - 1.0).abs() < 0.05, "R {}", c.r);
         assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
         assert!((c.inertia / j - 1.0).abs() < 0.15, "J {}", c.inertia);
+        assert!((c.inductance / l - 1.0).abs() < 0.20, "L {}", c.inductance);
+        // The current PI for 1 kHz: kp = 2π 1000 L, ki = 2π 1000 R (the defaults 1.5 and 6e4
+        // are this for the default motor).
+        let w = 2.0 * std::f64::consts::PI * 1000.0;
+        assert!((c.cur_pi.0 / (w * c.inductance) - 1.0).abs() < 1e-9);
+        assert!((c.cur_pi.1 / (w * c.r) - 1.0).abs() < 1e-9);
         // The device's directions are as they were (the caller applies the result).
         assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
     }
