@@ -385,11 +385,17 @@ pub struct PreslidingPlan {
     /// The creep speed that counts as breakaway \\[rad/s\\]: an axis still moving this fast
     /// after the dwell (over the averaged samples) slides; the run ends there.
     pub creep: f64,
+    /// The stroke from the start beyond which the device itself ends the run \\[rad\\]: its
+    /// position limits, narrowed to this for the staircase, switch the bridge off. After
+    /// breakaway the current is still held until the host has seen it; over a slow link (or
+    /// on a virtual device faster than real time on a loaded host) that is long enough for the
+    /// axis to run far. Reaching the guard counts as breakaway (that step is not recorded).
+    pub guard: f64,
 }
 
 impl PreslidingPlan {
     /// Steps of `step` \\[A\\], 20 ms of dwell, 100 samples, up to `max_steps`, a stroke window
-    /// of 20 mrad, breakaway above 30 mrad/s of creep.
+    /// of 20 mrad, breakaway above 30 mrad/s of creep, the device's guard at 0.5 rad.
     pub fn new(step: f64, max_steps: u32) -> PreslidingPlan {
         PreslidingPlan {
             step,
@@ -398,6 +404,7 @@ impl PreslidingPlan {
             samples: 100,
             window: 0.02,
             creep: 0.03,
+            guard: 0.5,
         }
     }
 
@@ -443,9 +450,11 @@ fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<Settled, Error> 
 /// at a time (in ten sub-steps, quasi-statically); after each dwell, the mean position and
 /// torque (k_M × the measured current) are recorded, relative to the start, until the axis
 /// slides (it creeps faster than `plan.creep` or leaves `plan.window`: that step is not
-/// recorded). Pushes `(x, f)` pairs as `hil-sim experiment presliding` writes them (one
-/// direction: only the power-up state is virgin) onto `out` as they come, and ends holding
-/// where the axis is. Fails (the bridge off) when the current does not flow (below half the
+/// recorded). The device's stroke limits are narrowed to `plan.guard` around the start for
+/// the run (and put back after): an axis that has broken away stops there with the bridge off
+/// however late the host sees it. Pushes `(x, f)` pairs as `hil-sim experiment presliding`
+/// writes them (one direction: only the power-up state is virgin) onto `out` as they come,
+/// and ends holding where the axis is (or, at the guard, with the bridge off). Fails (the bridge off) when the current does not flow (below half the
 /// command: the motor not connected), when the axis moves against the torque (the encoder
 /// reversed), when it has not broken away after `max_steps`, or on a fault.
 pub fn presliding(
@@ -453,28 +462,48 @@ pub fn presliding(
     plan: &PreslidingPlan,
     out: &mut Vec<(f64, f64)>,
 ) -> Result<(), Error> {
-    guarded(b, |b| {
-        let dev = DeviceInfo::read(b)?;
-        let dt = dev.dt();
-        // Straight into current mode: the position loop never closes before the direction
-        // is known (with the encoder reversed it would run away at once).
-        primitive(b, "enable current")?;
-        b.wait(plan.dwell)?;
-        // The start (no torque): the origin of the displacements, not a point of the curve.
-        let x0 = settled(b, plan.samples, dt)?.x;
-        // A thousandth of the window (20 µrad by default, five counts of a 3.8 µrad
-        // encoder): beyond noise and quantisation.
-        let against = plan.window / 1000.0;
-        for k in 1..=plan.max_steps {
-            let amps = plan.step * k as f64;
-            if amps > dev.i_max {
-                return Err(Error::Device(format!(
-                    "the axis did not break away below the current limit ({} A, {:.3e} N·m): \
-                     blocked, or the motor not connected?",
-                    dev.i_max,
-                    dev.k_m * dev.i_max
-                )));
-            }
+    // The device's own guard: its stroke limits narrowed around the start.
+    let limits = narrow_limits(b, plan.guard)?;
+    let result = guarded(b, |b| staircase(b, plan, out));
+    // The limits back, widening each side (best effort: the link may be gone).
+    let _ = b.request(&format!("set lim.pos_min {}", limits.0));
+    let _ = b.request(&format!("set lim.pos_max {}", limits.1));
+    result
+}
+
+/// Whether the device's only latched fault is `position_limit` (a guard reached).
+fn only_position_limit(b: &mut impl Bench) -> bool {
+    matches!(check_faults(b), Err(Error::Device(e)) if e.ends_with("(position_limit)"))
+}
+
+/// The staircase of [`presliding`], within the guard set by it.
+fn staircase(
+    b: &mut impl Bench,
+    plan: &PreslidingPlan,
+    out: &mut Vec<(f64, f64)>,
+) -> Result<(), Error> {
+    let dev = DeviceInfo::read(b)?;
+    let dt = dev.dt();
+    // Straight into current mode: the position loop never closes before the direction
+    // is known (with the encoder reversed it would run away at once).
+    primitive(b, "enable current")?;
+    b.wait(plan.dwell)?;
+    // The start (no torque): the origin of the displacements, not a point of the curve.
+    let x0 = settled(b, plan.samples, dt)?.x;
+    // A thousandth of the window (20 µrad by default, five counts of a 3.8 µrad
+    // encoder): beyond noise and quantisation.
+    let against = plan.window / 1000.0;
+    for k in 1..=plan.max_steps {
+        let amps = plan.step * k as f64;
+        if amps > dev.i_max {
+            return Err(Error::Device(format!(
+                "the axis did not break away below the current limit ({} A, {:.3e} N·m): \
+                 blocked, or the motor not connected?",
+                dev.i_max,
+                dev.k_m * dev.i_max
+            )));
+        }
+        let step = (|| {
             // Raised in ten small increments, not one: a torque step rings the axis on its
             // pre-sliding stiffness, and the overshoot slips blocks that then hold less than
             // the virgin curve (the paper loads quasi-statically).
@@ -485,34 +514,67 @@ pub fn presliding(
             }
             let s = settled(b, plan.samples, dt)?;
             check_faults(b)?;
-            let dx = s.x - x0;
-            if k >= 10 && s.i < 0.5 * amps {
-                return Err(Error::Device(format!(
-                    "commanded {amps:.4e} A, measured {:.4e} A: no current flows (the motor \
-                     not connected?)",
-                    s.i
-                )));
-            }
-            if dx < -against {
-                return Err(Error::Device(format!(
-                    "the axis moved {dx:.3e} rad under +{amps:.3e} A: the encoder counts \
-                     against the motor (swap its A and B channels, or the motor leads)"
-                )));
-            }
-            if dx.abs() > plan.window || s.creep.abs() > plan.creep {
-                b.request("hold")?;
+            Ok(s)
+        })();
+        let s = match step {
+            Ok(s) => s,
+            // The axis reached the guard (it broke away, and ran on until the device
+            // stopped it): the end of the staircase, the bridge off.
+            Err(_) if only_position_limit(b) => {
+                b.request("clear")?;
                 return Ok(());
             }
-            out.push((dx, dev.k_m * s.i));
+            Err(e) => return Err(e),
+        };
+        let dx = s.x - x0;
+        if k >= 10 && s.i < 0.5 * amps {
+            return Err(Error::Device(format!(
+                "commanded {amps:.4e} A, measured {:.4e} A: no current flows (the motor \
+                 not connected?)",
+                s.i
+            )));
         }
-        Err(Error::Device(format!(
-            "the axis did not break away after {} steps ({:.3e} N·m, {:.1} × the expected Fs \
-             {:.3e} N·m): blocked, or the motor not connected?",
-            plan.max_steps,
-            dev.k_m * plan.step * plan.max_steps as f64,
-            dev.k_m * plan.step * plan.max_steps as f64 / dev.fs,
-            dev.fs
-        )))
+        if dx < -against {
+            return Err(Error::Device(format!(
+                "the axis moved {dx:.3e} rad under +{amps:.3e} A: the encoder counts \
+                 against the motor (swap its A and B channels, or the motor leads)"
+            )));
+        }
+        if dx.abs() > plan.window || s.creep.abs() > plan.creep {
+            b.request("hold")?;
+            return Ok(());
+        }
+        out.push((dx, dev.k_m * s.i));
+    }
+    Err(Error::Device(format!(
+        "the axis did not break away after {} steps ({:.3e} N·m, {:.1} × the expected Fs \
+         {:.3e} N·m): blocked, or the motor not connected?",
+        plan.max_steps,
+        dev.k_m * plan.step * plan.max_steps as f64,
+        dev.k_m * plan.step * plan.max_steps as f64 / dev.fs,
+        dev.fs
+    )))
+}
+
+/// Moves the axis to `x` [rad] (the protocol's position) in the position loop at up to `vel`
+/// [rad/s] and waits until the move has ended; fails (the bridge off) on a fault or when it
+/// has not ended in twice its time.
+pub fn move_to(b: &mut impl Bench, x: f64, vel: f64) -> Result<(), Error> {
+    guarded(b, |b| {
+        b.request("enable")?;
+        let from = position(b)?;
+        b.request(&format!("move {x} {vel}"))?;
+        let t = (x - from).abs() / vel + 0.1;
+        b.wait(t)?;
+        for _ in 0..100 {
+            let (_, text) = b.request("status")?;
+            if text.split_whitespace().any(|w| w == "moving=0") {
+                return check_faults(b);
+            }
+            b.wait(t / 100.0)?;
+        }
+        check_faults(b)?;
+        Err(Error::Device(format!("the move to {x} rad did not end")))
     })
 }
 
@@ -775,7 +837,7 @@ pub struct Gathered {
 }
 
 /// The whole bench identification: the stroke limits narrowed to the plans' window, the
-/// pre-sliding staircase, the sliding sweep, the lag run around the Vs just measured; then,
+/// pre-sliding staircase, a move back to the start, the sliding sweep, the lag run around the Vs just measured; then,
 /// whatever happened, the bridge off, the limits back and the data written to `dir`
 /// (`presliding.csv`, `sliding.csv`, `lag.csv`: what `hil-sim identify` reads), and on
 /// success the identification of those files (`blocks`, `asymmetric` as `hil-sim identify`
@@ -796,7 +858,10 @@ pub fn identify_on<B: Bench>(
     let result = limits.clone().map(|_| ()).and_then(|_| {
         let steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
         stage(b, "pre-sliding", plans.presliding.duration(steps, dt));
+        let x_start = position(b)?;
         presliding(b, &plans.presliding, &mut g.presliding)?;
+        // Back to the start, so that the sliding runs have their planned stroke each way.
+        move_to(b, x_start, 1.0)?;
         stage(b, "sliding", plans.sliding.duration(dt));
         sliding(b, &plans.sliding, &mut g.sliding)?;
         // The lag run around the Vs just measured.
@@ -1178,12 +1243,14 @@ fn hold_current(
 /// polarity (a reversed sense makes the current loop run away at once: `over_current`, then
 /// `sense.dir` flipped and tried again); the encoder's direction (current steps of a quarter
 /// of the expected Fs until the axis slides 2 mrad, which way the counts say; flipped by
-/// `enc.dir`); the winding resistance (current mode at ±40 % of the expected breakaway, the
+/// `enc.dir`; each step a pulse of 10 ms the device ends by itself); the winding resistance (current mode at ±40 % of the expected breakaway, the
 /// axis held by friction: R from the voltage and current differences, offsets cancelled); the
 /// back-EMF constant (timed velocity runs at 1, 2 and 3 × `speed` each way: the voltage less
 /// R × current against the speed, the slope); the reflected inertia (timed current pulses and
-/// the coasts after them). The direction settings it changes to go on are
-/// put back at the end (and on failure, with the bridge off): the caller applies the result.
+/// the coasts after them); the inductance (the current loop's step response). The device's
+/// stroke limits are narrowed around the start for the run (the farthest speed run each way
+/// and 0.5 rad more). The direction settings it changes to go on, and the limits, are put back
+/// at the end (and on failure, with the bridge off): the caller applies the result.
 pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error> {
     if !(speed > 0.0 && speed * 3.0 <= VELOCITY_MAX_BENCH) {
         return Err(Error::Params(format!(
@@ -1194,13 +1261,23 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
     let dt = dev.dt();
     check_faults(b)?;
     let dirs0 = (get_param(b, "sense.dir")?, get_param(b, "enc.dir")?);
+    // The device's own stroke guard around the start: the farthest speed run each way, and
+    // half a radian for the rest; an axis that runs away stops there with the bridge off.
+    let v = 3.0 * speed;
+    let window = 1.2 * (v * KE_RUN + v * v / VELOCITY_ACC) + 0.5;
+    let limits = narrow_limits(b, window)?;
     let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, speed));
-    // The directions as they were (the caller applies what was found).
+    // The directions and the limits as they were (the caller applies what was found).
     let _ = b.request("disable");
     let _ = b.request(&format!("set sense.dir {}", dirs0.0));
     let _ = b.request(&format!("set enc.dir {}", dirs0.1));
+    let _ = b.request(&format!("set lim.pos_min {}", limits.0));
+    let _ = b.request(&format!("set lim.pos_max {}", limits.1));
     r
 }
+
+/// The length of each back-EMF run at constant speed \\[s\\] (0.1 s settling, 0.1 s averaged).
+const KE_RUN: f64 = 0.2;
 
 /// The current loop's bandwidth as a fraction of its rate \\[-\\]: 1/20 (1 kHz at 20 kHz),
 /// which leaves about 63° of phase margin against the loop's 1.5 periods of delay.
@@ -1271,9 +1348,11 @@ fn commission_steps(
             c.sense_dir
         ));
     }
-    // 3. The encoder's direction: raise the current until the axis slides (2 mrad: beyond
-    // the pre-sliding range, which a stiff or blocked axis travels too).
+    // 3. The encoder's direction: current pulses that the device ends by itself (so a slow
+    // link cannot hold the current on a sliding axis), each larger, until the axis has slid
+    // (2 mrad: beyond the pre-sliding range, which a stiff or blocked axis travels too).
     b.request("current 0")?;
+    b.wait(0.05)?;
     let x0 = position(b)?;
     let mut moved = 0.0;
     for k in 2..=12 {
@@ -1281,8 +1360,8 @@ fn commission_steps(
         if amps > dev.i_max {
             break;
         }
-        b.request(&format!("current {amps}"))?;
-        b.wait(0.005)?;
+        primitive(b, &format!("current {amps} 0.01"))?;
+        b.wait(0.05)?;
         moved = position(b)? - x0;
         if moved.abs() > 2e-3 {
             break;
@@ -1334,7 +1413,7 @@ fn commission_steps(
         for dir in [1.0, -1.0] {
             let v = dir * speed * k as f64;
             let t_acc = v.abs() / VELOCITY_ACC;
-            let run = 0.15 + 0.05;
+            let run = KE_RUN;
             timed_run(b, v, run, "t,pos,current,volts", dt)?;
             let rows: Vec<Vec<f64>> = capture_rows(b)?
                 .into_iter()

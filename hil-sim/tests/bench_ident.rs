@@ -536,3 +536,67 @@ fn a_bench_identification_stays_within_its_planned_stroke() {
     );
     assert!(lo > -planned && hi < planned, "{lo} {hi} vs {planned}");
 }
+
+/// A host that stalls: every `status` request (the staircase's fault check after each step)
+/// first lets `stall` seconds of device time pass, as a loaded PC or a slow link would.
+struct Stalling {
+    dev: LocalDevice,
+    stall: f64,
+}
+
+impl gms_ident::bench::Bench for Stalling {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        if line == "status" {
+            self.dev.wait(self.stall)?;
+        }
+        self.dev.request(line)
+    }
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+        self.dev.wait(seconds)
+    }
+}
+
+/// The staircase's guard: with the host stalling 0.2 s after each step, the current is still
+/// held long after breakaway; the device's narrowed stroke limits stop the axis (bridge off),
+/// which the staircase takes as its end: the data before it kept, the fault cleared, the
+/// limits put back. Without the guard the same stall runs the axis far beyond it.
+#[test]
+fn a_stalling_host_cannot_run_the_staircase_away() {
+    use gms_ident::bench::{Bench, PreslidingPlan, position, presliding};
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let run = |guard: f64| {
+        let mut b = Stalling {
+            dev: LocalDevice::new(&sc).unwrap(),
+            stall: 0.2,
+        };
+        let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
+        plan.guard = guard;
+        let mut pre = Vec::new();
+        let r = presliding(&mut b, &plan, &mut pre);
+        let (_, st) = b.request("status").unwrap();
+        // The axis at rest where it stopped.
+        b.wait(0.5).unwrap();
+        (r, pre.len(), position(&mut b).unwrap(), st, b)
+    };
+    let (r, n, x, st, mut b) = run(0.5);
+    eprintln!("guard 0.5 rad: {n} steps, stopped at {x:.3} rad; {st}");
+    r.unwrap();
+    assert!(n > 80 && n < 150, "{n} steps");
+    // Stopped at the guard, give or take the coast with the bridge off.
+    assert!(x > 0.5 && x < 0.55, "x {x}");
+    assert!(st.contains("faults=0") && st.contains("enabled=0"), "{st}");
+    let lim = |b: &mut Stalling, p: &str| {
+        let (_, v) = b.request(&format!("get {p}")).unwrap();
+        v.trim().parse::<f64>().unwrap()
+    };
+    assert_eq!(
+        (lim(&mut b, "lim.pos_min"), lim(&mut b, "lim.pos_max")),
+        (-50.0, 50.0)
+    );
+    // The same stall with the guard out of reach.
+    let (r, n2, x2, _, _) = run(40.0);
+    eprintln!("guard 40 rad: {n2} steps, stopped at {x2:.3} rad");
+    r.unwrap();
+    assert_eq!(n2, n);
+    assert!(x2 > 1.0, "x {x2}");
+}
