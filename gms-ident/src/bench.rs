@@ -556,7 +556,7 @@ fn staircase(
     )))
 }
 
-/// Moves the axis to `x` [rad] (the protocol's position) in the position loop at up to `vel`
+/// Moves the axis to `x` \\[rad\\] (the protocol's position) in the position loop at up to `vel`
 /// [rad/s] and waits until the move has ended; fails (the bridge off) on a fault or when it
 /// has not ended in twice its time.
 pub fn move_to(b: &mut impl Bench, x: f64, vel: f64) -> Result<(), Error> {
