@@ -391,11 +391,20 @@ pub struct PreslidingPlan {
     /// on a virtual device faster than real time on a loaded host) that is long enough for the
     /// axis to run far. Reaching the guard counts as breakaway (that step is not recorded).
     pub guard: f64,
+    /// Erase the friction's memory first \\[-\\]: the position loop swings the axis about its
+    /// start, from `window` each way (every block slides) down by 5 % per swing to below
+    /// `erase_min`, so that the staircase starts from a near-virgin state even after earlier
+    /// motion (commissioning, a previous run), as a decaying alternating field demagnetises.
+    pub erase: bool,
+    /// The smallest swing of the erase \\[rad\\]: a couple of encoder counts.
+    pub erase_min: f64,
 }
 
 impl PreslidingPlan {
     /// Steps of `step` \\[A\\], 20 ms of dwell, 100 samples, up to `max_steps`, a stroke window
-    /// of 20 mrad, breakaway above 30 mrad/s of creep, the device's guard at 0.5 rad.
+    /// of 20 mrad, breakaway above 30 mrad/s of creep, the device's guard at 0.5 rad, the
+    /// friction's memory erased first down to 4 µrad swings (about a count of the default
+    /// encoder).
     pub fn new(step: f64, max_steps: u32) -> PreslidingPlan {
         PreslidingPlan {
             step,
@@ -405,12 +414,26 @@ impl PreslidingPlan {
             window: 0.02,
             creep: 0.03,
             guard: 0.5,
+            erase: true,
+            erase_min: 4e-6,
         }
     }
 
-    /// The device time of `steps` steps, about \\[s\\].
-    pub fn duration(&self, steps: u32, dt: f64) -> f64 {
-        steps as f64 * (self.dwell + self.samples as f64 * dt)
+    /// The device time of `steps` steps and of the erase before them (for a compensator's
+    /// Stribeck velocity `vs` [rad/s]), about \\[s\\].
+    pub fn duration(&self, steps: u32, dt: f64, vs: f64) -> f64 {
+        let staircase = steps as f64 * (self.dwell + self.samples as f64 * dt);
+        if !self.erase {
+            return staircase;
+        }
+        // Each swing from one side to the other, then back to the start; a move takes about
+        // twice its travel at the cruise speed.
+        let (mut travel, mut amp) = (self.window, self.window);
+        while amp > self.erase_min {
+            travel += amp * (1.0 + ERASE_RATIO);
+            amp *= ERASE_RATIO;
+        }
+        staircase + 2.0 * travel / (ERASE_SPEED * vs)
     }
 }
 
@@ -484,8 +507,20 @@ fn staircase(
 ) -> Result<(), Error> {
     let dev = DeviceInfo::read(b)?;
     let dt = dev.dt();
-    // Straight into current mode: the position loop never closes before the direction
-    // is known (with the encoder reversed it would run away at once).
+    if plan.erase {
+        // The encoder's direction first, in current mode: a position loop on a reversed
+        // encoder would run away at once.
+        if slide(b, &dev, dt)? < 0.0 {
+            return Err(Error::Device(
+                "the axis moved backwards under a positive current: the encoder counts \
+                 against the motor (swap its A and B channels, or the motor leads; or set \
+                 enc.dir -1: `gms-tune commission` finds it)"
+                    .into(),
+            ));
+        }
+        erase(b, plan, &dev)?;
+    }
+    // Into current mode, at 0 A.
     primitive(b, "enable current")?;
     b.wait(plan.dwell)?;
     // The start (no torque): the origin of the displacements, not a point of the curve.
@@ -556,22 +591,51 @@ fn staircase(
     )))
 }
 
+/// The ratio of one erase swing to the one before \\[-\\]: each block is left within
+/// ±(1 − r)/(1 + r) of its slip deflection of zero (±2.6 % at 0.95).
+const ERASE_RATIO: f64 = 0.95;
+
+/// The erase's speed, a fraction of the compensator's Stribeck velocity \\[-\\].
+const ERASE_SPEED: f64 = 0.25;
+
+/// The friction's memory erased about where the axis is: position-loop swings each way,
+/// from `plan.window` down by [`ERASE_RATIO`] per swing to below `plan.erase_min`, slowly (at
+/// a quarter of the compensator's Vs, near the Stribeck curve's static end: a block that slips
+/// faster saturates lower, and its residual grows; at Vs the virgin curves of the property
+/// test came out up to 6.1 % of Fs off instead of 4.6 %), then back to the start. A block of
+/// the model is an elasto-slip element: a swing beyond its slip deflection resets it, the
+/// smaller swings after leave it near zero. About 35 s of device time with the defaults.
+fn erase(b: &mut impl Bench, plan: &PreslidingPlan, dev: &DeviceInfo) -> Result<(), Error> {
+    let x0 = position(b)?;
+    let vel = ERASE_SPEED * dev.vs;
+    let mut amp = plan.window;
+    let mut side = -1.0;
+    while amp > plan.erase_min {
+        move_to(b, x0 + side * amp, vel)?;
+        amp *= ERASE_RATIO;
+        side = -side;
+    }
+    move_to(b, x0, vel)
+}
+
 /// Moves the axis to `x` \\[rad\\] (the protocol's position) in the position loop at up to `vel`
 /// [rad/s] and waits until the move has ended; fails (the bridge off) on a fault or when it
-/// has not ended in twice its time.
+/// has not ended in four times the time at `vel`.
 pub fn move_to(b: &mut impl Bench, x: f64, vel: f64) -> Result<(), Error> {
     guarded(b, |b| {
         b.request("enable")?;
         let from = position(b)?;
         b.request(&format!("move {x} {vel}"))?;
-        let t = (x - from).abs() / vel + 0.1;
+        // A quintic from rest to rest peaks at 1.875 × its mean speed: about twice the time
+        // at `vel`; then up to twice that again.
+        let t = 2.0 * (x - from).abs() / vel + 0.02;
         b.wait(t)?;
         for _ in 0..100 {
             let (_, text) = b.request("status")?;
             if text.split_whitespace().any(|w| w == "moving=0") {
                 return check_faults(b);
             }
-            b.wait(t / 100.0)?;
+            b.wait(t / 50.0)?;
         }
         check_faults(b)?;
         Err(Error::Device(format!("the move to {x} rad did not end")))
@@ -708,6 +772,9 @@ pub struct Ranges {
     /// The stroke window around the start, each way \\[rad\\] (default 5): the device's stroke
     /// limits are narrowed to it while the experiments run.
     pub window: Option<f64>,
+    /// Skip the erase of the friction's memory before the staircase (right after power-up
+    /// the state is virgin already; the erase takes about 35 s).
+    pub no_erase: bool,
 }
 
 /// The three experiments planned for a device.
@@ -762,6 +829,7 @@ impl Plans {
         let mut presliding = PreslidingPlan::new(step_t / dev.k_m, 0);
         // Up to three times the expected breakaway: an axis that holds more is blocked.
         presliding.max_steps = (3.0 * steps_to_fs).ceil() as u32;
+        presliding.erase = !ranges.no_erase;
         presliding.window = presliding.window.min(window);
         let sliding = SlidingPlan::log_spaced(v_min, v_max, n);
         let need = sliding.stroke(dev.dt());
@@ -857,7 +925,11 @@ pub fn identify_on<B: Bench>(
     let limits = narrow_limits(b, plans.window);
     let result = limits.clone().map(|_| ()).and_then(|_| {
         let steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
-        stage(b, "pre-sliding", plans.presliding.duration(steps, dt));
+        stage(
+            b,
+            "pre-sliding",
+            plans.presliding.duration(steps, dt, dev.vs),
+        );
         let x_start = position(b)?;
         presliding(b, &plans.presliding, &mut g.presliding)?;
         // Back to the start, so that the sliding runs have their planned stroke each way.
@@ -1221,6 +1293,55 @@ fn means(rows: &[Vec<f64>]) -> Vec<f64> {
         .collect()
 }
 
+/// Which way the encoder counts when the motor pushes: in current mode, pulses of current
+/// that the device ends by itself after 10 ms (so a slow link cannot hold the current on a
+/// sliding axis), from half the expected breakaway up by a quarter of it each (to three times
+/// it, within the current limit), until the axis has slid (2 mrad: beyond the pre-sliding
+/// range, which a stiff or blocked axis travels too). Returns the signed slide \\[rad\\]
+/// (negative: the encoder counts against the motor). Fails when no current flows (a current
+/// friction holds, measured) or the axis does not slide.
+pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<f64, Error> {
+    let i_fs = dev.fs / dev.k_m;
+    primitive(b, "enable current")?;
+    b.request("current 0")?;
+    b.wait(0.05)?;
+    let x0 = position(b)?;
+    let mut moved = 0.0;
+    for k in 2..=12 {
+        let amps = 0.25 * k as f64 * i_fs;
+        if amps > dev.i_max {
+            break;
+        }
+        primitive(b, &format!("current {amps} 0.01"))?;
+        b.wait(0.05)?;
+        moved = position(b)? - x0;
+        if moved.abs() > 2e-3 {
+            break;
+        }
+    }
+    b.request("current 0")?;
+    b.wait(0.2)?;
+    check_faults(b)?;
+    if moved.abs() <= 2e-3 {
+        // Which of the two: a current friction holds (40 % of the expected breakaway).
+        let (i, _, _) = hold_current(b, 0.4 * i_fs, 0.1, dt)?;
+        b.request("current 0")?;
+        if i < 0.2 * i_fs {
+            return Err(Error::Device(format!(
+                "commanded {:.4e} A, measured {i:.4e} A: no current flows (the motor not \
+                 connected?)",
+                0.4 * i_fs
+            )));
+        }
+        return Err(Error::Device(format!(
+            "the axis did not move with current pulses up to 3 × the expected breakaway \
+             ({:.3e} N·m): blocked?",
+            3.0 * dev.fs
+        )));
+    }
+    Ok(moved)
+}
+
 /// Holds `amps` in current mode for `seconds` and returns the mean current \\[A\\] and voltage
 /// \\[V\\] over its second half, and the position change \\[rad\\] over the whole.
 fn hold_current(
@@ -1348,35 +1469,8 @@ fn commission_steps(
             c.sense_dir
         ));
     }
-    // 3. The encoder's direction: current pulses that the device ends by itself (so a slow
-    // link cannot hold the current on a sliding axis), each larger, until the axis has slid
-    // (2 mrad: beyond the pre-sliding range, which a stiff or blocked axis travels too).
-    b.request("current 0")?;
-    b.wait(0.05)?;
-    let x0 = position(b)?;
-    let mut moved = 0.0;
-    for k in 2..=12 {
-        let amps = 0.25 * k as f64 * i_fs;
-        if amps > dev.i_max {
-            break;
-        }
-        primitive(b, &format!("current {amps} 0.01"))?;
-        b.wait(0.05)?;
-        moved = position(b)? - x0;
-        if moved.abs() > 2e-3 {
-            break;
-        }
-    }
-    b.request("current 0")?;
-    b.wait(0.2)?;
-    check_faults(b)?;
-    if moved.abs() <= 2e-3 {
-        return Err(Error::Device(format!(
-            "the axis did not move with up to 3 × the expected breakaway ({:.3e} N·m): blocked, \
-             or the motor not connected?",
-            3.0 * dev.fs
-        )));
-    }
+    // 3. The encoder's direction.
+    let moved = slide(b, dev, dt)?;
     if moved < 0.0 {
         c.enc_dir = -c.enc_dir;
         // The bridge goes off with the change; back into current mode.

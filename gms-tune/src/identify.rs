@@ -46,11 +46,11 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     let plans = Plans::new(&dev, &a.ranges).map_err(|e| Fail::Usage(e.to_string()))?;
     let dt = dev.dt();
     let pre_steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
-    let total = plans.presliding.duration(pre_steps, dt)
+    let total = plans.presliding.duration(pre_steps, dt, dev.vs)
         + plans.sliding.duration(dt)
         + LagPlan::for_vs(dev.vs, dev.pos_hz).duration();
     eprintln!(
-        "pre-sliding: torque steps of {:.3e} N·m from rest (about {pre_steps} to breakaway)\n\
+        "pre-sliding: the friction's memory erased, then torque steps of {:.3e} N·m from rest (about {pre_steps} to breakaway)\n\
          sliding:     {} speeds from {:.3e} to {:.3e} rad/s, each way\n\
          lag:         speed swept around 1.5 Vs, 0.2 to 20 Hz\n\
          stroke window ±{} rad; at least {total:.0} s of device time",

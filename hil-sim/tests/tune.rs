@@ -127,3 +127,92 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
     }
 }
+
+/// The hidden axis of the end-to-end check: a motor and a friction the device is not told.
+fn hidden_axis(controller: &str) -> LocalDevice {
+    let text = format!(
+        "[plant]\nvariability = 0.0\nresistance = 7.5\nk_m = 8e-3\nk_e = 8e-3\ninertia = 9e-8\n\
+         inductance = 0.4e-3\n\
+         [plant.guideway]\nfs = 1e-6\nfc = 1e-6\n\
+         [plant.actuator]\nmodel = \"gms\"\nfs = 250e-6\nfc = 140e-6\nvs = 0.22\ndelta = 1.0\n\
+         sigma = 11e-6\nc = 5.5e-3\nblocks = [{{ k = 1.27, alpha = 0.575 }}, \
+         {{ k = 70.9e-3, alpha = 0.160 }}, {{ k = 14.4e-3, alpha = 0.059 }}, \
+         {{ k = 8.83e-3, alpha = 0.12 }}, {{ k = 2.25e-3, alpha = 0.051 }}, \
+         {{ k = 1.06e-3, alpha = 0.034 }}]\n{controller}"
+    );
+    LocalDevice::new(&Scenario::parse(&text, "test").unwrap()).unwrap()
+}
+
+/// After `commission` and `identify`, both applied, on an axis whose motor and friction are
+/// both hidden (the device starting from the default motor and Table 1), the sine test tracks
+/// within 15 % of the RMS error that the true parameters give (the true motor, friction and
+/// inertia, and the current PI the same rule gives for the true R and L).
+#[test]
+fn commission_then_identify_tracks_like_the_true_parameters() {
+    use gms_ident::bench::{
+        DeviceInfo, Plans, Ranges, commission, identify_on, load_params, sine_test,
+    };
+    use gms_ident::paramfile::ParamFile;
+    let w = 2.0 * std::f64::consts::PI * 1000.0;
+    let mut truth = hidden_axis(&format!(
+        "[controller.ff]\ninertia = 9e-8\n[controller.cur]\nkp = {}\nki = {}\n",
+        w * 0.4e-3,
+        w * 7.5
+    ));
+    let rms_true = sine_test(&mut truth, 2e-3, 1.0, 3.0).unwrap();
+    // The device told nothing: the default motor, Table 1.
+    let table1 = "[controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n\
+                  [controller.ff]\ninertia = 6e-8\n\
+                  [controller.gms]\nfs = 220e-6\nfc = 125e-6\nvs = 0.2\ndelta = 0.9\n\
+                  sigma = 10.5e-6\nc = 5e-3\nk1 = 1.159\nk2 = 64.417e-3\nk3 = 13.066e-3\n\
+                  k4 = 8.027e-3\nk5 = 2.043e-3\nk6 = 0.961e-3\n";
+    let mut dev = hidden_axis(table1);
+    let rms_told_nothing = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
+    // Commission, apply.
+    let c = commission(&mut dev, 1.0).unwrap();
+    let mut device = toml::Table::new();
+    for (k, v) in c.settings() {
+        device.insert(k.to_string(), toml::Value::Float(v));
+    }
+    let motor: f64 = get_param(&mut dev, "motor.r").unwrap();
+    assert_eq!(motor, 10.0);
+    let dir = tempfile::tempdir().unwrap();
+    let (_, id) = {
+        // Apply the motor first (the identification uses k_M).
+        let pf = ParamFile::load(std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../examples/table1.toml"
+        )))
+        .unwrap();
+        load_params(
+            &mut dev,
+            &ParamFile {
+                friction: pf.friction,
+                device: Some(device),
+            },
+        )
+        .unwrap();
+        let info = DeviceInfo::read(&mut dev).unwrap();
+        let plans = Plans::new(&info, &Ranges::default()).unwrap();
+        identify_on(&mut dev, &plans, dir.path(), 6, false, &mut |_, _, _| {}).unwrap()
+    };
+    load_params(
+        &mut dev,
+        &ParamFile {
+            friction: id.spec.clone(),
+            device: None,
+        },
+    )
+    .unwrap();
+    let rms = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
+    let rpc = 3.8e-6;
+    eprintln!(
+        "sine RMS error: true parameters {:.3} counts, told nothing {:.3}, after commission and \
+         identify {:.3} ({:+.1} %)",
+        rms_true / rpc,
+        rms_told_nothing / rpc,
+        rms / rpc,
+        (rms / rms_true - 1.0) * 100.0
+    );
+    assert!(rms < 1.15 * rms_true, "{rms} vs {rms_true}");
+}
