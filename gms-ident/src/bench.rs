@@ -1264,6 +1264,8 @@ pub struct Commissioned {
     pub inductance: f64,
     /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
     pub cur_pi: (f64, f64),
+    /// The position loop's gains and their bounds (once that step has run).
+    pub pos: Option<crate::gains::PositionGains>,
     /// What was done, a line per step.
     pub lines: Vec<String>,
 }
@@ -1281,6 +1283,13 @@ impl Commissioned {
             ("cur.kp", self.cur_pi.0),
             ("cur.ki", self.cur_pi.1),
         ]
+        .into_iter()
+        .chain(
+            self.pos
+                .iter()
+                .flat_map(|g| [("pos.kp", g.kp), ("pos.ki", g.ki), ("pos.kd", g.kd)]),
+        )
+        .collect()
     }
 }
 
@@ -1400,9 +1409,7 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
 /// The length of each back-EMF run at constant speed \\[s\\] (0.1 s settling, 0.1 s averaged).
 const KE_RUN: f64 = 0.2;
 
-/// The current loop's bandwidth as a fraction of its rate \\[-\\]: 1/20 (1 kHz at 20 kHz),
-/// which leaves about 63° of phase margin against the loop's 1.5 periods of delay.
-pub const CURRENT_BW_FRACTION: f64 = 0.05;
+pub use crate::gains::CURRENT_BW_FRACTION;
 
 /// The fastest speed commissioning uses [rad/s] (the velocity mode allows 20).
 const VELOCITY_MAX_BENCH: f64 = 20.0;
@@ -1545,8 +1552,7 @@ fn commission_steps(
     // 8. The current loop's PI for a bandwidth of CURRENT_BW_FRACTION of its rate: kp = ω L,
     //    ki = ω R (the PI's zero on the winding's pole: a first-order loop of bandwidth ω).
     let cur_hz = get_param(b, "rate.cur_hz")?;
-    let w = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * cur_hz;
-    c.cur_pi = (w * c.inductance, w * c.r);
+    c.cur_pi = crate::gains::current_pi(c.r, c.inductance, cur_hz);
     // The loop's delay: the sample, the computation and the update, about 1.5 periods.
     let margin = 90.0 - 360.0 * CURRENT_BW_FRACTION * 1.5;
     c.lines.push(format!(
@@ -1557,8 +1563,78 @@ fn commission_steps(
         c.cur_pi.0,
         c.cur_pi.1
     ));
+    // 9. The position loop's gains for this motor and loop, kd between the device's
+    //    friction model's Stribeck slope and the loops' stability limit.
+    c.pos = Some(position_gains_for(b, &mut c, cur_hz)?);
     b.request("disable")?;
     Ok(c)
+}
+
+/// The position loop's gains for the motor `c` measured, the current loop at `cur_hz` with
+/// its new PI, the device's position rate, derivative filter, supply and friction model.
+fn position_gains_for(
+    b: &mut impl Bench,
+    c: &mut Commissioned,
+    cur_hz: f64,
+) -> Result<crate::gains::PositionGains, Error> {
+    use crate::gains::{Axis, Stribeck, position_gains};
+    let mut k0 = 0.0;
+    for i in 1..=6 {
+        k0 += get_param(b, &format!("gms.k{i}"))?;
+    }
+    let axis = Axis {
+        r: c.r,
+        l: c.inductance,
+        k_m: c.k_e,
+        inertia: c.inertia,
+        cur_pi: c.cur_pi,
+        cur_hz,
+        pos_hz: get_param(b, "rate.pos_hz")?,
+        d_filter_hz: get_param(b, "pos.d_filter_hz")?,
+        v_supply: get_param(b, "lim.v_supply")?,
+        k_presliding: k0,
+    };
+    let s = Stribeck {
+        fs: get_param(b, "gms.fs")?,
+        fc: get_param(b, "gms.fc")?,
+        vs: get_param(b, "gms.vs")?,
+        delta: get_param(b, "gms.delta")?,
+        sigma: get_param(b, "gms.sigma")?,
+    };
+    let g = position_gains(&axis, &s).ok_or_else(|| {
+        Error::Device(format!(
+            "no position-loop gains for the measured motor ({axis:?}): the loop model does not \
+             settle"
+        ))
+    })?;
+    c.lines.push(format!(
+        "position loop: pos.kp {:.4} N·m/rad, pos.ki {:.4} N·m/(rad·s), pos.kd {:.3e} N·m·s/rad \
+         (natural frequency {:.0} Hz)",
+        g.kp,
+        g.ki,
+        g.kd,
+        (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
+    ));
+    c.lines.push(format!(
+        "  kd above the friction's negative damping {:.3e} (the device's Stribeck curve at Vs: \
+         Fs {:.3e}, Fc {:.3e}, Vs {:.3}) by ×{:.2}; below the stability limit {:.3e} by ×{:.2}",
+        g.kd_min,
+        s.fs,
+        s.fc,
+        s.vs,
+        g.margin_low(),
+        g.kd_max,
+        g.margin_high()
+    ));
+    if g.kd_max <= g.kd_min {
+        c.lines.push(
+            "  warning: no kd is both above the friction's negative damping and stable: kd is \
+             set for stability, the axis may hunt at low speed (a faster current loop or more \
+             inertia widens the window)"
+                .into(),
+        );
+    }
+    Ok(g)
 }
 
 /// The reflected inertia from current pulses (3 × the expected breakaway current for 2 ms,

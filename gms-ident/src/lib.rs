@@ -11,6 +11,7 @@
 use core::fmt;
 
 pub mod bench;
+pub mod gains;
 pub mod identify;
 pub mod io;
 pub mod paramfile;

@@ -1,0 +1,288 @@
+//! Loop gains from a measured motor: the current loop's PI from a bandwidth, and the position
+//! loop's PID with the derivative gain between the friction's lower bound and the loop's
+//! stability limit, each with its margin (docs/commissioning.md).
+//!
+//! The rules reproduce the device's defaults for the default motor (R 10 Ω, L 0.24 mH,
+//! J 6e-8 kg·m², 20 kHz current loop, 10 kHz position loop): cur.kp 1.5, cur.ki 6e4 (1 kHz),
+//! pos.kp 0.2, pos.ki about 100; the derivative gain between them as the default 2.5e-4 is.
+
+use gms_core::controller::{Controller, ControllerParams, FfMode};
+use gms_core::reference::RefSample;
+
+/// The current loop's bandwidth as a fraction of its rate \[-\]: 1/20 (1 kHz at 20 kHz),
+/// which leaves about 63° of phase margin against the loop's 1.5 periods of delay.
+pub const CURRENT_BW_FRACTION: f64 = 0.05;
+
+/// The position loop's natural frequency as a fraction of the current loop's bandwidth
+/// \[-\]: 0.29 (290 Hz under a 1 kHz current loop, the default tune's sqrt(kp / J)).
+pub const POS_NATURAL_FRACTION: f64 = 0.29;
+
+/// The current loop's PI for a bandwidth of [`CURRENT_BW_FRACTION`] of `cur_hz` \[Hz\] on a
+/// winding of `r` \[ohm\] and `l` \[H\]: `(kp [V/A], ki [V/(A·s)])` = (ω L, ω R), the PI's
+/// zero on the winding's pole, a first-order loop of bandwidth ω.
+pub fn current_pi(r: f64, l: f64, cur_hz: f64) -> (f64, f64) {
+    let w = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * cur_hz;
+    (w * l, w * r)
+}
+
+/// The friction's Stribeck curve as the compensator holds it (SI).
+#[derive(Debug, Clone, Copy)]
+pub struct Stribeck {
+    /// Static friction [N·m].
+    pub fs: f64,
+    /// Coulomb friction [N·m].
+    pub fc: f64,
+    /// Stribeck velocity \[rad/s\].
+    pub vs: f64,
+    /// Stribeck shape exponent \[-\].
+    pub delta: f64,
+    /// Viscous coefficient [N·m·s/rad].
+    pub sigma: f64,
+}
+
+impl Stribeck {
+    /// The friction's negative damping the derivative gain must exceed [N·m·s/rad]: the
+    /// Stribeck curve's slope at its Stribeck velocity, −s'(Vs) = (Fs − Fc) δ / (e Vs), less
+    /// the viscous coefficient. (Below Vs the curve is steeper — infinitely so at 0 for
+    /// δ < 1 — but there the axis is mostly in pre-sliding: the blocks stick and the friction
+    /// acts as a spring, not as a negative damper.)
+    pub fn negative_slope(&self) -> f64 {
+        (self.fs - self.fc) * self.delta / (std::f64::consts::E * self.vs) - self.sigma
+    }
+}
+
+/// What the position loop is tuned for: the measured motor and the device's loops.
+#[derive(Debug, Clone, Copy)]
+pub struct Axis {
+    /// Winding resistance \[ohm\].
+    pub r: f64,
+    /// Winding inductance \[H\].
+    pub l: f64,
+    /// Back-EMF constant = torque constant [V·s/rad = N·m/A].
+    pub k_m: f64,
+    /// Reflected inertia [kg·m²].
+    pub inertia: f64,
+    /// The current loop's PI (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
+    pub cur_pi: (f64, f64),
+    /// Current-loop rate \[Hz\].
+    pub cur_hz: f64,
+    /// Position-loop rate \[Hz\].
+    pub pos_hz: f64,
+    /// The derivative's filter corner (`pos.d_filter_hz`) \[Hz\].
+    pub d_filter_hz: f64,
+    /// Supply voltage \[V\].
+    pub v_supply: f64,
+    /// The friction's initial pre-sliding stiffness (the sum of the blocks' k) [N·m/rad]: at
+    /// rest the friction is a spring to the frame.
+    pub k_presliding: f64,
+}
+
+/// The position loop's gains and their margins.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PositionGains {
+    /// `pos.kp` [N·m/rad]: J ω_n², ω_n = [`POS_NATURAL_FRACTION`] × the current bandwidth.
+    pub kp: f64,
+    /// `pos.ki` [N·m/(rad·s)]: kp ω_n / 4 (the integral's corner two octaves below ω_n).
+    pub ki: f64,
+    /// `pos.kd` [N·m·s/rad]: the geometric mean of `kd_min` and `kd_max` when they leave
+    /// room, else `kd_max` / 1.5 (stability first).
+    pub kd: f64,
+    /// The lower bound: the friction's negative damping [N·m·s/rad].
+    pub kd_min: f64,
+    /// The upper bound: where the loop (these kp, ki, the device's current loop, the winding
+    /// and the inertia, simulated with the device's own controller) goes unstable
+    /// [N·m·s/rad].
+    pub kd_max: f64,
+}
+
+impl PositionGains {
+    /// kd over its lower bound \[-\] (below 1: the friction can drive a limit cycle).
+    pub fn margin_low(&self) -> f64 {
+        self.kd / self.kd_min
+    }
+    /// The stability limit over kd \[-\].
+    pub fn margin_high(&self) -> f64 {
+        self.kd_max / self.kd
+    }
+}
+
+/// The position loop's gains for `axis` under the friction `s`; `None` when the axis's
+/// figures cannot make a controller (not finite, not positive).
+pub fn position_gains(axis: &Axis, s: &Stribeck) -> Option<PositionGains> {
+    let w_cur = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * axis.cur_hz;
+    let wn = POS_NATURAL_FRACTION * w_cur;
+    let kp = axis.inertia * wn * wn;
+    let ki = kp * wn / 4.0;
+    if !(kp.is_finite() && kp > 0.0) {
+        return None;
+    }
+    // The stability limit: bisection on a log scale between a kd surely stable with these
+    // kp, ki (critically damped at ω_n is 2 J ω_n; far below the limit) and 100 times it.
+    let (mut lo, mut hi) = (0.5 * axis.inertia * wn, 200.0 * axis.inertia * wn);
+    if !stable(axis, kp, ki, lo)? {
+        return None;
+    }
+    if stable(axis, kp, ki, hi)? {
+        return None;
+    }
+    for _ in 0..30 {
+        let mid = (lo * hi).sqrt();
+        if stable(axis, kp, ki, mid)? {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let kd_max = lo;
+    let kd_min = s.negative_slope().max(0.0);
+    let kd = if kd_max > kd_min {
+        (kd_min.max(kd_max / 1e3) * kd_max).sqrt()
+    } else {
+        kd_max / 1.5
+    };
+    Some(PositionGains {
+        kp,
+        ki,
+        kd,
+        kd_min,
+        kd_max,
+    })
+}
+
+/// Whether the position loop with `kp`, `ki`, `kd` on `axis` is stable: a small step of the
+/// reference (no friction, no feedforward, an encoder fine enough not to matter) through the
+/// device's own controller, its current loop driving the winding one period late, the motor
+/// turning the inertia, the friction's pre-sliding spring holding it; stable when the
+/// position's swing over the last fifth of 0.2 s is below 0.9 of the fifth before (it
+/// decays), or settled within a thousandth of the step. `None` when the set is not one the controller takes.
+fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
+    let mut p: ControllerParams<6> = gms_core::device::default_settings();
+    p.pid.kp = kp as f32;
+    p.pid.ki = ki as f32;
+    p.pid.kd = kd as f32;
+    p.pid.d_filter_hz = axis.d_filter_hz as f32;
+    p.current.kp = axis.cur_pi.0 as f32;
+    p.current.ki = axis.cur_pi.1 as f32;
+    p.cur_rate_hz = axis.cur_hz as f32;
+    p.pos_rate_hz = axis.pos_hz as f32;
+    p.v_supply = axis.v_supply as f32;
+    p.motor.r = axis.r as f32;
+    p.motor.k_m = axis.k_m as f32;
+    p.motor.k_e = axis.k_m as f32;
+    p.motor.inertia = axis.inertia as f32;
+    p.ff.mode = FfMode::None;
+    // A nanoradian count: the loop as if continuous in position.
+    p.rad_per_count = 1e-9;
+    p.i_max = 100.0;
+    let mut c = Controller::try_new(p).ok()?;
+    let ratio = (axis.cur_hz / axis.pos_hz).round().max(1.0) as usize;
+    let h = 1.0 / axis.cur_hz;
+    // A step of 1e-5 rad: 1e4 counts of a nanoradian.
+    let step = 1e-5;
+    let target = RefSample {
+        pos: (1e4 * 65536.0) as i64,
+        vel: 0.0,
+        acc: 0.0,
+    };
+    let decay = (-axis.r * h / axis.l).exp();
+    let (mut i, mut w, mut x, mut v_prev) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let n = (0.2 * axis.pos_hz) as usize;
+    // The position's swing (max - min) over the fourth and the last fifth of the run.
+    let mut swing = [(f64::INFINITY, f64::NEG_INFINITY); 2];
+    for k in 0..n {
+        c.position_step((x / 1e-9).round() as i64, &target);
+        for _ in 0..ratio {
+            let v = c.current_step(i as f32).voltage as f64;
+            // The voltage computed now drives the next period.
+            let i_ss = (v_prev - axis.k_m * w) / axis.r;
+            i = i_ss + (i - i_ss) * decay;
+            w += (axis.k_m * i - axis.k_presliding * x) / axis.inertia * h;
+            x += w * h;
+            v_prev = v;
+        }
+        if !x.is_finite() || x.abs() > 1e3 * step {
+            return Some(false);
+        }
+        if k >= n * 3 / 5 {
+            let w = &mut swing[usize::from(k >= n * 4 / 5)];
+            *w = (w.0.min(x), w.1.max(x));
+        }
+    }
+    let (early, late) = (swing[0].1 - swing[0].0, swing[1].1 - swing[1].0);
+    // Decaying (an integrator settling slowly decays too), or settled to the 1 nrad count.
+    Some(late < 0.9 * early || late < 1e-3 * step)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The default motor and loops.
+    fn default_axis() -> Axis {
+        Axis {
+            r: 10.0,
+            l: 0.24e-3,
+            k_m: 6.6e-3,
+            inertia: 6e-8,
+            cur_pi: current_pi(10.0, 0.24e-3, 20e3),
+            cur_hz: 20e3,
+            pos_hz: 10e3,
+            d_filter_hz: 2000.0,
+            v_supply: 12.0,
+            k_presliding: 1.2501,
+        }
+    }
+
+    /// Table 1's Stribeck curve (docs/design.md#reading-table-1).
+    const TABLE1: Stribeck = Stribeck {
+        fs: 220e-6,
+        fc: 125e-6,
+        vs: 0.2,
+        delta: 0.9,
+        sigma: 10.5e-6,
+    };
+
+    #[test]
+    fn the_default_motor_gets_the_default_tune() {
+        let g = position_gains(&default_axis(), &TABLE1).unwrap();
+        eprintln!("{g:?}");
+        // The defaults: kp 0.2, ki 100 (here 91: ki = kp ω_n / 4), kd 2.5e-4.
+        assert!((g.kp / 0.2 - 1.0).abs() < 0.01, "kp {}", g.kp);
+        assert!((g.ki / 100.0 - 1.0).abs() < 0.1, "ki {}", g.ki);
+        assert!((g.kd / 2.5e-4 - 1.0).abs() < 0.05, "kd {}", g.kd);
+        // Table 1's slope at Vs: (Fs - Fc) δ / (e Vs) - σ.
+        let slope = 95e-6 * 0.9 / (std::f64::consts::E * 0.2) - 10.5e-6;
+        assert!((g.kd_min / slope - 1.0).abs() < 1e-12);
+        assert!(g.kd_min < g.kd && g.kd < g.kd_max);
+        assert!((g.margin_low() / g.margin_high() - 1.0).abs() < 1e-9);
+    }
+
+    /// A loop with more inertia takes more derivative gain before it goes unstable; a stiffer
+    /// pre-sliding spring takes less (it raises the frequency the loop must damp).
+    #[test]
+    fn the_stability_limit_moves_with_the_axis() {
+        let base = position_gains(&default_axis(), &TABLE1).unwrap().kd_max;
+        let heavy = Axis {
+            inertia: 1.2e-7,
+            ..default_axis()
+        };
+        let stiff = Axis {
+            k_presliding: 2.5,
+            ..default_axis()
+        };
+        let free = Axis {
+            k_presliding: 0.0,
+            ..default_axis()
+        };
+        let kd = |a: &Axis| position_gains(a, &TABLE1).unwrap().kd_max;
+        eprintln!(
+            "kd_max {base:.3e}, J x2 {:.3e}, spring x2 {:.3e}, no spring {:.3e}",
+            kd(&heavy),
+            kd(&stiff),
+            kd(&free)
+        );
+        assert!(kd(&heavy) > 1.5 * base);
+        assert!(kd(&stiff) < base);
+        assert!(kd(&free) > base);
+    }
+}
