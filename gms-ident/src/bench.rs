@@ -147,6 +147,28 @@ impl DeviceInfo {
     }
 }
 
+/// Waits `seconds` of the device's own clock (its `status` `t`), not the host's: over a link
+/// to a device that lags (a loaded host running the virtual device) the host's wait may
+/// pass before the device's has.
+pub fn wait_device(b: &mut impl Bench, seconds: f64) -> Result<(), Error> {
+    let t = |b: &mut _| -> Result<f64, Error> {
+        let (_, text) = Bench::request(b, "status")?;
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix("t="))
+            .and_then(|v| v.parse().ok())
+            .ok_or_else(|| Error::Device(format!("no time in the status: {text}")))
+    };
+    let t0 = t(b)?;
+    b.wait(seconds)?;
+    for _ in 0..200 {
+        if t(b)? >= t0 + seconds {
+            return Ok(());
+        }
+        b.wait(seconds / 10.0)?;
+    }
+    Err(Error::Device("the device's clock does not advance".into()))
+}
+
 /// The device's latched faults, as an error naming them, if any.
 pub fn check_faults(b: &mut impl Bench) -> Result<(), Error> {
     let (_, text) = b.request("status")?;
@@ -1771,7 +1793,7 @@ fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> R
     primitive(b, "enable current")?;
     for dir in [1.0, -1.0, 1.0, -1.0] {
         b.request("current 0")?;
-        b.wait(0.01)?;
+        wait_device(b, 0.01)?;
         b.request(&format!("capture current 1 {n} next"))?;
         b.request(&format!("current {}", dir * amps))?;
         b.wait(n as f64 * dt)?;
