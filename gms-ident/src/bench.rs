@@ -1781,27 +1781,33 @@ fn inertia(
 }
 
 /// The winding inductance from the current loop's response to current steps at standstill
-/// (±40 % of the expected breakaway current: friction holds the axis, no back-EMF), averaged
-/// over four steps, against the device's own current loop (`gms_core`'s controller with the
-/// device's gains, rates, supply and feedforward R) driving an R-L winding whose voltage is
-/// applied one current period late, as the bridge does: the L whose simulated response is
-/// closest (least squares over the first 2 ms, golden-section search over ln L).
+/// (between −40 % and +40 % of the expected breakaway current: friction holds the axis, no
+/// back-EMF), sixteen steps each way in turn, averaged (the loop is linear, so a step of 2A
+/// from −A is twice the response to A from rest), against the device's own current loop
+/// (`gms_core`'s controller with the device's gains, rates, supply and feedforward R) driving
+/// an R-L winding whose voltage is applied one current period late, as the bridge does: the L
+/// whose simulated response is closest (least squares over the first 2 ms, golden-section
+/// search over ln L). A winding much faster than the current period settles within it and
+/// shows little of its L: below L/R = a sixth of the period the result is flagged.
 fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> Result<f64, Error> {
     let amps = 0.4 * i_fs;
     let n = 20u32;
+    let steps = 16;
     let mut avg = vec![0.0f64; n as usize];
     primitive(b, "enable current")?;
-    for dir in [1.0, -1.0, 1.0, -1.0] {
-        b.request("current 0")?;
-        wait_device(b, 0.01)?;
+    b.request(&format!("current {}", -amps))?;
+    wait_device(b, 0.01)?;
+    for k in 0..steps {
+        let dir = if k % 2 == 0 { 1.0 } else { -1.0 };
         b.request(&format!("capture current 1 {n} next"))?;
         b.request(&format!("current {}", dir * amps))?;
         b.wait(n as f64 * dt)?;
         capture_wait(b, 0.01, 200)?;
         check_faults(b)?;
         for (a, r) in avg.iter_mut().zip(capture_rows(b)?) {
-            *a += dir * r[0] / 4.0;
+            *a += (dir * r[0] + amps) / 2.0 / steps as f64;
         }
+        wait_device(b, 0.002)?;
     }
     b.request("current 0")?;
     // The device's current loop, as it runs.
@@ -1859,10 +1865,18 @@ fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> R
         ));
     }
     c.lines.push(format!(
-        "winding inductance: {:.4e} H from the current loop's response to four steps of {amps:.3e} A \
-         (L/R {:.1} µs)",
+        "winding inductance: {:.4e} H from the current loop's response to {steps} steps of \
+         {:.3e} A (L/R {:.1} µs)",
         l,
+        2.0 * amps,
         l / r * 1e6
     ));
+    if l / r < h / 6.0 {
+        c.lines.push(format!(
+            "  warning: L/R is below a sixth of the current period ({:.1} µs): the winding \
+             settles within a period, so L is poorly resolved (cur.kp = ωL matters little there)",
+            h / 6.0 * 1e6
+        ));
+    }
     Ok(l)
 }
