@@ -147,28 +147,6 @@ impl DeviceInfo {
     }
 }
 
-/// Waits `seconds` of the device's own clock (its `status` `t`), not the host's: over a link
-/// to a device that lags (a loaded host running the virtual device) the host's wait may
-/// pass before the device's has.
-pub fn wait_device(b: &mut impl Bench, seconds: f64) -> Result<(), Error> {
-    let t = |b: &mut _| -> Result<f64, Error> {
-        let (_, text) = Bench::request(b, "status")?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("t="))
-            .and_then(|v| v.parse().ok())
-            .ok_or_else(|| Error::Device(format!("no time in the status: {text}")))
-    };
-    let t0 = t(b)?;
-    b.wait(seconds)?;
-    for _ in 0..200 {
-        if t(b)? >= t0 + seconds {
-            return Ok(());
-        }
-        b.wait(seconds / 10.0)?;
-    }
-    Err(Error::Device("the device's clock does not advance".into()))
-}
-
 /// The device's latched faults, as an error naming them, if any.
 pub fn check_faults(b: &mut impl Bench) -> Result<(), Error> {
     let (_, text) = b.request("status")?;
@@ -1796,7 +1774,7 @@ fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> R
     let mut avg = vec![0.0f64; n as usize];
     primitive(b, "enable current")?;
     b.request(&format!("current {}", -amps))?;
-    wait_device(b, 0.01)?;
+    b.wait(0.01)?;
     for k in 0..steps {
         let dir = if k % 2 == 0 { 1.0 } else { -1.0 };
         b.request(&format!("capture current 1 {n} next"))?;
@@ -1807,7 +1785,7 @@ fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> R
         for (a, r) in avg.iter_mut().zip(capture_rows(b)?) {
             *a += (dir * r[0] + amps) / 2.0 / steps as f64;
         }
-        wait_device(b, 0.002)?;
+        b.wait(0.002)?;
     }
     b.request("current 0")?;
     // The device's current loop, as it runs.

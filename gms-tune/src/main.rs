@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Parser, Subcommand};
-use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
+use gms_ident::paramfile::ParamFile;
 use gms_tune::{Link, LinkError, parse_telemetry};
 
 mod commission;
@@ -223,75 +223,24 @@ impl From<LinkError> for Fail {
     }
 }
 
-/// The device's settable parameters and their values (read-only estimates left out).
-fn list(link: &mut Link) -> Result<Vec<(String, String)>, Fail> {
-    let (lines, _) = link.request("list")?;
-    Ok(lines
-        .iter()
-        .filter(|l| !l.ends_with("[read-only]"))
-        .filter_map(|l| {
-            let mut w = l.split_whitespace();
-            Some((w.next()?.to_string(), w.next()?.to_string()))
-        })
-        .collect())
-}
-
 fn dump(link: &mut Link) -> Result<String, Fail> {
     let file = device_params(link)?;
     Ok(format!("# gms-tune params dump\n{}", file.to_toml()))
 }
 
-/// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
-/// and `[device]` (everything else, by protocol path).
+/// The device's parameters as a parameter file ([`gms_tune::params::read`]).
 pub(crate) fn device_params(link: &mut Link) -> Result<ParamFile, Fail> {
-    let params = list(link)?;
-    let num = |k: &str| {
-        params
-            .iter()
-            .find(|p| p.0 == k)
-            .and_then(|p| p.1.parse::<f64>().ok())
-    };
-    let mut blocks = Vec::new();
-    for i in 1..=6 {
-        match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
-            (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
-            _ => return Err(Fail::Device(format!("list has no gms.k{i}/gms.a{i}"))),
-        }
-    }
-    let friction = FrictionSpec {
-        model: ModelKind::Gms,
-        fs: num("gms.fs"),
-        fc: num("gms.fc"),
-        vs: num("gms.vs"),
-        delta: num("gms.delta"),
-        sigma: num("gms.sigma"),
-        c: num("gms.c"),
-        blocks: Some(blocks),
-        ..FrictionSpec::default()
-    };
-    let mut device = toml::Table::new();
-    for (k, v) in &params {
-        if k.starts_with("gms.") {
-            continue;
-        }
-        let value = match v.parse::<f64>() {
-            Ok(x) => toml::Value::Float(x),
-            Err(_) => toml::Value::String(v.clone()),
-        };
-        device.insert(k.clone(), value);
-    }
-    Ok(ParamFile {
-        friction,
-        device: Some(device),
+    gms_tune::params::read(link).map_err(|e| match e {
+        LinkError::Device(m) | LinkError::Io(m) => Fail::Device(m),
+        e => Fail::Device(e.to_string()),
     })
 }
 
-/// `params load FILE`: the file sent as one set (`gms_ident::bench::load_params`).
+/// `params load FILE`: the file sent as one set ([`gms_tune::params::load`]).
 pub(crate) fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
-    let pf = ParamFile::load(file).map_err(|e| Fail::Usage(e.to_string()))?;
-    gms_ident::bench::load_params(link, &pf).map_err(|e| match e {
-        gms_ident::Error::Params(m) => Fail::Usage(format!("{}: {m}", file.display())),
-        e => Fail::Device(e.to_string()),
+    gms_tune::params::load(link, file).map_err(|e| match e {
+        gms_tune::params::LoadError::File(m) => Fail::Usage(m),
+        gms_tune::params::LoadError::Device(m) => Fail::Device(m),
     })
 }
 

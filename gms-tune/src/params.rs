@@ -1,0 +1,126 @@
+//! The device's parameters as a parameter file, and a file sent back as one set: shared by
+//! `gms-tune params dump/load`, `commission`, `identify` and the window.
+
+use std::path::Path;
+
+use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
+
+use crate::{Link, LinkError};
+
+/// One row of `list`: a parameter's path, value, unit and range (as the device prints them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Listed {
+    /// Protocol path (`pos.kp`).
+    pub path: String,
+    /// The device's value, as printed.
+    pub value: String,
+    /// Unit (`-` for none).
+    pub unit: String,
+    /// The range as printed (`[0, 1000]`, `[none, static, gms, gms-adaptive]`, `[read-only]`).
+    pub range: String,
+}
+
+impl Listed {
+    /// Whether the device refuses sets of it (an estimate).
+    pub fn read_only(&self) -> bool {
+        self.range == "[read-only]"
+    }
+}
+
+/// Parses one line of `list` (`path value unit [range]`).
+pub fn parse_list_line(line: &str) -> Option<Listed> {
+    let mut w = line.splitn(2, ' ');
+    let path = w.next()?.to_string();
+    let rest = w.next()?;
+    let (head, range) = match rest.find('[') {
+        Some(i) => (&rest[..i], rest[i..].trim().to_string()),
+        None => (rest, String::new()),
+    };
+    let mut h = head.split_whitespace();
+    let value = h.next()?.to_string();
+    let unit = h.next().unwrap_or("-").to_string();
+    Some(Listed {
+        path,
+        value,
+        unit,
+        range,
+    })
+}
+
+/// Every parameter `list` prints, read-only estimates included.
+pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
+    let (lines, _) = link.request("list")?;
+    Ok(lines.iter().filter_map(|l| parse_list_line(l)).collect())
+}
+
+/// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
+/// and `[device]` (everything else settable, by protocol path).
+pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
+    let params: Vec<Listed> = list(link)?.into_iter().filter(|p| !p.read_only()).collect();
+    let num = |k: &str| {
+        params
+            .iter()
+            .find(|p| p.path == k)
+            .and_then(|p| p.value.parse::<f64>().ok())
+    };
+    let mut blocks = Vec::new();
+    for i in 1..=6 {
+        match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
+            (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
+            _ => return Err(LinkError::Device(format!("list has no gms.k{i}/gms.a{i}"))),
+        }
+    }
+    let friction = FrictionSpec {
+        model: ModelKind::Gms,
+        fs: num("gms.fs"),
+        fc: num("gms.fc"),
+        vs: num("gms.vs"),
+        delta: num("gms.delta"),
+        sigma: num("gms.sigma"),
+        c: num("gms.c"),
+        blocks: Some(blocks),
+        ..FrictionSpec::default()
+    };
+    let mut device = toml::Table::new();
+    for p in &params {
+        if p.path.starts_with("gms.") {
+            continue;
+        }
+        let value = match p.value.parse::<f64>() {
+            Ok(x) => toml::Value::Float(x),
+            Err(_) => toml::Value::String(p.value.clone()),
+        };
+        device.insert(p.path.clone(), value);
+    }
+    Ok(ParamFile {
+        friction,
+        device: Some(device),
+    })
+}
+
+/// Why a parameter file was not loaded.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LoadError {
+    /// The file cannot be read or is not a valid set (the message names it).
+    File(String),
+    /// The device refused it or the link failed.
+    Device(String),
+}
+
+impl std::fmt::Display for LoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LoadError::File(m) | LoadError::Device(m) => f.write_str(m),
+        }
+    }
+}
+
+/// Sends the parameter file `file` as one set (`gms_ident::bench::load_params`); returns the
+/// number of parameters sent.
+pub fn load(link: &mut Link, file: &Path) -> Result<usize, LoadError> {
+    let pf = ParamFile::load(file).map_err(|e| LoadError::File(e.to_string()))?;
+    gms_ident::bench::load_params(link, &pf).map_err(|e| match e {
+        gms_ident::Error::Params(m) => LoadError::File(format!("{}: {m}", file.display())),
+        e => LoadError::Device(e.to_string()),
+    })
+}
