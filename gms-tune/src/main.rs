@@ -99,6 +99,19 @@ enum Cmd {
         #[arg(long, default_value_t = 200, value_parser = clap::value_parser!(u64).range(20..=10_000))]
         refresh_ms: u64,
     },
+    /// The window: live plots of the telemetry (position, error, feedforward against the
+    /// friction estimate, current), the friction loop against position and velocity with the
+    /// model over it, the parameter tree (edit, save/load/defaults, dump/load a file), enable,
+    /// disable, clear, status and faults, jog, move and step test. The link runs off the UI
+    /// thread; a lost link is shown and retried every second.
+    Ui {
+        /// Write a PNG of the window after --after seconds, then close it.
+        #[arg(long, value_name = "FILE.png")]
+        screenshot: Option<PathBuf>,
+        /// Seconds after opening for --screenshot.
+        #[arg(long, default_value_t = 5.0)]
+        after: f64,
+    },
     /// Identify the axis's friction on the device: the pre-sliding torque staircase (from
     /// rest, after the friction's memory is erased by swings of decaying amplitude), the
     /// sliding velocity sweep
@@ -282,6 +295,21 @@ fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
 
 fn run(cli: Cli) -> Result<(), Fail> {
     let timeout = Duration::from_millis(cli.timeout_ms);
+    if let Cmd::Ui { screenshot, after } = &cli.cmd {
+        let endpoint = match (&cli.port, &cli.tcp) {
+            (Some(p), _) => gms_tune::ui::Endpoint::Serial(p.clone()),
+            (None, Some(a)) => gms_tune::ui::Endpoint::Tcp(a.clone()),
+            (None, None) => return Err(Fail::Usage("give --port or --tcp".into())),
+        };
+        if !(after.is_finite() && *after >= 0.0) {
+            return Err(Fail::Usage(format!("--after {after}: seconds, 0 or more")));
+        }
+        let shot = screenshot.clone().map(|path| gms_tune::ui::Screenshot {
+            path,
+            after: *after,
+        });
+        return gms_tune::ui::run(endpoint, timeout, shot).map_err(Fail::Device);
+    }
     let mut link = match (&cli.port, &cli.tcp) {
         (Some(p), _) => Link::serial(p, timeout),
         (None, Some(a)) => Link::tcp(a, timeout),
@@ -437,6 +465,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 save,
             },
         )?,
+        Cmd::Ui { .. } => unreachable!("handled before the link opens"),
         Cmd::Identify {
             out,
             report,

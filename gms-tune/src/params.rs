@@ -56,7 +56,12 @@ pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
 /// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
 /// and `[device]` (everything else settable, by protocol path).
 pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
-    let params: Vec<Listed> = list(link)?.into_iter().filter(|p| !p.read_only()).collect();
+    to_file(&list(link)?).map_err(LinkError::Device)
+}
+
+/// The parameter file of a `list` (read-only estimates left out).
+pub fn to_file(listed: &[Listed]) -> Result<ParamFile, String> {
+    let params: Vec<&Listed> = listed.iter().filter(|p| !p.read_only()).collect();
     let num = |k: &str| {
         params
             .iter()
@@ -67,7 +72,7 @@ pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
     for i in 1..=6 {
         match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
             (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
-            _ => return Err(LinkError::Device(format!("list has no gms.k{i}/gms.a{i}"))),
+            _ => return Err(format!("list has no gms.k{i}/gms.a{i}")),
         }
     }
     let friction = FrictionSpec {
@@ -123,4 +128,28 @@ pub fn load(link: &mut Link, file: &Path) -> Result<usize, LoadError> {
         gms_ident::Error::Params(m) => LoadError::File(format!("{}: {m}", file.display())),
         e => LoadError::Device(e.to_string()),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn list_lines_parse() {
+        let n = parse_list_line("pos.kp 0.2 N·m/rad [0, 1000]").unwrap();
+        assert_eq!(
+            (
+                n.path.as_str(),
+                n.value.as_str(),
+                n.unit.as_str(),
+                n.range.as_str()
+            ),
+            ("pos.kp", "0.2", "N·m/rad", "[0, 1000]")
+        );
+        let m = parse_list_line("ff.mode gms - [none, static, gms, gms-adaptive]").unwrap();
+        assert_eq!((m.value.as_str(), m.unit.as_str()), ("gms", "-"));
+        let e = parse_list_line("ff.scale 1 - [read-only]").unwrap();
+        assert!(e.read_only());
+        assert!(parse_list_line("lonely").is_none());
+    }
 }

@@ -164,6 +164,11 @@ fn main() {
             "commission_with_the_link_lost_applies_nothing",
             commission_with_the_link_lost_applies_nothing,
         ),
+        (
+            "the_window_shows_the_device_and_sets_what_it_is_told",
+            the_window_shows_the_device_and_sets_what_it_is_told,
+        ),
+        ("the_window_shows_a_lost_link", the_window_shows_a_lost_link),
         #[cfg(unix)]
         (
             "identify_stops_on_ctrl_c_with_the_bridge_off",
@@ -880,4 +885,139 @@ fn commission_with_the_link_lost_applies_nothing() {
         "{err}"
     );
     assert!(!d.join("m.toml").exists());
+}
+
+/// The window (`gms_tune::ui::App`, its real widgets driven by egui_kittest without a
+/// display) on `srv` over TCP, the harness tall enough to lay out the whole parameter tree.
+fn window(srv: &Server) -> egui_kittest::Harness<'static, gms_tune::ui::App> {
+    let app = gms_tune::ui::App::new(
+        gms_tune::ui::Endpoint::Tcp(srv.addr.clone()),
+        std::time::Duration::from_secs(2),
+        &egui::Context::default(),
+    );
+    egui_kittest::Harness::builder()
+        .with_size(egui::vec2(1400.0, 3200.0))
+        .build_ui_state(|ui, app: &mut gms_tune::ui::App| app.show(ui), app)
+}
+
+/// Steps the window (a frame each 20 ms) until `done` holds, at most `seconds`.
+fn step_until(
+    h: &mut egui_kittest::Harness<'static, gms_tune::ui::App>,
+    seconds: f64,
+    done: impl Fn(&gms_tune::ui::App) -> bool,
+) -> bool {
+    let end = std::time::Instant::now() + std::time::Duration::from_secs_f64(seconds);
+    while std::time::Instant::now() < end {
+        h.step();
+        if done(h.state()) {
+            return true;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    false
+}
+
+/// Types `text` into the parameter field `path` and presses Enter (a set).
+fn type_param(h: &mut egui_kittest::Harness<'static, gms_tune::ui::App>, path: &str, text: &str) {
+    use egui_kittest::kittest::Queryable;
+    h.get_by_label(path).click();
+    h.step();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.step();
+    h.get_by_label(path).type_text(text);
+    h.step();
+    h.key_press(egui::Key::Enter);
+    h.step();
+}
+
+/// Against `hil-sim serve`: the window lists every parameter path with its unit; the
+/// telemetry's values change over time; Enable and Disable switch the bridge; a set typed in
+/// the window changes the device (read back with `get` once the window is closed); a refused
+/// set shows the device's error beside the field and the field shows the device's value again.
+fn the_window_shows_the_device_and_sets_what_it_is_told() {
+    use egui_kittest::kittest::Queryable;
+    use gms_core::protocol::PARAMS;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start("tcp", &d.join("flash.img"));
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| a.rows.len() >= PARAMS.len()
+        && a.samples.len() > 100));
+    for p in PARAMS {
+        // The field (labelled by its path) and its unit beside it.
+        let field = h.get_by_label(p.path);
+        assert!(field.value().is_some(), "{}", p.path);
+        assert!(
+            h.query_all_by_label(p.unit).count() > 0,
+            "{} {}",
+            p.path,
+            p.unit
+        );
+    }
+    // Live values: the time and the received count go on.
+    let (t0, n0) = (h.state().samples.back().unwrap().t, h.state().received);
+    assert!(step_until(&mut h, 5.0, |a| a.samples.back().unwrap().t > t0 + 0.5));
+    let n1 = h.state().received;
+    assert!(n1 > n0 + 300, "{n0} -> {n1}");
+    assert!(h.query_by_label_contains("samples received").is_some());
+    // Enable, then Disable: the status says so, and the window shows it.
+    h.get_by_label("Enable").click();
+    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("1")));
+    h.step();
+    assert!(h.query_by_label("bridge on").is_some());
+    h.get_by_label("Disable").click();
+    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("0")));
+    h.step();
+    assert!(h.query_by_label("bridge off").is_some());
+    // A set the device takes.
+    type_param(&mut h, "pos.kd", "2.2e-4");
+    let row = |a: &gms_tune::ui::App, p: &str| a.rows.iter().find(|r| r.listed.path == p).cloned();
+    assert!(step_until(&mut h, 5.0, |a| row(a, "pos.kd")
+        .unwrap()
+        .listed
+        .value
+        == "0.00022"));
+    // A set it refuses (out of range): the error beside the field, the field back at 0.2.
+    type_param(&mut h, "pos.kp", "5000");
+    assert!(step_until(&mut h, 5.0, |a| row(a, "pos.kp")
+        .unwrap()
+        .error
+        .is_some()));
+    h.step();
+    let r = row(h.state(), "pos.kp").unwrap();
+    assert!(
+        r.error.as_deref().unwrap().contains("err 6"),
+        "{:?}",
+        r.error
+    );
+    assert_eq!(r.edit, "0.2");
+    // Beside the field, and in the log below.
+    assert_eq!(h.query_all_by_label_contains("err 6").count(), 2);
+    assert_eq!(h.get_by_label("pos.kp").value().as_deref(), Some("0.2"));
+    // The window closed, the device read back by another client.
+    drop(h);
+    assert_eq!(tune(&srv, &["get", "pos.kd"], d).1.trim(), "0.00022");
+    assert_eq!(tune(&srv, &["get", "pos.kp"], d).1.trim(), "0.2");
+}
+
+/// The device gone: the window says the link is lost (and keeps drawing).
+fn the_window_shows_a_lost_link() {
+    use egui_kittest::kittest::Queryable;
+    let dir = tempfile::tempdir().unwrap();
+    let mut srv = Server::start("tcp", &dir.path().join("flash.img"));
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| a.link == gms_tune::ui::app::LinkState::Up));
+    let _ = srv.child.kill();
+    let _ = srv.child.wait();
+    assert!(step_until(&mut h, 10.0, |a| matches!(
+        a.link,
+        gms_tune::ui::app::LinkState::Lost(_)
+    )));
+    h.step();
+    // In the top bar, and in the log below.
+    assert!(h.query_all_by_label_contains("link lost").count() >= 2);
+    // The window goes on drawing frames while the worker retries.
+    for _ in 0..10 {
+        h.step();
+    }
 }

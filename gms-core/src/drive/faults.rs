@@ -44,6 +44,29 @@ impl Faults {
         "watchdog_reset",
     ];
 
+    /// What each bit means to the user, in [`Self::NAMES`]' order.
+    pub const MEANINGS: [&'static str; 8] = [
+        "the measured current exceeded the trip level (lim.i_max with margin): a runaway, a \
+         short, a reversed current sense",
+        "the position error exceeded its limit: the axis cannot follow (blocked, too little \
+         current, gains too soft)",
+        "the encoder moved more in one period than the axis can: noise or a loose encoder",
+        "a control step took longer than its period",
+        "the position left lim.pos_min .. lim.pos_max",
+        "the parameter set was invalid, or the stored one invalid or missing at start-up (the \
+         defaults run)",
+        "the current-sense zero at start-up was outside the board's window",
+        "the last reset was by the watchdog",
+    ];
+
+    /// The meaning of the fault named `name` (one of [`Self::NAMES`]).
+    pub fn meaning(name: &str) -> Option<&'static str> {
+        Self::NAMES
+            .iter()
+            .position(|n| *n == name)
+            .and_then(|i| Self::MEANINGS.get(i).copied())
+    }
+
     /// True when no fault is set.
     pub fn is_empty(self) -> bool {
         self.0 == 0

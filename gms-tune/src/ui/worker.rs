@@ -1,0 +1,388 @@
+//! The window's device link, off the UI thread: a thread that owns the [`Link`], runs what
+//! the window asks ([`Cmd`]) one request at a time, polls `status`, streams the telemetry, and
+//! reports back ([`Event`]); a lost link is reported and the link reopened every second.
+
+use std::path::PathBuf;
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
+use std::time::{Duration, Instant};
+
+use crate::params::{self, Listed};
+use crate::{Link, LinkError, parse_telemetry};
+
+/// Where the device is.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Endpoint {
+    /// A serial port (USB CDC-ACM or a PTY).
+    Serial(String),
+    /// A TCP address (`hil-sim serve --tcp`).
+    Tcp(String),
+}
+
+impl Endpoint {
+    /// Opens a link to it with the reply timeout `timeout`.
+    pub fn open(&self, timeout: Duration) -> Result<Link, String> {
+        match self {
+            Endpoint::Serial(p) => Link::serial(p, timeout),
+            Endpoint::Tcp(a) => Link::tcp(a, timeout),
+        }
+    }
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Endpoint::Serial(p) => write!(f, "--port {p}"),
+            Endpoint::Tcp(a) => write!(f, "--tcp {a}"),
+        }
+    }
+}
+
+/// What the window asks of the device.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Cmd {
+    /// `set PATH VALUE`, then the value read back with `get` (accepted or not).
+    Set {
+        /// Protocol path.
+        path: String,
+        /// The value as typed.
+        value: String,
+    },
+    /// One request line as it is (`enable`, `clear`, `move 0.1`, `save`, …).
+    Request(String),
+    /// Read `list` again.
+    List,
+    /// Write the device's parameters to a parameter file (`params dump`).
+    Dump(PathBuf),
+    /// Send a parameter file as one set (`params load`), then read `list` again.
+    Load(PathBuf),
+    /// End the worker.
+    Quit,
+}
+
+/// A telemetry sample (SI: s, rad, N·m, A).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sample {
+    /// Device time \[s\].
+    pub t: f64,
+    /// Position \[rad\].
+    pub pos: f64,
+    /// Reference \[rad\].
+    pub reference: f64,
+    /// Position error \[rad\].
+    pub error: f64,
+    /// Friction feedforward [N·m].
+    pub ff: f64,
+    /// Measured current \[A\].
+    pub current: f64,
+    /// The friction estimate k_M·i − J·a_ref [N·m].
+    pub friction: f64,
+}
+
+/// The telemetry fields the window streams, in [`Sample`]'s order.
+pub const FIELDS: &str = "t,pos,ref,error,ff,current,friction";
+
+impl Sample {
+    /// From a telemetry line's `name=value` pairs; `None` without a time.
+    pub fn parse(line: &str) -> Option<Sample> {
+        let kv = parse_telemetry(line);
+        let get = |k: &str| kv.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
+        Some(Sample {
+            t: get("t")?,
+            pos: get("pos").unwrap_or(f64::NAN),
+            reference: get("ref").unwrap_or(f64::NAN),
+            error: get("error").unwrap_or(f64::NAN),
+            ff: get("ff").unwrap_or(f64::NAN),
+            current: get("current").unwrap_or(f64::NAN),
+            friction: get("friction").unwrap_or(f64::NAN),
+        })
+    }
+}
+
+/// What the worker reports.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// The link is up (again).
+    Connected,
+    /// The link is lost (the message says how); the worker retries every second.
+    Lost(String),
+    /// `list`, parsed.
+    Listed(Vec<Listed>),
+    /// A `set`'s outcome: `Err` with the device's `err` line; `value` is the device's value
+    /// read back after it (`None` if that failed too).
+    Set {
+        /// Protocol path.
+        path: String,
+        /// `Ok` or the device's error.
+        result: Result<(), String>,
+        /// The device's value now.
+        value: Option<String>,
+    },
+    /// A request's outcome (its reply text, or the error).
+    Reply {
+        /// The request line.
+        line: String,
+        /// The text after `ok`, or the error.
+        result: Result<String, String>,
+    },
+    /// The `status` reply's text.
+    Status(String),
+    /// Telemetry samples, in order.
+    Samples(Vec<Sample>),
+}
+
+/// The window's side of the worker.
+pub struct Worker {
+    /// Commands to the worker.
+    pub tx: Sender<Cmd>,
+    /// Its reports.
+    pub rx: Receiver<Event>,
+    handle: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Worker {
+    /// Starts the worker on `endpoint`; `wake` is called after each batch of events (the
+    /// window's repaint request).
+    pub fn start(
+        endpoint: Endpoint,
+        timeout: Duration,
+        wake: impl Fn() + Send + 'static,
+    ) -> Worker {
+        let (tx, cmd_rx) = channel();
+        let (ev_tx, rx) = channel();
+        let handle = std::thread::spawn(move || run(endpoint, timeout, cmd_rx, ev_tx, wake));
+        Worker {
+            tx,
+            rx,
+            handle: Some(handle),
+        }
+    }
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        let _ = self.tx.send(Cmd::Quit);
+        if let Some(h) = self.handle.take() {
+            let _ = h.join();
+        }
+    }
+}
+
+/// How often `status` is read.
+const STATUS_PERIOD: Duration = Duration::from_millis(100);
+
+/// The worker's loop.
+fn run(
+    endpoint: Endpoint,
+    timeout: Duration,
+    cmds: Receiver<Cmd>,
+    events: Sender<Event>,
+    wake: impl Fn(),
+) {
+    let mut link: Option<Link> = None;
+    let mut next_try = Instant::now();
+    let mut next_status = Instant::now();
+    let send = |e: Event| events.send(e).is_ok();
+    loop {
+        let Some(l) = link.as_mut() else {
+            // Down: drain the commands (a quit ends it; the rest cannot run), retry each second.
+            loop {
+                match cmds.try_recv() {
+                    Ok(Cmd::Quit) | Err(TryRecvError::Disconnected) => return,
+                    Ok(c) => {
+                        if !send(refused(&c, "no link to the device")) {
+                            return;
+                        }
+                    }
+                    Err(TryRecvError::Empty) => break,
+                }
+            }
+            if Instant::now() >= next_try {
+                next_try = Instant::now() + Duration::from_secs(1);
+                match endpoint.open(timeout).and_then(|mut l| {
+                    start_session(&mut l).map_err(|e| e.to_string())?;
+                    Ok(l)
+                }) {
+                    Ok(mut l) => {
+                        let listed = params::list(&mut l);
+                        link = Some(l);
+                        send(Event::Connected);
+                        match listed {
+                            Ok(v) => send(Event::Listed(v)),
+                            Err(e) => send(Event::Lost(e.to_string())),
+                        };
+                        wake();
+                    }
+                    Err(e) => {
+                        send(Event::Lost(e));
+                        wake();
+                    }
+                }
+            }
+            std::thread::sleep(Duration::from_millis(20));
+            continue;
+        };
+        let mut lost: Option<String> = None;
+        let mut any = false;
+        // The commands waiting.
+        loop {
+            match cmds.try_recv() {
+                Ok(Cmd::Quit) | Err(TryRecvError::Disconnected) => {
+                    let _ = l.request("stream off");
+                    return;
+                }
+                Ok(c) => {
+                    any = true;
+                    match execute(l, c) {
+                        Ok(evs) => {
+                            for e in evs {
+                                send(e);
+                            }
+                        }
+                        Err(e) => {
+                            lost = Some(e);
+                            break;
+                        }
+                    }
+                }
+                Err(TryRecvError::Empty) => break,
+            }
+        }
+        if lost.is_none() && Instant::now() >= next_status {
+            next_status = Instant::now() + STATUS_PERIOD;
+            match l.request("status") {
+                Ok((_, text)) => {
+                    send(Event::Status(text));
+                    any = true;
+                }
+                Err(e) => lost = Some(e.to_string()),
+            }
+        }
+        if lost.is_none()
+            && let Err(e) = l.listen(Duration::from_millis(10))
+        {
+            lost = Some(e.to_string());
+        }
+        let samples: Vec<Sample> = l
+            .telemetry
+            .drain(..)
+            .filter_map(|(_, line)| Sample::parse(&line))
+            .collect();
+        if !samples.is_empty() {
+            send(Event::Samples(samples));
+            any = true;
+        }
+        if let Some(e) = lost {
+            link = None;
+            next_try = Instant::now() + Duration::from_secs(1);
+            send(Event::Lost(e));
+            any = true;
+        }
+        if any {
+            wake();
+        }
+    }
+}
+
+/// A new session: the telemetry stream at 1 kHz.
+fn start_session(l: &mut Link) -> Result<(), LinkError> {
+    l.request(&format!("stream {FIELDS} 1000"))?;
+    Ok(())
+}
+
+/// The report for a command that could not run.
+fn refused(c: &Cmd, why: &str) -> Event {
+    match c {
+        Cmd::Set { path, .. } => Event::Set {
+            path: path.clone(),
+            result: Err(why.to_string()),
+            value: None,
+        },
+        other => Event::Reply {
+            line: format!("{other:?}"),
+            result: Err(why.to_string()),
+        },
+    }
+}
+
+/// Whether a link error means the link is gone (not just a refusal).
+fn gone(e: &LinkError) -> bool {
+    matches!(e, LinkError::Io(_) | LinkError::Timeout(_))
+}
+
+/// Runs one command; `Err` when the link is lost on the way.
+fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
+    let mut out = Vec::new();
+    match c {
+        Cmd::Set { path, value } => {
+            let result = match l.request(&format!("set {path} {value}")) {
+                Ok(_) => Ok(()),
+                Err(e) if gone(&e) => return Err(e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            // The device's value, whatever happened: nothing is assumed changed.
+            let value = match l.request(&format!("get {path}")) {
+                Ok((_, v)) => Some(v.trim().to_string()),
+                Err(e) if gone(&e) => return Err(e.to_string()),
+                Err(_) => None,
+            };
+            out.push(Event::Set {
+                path,
+                result,
+                value,
+            });
+        }
+        Cmd::Request(line) => {
+            let result = match l.request(&line) {
+                Ok((body, text)) => {
+                    let mut t = body.join("\n");
+                    if !text.is_empty() {
+                        if !t.is_empty() {
+                            t.push('\n');
+                        }
+                        t.push_str(&text);
+                    }
+                    Ok(t)
+                }
+                Err(e) if gone(&e) => return Err(e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            let reread = result.is_ok()
+                && matches!(
+                    line.split_whitespace().next(),
+                    Some("load" | "defaults" | "commit")
+                );
+            out.push(Event::Reply { line, result });
+            if reread {
+                out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+            }
+        }
+        Cmd::List => out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?)),
+        Cmd::Dump(path) => {
+            let result = match params::read(l) {
+                Ok(pf) => {
+                    std::fs::write(&path, format!("# gms-tune params dump\n{}", pf.to_toml()))
+                        .map(|_| format!("written to {}", path.display()))
+                        .map_err(|e| format!("{}: {e}", path.display()))
+                }
+                Err(e) if gone(&e) => return Err(e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            out.push(Event::Reply {
+                line: format!("params dump {}", path.display()),
+                result,
+            });
+        }
+        Cmd::Load(path) => {
+            let result = params::load(l, &path)
+                .map(|n| format!("{n} parameters loaded from {}", path.display()))
+                .map_err(|e| e.to_string());
+            out.push(Event::Reply {
+                line: format!("params load {}", path.display()),
+                result,
+            });
+            out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+        }
+        Cmd::Quit => {}
+    }
+    Ok(out)
+}
