@@ -111,6 +111,13 @@ enum Cmd {
         /// Seconds after opening for --screenshot.
         #[arg(long, default_value_t = 5.0)]
         after: f64,
+        /// A request line sent once the link is up, its reply in the log (repeatable, in
+        /// order): e.g. --send enable --send "velocity 0 0.02 0.5 0.5 60".
+        #[arg(long, value_name = "LINE")]
+        send: Vec<String>,
+        /// The page shown first.
+        #[arg(long, value_enum, default_value_t = gms_tune::ui::app::Tab::Live)]
+        tab: gms_tune::ui::app::Tab,
     },
     /// Identify the axis's friction on the device: the pre-sliding torque staircase (from
     /// rest, after the friction's memory is erased by swings of decaying amplitude), the
@@ -295,7 +302,13 @@ fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
 
 fn run(cli: Cli) -> Result<(), Fail> {
     let timeout = Duration::from_millis(cli.timeout_ms);
-    if let Cmd::Ui { screenshot, after } = &cli.cmd {
+    if let Cmd::Ui {
+        screenshot,
+        after,
+        send,
+        tab,
+    } = &cli.cmd
+    {
         let endpoint = match (&cli.port, &cli.tcp) {
             (Some(p), _) => gms_tune::ui::Endpoint::Serial(p.clone()),
             (None, Some(a)) => gms_tune::ui::Endpoint::Tcp(a.clone()),
@@ -308,7 +321,8 @@ fn run(cli: Cli) -> Result<(), Fail> {
             path,
             after: *after,
         });
-        return gms_tune::ui::run(endpoint, timeout, shot).map_err(Fail::Device);
+        return gms_tune::ui::run(endpoint, timeout, send.clone(), *tab, shot)
+            .map_err(Fail::Device);
     }
     let mut link = match (&cli.port, &cli.tcp) {
         (Some(p), _) => Link::serial(p, timeout),

@@ -893,6 +893,7 @@ fn window(srv: &Server) -> egui_kittest::Harness<'static, gms_tune::ui::App> {
     let app = gms_tune::ui::App::new(
         gms_tune::ui::Endpoint::Tcp(srv.addr.clone()),
         std::time::Duration::from_secs(2),
+        Vec::new(),
         &egui::Context::default(),
     );
     egui_kittest::Harness::builder()

@@ -41,7 +41,7 @@ pub enum LinkState {
 }
 
 /// The central area's pages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Tab {
     /// Live plots.
     Live,
@@ -54,15 +54,15 @@ pub enum Tab {
 /// A step test's result.
 #[derive(Debug, Clone)]
 pub struct StepResult {
-    /// The step [rad].
+    /// The step \[rad\].
     pub step: f64,
-    /// Device time at the command [s].
+    /// Device time at the command \[s\].
     pub t0: f64,
-    /// Samples from the command: (t − t0 [s], error [counts]).
+    /// Samples from the command: (t − t0 \[s\], error \[counts\]).
     pub error: Vec<[f64; 2]>,
-    /// Overshoot past the target [counts].
+    /// Overshoot past the target \[counts\].
     pub overshoot: f64,
-    /// Time until the error stays within ±1 count [s] (`None`: not within the record).
+    /// Time until the error stays within ±1 count \[s\] (`None`: not within the record).
     pub settle: Option<f64>,
 }
 
@@ -82,7 +82,7 @@ pub struct App {
     pub received: u64,
     /// Paused: new samples are not added.
     pub paused: bool,
-    /// The live plots' span [s].
+    /// The live plots' span \[s\].
     pub span: f64,
     /// The visible time window of the live plots (device time, s).
     pub visible: (f64, f64),
@@ -102,12 +102,18 @@ pub struct App {
 }
 
 impl App {
-    /// A window on `endpoint`; `ctx` is woken by the worker when something arrives.
-    pub fn new(endpoint: Endpoint, timeout: Duration, ctx: &egui::Context) -> App {
+    /// A window on `endpoint`; `ctx` is woken by the worker when something arrives; `first`
+    /// are request lines sent once the link is first up.
+    pub fn new(
+        endpoint: Endpoint,
+        timeout: Duration,
+        first: Vec<String>,
+        ctx: &egui::Context,
+    ) -> App {
         let c = ctx.clone();
         let label = endpoint.to_string();
         App {
-            worker: Worker::start(endpoint, timeout, move || c.request_repaint()),
+            worker: Worker::start(endpoint, timeout, first, move || c.request_repaint()),
             endpoint: label,
             link: LinkState::Connecting,
             rows: Vec::new(),
@@ -356,7 +362,8 @@ impl App {
                                             !ro,
                                             egui::TextEdit::singleline(&mut r.edit)
                                                 .id_salt(&r.listed.path)
-                                                .desired_width(130.0),
+                                                .desired_width(130.0)
+                                                .min_size(egui::vec2(130.0, 0.0)),
                                         )
                                         .labelled_by(label.id);
                                     if edit.lost_focus()

@@ -53,10 +53,13 @@ impl eframe::App for Window {
     }
 }
 
-/// Opens the window on `endpoint` (reply timeout `timeout`) and runs it until closed.
+/// Opens the window on `endpoint` (reply timeout `timeout`; `first`: request lines sent once
+/// the link is up; `tab`: the page shown first) and runs it until closed.
 pub fn run(
     endpoint: Endpoint,
     timeout: Duration,
+    first: Vec<String>,
+    tab: app::Tab,
     screenshot: Option<Screenshot>,
 ) -> Result<(), String> {
     let options = eframe::NativeOptions {
@@ -69,8 +72,10 @@ pub fn run(
         "gms-tune",
         options,
         Box::new(move |cc| {
+            let mut app = App::new(endpoint, timeout, first, &cc.egui_ctx);
+            app.tab = tab;
             Ok(Box::new(Window {
-                app: App::new(endpoint, timeout, &cc.egui_ctx),
+                app,
                 opened: Instant::now(),
                 screenshot,
             }))

@@ -70,11 +70,11 @@ pub struct Sample {
     pub reference: f64,
     /// Position error \[rad\].
     pub error: f64,
-    /// Friction feedforward [N·m].
+    /// Friction feedforward \[N·m\].
     pub ff: f64,
     /// Measured current \[A\].
     pub current: f64,
-    /// The friction estimate k_M·i − J·a_ref [N·m].
+    /// The friction estimate k_M·i − J·a_ref \[N·m\].
     pub friction: f64,
 }
 
@@ -141,15 +141,17 @@ pub struct Worker {
 
 impl Worker {
     /// Starts the worker on `endpoint`; `wake` is called after each batch of events (the
-    /// window's repaint request).
+    /// window's repaint request); `first` are request lines sent once, when the link first
+    /// comes up (their replies reported).
     pub fn start(
         endpoint: Endpoint,
         timeout: Duration,
+        first: Vec<String>,
         wake: impl Fn() + Send + 'static,
     ) -> Worker {
         let (tx, cmd_rx) = channel();
         let (ev_tx, rx) = channel();
-        let handle = std::thread::spawn(move || run(endpoint, timeout, cmd_rx, ev_tx, wake));
+        let handle = std::thread::spawn(move || run(endpoint, timeout, first, cmd_rx, ev_tx, wake));
         Worker {
             tx,
             rx,
@@ -174,6 +176,7 @@ const STATUS_PERIOD: Duration = Duration::from_millis(100);
 fn run(
     endpoint: Endpoint,
     timeout: Duration,
+    mut first: Vec<String>,
     cmds: Receiver<Cmd>,
     events: Sender<Event>,
     wake: impl Fn(),
@@ -210,6 +213,15 @@ fn run(
                             Ok(v) => send(Event::Listed(v)),
                             Err(e) => send(Event::Lost(e.to_string())),
                         };
+                        if let Some(l) = link.as_mut() {
+                            for line in first.drain(..) {
+                                if let Ok(evs) = execute(l, Cmd::Request(line)) {
+                                    for e in evs {
+                                        send(e);
+                                    }
+                                }
+                            }
+                        }
                         wake();
                     }
                     Err(e) => {
