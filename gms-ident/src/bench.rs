@@ -1094,7 +1094,7 @@ pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Resu
 
 /// The feedforward-gain sweep's settings: the sine test (amplitude \\[rad\\], frequency \\[Hz\\],
 /// duration \\[s\\]) repeated at `steps` gains from `from` to `to` \\[-\\].
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TuneFfPlan {
     /// Sine amplitude \\[rad\\].
     pub amp: f64,
@@ -1145,7 +1145,7 @@ impl TuneFfPlan {
 }
 
 /// What the sweep found.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TuneFf {
     /// `(gain, RMS error [rad])` for each gain tried.
     pub curve: Vec<(f64, f64)>,

@@ -8,12 +8,14 @@ use gms_ident::bench::{commission, load_params};
 use gms_tune::Link;
 
 use crate::Fail;
-use crate::tracked::Tracked;
+use crate::tracked::{Bar, ctrl_c};
+use gms_tune::run::RunBench;
 
 /// Runs the commissioning; writes `out`; applies/saves on request.
 pub fn run(link: &mut Link, out: &Path, speed: f64, apply: bool, save: bool) -> Result<(), Fail> {
-    let mut pf = crate::device_params(link)?;
-    let mut bench = Tracked::new(link);
+    let pf = crate::device_params(link)?;
+    let mut bar = Bar::new();
+    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
     let r = commission(&mut bench, speed);
     let link = bench.link;
     let c = r.map_err(|e| match e {
@@ -23,19 +25,7 @@ pub fn run(link: &mut Link, out: &Path, speed: f64, apply: bool, save: bool) -> 
     for l in &c.lines {
         println!("{l}");
     }
-    let mut device = toml::Table::new();
-    for (k, v) in c.settings() {
-        device.insert(k.to_string(), toml::Value::Float(v));
-    }
-    pf.device = Some(device);
-    let text = format!(
-        "# commissioned by gms-tune commission\n{}{}",
-        c.lines
-            .iter()
-            .map(|l| format!("# {l}\n"))
-            .collect::<String>(),
-        pf.to_toml()
-    );
+    let (pf, text) = gms_tune::run::commissioned_file(&c, pf);
     gms_ident::io::write_atomic(out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
     println!(
         "summary: sense.dir {} enc.dir {} motor.r {:.4} ohm motor.k_e = motor.k_m {:.4e}; wrote {}",

@@ -9,11 +9,11 @@ use std::time::Instant;
 use gms_ident::Error;
 use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
 use gms_ident::identify::write_report;
-use gms_ident::paramfile::ParamFile;
 use gms_tune::Link;
 
 use crate::Fail;
-use crate::tracked::Tracked;
+use crate::tracked::{Bar, ctrl_c};
+use gms_tune::run::RunBench;
 
 /// What `gms-tune identify` is asked.
 pub struct Args {
@@ -61,17 +61,18 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         plans.window,
     );
     let started = Instant::now();
-    let mut bench = Tracked::new(link);
+    let mut bar = Bar::new();
+    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
     let r = bench::identify_on(
         &mut bench,
         &plans,
         &a.report,
         a.blocks,
         a.asymmetric,
-        &mut |b: &mut Tracked<'_>, name, seconds| b.start(name, seconds),
+        &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
     );
-    bench.bar.finish_and_clear();
     let link = bench.link;
+    bar.bar.finish_and_clear();
     let (g, id) = r.map_err(|e| match e {
         Error::Params(m) => Fail::Usage(m),
         e => Fail::Device(e.to_string()),
@@ -87,19 +88,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         println!("{l}");
     }
     write_report(&id, &a.report).map_err(|e| Fail::Usage(e.to_string()))?;
-    let file = ParamFile {
-        friction: id.spec.clone(),
-        device: None,
-    };
-    let text = format!(
-        "# identified by gms-tune identify (data in {})\n{}{}",
-        a.report.display(),
-        id.report
-            .iter()
-            .map(|l| format!("# {l}\n"))
-            .collect::<String>(),
-        file.to_toml()
-    );
+    let (_, text) = gms_tune::run::identified_file(&id, &a.report);
     gms_ident::io::write_atomic(&a.out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
     println!(
         "wrote {} and the report in {}",

@@ -2,6 +2,7 @@
 //! a time, replies read up to their `ok`/`err` line, telemetry (`#` lines) set aside.
 
 pub mod params;
+pub mod run;
 pub mod ui;
 
 use std::io::{ErrorKind, Read, Write};

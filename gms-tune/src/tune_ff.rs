@@ -8,7 +8,8 @@ use gms_ident::bench::{TuneFfPlan, tune_ff};
 use gms_tune::Link;
 
 use crate::Fail;
-use crate::tracked::Tracked;
+use crate::tracked::{Bar, ctrl_c};
+use gms_tune::run::RunBench;
 
 /// What `gms-tune tune-ff` is asked.
 pub struct Args {
@@ -39,13 +40,14 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         a.plan.steps as f64 * (a.plan.seconds + 0.2)
     );
     println!("ff.gain  RMS error [rad]  [counts of 3.8 µrad]");
-    let mut bench = Tracked::new(link);
-    bench.start("tune-ff", a.plan.steps as f64 * a.plan.seconds);
+    let mut bar = Bar::new();
+    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
+    bench.stage("tune-ff", a.plan.steps as f64 * a.plan.seconds);
     let r = tune_ff(&mut bench, &a.plan, |_, g, rms| {
         println!("{g:7.4}  {rms:.4e}  {:.3}", rms / rpc)
     });
-    bench.bar.finish_and_clear();
     let link = bench.link;
+    bar.bar.finish_and_clear();
     let t = r.map_err(|e| Fail::Device(format!("{e}; the bridge is off, ff.gain as it was")))?;
     println!("chosen ff.gain {:.4} (was {})", t.chosen, t.before);
     let mut csv = String::from("gain,rms\n");

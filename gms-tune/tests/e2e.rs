@@ -169,6 +169,14 @@ fn main() {
             the_window_shows_the_device_and_sets_what_it_is_told,
         ),
         ("the_window_shows_a_lost_link", the_window_shows_a_lost_link),
+        (
+            "the_window_runs_tune_ff_and_applies_it",
+            the_window_runs_tune_ff_and_applies_it,
+        ),
+        (
+            "the_window_stops_a_run_with_the_bridge_off",
+            the_window_stops_a_run_with_the_bridge_off,
+        ),
         #[cfg(unix)]
         (
             "identify_stops_on_ctrl_c_with_the_bridge_off",
@@ -1021,4 +1029,81 @@ fn the_window_shows_a_lost_link() {
     for _ in 0..10 {
         h.step();
     }
+}
+
+/// The window's Experiments page: tune-ff typed in and started with its button on a virtual
+/// device 10 × real time; the sweep's points arrive as it runs; the device's gain stays until
+/// "Apply the gain", then it is the chosen one (read back with `get` once the window is
+/// closed).
+fn the_window_runs_tune_ff_and_applies_it() {
+    use egui_kittest::kittest::Queryable;
+    use gms_tune::ui::worker::Outcome;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sc = quiet_scenario(d, "");
+    let srv = Server::start_with("tcp", &d.join("flash.img"), 10.0, Some(&sc));
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| !a.rows.is_empty()));
+    h.state_mut().tab = gms_tune::ui::app::Tab::Experiments;
+    h.step();
+    for (label, v) in [("steps", "5"), ("seconds", "2")] {
+        h.get_by_label(label).click();
+        h.step();
+        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+        h.step();
+        h.get_by_label(label).type_text(v);
+        h.step();
+    }
+    h.get_by_label("Tune ff").click();
+    h.step();
+    assert!(h.state().running.is_some());
+    let done = step_until(&mut h, 90.0, |a| a.outcome.is_some());
+    assert!(done, "{:?} {:?}", h.state().running, h.state().log);
+    let (chosen, before, points) = match h.state().outcome.clone().unwrap() {
+        Ok(Outcome::TunedFf(t)) => (t.chosen, t.before, t.curve.len()),
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(points, 5);
+    assert_eq!(h.state().ff_points.len(), 5);
+    assert!((0.7..=1.2).contains(&chosen), "{chosen}");
+    assert_eq!(before, 0.94);
+    h.step();
+    h.get_by_label("Apply the gain").click();
+    assert!(step_until(&mut h, 5.0, |a| a.rows.iter().any(|r| r
+        .listed
+        .path
+        == "ff.gain"
+        && r.listed.value != "0.94")));
+    drop(h);
+    let got: f64 = tune(&srv, &["get", "ff.gain"], d).1.trim().parse().unwrap();
+    assert!((got - chosen).abs() < 1e-5, "{got} vs {chosen}");
+}
+
+/// Stop during a run from the window (an identification at real time): the run ends with
+/// the window saying it stopped, the bridge is off and the stroke limits are back.
+fn the_window_stops_a_run_with_the_bridge_off() {
+    use egui_kittest::kittest::Queryable;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sc = quiet_scenario(d, "");
+    let srv = Server::start_with("tcp", &d.join("flash.img"), 1.0, Some(&sc));
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| !a.rows.is_empty()));
+    h.state_mut().tab = gms_tune::ui::app::Tab::Experiments;
+    h.step();
+    h.get_by_label("Identify").click();
+    h.step();
+    // Into the run (its first stage).
+    assert!(step_until(&mut h, 10.0, |a| a
+        .running
+        .as_ref()
+        .is_some_and(|r| r.done > 0.2)));
+    h.get_by_label("Stop").click();
+    assert!(step_until(&mut h, 20.0, |a| a.outcome.is_some()));
+    let out = h.state().outcome.clone().unwrap();
+    assert!(matches!(&out, Err(e) if e.contains("stopped")), "{out:?}");
+    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("0")));
+    drop(h);
+    assert_eq!(tune(&srv, &["get", "lim.pos_max"], d).1.trim(), "50");
+    assert_eq!(tune(&srv, &["get", "lim.pos_min"], d).1.trim(), "-50");
 }

@@ -9,7 +9,7 @@ use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
 use gms_core::model::FrictionModel;
 
-use super::worker::{Cmd, Endpoint, Event, Sample, Worker};
+use super::worker::{Cmd, Endpoint, Event, Job, Outcome, Sample, Worker};
 use crate::params::Listed;
 
 /// Samples kept: 60 s of the 1 kHz stream.
@@ -49,6 +49,63 @@ pub enum Tab {
     Friction,
     /// Jog, move and step test.
     Motion,
+    /// Commissioning, feedforward tuning and identification.
+    Experiments,
+}
+
+/// A long run under way.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Running {
+    /// What (commission, tune-ff, identify).
+    pub what: String,
+    /// Its stage now.
+    pub stage: String,
+    /// Device seconds done of the stage.
+    pub done: f64,
+    /// Device seconds the stage expects.
+    pub total: f64,
+}
+
+/// The experiments page's inputs (as typed).
+#[derive(Debug, Clone)]
+pub struct ExperimentInputs {
+    /// Commissioning speed \[rad/s\].
+    pub speed: String,
+    /// The motor file.
+    pub motor: String,
+    /// Sine amplitude \[rad\].
+    pub amp: String,
+    /// Sine frequency \[Hz\].
+    pub freq: String,
+    /// Each test \[s\].
+    pub seconds: String,
+    /// Lowest gain.
+    pub from: String,
+    /// Highest gain.
+    pub to: String,
+    /// Gains.
+    pub steps: String,
+    /// The identification's report directory.
+    pub report: String,
+    /// The identified parameter file.
+    pub identified: String,
+}
+
+impl Default for ExperimentInputs {
+    fn default() -> Self {
+        ExperimentInputs {
+            speed: "1".into(),
+            motor: "motor.toml".into(),
+            amp: "2e-3".into(),
+            freq: "1".into(),
+            seconds: "3".into(),
+            from: "0.7".into(),
+            to: "1.2".into(),
+            steps: "11".into(),
+            report: "identify-report".into(),
+            identified: "identified.toml".into(),
+        }
+    }
 }
 
 /// A step test's result.
@@ -99,6 +156,14 @@ pub struct App {
     csv: String,
     /// The page shown.
     pub tab: Tab,
+    /// The experiments page's inputs.
+    pub inputs: ExperimentInputs,
+    /// The long run under way.
+    pub running: Option<Running>,
+    /// The feedforward sweep's points so far (gain, RMS \[counts\]).
+    pub ff_points: Vec<[f64; 2]>,
+    /// The last long run's result, or why it failed.
+    pub outcome: Option<Result<Outcome, String>>,
 }
 
 impl App {
@@ -133,7 +198,35 @@ impl App {
             file: "params.toml".into(),
             csv: "live.csv".into(),
             tab: Tab::Live,
+            inputs: ExperimentInputs::default(),
+            running: None,
+            ff_points: Vec::new(),
+            outcome: None,
         }
+    }
+
+    /// Starts a long run (one at a time).
+    pub fn start(&mut self, what: &str, job: Job) {
+        if self.running.is_some() {
+            return;
+        }
+        self.running = Some(Running {
+            what: what.into(),
+            stage: what.into(),
+            done: 0.0,
+            total: 0.0,
+        });
+        self.ff_points.clear();
+        self.outcome = None;
+        self.note(format!("{what}: started"));
+        self.send(Cmd::Run(job));
+    }
+
+    /// Ends the long run under way (the worker's stop flag).
+    pub fn stop(&mut self) {
+        self.worker
+            .stop
+            .store(true, std::sync::atomic::Ordering::SeqCst);
     }
 
     fn send(&mut self, c: Cmd) {
@@ -196,6 +289,20 @@ impl App {
                     Err(e) => self.note(format!("{line}: {e}")),
                 },
                 Event::Status(s) => self.status = s,
+                Event::Progress { stage, done, total } => {
+                    if let Some(r) = &mut self.running {
+                        (r.stage, r.done, r.total) = (stage, done, total);
+                    }
+                }
+                Event::FfPoint(g, rms) => self.ff_points.push([g, rms / RAD_PER_COUNT]),
+                Event::Done(r) => {
+                    let what = self.running.take().map_or(String::new(), |r| r.what);
+                    match &r {
+                        Ok(_) => self.note(format!("{what}: done")),
+                        Err(e) => self.note(format!("{what}: {e}")),
+                    }
+                    self.outcome = Some(r);
+                }
                 Event::Samples(v) => {
                     self.received += v.len() as u64;
                     if !self.paused {
@@ -236,12 +343,14 @@ impl App {
                 ui.selectable_value(&mut self.tab, Tab::Live, "Live");
                 ui.selectable_value(&mut self.tab, Tab::Friction, "Friction loop");
                 ui.selectable_value(&mut self.tab, Tab::Motion, "Motion");
+                ui.selectable_value(&mut self.tab, Tab::Experiments, "Experiments");
             });
             ui.separator();
             match self.tab {
                 Tab::Live => self.live(ui),
                 Tab::Friction => self.friction(ui),
                 Tab::Motion => self.motion(ui),
+                Tab::Experiments => self.experiments(ui),
             }
         });
         // Telemetry arrives continuously: a smooth frame rate while the link is up.
@@ -652,6 +761,178 @@ impl App {
         }
     }
 
+    fn experiments(&mut self, ui: &mut egui::Ui) {
+        let idle = self.running.is_none();
+        if let Some(r) = &self.running {
+            let frac = if r.total > 0.0 {
+                (r.done / r.total).clamp(0.0, 1.0) as f32
+            } else {
+                0.0
+            };
+            let text = format!(
+                "{}: {} — {:.1} of about {:.1} s of device time",
+                r.what, r.stage, r.done, r.total
+            );
+            ui.horizontal(|ui| {
+                ui.add(egui::ProgressBar::new(frac).text(text).desired_width(600.0));
+                if ui.button("Stop").clicked() {
+                    self.stop();
+                }
+            });
+        } else {
+            ui.label("One run at a time; the bridge is off when a run ends by a failure or Stop.");
+        }
+        ui.separator();
+        let inp = &mut self.inputs;
+        let mut start: Option<(&str, Result<Job, String>)> = None;
+        let field = |ui: &mut egui::Ui, label: &str, v: &mut String, w: f32| {
+            let l = ui.label(label);
+            ui.add(egui::TextEdit::singleline(v).desired_width(w))
+                .labelled_by(l.id);
+        };
+        ui.horizontal(|ui| {
+            field(ui, "speed [rad/s]", &mut inp.speed, 50.0);
+            field(ui, "motor file", &mut inp.motor, 120.0);
+            if ui
+                .add_enabled(idle, egui::Button::new("Commission"))
+                .clicked()
+            {
+                let job = num(&inp.speed, "speed").map(|speed| Job::Commission {
+                    speed,
+                    out: PathBuf::from(&inp.motor),
+                });
+                start = Some(("commission", job));
+            }
+        });
+        ui.horizontal(|ui| {
+            field(ui, "amplitude [rad]", &mut inp.amp, 60.0);
+            field(ui, "frequency [Hz]", &mut inp.freq, 40.0);
+            field(ui, "seconds", &mut inp.seconds, 40.0);
+            field(ui, "gain from", &mut inp.from, 40.0);
+            field(ui, "to", &mut inp.to, 40.0);
+            field(ui, "steps", &mut inp.steps, 40.0);
+            if ui.add_enabled(idle, egui::Button::new("Tune ff")).clicked() {
+                let plan = (|| {
+                    Ok(gms_ident::bench::TuneFfPlan {
+                        amp: num(&inp.amp, "amplitude")?,
+                        freq: num(&inp.freq, "frequency")?,
+                        seconds: num(&inp.seconds, "seconds")?,
+                        from: num(&inp.from, "gain from")?,
+                        to: num(&inp.to, "to")?,
+                        steps: inp
+                            .steps
+                            .trim()
+                            .parse()
+                            .map_err(|_| format!("steps {}: a whole number", inp.steps))?,
+                    })
+                })();
+                start = Some(("tune-ff", plan.map(Job::TuneFf)));
+            }
+        });
+        ui.horizontal(|ui| {
+            field(ui, "report directory", &mut inp.report, 140.0);
+            field(ui, "identified file", &mut inp.identified, 140.0);
+            if ui
+                .add_enabled(idle, egui::Button::new("Identify"))
+                .clicked()
+            {
+                start = Some((
+                    "identify",
+                    Ok(Job::Identify {
+                        report: PathBuf::from(&inp.report),
+                        out: PathBuf::from(&inp.identified),
+                    }),
+                ));
+            }
+        });
+        match start {
+            Some((what, Ok(job))) => self.start(what, job),
+            Some((what, Err(e))) => self.note(format!("{what}: {e}")),
+            None => {}
+        }
+        ui.separator();
+        let mut apply: Option<Cmd> = None;
+        match &self.outcome {
+            None => {
+                if !self.ff_points.is_empty() {
+                    let pts = self.ff_points.clone();
+                    ff_plot(ui, pts, None);
+                }
+            }
+            Some(Err(e)) => {
+                ui.label(RichText::new(e).color(Color32::from_rgb(255, 90, 90)));
+            }
+            Some(Ok(Outcome::Commissioned { lines, file })) => {
+                ui.horizontal(|ui| {
+                    if ui.button("Apply the motor settings").clicked() {
+                        apply = Some(Cmd::Apply(file.clone()));
+                    }
+                });
+                for l in lines {
+                    ui.monospace(l);
+                }
+            }
+            Some(Ok(Outcome::TunedFf(t))) => {
+                ui.horizontal(|ui| {
+                    ui.label(format!("chosen ff.gain {:.4} (was {})", t.chosen, t.before));
+                    if ui.button("Apply the gain").clicked() {
+                        apply = Some(Cmd::Set {
+                            path: "ff.gain".into(),
+                            value: format!("{}", t.chosen),
+                        });
+                    }
+                });
+                let pts = t
+                    .curve
+                    .iter()
+                    .map(|(g, r)| [*g, r / RAD_PER_COUNT])
+                    .collect();
+                ff_plot(ui, pts, Some(t.chosen));
+            }
+            Some(Ok(Outcome::Identified {
+                report,
+                presliding,
+                sliding,
+                file,
+            })) => {
+                ui.horizontal(|ui| {
+                    if ui.button("Apply the identified set").clicked() {
+                        apply = Some(Cmd::Apply(file.clone()));
+                    }
+                });
+                egui::ScrollArea::vertical()
+                    .max_height(140.0)
+                    .show(ui, |ui| {
+                        for l in report {
+                            ui.monospace(l);
+                        }
+                    });
+                let h = (ui.available_height() - 10.0).max(100.0);
+                let pre: Vec<[f64; 2]> = presliding.iter().map(|(x, f)| [*x, *f]).collect();
+                let sl: Vec<[f64; 2]> = sliding.iter().map(|(v, f)| [*v, *f]).collect();
+                ui.columns(2, |cols| {
+                    Plot::new("pre")
+                        .height(h)
+                        .x_axis_label("pre-sliding displacement [rad]")
+                        .y_axis_label("friction [N·m]")
+                        .show(&mut cols[0], |p| {
+                            p.points(Points::new("virgin curve", PlotPoints::from(pre)).radius(2.0))
+                        });
+                    Plot::new("slide")
+                        .height(h)
+                        .x_axis_label("speed [rad/s]")
+                        .y_axis_label("friction [N·m]")
+                        .show(&mut cols[1], |p| {
+                            p.points(Points::new("sliding", PlotPoints::from(sl)).radius(2.0))
+                        });
+                });
+            }
+        }
+        if let Some(c) = apply {
+            self.send(c);
+        }
+    }
+
     /// A step test's figures once 0.5 s of samples has come after its command.
     fn finish_step(&mut self) {
         let Some((d, t0)) = self.step_pending else {
@@ -684,6 +965,30 @@ impl App {
             settle,
         });
     }
+}
+
+/// A typed number, or a one-line error naming the field.
+fn num(text: &str, what: &str) -> Result<f64, String> {
+    text.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("{what} {text:?}: not a number"))
+}
+
+/// The feedforward sweep: RMS error against the gain, the chosen gain marked.
+fn ff_plot(ui: &mut egui::Ui, pts: Vec<[f64; 2]>, chosen: Option<f64>) {
+    let h = (ui.available_height() - 10.0).max(100.0);
+    Plot::new("ff")
+        .height(h)
+        .x_axis_label("ff.gain")
+        .y_axis_label("sine test RMS error [counts]")
+        .show(ui, |p| {
+            p.line(Line::new("RMS error", PlotPoints::from(pts)));
+            if let Some(g) = chosen {
+                p.vline(egui_plot::VLine::new("chosen", g));
+            }
+        });
 }
 
 /// A path's group in the tree: what comes before its first dot.

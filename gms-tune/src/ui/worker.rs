@@ -3,6 +3,8 @@
 //! reports back ([`Event`]); a lost link is reported and the link reopened every second.
 
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::time::{Duration, Instant};
 
@@ -55,8 +57,58 @@ pub enum Cmd {
     Dump(PathBuf),
     /// Send a parameter file as one set (`params load`), then read `list` again.
     Load(PathBuf),
+    /// Send a parameter set as one set (a result to apply), then read `list` again.
+    Apply(Box<gms_ident::paramfile::ParamFile>),
+    /// A long run; [`Worker::stop`] ends it.
+    Run(Job),
     /// End the worker.
     Quit,
+}
+
+/// A long run of the bench's experiments, the command line's code.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Job {
+    /// `gms-tune commission --speed SPEED --out OUT`.
+    Commission {
+        /// The back-EMF runs' base speed \[rad/s\].
+        speed: f64,
+        /// The motor file written.
+        out: PathBuf,
+    },
+    /// `gms-tune tune-ff`.
+    TuneFf(gms_ident::bench::TuneFfPlan),
+    /// `gms-tune identify --report REPORT --out OUT`.
+    Identify {
+        /// The experiments' CSVs, report and plots.
+        report: PathBuf,
+        /// The identified parameter file.
+        out: PathBuf,
+    },
+}
+
+/// What a long run gave.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// The commissioning's lines and its motor file (not applied).
+    Commissioned {
+        /// A line per step.
+        lines: Vec<String>,
+        /// The device's parameters with the settings found.
+        file: Box<gms_ident::paramfile::ParamFile>,
+    },
+    /// The feedforward sweep (not applied).
+    TunedFf(gms_ident::bench::TuneFf),
+    /// The identification (not applied).
+    Identified {
+        /// The fits' report.
+        report: Vec<String>,
+        /// Pre-sliding points (x \[rad\], f \[N·m\]).
+        presliding: Vec<(f64, f64)>,
+        /// Sliding points (v \[rad/s\], f \[N·m\]).
+        sliding: Vec<(f64, f64)>,
+        /// The identified set.
+        file: Box<gms_ident::paramfile::ParamFile>,
+    },
 }
 
 /// A telemetry sample (SI: s, rad, N·m, A).
@@ -128,12 +180,27 @@ pub enum Event {
     Status(String),
     /// Telemetry samples, in order.
     Samples(Vec<Sample>),
+    /// A long run's progress: its stage, and the device time done of what the stage expects.
+    Progress {
+        /// The stage.
+        stage: String,
+        /// Device seconds waited in it.
+        done: f64,
+        /// Device seconds it expects.
+        total: f64,
+    },
+    /// A point of the feedforward sweep as it is measured (gain, RMS error \[rad\]).
+    FfPoint(f64, f64),
+    /// A long run ended: what it gave, or why not (the bridge is off then).
+    Done(Result<Outcome, String>),
 }
 
 /// The window's side of the worker.
 pub struct Worker {
     /// Commands to the worker.
     pub tx: Sender<Cmd>,
+    /// Set to end a long run (the window's Stop); cleared when a run starts.
+    pub stop: Arc<AtomicBool>,
     /// Its reports.
     pub rx: Receiver<Event>,
     handle: Option<std::thread::JoinHandle<()>>,
@@ -151,9 +218,13 @@ impl Worker {
     ) -> Worker {
         let (tx, cmd_rx) = channel();
         let (ev_tx, rx) = channel();
-        let handle = std::thread::spawn(move || run(endpoint, timeout, first, cmd_rx, ev_tx, wake));
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = stop.clone();
+        let handle =
+            std::thread::spawn(move || run(endpoint, timeout, first, cmd_rx, ev_tx, flag, wake));
         Worker {
             tx,
+            stop,
             rx,
             handle: Some(handle),
         }
@@ -162,6 +233,7 @@ impl Worker {
 
 impl Drop for Worker {
     fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
         let _ = self.tx.send(Cmd::Quit);
         if let Some(h) = self.handle.take() {
             let _ = h.join();
@@ -179,6 +251,7 @@ fn run(
     mut first: Vec<String>,
     cmds: Receiver<Cmd>,
     events: Sender<Event>,
+    stop: Arc<AtomicBool>,
     wake: impl Fn(),
 ) {
     let mut link: Option<Link> = None;
@@ -241,6 +314,20 @@ fn run(
                 Ok(Cmd::Quit) | Err(TryRecvError::Disconnected) => {
                     let _ = l.request("stream off");
                     return;
+                }
+                Ok(Cmd::Run(job)) => {
+                    stop.store(false, Ordering::SeqCst);
+                    // The stream off during the run: its captures and waits need the link
+                    // (on a virtual device faster than real time the stream alone can fill it).
+                    let _ = l.request("stream off");
+                    l.telemetry.clear();
+                    let done = run_job(l, job, &stop, &events, &wake);
+                    send(Event::Done(done));
+                    wake();
+                    if let Err(e) = start_session(l) {
+                        lost = Some(e.to_string());
+                        break;
+                    }
                 }
                 Ok(c) => {
                     any = true;
@@ -394,7 +481,139 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             });
             out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
         }
-        Cmd::Quit => {}
+        Cmd::Apply(pf) => {
+            let result = gms_ident::bench::load_params(l, &pf)
+                .map(|n| format!("{n} parameters loaded"))
+                .map_err(|e| e.to_string());
+            out.push(Event::Reply {
+                line: "apply".into(),
+                result,
+            });
+            out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+        }
+        Cmd::Run(_) | Cmd::Quit => {}
     }
     Ok(out)
+}
+
+/// The window's hooks for a long run: its progress, and the telemetry that came meanwhile.
+struct Reporter<'e> {
+    events: &'e Sender<Event>,
+    wake: &'e dyn Fn(),
+    stage: String,
+    done: f64,
+    total: f64,
+    last: Instant,
+}
+
+impl crate::run::Hooks for Reporter<'_> {
+    fn stage(&mut self, what: &str, seconds: f64) {
+        (self.stage, self.done, self.total) = (what.to_string(), 0.0, seconds);
+        self.report();
+    }
+
+    fn waited(&mut self, link: &mut Link, seconds: f64) {
+        self.done += seconds;
+        if self.last.elapsed() >= Duration::from_millis(50) {
+            let samples: Vec<Sample> = link
+                .telemetry
+                .drain(..)
+                .filter_map(|(_, line)| Sample::parse(&line))
+                .collect();
+            if !samples.is_empty() {
+                let _ = self.events.send(Event::Samples(samples));
+            }
+            self.report();
+        }
+    }
+}
+
+impl Reporter<'_> {
+    fn report(&mut self) {
+        self.last = Instant::now();
+        let _ = self.events.send(Event::Progress {
+            stage: self.stage.clone(),
+            done: self.done,
+            total: self.total,
+        });
+        (self.wake)();
+    }
+}
+
+/// Runs a long job with the command line's code; the stop flag ends it.
+fn run_job(
+    l: &mut Link,
+    job: Job,
+    stop: &Arc<AtomicBool>,
+    events: &Sender<Event>,
+    wake: &dyn Fn(),
+) -> Result<Outcome, String> {
+    use crate::run::RunBench;
+    use gms_ident::bench;
+    let mut rep = Reporter {
+        events,
+        wake,
+        stage: String::new(),
+        done: 0.0,
+        total: 0.0,
+        last: Instant::now(),
+    };
+    let why = "stopped (the window's Stop)";
+    match job {
+        Job::Commission { speed, out } => {
+            let pf = params::read(l).map_err(|e| e.to_string())?;
+            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
+            b.stage("commission", 5.0);
+            let c = bench::commission(&mut b, speed)
+                .map_err(|e| format!("{e}; the bridge is off, nothing changed"))?;
+            let (file, text) = crate::run::commissioned_file(&c, pf);
+            gms_ident::io::write_atomic(&out, text.as_bytes()).map_err(|e| e.to_string())?;
+            let mut lines = c.lines.clone();
+            lines.push(format!("wrote {}", out.display()));
+            Ok(Outcome::Commissioned {
+                lines,
+                file: Box::new(file),
+            })
+        }
+        Job::TuneFf(plan) => {
+            plan.check().map_err(|e| e.to_string())?;
+            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
+            b.stage("tune-ff", plan.steps as f64 * plan.seconds);
+            let t = bench::tune_ff(&mut b, &plan, |_, g, rms| {
+                let _ = events.send(Event::FfPoint(g, rms));
+            })
+            .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
+            Ok(Outcome::TunedFf(t))
+        }
+        Job::Identify { report, out } => {
+            let dev = bench::DeviceInfo::read(l).map_err(|e| e.to_string())?;
+            let plans =
+                bench::Plans::new(&dev, &bench::Ranges::default()).map_err(|e| e.to_string())?;
+            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
+            let (g, id) = bench::identify_on(
+                &mut b,
+                &plans,
+                &report,
+                6,
+                false,
+                &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
+            )
+            .map_err(|e| e.to_string())?;
+            gms_ident::identify::write_report(&id, &report).map_err(|e| e.to_string())?;
+            let (file, text) = crate::run::identified_file(&id, &report);
+            gms_ident::io::write_atomic(&out, text.as_bytes()).map_err(|e| e.to_string())?;
+            let mut lines = id.report.clone();
+            lines.push(format!(
+                "wrote {} and the report in {}",
+                out.display(),
+                report.display()
+            ));
+            Ok(Outcome::Identified {
+                report: lines,
+                presliding: g.presliding,
+                sliding: g.sliding,
+                file: Box::new(file),
+            })
+        }
+    }
 }

@@ -1,0 +1,134 @@
+//! The link as a bench for long runs (identify, commission, tune-ff), shared by the command
+//! line and the window: a stop flag (Ctrl-C, or the window's Stop) that ends the run at its
+//! next request or wait while the requests that end a run safely still go out, and hooks told
+//! of each stage and each wait (a progress bar, or the window's progress and telemetry).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use gms_ident::Error;
+use gms_ident::bench::Bench;
+
+use crate::Link;
+
+/// What a run reports as it goes.
+pub trait Hooks {
+    /// A stage starts (`what`), expected to take `seconds` of device time.
+    fn stage(&mut self, what: &str, seconds: f64);
+    /// `seconds` of device time were waited; the link is free for a look (its telemetry).
+    fn waited(&mut self, link: &mut Link, seconds: f64);
+}
+
+/// The link as a stoppable bench.
+pub struct RunBench<'a, 'h> {
+    /// The link.
+    pub link: &'a mut Link,
+    stop: Arc<AtomicBool>,
+    why: &'static str,
+    hooks: &'h mut dyn Hooks,
+}
+
+/// Whether a request is one that ends a run safely (it goes out even after a stop): the
+/// bridge off, a status, the stroke limits and the feedforward gain put back.
+pub fn ends_safely(line: &str) -> bool {
+    line == "disable"
+        || line == "status"
+        || line.starts_with("set lim.pos_")
+        || line.starts_with("set ff.gain ")
+        || line.starts_with("set pos.")
+        || line.starts_with("set sense.dir ")
+        || line.starts_with("set enc.dir ")
+}
+
+impl<'a, 'h> RunBench<'a, 'h> {
+    /// The link; `stop` set ends the run (`why` says by what, e.g. "interrupted (Ctrl-C)").
+    pub fn new(
+        link: &'a mut Link,
+        stop: Arc<AtomicBool>,
+        why: &'static str,
+        hooks: &'h mut dyn Hooks,
+    ) -> RunBench<'a, 'h> {
+        RunBench {
+            link,
+            stop,
+            why,
+            hooks,
+        }
+    }
+
+    fn stopped(&self) -> Result<(), Error> {
+        if self.stop.load(Ordering::SeqCst) {
+            Err(Error::Device(self.why.into()))
+        } else {
+            Ok(())
+        }
+    }
+
+    /// A stage starts.
+    pub fn stage(&mut self, what: &str, seconds: f64) {
+        self.hooks.stage(what, seconds);
+    }
+}
+
+impl Bench for RunBench<'_, '_> {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
+        if !ends_safely(line) {
+            self.stopped()?;
+        }
+        Bench::request(&mut *self.link, line)
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
+        self.stopped()?;
+        Bench::wait(&mut *self.link, seconds)?;
+        if seconds.is_finite() && seconds > 0.0 {
+            self.hooks.waited(self.link, seconds);
+        }
+        self.stopped()
+    }
+}
+
+/// The parameter file of an identification and its text (the report lines as comments, the
+/// data's directory named), as `gms-tune identify` and the window write it.
+pub fn identified_file(
+    id: &gms_ident::identify::Identified,
+    report: &std::path::Path,
+) -> (gms_ident::paramfile::ParamFile, String) {
+    let file = gms_ident::paramfile::ParamFile {
+        friction: id.spec.clone(),
+        device: None,
+    };
+    let text = format!(
+        "# identified by gms-tune identify (data in {})\n{}{}",
+        report.display(),
+        id.report
+            .iter()
+            .map(|l| format!("# {l}\n"))
+            .collect::<String>(),
+        file.to_toml()
+    );
+    (file, text)
+}
+
+/// The parameter file of a commissioning — the device's parameters `pf` with the settings
+/// found in `[device]` — and its text (the steps' lines as comments), as `gms-tune commission`
+/// and the window write it.
+pub fn commissioned_file(
+    c: &gms_ident::bench::Commissioned,
+    mut pf: gms_ident::paramfile::ParamFile,
+) -> (gms_ident::paramfile::ParamFile, String) {
+    let mut device = toml::Table::new();
+    for (k, v) in c.settings() {
+        device.insert(k.to_string(), toml::Value::Float(v));
+    }
+    pf.device = Some(device);
+    let text = format!(
+        "# commissioned by gms-tune commission\n{}{}",
+        c.lines
+            .iter()
+            .map(|l| format!("# {l}\n"))
+            .collect::<String>(),
+        pf.to_toml()
+    );
+    (pf, text)
+}
