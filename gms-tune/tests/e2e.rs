@@ -170,6 +170,10 @@ fn main() {
         ),
         ("the_window_shows_a_lost_link", the_window_shows_a_lost_link),
         (
+            "the_window_exports_dumps_and_steps",
+            the_window_exports_dumps_and_steps,
+        ),
+        (
             "the_window_runs_tune_ff_and_applies_it",
             the_window_runs_tune_ff_and_applies_it,
         ),
@@ -898,10 +902,18 @@ fn commission_with_the_link_lost_applies_nothing() {
 /// The window (`gms_tune::ui::App`, its real widgets driven by egui_kittest without a
 /// display) on `srv` over TCP, the harness tall enough to lay out the whole parameter tree.
 fn window(srv: &Server) -> egui_kittest::Harness<'static, gms_tune::ui::App> {
+    window_on(srv, Vec::new())
+}
+
+/// The same, the request lines `first` sent once the link is up.
+fn window_on(
+    srv: &Server,
+    first: Vec<String>,
+) -> egui_kittest::Harness<'static, gms_tune::ui::App> {
     let app = gms_tune::ui::App::new(
         gms_tune::ui::Endpoint::Tcp(srv.addr.clone()),
         std::time::Duration::from_secs(2),
-        Vec::new(),
+        first,
         &egui::Context::default(),
     );
     egui_kittest::Harness::builder()
@@ -1106,4 +1118,57 @@ fn the_window_stops_a_run_with_the_bridge_off() {
     drop(h);
     assert_eq!(tune(&srv, &["get", "lim.pos_max"], d).1.trim(), "50");
     assert_eq!(tune(&srv, &["get", "lim.pos_min"], d).1.trim(), "-50");
+}
+
+/// Export visible writes the samples of the plots' time window; Dump writes the device's
+/// parameters as a parameter file; the step test moves the axis by the step and gives its
+/// figures.
+fn the_window_exports_dumps_and_steps() {
+    use egui_kittest::kittest::Queryable;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start("tcp", &d.join("flash.img"));
+    let mut h = window_on(&srv, vec!["set pos.kd 2.2e-4".into(), "enable".into()]);
+    assert!(step_until(&mut h, 10.0, |a| a.samples.len() > 2000
+        && a.status_value("enabled") == Some("1")));
+    h.state_mut().csv = d.join("live.csv").display().to_string();
+    h.state_mut().file = d.join("dump.toml").display().to_string();
+    h.step();
+    h.get_by_label("Pause").click();
+    h.step();
+    h.get_by_label("Export visible").click();
+    h.step();
+    let text = std::fs::read_to_string(d.join("live.csv")).unwrap();
+    let (a, b) = h.state().visible;
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(
+        text.lines().next(),
+        Some("t,pos,ref,error,ff,current,friction")
+    );
+    assert!(rows.len() > 1000, "{}", rows.len());
+    assert!(rows.iter().all(|r| r.len() == 7 && r[0] >= a && r[0] <= b));
+    h.get_by_label("Resume").click();
+    h.get_by_label("Dump").click();
+    assert!(step_until(&mut h, 5.0, |_| d.join("dump.toml").exists()));
+    let pf = gms_ident::paramfile::ParamFile::load(&d.join("dump.toml")).unwrap();
+    assert_eq!(pf.device.unwrap()["pos.kd"].as_float(), Some(0.00022));
+    // A step of 2e-4 rad (53 counts) on the Motion page.
+    h.state_mut().tab = gms_tune::ui::app::Tab::Motion;
+    h.step();
+    h.get_by_label("Step").click();
+    assert!(step_until(&mut h, 10.0, |a| a.step.is_some()));
+    let s = h.state().step.clone().unwrap();
+    eprintln!(
+        "step {} rad: overshoot {:.1} counts, settled {:?} s",
+        s.step, s.overshoot, s.settle
+    );
+    assert_eq!(s.step, 2e-4);
+    assert!(s.settle.is_some_and(|t| t < 0.3), "{:?}", s.settle);
+    assert!(s.overshoot >= 0.0 && s.overshoot < 53.0);
+    h.step();
+    assert!(h.query_by_label_contains("overshoot").is_some());
 }

@@ -152,8 +152,10 @@ pub struct App {
     step_pending: Option<(f64, f64)>,
     /// The last step test.
     pub step: Option<StepResult>,
-    file: String,
-    csv: String,
+    /// The parameter file of Dump and Load file.
+    pub file: String,
+    /// The CSV of Export visible.
+    pub csv: String,
     /// The page shown.
     pub tab: Tab,
     /// The experiments page's inputs.
