@@ -3,6 +3,7 @@
 
 pub mod params;
 pub mod run;
+#[cfg(feature = "ui")]
 pub mod ui;
 
 use std::io::{ErrorKind, Read, Write};

@@ -104,6 +104,7 @@ enum Cmd {
     /// model over it, the parameter tree (edit, save/load/defaults, dump/load a file), enable,
     /// disable, clear, status and faults, jog, move and step test. The link runs off the UI
     /// thread; a lost link is shown and retried every second.
+    #[cfg(feature = "ui")]
     Ui {
         /// Write a PNG of the window after --after seconds, then close it.
         #[arg(long, value_name = "FILE.png")]
@@ -302,6 +303,7 @@ fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
 
 fn run(cli: Cli) -> Result<(), Fail> {
     let timeout = Duration::from_millis(cli.timeout_ms);
+    #[cfg(feature = "ui")]
     if let Cmd::Ui {
         screenshot,
         after,
@@ -479,6 +481,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 save,
             },
         )?,
+        #[cfg(feature = "ui")]
         Cmd::Ui { .. } => unreachable!("handled before the link opens"),
         Cmd::Identify {
             out,

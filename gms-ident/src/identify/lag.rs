@@ -3,7 +3,7 @@
 
 use crate::Error;
 /// The frictional-lag fit of C.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LagFit {
     /// The fitted slip rate C [N/s or N·m/s].
     pub c: f64,

@@ -6,7 +6,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Dyn, Matrix, OMatrix, OVector, Owned, U5, Vector5};
 
 /// The sliding fit: Stribeck + viscous parameters and their uncertainty.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct StribeckFit {
     /// Static friction [N or N·m].
     pub fs: f64,

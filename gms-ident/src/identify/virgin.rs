@@ -7,7 +7,7 @@ use nalgebra::{Dyn, OMatrix, OVector};
 use crate::paramfile::BlockSpec;
 
 /// The result of the pre-sliding fit.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct VirginFit {
     /// The blocks: stiffness k_i and weight alpha_i, breakpoints in increasing order.
     pub blocks: Vec<BlockSpec>,

@@ -1,0 +1,74 @@
+"""gms: the friction models, identification, simulator and bench client of the gms project,
+from the same Rust core as the firmware. Units are SI: s, m or rad, N or N·m, A, V."""
+
+from os import PathLike
+from typing import Any, Optional, Union
+
+import numpy as np
+import numpy.typing as npt
+
+Params = Union[str, "PathLike[str]", dict[str, Any]]
+"""A parameter file's path, or a dict with its keys ({"friction": {"model": "gms", ...}})."""
+
+Scenario = Union[None, str, "PathLike[str]", dict[str, Any]]
+"""None (the default scenario), a scenario file's path, or a dict with its keys."""
+
+class GmsError(Exception):
+    """Bad input (arrays, parameters, files), a fit that does not converge, or a device that
+    refused or went silent; the message is the command line's one line."""
+
+def friction(params: Params, t: npt.NDArray[np.float64], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The friction [N or N·m] along x(t) [m or rad; s] from the virgin state: what
+    `hil-sim friction` computes for the same file (the same f32 model). Element 0 is 0.
+    t strictly increasing, every value finite, equal lengths."""
+
+class Model:
+    """A friction model (gms, lugre or static) of a parameter file."""
+
+    def __init__(self, params: Params) -> None: ...
+    @property
+    def kind(self) -> str:
+        """"gms", "lugre" or "static"."""
+    @property
+    def force(self) -> float:
+        """The friction after the last step [N or N·m]."""
+    def step(self, dx: float, dt: float) -> float:
+        """Moves by dx [m or rad] at constant velocity over dt [s]; returns the friction."""
+    def run(self, t: npt.NDArray[np.float64], x: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The friction along x(t) from the present state (element 0: the force before)."""
+    def reset(self) -> None:
+        """Back to the virgin state at rest."""
+
+def fit_virgin(x: npt.NDArray[np.float64], f: npt.NDArray[np.float64], blocks: int = 6) -> dict[str, Any]:
+    """The virgin-curve fit (pre-sliding x [m or rad], f [N or N·m] from rest):
+    {"blocks": [{"k", "alpha"}], "fs", "breakpoints", "rms"}."""
+
+def fit_stribeck(v: npt.NDArray[np.float64], f: npt.NDArray[np.float64]) -> dict[str, Any]:
+    """The Stribeck fit of steady sliding (v > 0 [m/s or rad/s], f): {"fs", "fc", "vs",
+    "delta", "sigma", "rms", "std_err"}."""
+
+def fit_lag(params: Params, t: npt.NDArray[np.float64], x: npt.NDArray[np.float64], f: npt.NDArray[np.float64]) -> dict[str, Any]:
+    """The frictional-lag fit of C (the rest of the model from params): {"c", "rel_err", "rms"}."""
+
+def run(scenario: Scenario = None) -> dict[str, Any]:
+    """One closed-loop run as `hil-sim run`: {"trace": {column: array}, "metrics": {...},
+    "mode", "seed"}; columns t, reference, position, error, current, current_cmd, voltage,
+    friction, feedforward, ff_scale, drift, ref_velocity (SI)."""
+
+def compare(scenario: Scenario = None, runs: int = 20, seed: int = 1) -> dict[str, Any]:
+    """Every feedforward mode over `runs` friction draws, as `hil-sim compare` writes its JSON."""
+
+class Device:
+    """A board (serial port) or the virtual device (TCP) speaking the protocol, as gms-tune."""
+
+    def __init__(self, port: Optional[str] = None, tcp: Optional[str] = None, timeout: float = 1.0) -> None: ...
+    def request(self, line: str) -> str:
+        """One protocol line; the reply's text (an `err` raises GmsError)."""
+    def get(self, path: str) -> Union[float, str]: ...
+    def set(self, path: str, value: Union[float, str]) -> None:
+        """A refusal raises GmsError with the device's line; nothing changes."""
+    def list(self) -> list[dict[str, str]]:
+        """Every parameter: {"path", "value", "unit", "range"}."""
+    def status(self) -> dict[str, Union[float, str]]: ...
+    def record(self, fields: str = "t,pos,error,current", rate: float = 1000.0, seconds: float = 1.0) -> dict[str, npt.NDArray[np.float64]]:
+        """The telemetry stream for `seconds` of wall time, as arrays by field."""

@@ -1,0 +1,537 @@
+//! `gms`: the project's Rust core in Python — the friction models (the same f32 code as the
+//! firmware), the identification fits on arrays, the closed-loop simulator, and the bench
+//! client. Every error is a `gms.GmsError` with the command line's one-line message.
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString};
+
+use gms_ident::paramfile::{AnyModel, ParamFile};
+
+create_exception!(
+    gms,
+    GmsError,
+    PyException,
+    "A gms failure: bad input (arrays, parameters, files), a fit that does not converge, or a device that refused or went silent. The message is the command line's."
+);
+
+fn err(e: impl std::fmt::Display) -> PyErr {
+    GmsError::new_err(e.to_string())
+}
+
+/// A Python value as TOML (dicts, lists, numbers, strings, booleans).
+fn to_toml(v: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
+    if v.is_instance_of::<PyBool>() {
+        return Ok(toml::Value::Boolean(v.extract()?));
+    }
+    if v.is_instance_of::<PyInt>() {
+        return Ok(toml::Value::Integer(v.extract()?));
+    }
+    if v.is_instance_of::<PyFloat>() {
+        return Ok(toml::Value::Float(v.extract()?));
+    }
+    if v.is_instance_of::<PyString>() {
+        return Ok(toml::Value::String(v.extract()?));
+    }
+    if let Ok(d) = v.cast::<PyDict>() {
+        let mut t = toml::Table::new();
+        for (k, val) in d.iter() {
+            let key: String = k
+                .extract()
+                .map_err(|_| err(format!("{at}: keys must be strings")))?;
+            let here = if at.is_empty() {
+                key.clone()
+            } else {
+                format!("{at}.{key}")
+            };
+            t.insert(key, to_toml(&val, &here)?);
+        }
+        return Ok(toml::Value::Table(t));
+    }
+    if let Ok(l) = v.cast::<PyList>() {
+        return Ok(toml::Value::Array(
+            l.iter()
+                .enumerate()
+                .map(|(i, x)| to_toml(&x, &format!("{at}[{i}]")))
+                .collect::<PyResult<_>>()?,
+        ));
+    }
+    // numpy scalars and the like.
+    if let Ok(x) = v.extract::<f64>() {
+        return Ok(toml::Value::Float(x));
+    }
+    Err(err(format!("{at}: not a TOML value")))
+}
+
+/// A parameter file from a path (str or os.PathLike) or a dict with the file's keys.
+fn param_file(params: &Bound<'_, PyAny>) -> PyResult<ParamFile> {
+    if params.is_instance_of::<PyDict>() {
+        let text = match to_toml(params, "")? {
+            toml::Value::Table(t) => toml::to_string(&t).map_err(err)?,
+            _ => unreachable!("a dict is a table"),
+        };
+        return ParamFile::parse(&text, "<dict>").map_err(err);
+    }
+    let path: PathBuf = params
+        .extract()
+        .map_err(|_| err("params: a path to a parameter file, or a dict"))?;
+    ParamFile::load(&path).map_err(err)
+}
+
+/// A 1-D float array as a slice (copied when not contiguous).
+fn floats(a: &PyReadonlyArray1<'_, f64>) -> Vec<f64> {
+    a.as_array().iter().copied().collect()
+}
+
+/// A trajectory checked as `hil-sim friction` checks its file: equal lengths, finite values,
+/// t strictly increasing.
+fn trajectory(t: &[f64], x: &[f64]) -> PyResult<Vec<hil_sim::friction_cmd::Sample>> {
+    if t.len() != x.len() {
+        return Err(err(format!(
+            "t and x have different lengths ({} and {})",
+            t.len(),
+            x.len()
+        )));
+    }
+    let mut out = Vec::with_capacity(t.len());
+    for (i, (&ti, &xi)) in t.iter().zip(x).enumerate() {
+        if !(ti.is_finite() && xi.is_finite()) {
+            return Err(err(format!("sample {i}: t and x must be finite numbers")));
+        }
+        if let Some(p) = out.last().map(|p: &hil_sim::friction_cmd::Sample| p.t)
+            && ti <= p
+        {
+            return Err(err(format!(
+                "sample {i}: t does not increase: {ti} after {p}"
+            )));
+        }
+        out.push(hil_sim::friction_cmd::Sample { t: ti, x: xi });
+    }
+    Ok(out)
+}
+
+/// friction(params, t, x) -> numpy.ndarray
+///
+/// The friction [N or N·m] along the trajectory x(t) [m or rad; s], from the virgin state at
+/// rest: exactly what `hil-sim friction` computes for the same parameter file (the same f32
+/// model, the same bits); element 0 is the virgin state's 0. `params`: a parameter file's
+/// path or a dict with its keys ({"friction": {"model": "gms", ...}}).
+#[pyfunction]
+fn friction<'py>(
+    py: Python<'py>,
+    params: &Bound<'py, PyAny>,
+    t: PyReadonlyArray1<'py, f64>,
+    x: PyReadonlyArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let pf = param_file(params)?;
+    let mut model = pf.friction.build().map_err(err)?;
+    let traj = trajectory(&floats(&t), &floats(&x))?;
+    let rows = hil_sim::friction_cmd::simulate(&mut model, &traj);
+    Ok(PyArray1::from_vec(
+        py,
+        rows.iter().map(|r| r.f as f64).collect(),
+    ))
+}
+
+/// A friction model of a parameter file (its `[friction]` table): stepped by displacements,
+/// run along trajectories, its force read, reset to the virgin state.
+#[pyclass(module = "gms", unsendable)]
+struct Model {
+    model: AnyModel,
+    kind: String,
+}
+
+#[pymethods]
+impl Model {
+    /// Model(params): from a parameter file's path or a dict with its keys.
+    #[new]
+    fn new(params: &Bound<'_, PyAny>) -> PyResult<Model> {
+        let pf = param_file(params)?;
+        let kind = pf.friction.model.to_string();
+        Ok(Model {
+            model: pf.friction.build().map_err(err)?,
+            kind,
+        })
+    }
+
+    /// The model's kind: "gms", "lugre" or "static".
+    #[getter]
+    fn kind(&self) -> String {
+        self.kind.clone()
+    }
+
+    /// The friction after the last step [N or N·m].
+    #[getter]
+    fn force(&self) -> f64 {
+        self.model.force() as f64
+    }
+
+    /// step(dx, dt) -> float: moves by dx [m or rad] at constant velocity over dt [s];
+    /// returns the friction after it. dx = 0 holds; non-finite input leaves the state.
+    fn step(&mut self, dx: f64, dt: f64) -> PyResult<f64> {
+        if !(dx.is_finite() && dt.is_finite() && dt >= 0.0) {
+            return Err(err(format!("step({dx}, {dt}): finite dx, dt >= 0")));
+        }
+        Ok(self.model.advance(dx as f32, dt as f32) as f64)
+    }
+
+    /// run(t, x) -> numpy.ndarray: the friction along x(t) from the model's present state
+    /// (element 0: its force before the first motion).
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        t: PyReadonlyArray1<'py, f64>,
+        x: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let traj = trajectory(&floats(&t), &floats(&x))?;
+        let rows = hil_sim::friction_cmd::simulate(&mut self.model, &traj);
+        Ok(PyArray1::from_vec(
+            py,
+            rows.iter().map(|r| r.f as f64).collect(),
+        ))
+    }
+
+    /// Back to the virgin state at rest.
+    fn reset(&mut self) {
+        self.model.reset();
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "gms.Model(kind={:?}, force={})",
+            self.kind,
+            self.model.force()
+        )
+    }
+}
+
+/// fit_virgin(x, f, blocks=6) -> dict
+///
+/// The virgin-curve fit of `hil-sim identify` on arrays: pre-sliding displacement x [m or
+/// rad] and friction f [N or N·m] from rest; returns {"fs", "blocks": [(k, alpha)], "rms",
+/// ...} as the identification's report gives them.
+#[pyfunction]
+#[pyo3(signature = (x, f, blocks = 6))]
+fn fit_virgin<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray1<'py, f64>,
+    f: PyReadonlyArray1<'py, f64>,
+    blocks: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let fit = gms_ident::identify::fit_virgin(&floats(&x), &floats(&f), blocks).map_err(err)?;
+    debug_dict(py, &fit)
+}
+
+/// fit_stribeck(v, f) -> dict
+///
+/// The Stribeck fit of `hil-sim identify` on arrays of steady sliding speed v [m/s or rad/s,
+/// > 0] and friction f: {"fs", "fc", "vs", "delta", "sigma", "rms", "std_err": [...]}.
+#[pyfunction]
+fn fit_stribeck<'py>(
+    py: Python<'py>,
+    v: PyReadonlyArray1<'py, f64>,
+    f: PyReadonlyArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let fit = gms_ident::identify::fit_stribeck(&floats(&v), &floats(&f)).map_err(err)?;
+    debug_dict(py, &fit)
+}
+
+/// fit_lag(params, t, x, f) -> dict
+///
+/// The frictional-lag fit of C on arrays (t [s], x, f) with the rest of the model from
+/// `params` (a path or a dict): {"c", "rel_err", "rms"}.
+#[pyfunction]
+fn fit_lag<'py>(
+    py: Python<'py>,
+    params: &Bound<'py, PyAny>,
+    t: PyReadonlyArray1<'py, f64>,
+    x: PyReadonlyArray1<'py, f64>,
+    f: PyReadonlyArray1<'py, f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let pf = param_file(params)?;
+    let fit = gms_ident::identify::fit_lag(&pf.friction, &floats(&t), &floats(&x), &floats(&f))
+        .map_err(err)?;
+    debug_dict(py, &fit)
+}
+
+/// A fit's fields as a dict, through its serde form.
+fn debug_dict<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'py, PyDict>> {
+    let json = serde_json::to_value(v).map_err(err)?;
+    match json_to_py(py, &json)?.cast_into::<PyDict>() {
+        Ok(d) => Ok(d),
+        Err(_) => Err(err("not a record")),
+    }
+}
+
+fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use serde_json::Value;
+    Ok(match v {
+        Value::Null => py.None().into_bound(py),
+        Value::Bool(b) => PyBool::new(py, *b).to_owned().into_any(),
+        Value::Number(n) => match n.as_i64() {
+            Some(i) if !n.is_f64() => i.into_pyobject(py)?.into_any(),
+            _ => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        Value::String(s) => s.into_pyobject(py)?.into_any(),
+        Value::Array(a) => {
+            let l = PyList::empty(py);
+            for x in a {
+                l.append(json_to_py(py, x)?)?;
+            }
+            l.into_any()
+        }
+        Value::Object(o) => {
+            let d = PyDict::new(py);
+            for (k, x) in o {
+                d.set_item(k, json_to_py(py, x)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+/// A scenario from None (the default), a path or a dict with the file's keys.
+fn scenario(sc: Option<&Bound<'_, PyAny>>) -> PyResult<hil_sim::scenario::Scenario> {
+    match sc {
+        None => Ok(hil_sim::scenario::Scenario::default()),
+        Some(s) if s.is_none() => Ok(hil_sim::scenario::Scenario::default()),
+        Some(s) if s.is_instance_of::<PyDict>() => {
+            let text = match to_toml(s, "")? {
+                toml::Value::Table(t) => toml::to_string(&t).map_err(err)?,
+                _ => unreachable!("a dict is a table"),
+            };
+            hil_sim::scenario::Scenario::parse(&text, "<dict>").map_err(err)
+        }
+        Some(s) => {
+            let path: PathBuf = s
+                .extract()
+                .map_err(|_| err("scenario: None, a path to a scenario file, or a dict"))?;
+            hil_sim::scenario::Scenario::load(&path).map_err(err)
+        }
+    }
+}
+
+/// run(scenario=None) -> dict
+///
+/// One closed-loop run, as `hil-sim run` does it (the scenario's mode and seed): {"trace":
+/// {column: numpy array}, "metrics": {...}} — the trace's columns t, reference, position,
+/// error, current, current_cmd, voltage, friction, feedforward, ff_scale, drift,
+/// ref_velocity (SI), the metrics of metrics.json (SI).
+#[pyfunction]
+#[pyo3(signature = (scenario = None))]
+fn run<'py>(py: Python<'py>, scenario: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyDict>> {
+    let sc = self::scenario(scenario)?;
+    let res = hil_sim::sim::run(&sc, sc.mode(), sc.plant.seed).map_err(err)?;
+    let out = PyDict::new(py);
+    let trace = PyDict::new(py);
+    macro_rules! col {
+        ($name:literal, $f:ident) => {
+            trace.set_item(
+                $name,
+                PyArray1::from_vec(py, res.trace.iter().map(|r| r.$f).collect()),
+            )?;
+        };
+    }
+    col!("t", t);
+    col!("reference", reference);
+    col!("position", position);
+    col!("error", error);
+    col!("current", current);
+    col!("current_cmd", current_cmd);
+    col!("voltage", voltage);
+    col!("friction", friction);
+    col!("feedforward", feedforward);
+    col!("ff_scale", ff_scale);
+    col!("drift", drift);
+    col!("ref_velocity", ref_velocity);
+    out.set_item("trace", trace)?;
+    out.set_item("metrics", debug_dict(py, &res.metrics)?)?;
+    out.set_item("mode", sc.mode().name())?;
+    out.set_item("seed", sc.plant.seed)?;
+    Ok(out)
+}
+
+/// compare(scenario=None, runs=20, seed=1) -> dict
+///
+/// Every feedforward mode over `runs` friction draws (seeds seed … seed + runs − 1), as
+/// `hil-sim compare` writes its JSON.
+#[pyfunction]
+#[pyo3(signature = (scenario = None, runs = 20, seed = 1))]
+fn compare<'py>(
+    py: Python<'py>,
+    scenario: Option<&Bound<'py, PyAny>>,
+    runs: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    if runs == 0 {
+        return Err(err("runs: at least 1"));
+    }
+    let sc = self::scenario(scenario)?;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (cmp, _) = hil_sim::commands::compare(&sc, runs, seed, threads, false).map_err(err)?;
+    debug_dict(py, &cmp)
+}
+
+/// A device over a serial port or TCP, speaking the protocol as `gms-tune` does.
+#[pyclass(module = "gms", unsendable)]
+struct Device {
+    link: gms_tune::Link,
+}
+
+fn link_err(e: gms_tune::LinkError) -> PyErr {
+    err(e)
+}
+
+#[pymethods]
+impl Device {
+    /// Device(port=None, tcp=None, timeout=1.0): a board's serial port, or a TCP address
+    /// (`hil-sim serve --tcp`); `timeout` is the reply timeout [s].
+    #[new]
+    #[pyo3(signature = (port = None, tcp = None, timeout = 1.0))]
+    fn new(port: Option<String>, tcp: Option<String>, timeout: f64) -> PyResult<Device> {
+        if !(timeout.is_finite() && timeout > 0.0) {
+            return Err(err(format!("timeout {timeout}: seconds, above 0")));
+        }
+        let d = Duration::from_secs_f64(timeout);
+        let link = match (port, tcp) {
+            (Some(p), None) => gms_tune::Link::serial(&p, d),
+            (None, Some(a)) => gms_tune::Link::tcp(&a, d),
+            _ => Err("give port or tcp (one of them)".into()),
+        }
+        .map_err(err)?;
+        Ok(Device { link })
+    }
+
+    /// request(line) -> str: one protocol line; the text after `ok` (with the lines before it,
+    /// newline-separated); an `err` reply raises GmsError with the device's line.
+    fn request(&mut self, line: &str) -> PyResult<String> {
+        let (body, text) = self.link.request(line).map_err(link_err)?;
+        let mut out = body.join("\n");
+        if !text.is_empty() {
+            if !out.is_empty() {
+                out.push('\n');
+            }
+            out.push_str(&text);
+        }
+        Ok(out)
+    }
+
+    /// get(path) -> float | str: a parameter's value (a number where it is one).
+    fn get<'py>(&mut self, py: Python<'py>, path: &str) -> PyResult<Bound<'py, PyAny>> {
+        let (_, v) = self
+            .link
+            .request(&format!("get {path}"))
+            .map_err(link_err)?;
+        let v = v.trim().to_string();
+        Ok(match v.parse::<f64>() {
+            Ok(x) => x.into_pyobject(py)?.into_any(),
+            Err(_) => v.into_pyobject(py)?.into_any(),
+        })
+    }
+
+    /// set(path, value): sets a parameter; a refusal raises GmsError and changes nothing.
+    fn set(&mut self, path: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let v: String = match value.extract::<f64>() {
+            Ok(x) if value.is_instance_of::<PyBool>() => {
+                return Err(err(format!("{path}: {x}: not a number or a name")));
+            }
+            Ok(x) => format!("{x}"),
+            Err(_) => value.extract::<String>()?,
+        };
+        self.link
+            .request(&format!("set {path} {v}"))
+            .map_err(link_err)?;
+        Ok(())
+    }
+
+    /// list() -> list[dict]: every parameter as {"path", "value", "unit", "range"}.
+    fn list<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let rows = gms_tune::params::list(&mut self.link).map_err(link_err)?;
+        let l = PyList::empty(py);
+        for r in rows {
+            let d = PyDict::new(py);
+            d.set_item("path", r.path)?;
+            d.set_item("value", r.value)?;
+            d.set_item("unit", r.unit)?;
+            d.set_item("range", r.range)?;
+            l.append(d)?;
+        }
+        Ok(l)
+    }
+
+    /// status() -> dict: the `status` reply's keys (numbers where they are).
+    fn status<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (_, text) = self.link.request("status").map_err(link_err)?;
+        let d = PyDict::new(py);
+        for kv in text.split_whitespace() {
+            if let Some((k, v)) = kv.split_once('=') {
+                match v.parse::<f64>() {
+                    Ok(x) => d.set_item(k, x)?,
+                    Err(_) => d.set_item(k, v)?,
+                }
+            }
+        }
+        Ok(d)
+    }
+
+    /// record(fields="t,pos,error,current", rate=1000.0, seconds=1.0) -> dict: the telemetry
+    /// stream for `seconds` (wall time) as {field: numpy array}.
+    #[pyo3(signature = (fields = "t,pos,error,current", rate = 1000.0, seconds = 1.0))]
+    fn record<'py>(
+        &mut self,
+        py: Python<'py>,
+        fields: &str,
+        rate: f64,
+        seconds: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
+            return Err(err(format!("seconds {seconds}: above 0, at most 3600")));
+        }
+        let names: Vec<&str> = fields.split(',').map(str::trim).collect();
+        self.link.telemetry.clear();
+        self.link
+            .request(&format!("stream {fields} {rate}"))
+            .map_err(link_err)?;
+        let listened = self.link.listen(Duration::from_secs_f64(seconds));
+        let _ = self.link.request("stream off");
+        listened.map_err(link_err)?;
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+        for (_, line) in self.link.telemetry.drain(..) {
+            let kv = gms_tune::parse_telemetry(&line);
+            let row: Option<Vec<f64>> = names
+                .iter()
+                .map(|n| kv.iter().find(|(k, _)| k == n).map(|(_, v)| *v))
+                .collect();
+            if let Some(row) = row {
+                for (c, v) in cols.iter_mut().zip(row) {
+                    c.push(v);
+                }
+            }
+        }
+        let d = PyDict::new(py);
+        for (n, c) in names.iter().zip(cols) {
+            d.set_item(*n, PyArray1::from_vec(py, c))?;
+        }
+        Ok(d)
+    }
+}
+
+/// The module.
+#[pymodule]
+fn gms(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("GmsError", m.py().get_type::<GmsError>())?;
+    m.add_function(wrap_pyfunction!(friction, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_virgin, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_stribeck, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_lag, m)?)?;
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_class::<Model>()?;
+    m.add_class::<Device>()?;
+    Ok(())
+}

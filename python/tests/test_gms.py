@@ -1,0 +1,171 @@
+"""The Python package against the command line it shares its code with (`hil-sim friction`,
+`hil-sim run`, `hil-sim serve`), and against physics it must reproduce."""
+
+import csv
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import gms
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE1 = ROOT / "examples" / "table1.toml"
+
+
+def hil_sim(*args, **kw):
+    """`hil-sim ARGS` through cargo from the repository's root."""
+    return subprocess.run(
+        ["cargo", "run", "-q", "-p", "hil-sim", "--", *map(str, args)],
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+        text=True,
+        **kw,
+    )
+
+
+def read_csv(path):
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+def test_friction_is_hil_sim_friction(tmp_path):
+    traj = read_csv(ROOT / "examples" / "trajectory.csv")
+    out = tmp_path / "f.csv"
+    hil_sim("friction", "--params", TABLE1, "--input", ROOT / "examples" / "trajectory.csv", "--output", out)
+    cli = read_csv(out)
+    f = gms.friction(str(TABLE1), traj["t"], traj["x"])
+    assert f.shape == cli["f"].shape
+    # The same f32 model: the same bits (the CLI prints the f32 shortest form).
+    assert np.array_equal(np.float32(f), np.float32(cli["f"]))
+    # The parameter file as a dict gives the same.
+    import tomllib
+
+    with open(TABLE1, "rb") as fh:
+        params = tomllib.load(fh)
+    assert np.array_equal(gms.friction(params, traj["t"], traj["x"]), f)
+
+
+def test_model_objects_step_run_and_reset():
+    m = gms.Model(str(TABLE1))
+    assert m.kind == "gms"
+    t = np.linspace(0.0, 1.0, 101)
+    x = 2e-3 * np.sin(2 * np.pi * t)
+    a = m.run(t, x)
+    assert np.array_equal(a, gms.friction(str(TABLE1), t, x))
+    assert m.force == pytest.approx(a[-1])
+    m.reset()
+    assert m.force == 0.0
+    # Steps of the same motion give the same friction.
+    for i in range(1, len(t)):
+        last = m.step(x[i] - x[i - 1], t[i] - t[i - 1])
+    assert last == a[-1]
+
+
+def test_identification_round_trip_from_arrays():
+    # The virgin curve: a slow ramp from rest with Table 1's model.
+    t = np.linspace(0.0, 10.0, 400)
+    x = np.linspace(0.0, 6e-3, 400)
+    f = gms.friction(str(TABLE1), t, x)
+    fit = gms.fit_virgin(x[1:], f[1:], 6)
+    assert len(fit["blocks"]) == 6
+    assert sum(b["alpha"] for b in fit["blocks"]) == pytest.approx(1.0, abs=1e-6)
+    assert fit["rms"] < 0.01 * f.max()
+    # The Stribeck curve: steady sliding at each speed (the model run long enough to settle).
+    v = np.geomspace(0.02, 6.0, 12)
+    fv = []
+    for vi in v:
+        m = gms.Model(str(TABLE1))
+        tt = np.linspace(0.0, 0.5, 2001)
+        fv.append(m.run(tt, vi * tt)[-1])
+    s = gms.fit_stribeck(v, np.array(fv))
+    assert s["fs"] == pytest.approx(220e-6, rel=0.01)
+    assert s["fc"] == pytest.approx(125e-6, rel=0.01)
+    assert s["vs"] == pytest.approx(0.2, rel=0.02)
+
+
+def test_run_is_hil_sim_run(tmp_path):
+    res = gms.run()
+    hil_sim("run", "--out", tmp_path)
+    with open(tmp_path / "metrics.json") as fh:
+        cli = json.load(fh)
+    for k, v in cli["metrics"].items():
+        assert res["metrics"][k] == pytest.approx(v, rel=1e-12, abs=1e-15), k
+    assert res["mode"] == cli["mode"] and res["seed"] == cli["seed"]
+    tr = res["trace"]
+    assert len(tr["t"]) == len(tr["error"]) > 1000
+    assert np.all(np.diff(tr["t"]) > 0)
+
+
+@pytest.fixture
+def server():
+    p = subprocess.Popen(
+        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0"],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    line = p.stdout.readline()
+    assert line.startswith("listening on "), line
+    yield line.split()[-1]
+    p.kill()
+    p.wait()
+
+
+def test_device_against_the_virtual_device(server):
+    d = gms.Device(tcp=server, timeout=2.0)
+    assert d.get("pos.kp") == 0.2
+    d.set("pos.kd", 2.2e-4)
+    assert d.get("pos.kd") == pytest.approx(2.2e-4)
+    with pytest.raises(gms.GmsError, match="err 6"):
+        d.set("pos.kp", 5000)
+    assert d.get("pos.kp") == 0.2
+    assert d.get("ff.mode") == "gms"
+    paths = [p["path"] for p in d.list()]
+    assert "gms.fs" in paths and "pos.kp" in paths
+    st = d.status()
+    assert st["enabled"] == 0 and st["fault_names"] == "none"
+    rec = d.record("t,pos", 1000.0, 0.5)
+    assert len(rec["t"]) > 100
+    assert np.all(np.diff(rec["t"]) > 0)
+
+
+def test_bad_inputs_raise_clear_errors(tmp_path):
+    t = np.linspace(0.0, 1.0, 5)
+    with pytest.raises(gms.GmsError, match="different lengths"):
+        gms.friction(str(TABLE1), t, t[:3])
+    x = t.copy()
+    x[2] = np.nan
+    with pytest.raises(gms.GmsError, match="finite"):
+        gms.friction(str(TABLE1), t, x)
+    with pytest.raises(gms.GmsError, match="does not increase"):
+        gms.friction(str(TABLE1), t[::-1], t)
+    with pytest.raises(TypeError):
+        gms.friction(str(TABLE1), np.zeros((2, 2)), np.zeros((2, 2)))
+    bad = {"friction": {"model": "gms", "fs": 1e-4, "fc": 2e-4, "vs": 0.1, "c": 1e-3,
+                        "blocks": [{"k": 1.0, "alpha": 1.0}]}}
+    with pytest.raises(gms.GmsError, match=r"\[friction\] fs must be >= fc"):
+        gms.friction(bad, t, t)
+    with pytest.raises(gms.GmsError, match="needs `sigma0`"):
+        gms.Model({"friction": {"model": "lugre", "fs": 2e-4, "fc": 1e-4, "vs": 0.1}})
+    with pytest.raises(gms.GmsError, match="missing.toml"):
+        gms.Model(str(tmp_path / "missing.toml"))
+    with pytest.raises(gms.GmsError):
+        gms.fit_stribeck(np.array([1.0, 2.0]), np.array([1.0]))
+    with pytest.raises(gms.GmsError, match="port or tcp"):
+        gms.Device()
+
+
+def test_compare_is_hil_sim_compare(tmp_path):
+    res = gms.compare(None, runs=2, seed=1)
+    hil_sim("compare", "--runs", 2, "--seed", 1, "--json", tmp_path / "c.json")
+    with open(tmp_path / "c.json") as fh:
+        cli = json.load(fh)
+    assert json.dumps(res, sort_keys=True) == json.dumps(cli, sort_keys=True)
