@@ -38,6 +38,23 @@ class Model:
         """The friction along x(t) from the present state (element 0: the force before)."""
     def reset(self) -> None:
         """Back to the virgin state at rest."""
+    @property
+    def state(self) -> npt.NDArray[np.float64]:
+        """Each Maxwell-slip block's force [N or N·m] (GMS), the bristle deflection z (LuGre),
+        empty (static map)."""
+
+class Gms(Model):
+    """A GMS model (the file's model must be "gms")."""
+
+class LuGre(Model):
+    """A LuGre model (the file's model must be "lugre")."""
+
+class StaticMap(Model):
+    """A static friction map (the file's model must be "static")."""
+
+def identify(presliding: Optional[Union[str, "PathLike[str]"]] = None, sliding: Optional[Union[str, "PathLike[str]"]] = None, lag: Optional[Union[str, "PathLike[str]"]] = None, blocks: int = 6, asymmetric: bool = False) -> dict[str, Any]:
+    """The whole identification of `hil-sim identify` from its CSVs: {"params": the file's
+    text, "friction": its [friction] table, "report", "virgin", "stribeck", "lag"}."""
 
 def fit_virgin(x: npt.NDArray[np.float64], f: npt.NDArray[np.float64], blocks: int = 6) -> dict[str, Any]:
     """The virgin-curve fit (pre-sliding x [m or rad], f [N or N·m] from rest):

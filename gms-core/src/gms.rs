@@ -264,4 +264,8 @@ impl<const N: usize> FrictionModel for Gms<N> {
         self.viscous = 0.0;
         self.force = 0.0;
     }
+
+    fn state(&self) -> &[f32] {
+        &self.f
+    }
 }

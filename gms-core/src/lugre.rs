@@ -121,4 +121,8 @@ impl FrictionModel for LuGre {
         self.z = 0.0;
         self.force = 0.0;
     }
+
+    fn state(&self) -> &[f32] {
+        core::slice::from_ref(&self.z)
+    }
 }

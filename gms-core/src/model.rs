@@ -19,6 +19,12 @@ pub trait FrictionModel {
 
     /// Returns to the virgin state at rest (zero internal state, zero force).
     fn reset(&mut self);
+
+    /// The internal state: each Maxwell-slip block's force [N or N·m] for GMS, the bristle
+    /// deflection z [m or rad] for LuGre, nothing for a static map.
+    fn state(&self) -> &[f32] {
+        &[]
+    }
 }
 
 /// The step's velocity [m/s] and direction, or `None` when the step is ignored or holds.

@@ -403,36 +403,14 @@ fn run(cli: Cli) -> Result<(), Fail> {
             link.request("stream off")?;
             let rows = telemetry_rows(&link, fields);
             write_csv(&out.join("trace.csv"), fields, &rows)?;
-            let trace: Vec<gms_ident::trace::TraceRow> = rows
+            let six: Vec<[f64; 6]> = rows
                 .iter()
-                .map(|r| gms_ident::trace::TraceRow {
-                    t: r[0],
-                    reference: r[1],
-                    position: r[2],
-                    error: r[3],
-                    current: 0.0,
-                    current_cmd: 0.0,
-                    voltage: 0.0,
-                    friction: r[5],
-                    feedforward: r[4],
-                    ff_scale: 1.0,
-                    drift: 1.0,
-                    ref_velocity: 0.0,
-                    segment: 0,
-                })
+                .filter(|r| r.len() == 6)
+                .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
                 .collect();
-            // hil-sim's own figures, for the one move the device made (its profile limits
-            // are the device's defaults for `move`).
-            let rpc = 3.8e-6;
-            use gms_core::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
-            let seg = gms_core::reference::Segment::Move {
-                distance: distance as f32,
-                vmax: MOVE_VMAX,
-                amax: MOVE_AMAX,
-                jmax: MOVE_JMAX,
-                dwell: seconds as f32,
-            };
-            let m = gms_ident::trace::metrics(&trace, &[seg], rpc);
+            // hil-sim's own figures, for the one move the device made.
+            let (trace, m) = gms_tune::run::step_figures(&six, distance, seconds);
+            let rpc = gms_tune::run::RAD_PER_COUNT;
             for (name, v) in m.named() {
                 if name != "sine_rms_error" {
                     println!("{name} {v:e}");

@@ -132,3 +132,45 @@ pub fn commissioned_file(
     );
     (pf, text)
 }
+
+/// A step test's samples `(t, ref, pos, error, ff, friction)` (SI) as a trace, and its figures
+/// by `gms_ident::trace::metrics` for the one move of `distance` \[rad\] the device made with
+/// its default profile (`move POS`), dwelling `seconds` after it: what `gms-tune step-test`
+/// and the window both report.
+pub fn step_figures(
+    rows: &[[f64; 6]],
+    distance: f64,
+    seconds: f64,
+) -> (Vec<gms_ident::trace::TraceRow>, gms_ident::trace::Metrics) {
+    use gms_core::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
+    let trace: Vec<gms_ident::trace::TraceRow> = rows
+        .iter()
+        .map(|r| gms_ident::trace::TraceRow {
+            t: r[0],
+            reference: r[1],
+            position: r[2],
+            error: r[3],
+            current: 0.0,
+            current_cmd: 0.0,
+            voltage: 0.0,
+            friction: r[5],
+            feedforward: r[4],
+            ff_scale: 1.0,
+            drift: 1.0,
+            ref_velocity: 0.0,
+            segment: 0,
+        })
+        .collect();
+    let seg = gms_core::reference::Segment::Move {
+        distance: distance as f32,
+        vmax: MOVE_VMAX,
+        amax: MOVE_AMAX,
+        jmax: MOVE_JMAX,
+        dwell: seconds as f32,
+    };
+    let m = gms_ident::trace::metrics(&trace, &[seg], RAD_PER_COUNT);
+    (trace, m)
+}
+
+/// Radians per count of the default encoder (3.8 µrad), for figures in counts.
+pub const RAD_PER_COUNT: f64 = 3.8e-6;

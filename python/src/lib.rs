@@ -140,7 +140,7 @@ fn friction<'py>(
 
 /// A friction model of a parameter file (its `[friction]` table): stepped by displacements,
 /// run along trajectories, its force read, reset to the virgin state.
-#[pyclass(module = "gms", unsendable)]
+#[pyclass(module = "gms", unsendable, subclass)]
 struct Model {
     model: AnyModel,
     kind: String,
@@ -201,6 +201,13 @@ impl Model {
         self.model.reset();
     }
 
+    /// The internal state as an array: each Maxwell-slip block's force [N or N·m] (GMS),
+    /// the bristle deflection z [m or rad] (LuGre), empty (static map).
+    #[getter]
+    fn state<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.model.state().iter().map(|&v| v as f64).collect())
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "gms.Model(kind={:?}, force={})",
@@ -208,6 +215,108 @@ impl Model {
             self.model.force()
         )
     }
+}
+
+/// A model of the kind `kind`, or a GmsError naming what the file holds.
+fn model_of(params: &Bound<'_, PyAny>, kind: &str) -> PyResult<Model> {
+    let m = Model::new(params)?;
+    if m.kind != kind {
+        return Err(err(format!(
+            "the parameters are a {} model, not {kind}",
+            m.kind
+        )));
+    }
+    Ok(m)
+}
+
+/// Gms(params): a Generalized Maxwell-Slip model (the file's `model` must be "gms").
+#[pyclass(module = "gms", unsendable, extends = Model)]
+struct Gms;
+
+#[pymethods]
+impl Gms {
+    #[new]
+    fn new(params: &Bound<'_, PyAny>) -> PyResult<PyClassInitializer<Self>> {
+        Ok(PyClassInitializer::from(model_of(params, "gms")?).add_subclass(Gms))
+    }
+}
+
+/// LuGre(params): a LuGre model (the file's `model` must be "lugre").
+#[pyclass(module = "gms", unsendable, extends = Model)]
+struct LuGre;
+
+#[pymethods]
+impl LuGre {
+    #[new]
+    fn new(params: &Bound<'_, PyAny>) -> PyResult<PyClassInitializer<Self>> {
+        Ok(PyClassInitializer::from(model_of(params, "lugre")?).add_subclass(LuGre))
+    }
+}
+
+/// StaticMap(params): a static friction map (the file's `model` must be "static").
+#[pyclass(module = "gms", unsendable, extends = Model)]
+struct StaticMap;
+
+#[pymethods]
+impl StaticMap {
+    #[new]
+    fn new(params: &Bound<'_, PyAny>) -> PyResult<PyClassInitializer<Self>> {
+        Ok(PyClassInitializer::from(model_of(params, "static")?).add_subclass(StaticMap))
+    }
+}
+
+/// identify(presliding=None, sliding=None, lag=None, blocks=6, asymmetric=False) -> dict
+///
+/// The whole identification of `hil-sim identify` from its CSV files (pre-sliding `x,f`,
+/// sliding `v,f`, lag `t,x,f`): {"params": the parameter file's text, "friction": its
+/// [friction] table as a dict, "report": [lines], "virgin", "stribeck", "lag": the fits}.
+#[pyfunction]
+#[pyo3(signature = (presliding = None, sliding = None, lag = None, blocks = 6, asymmetric = false))]
+fn identify<'py>(
+    py: Python<'py>,
+    presliding: Option<PathBuf>,
+    sliding: Option<PathBuf>,
+    lag: Option<PathBuf>,
+    blocks: usize,
+    asymmetric: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let id = gms_ident::identify::identify_from(&gms_ident::identify::Inputs {
+        presliding: presliding.as_deref(),
+        sliding: sliding.as_deref(),
+        lag: lag.as_deref(),
+        blocks,
+        asymmetric,
+    })
+    .map_err(err)?;
+    let file = ParamFile {
+        friction: id.spec.clone(),
+        device: None,
+    };
+    let text = file.to_toml();
+    let table: toml::Table = toml::from_str(&text).map_err(err)?;
+    let d = PyDict::new(py);
+    d.set_item("params", &text)?;
+    d.set_item(
+        "friction",
+        json_to_py(py, &serde_json::to_value(&table["friction"]).map_err(err)?)?,
+    )?;
+    d.set_item("report", id.report.clone())?;
+    d.set_item(
+        "virgin",
+        id.virgin.as_ref().map(|f| debug_dict(py, f)).transpose()?,
+    )?;
+    d.set_item(
+        "stribeck",
+        id.stribeck
+            .as_ref()
+            .map(|f| debug_dict(py, f))
+            .transpose()?,
+    )?;
+    d.set_item(
+        "lag",
+        id.lag.as_ref().map(|f| debug_dict(py, f)).transpose()?,
+    )?;
+    Ok(d)
 }
 
 /// fit_virgin(x, f, blocks=6) -> dict
@@ -531,7 +640,11 @@ fn gms(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_lag, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_class::<Model>()?;
+    m.add_class::<Gms>()?;
+    m.add_class::<LuGre>()?;
+    m.add_class::<StaticMap>()?;
     m.add_class::<Device>()?;
     Ok(())
 }

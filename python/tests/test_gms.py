@@ -169,3 +169,41 @@ def test_compare_is_hil_sim_compare(tmp_path):
     with open(tmp_path / "c.json") as fh:
         cli = json.load(fh)
     assert json.dumps(res, sort_keys=True) == json.dumps(cli, sort_keys=True)
+
+
+def test_model_classes_and_state():
+    g = gms.Gms(str(TABLE1))
+    assert isinstance(g, gms.Model) and g.kind == "gms"
+    assert len(g.state) == 6 and not g.state.any()
+    g.step(3e-4, 0.01)
+    # At rest (a hold step: no viscous part) the friction is the sum of the block forces.
+    f = g.step(0.0, 0.01)
+    assert f == pytest.approx(float(np.sum(np.float32(g.state))), rel=1e-6)
+    assert np.all(g.state > 0)
+    g.reset()
+    assert not g.state.any()
+    with pytest.raises(gms.GmsError, match="a gms model, not lugre"):
+        gms.LuGre(str(TABLE1))
+    lug = gms.LuGre({"friction": {"model": "lugre", "fs": 2e-4, "fc": 1e-4, "vs": 0.1,
+                                  "sigma0": 1.0, "sigma1": 1e-3}})
+    lug.step(1e-5, 0.01)
+    assert len(lug.state) == 1 and lug.state[0] > 0
+
+
+def test_identify_is_hil_sim_identify(tmp_path):
+    pre, slide, out = tmp_path / "pre.csv", tmp_path / "slide.csv", tmp_path / "id.toml"
+    hil_sim("experiment", "presliding", "--params", TABLE1, "--out", pre)
+    hil_sim("experiment", "sliding", "--params", TABLE1, "--out", slide)
+    hil_sim("identify", "--presliding", pre, "--sliding", slide, "--out", out)
+    res = gms.identify(presliding=pre, sliding=slide)
+    import tomllib
+
+    with open(out, "rb") as fh:
+        cli = tomllib.load(fh)
+    assert tomllib.loads(res["params"])["friction"] == cli["friction"]
+    # The simulated experiments' defaults (the CLI's own figures): Table 1 within a few %.
+    assert res["friction"]["fs"] == pytest.approx(220e-6, rel=0.03)
+    assert res["stribeck"]["vs"] == pytest.approx(0.2, rel=0.05)
+    assert len(res["virgin"]["blocks"]) == 6 and res["report"]
+    with pytest.raises(gms.GmsError):
+        gms.identify(presliding=tmp_path / "none.csv")

@@ -15,8 +15,7 @@ use crate::params::Listed;
 /// Samples kept: 60 s of the 1 kHz stream.
 const KEEP: usize = 60_000;
 
-/// Radians per encoder count of the default encoder (3.8 µrad), for errors in counts.
-const RAD_PER_COUNT: f64 = 3.8e-6;
+use crate::run::RAD_PER_COUNT;
 
 /// One parameter of the tree.
 #[derive(Debug, Clone)]
@@ -117,10 +116,8 @@ pub struct StepResult {
     pub t0: f64,
     /// Samples from the command: (t − t0 \[s\], error \[counts\]).
     pub error: Vec<[f64; 2]>,
-    /// Overshoot past the target \[counts\].
-    pub overshoot: f64,
-    /// Time until the error stays within ±1 count \[s\] (`None`: not within the record).
-    pub settle: Option<f64>,
+    /// The figures of `gms-tune step-test` (`gms_tune::run::step_figures`).
+    pub metrics: gms_ident::trace::Metrics,
 }
 
 /// The window.
@@ -735,23 +732,24 @@ impl App {
                 )
             {
                 self.step_pending = Some((d, last.t));
-                self.send(Cmd::Request(format!(
-                    "move {} {}",
-                    p + d,
-                    self.move_vel.trim()
-                )));
+                self.send(Cmd::Request(format!("move {}", p + d)));
             }
         });
         if let Some(s) = &self.step {
+            let m = &s.metrics;
             ui.label(format!(
-                "step {:.3e} rad: overshoot {:.1} counts, settled within ±1 count {}",
+                "step {:.3e} rad: {} within ±1 count {:.1} ms after the move, steady-state \
+                 error {:.2} counts, largest error {:.1} counts (the figures of gms-tune \
+                 step-test)",
                 s.step,
-                s.overshoot,
-                s.settle
-                    .map_or("not within the record".to_string(), |t| format!(
-                        "after {:.1} ms",
-                        t * 1e3
-                    ))
+                if m.unsettled_steps > 0.0 {
+                    "not settled"
+                } else {
+                    "settled"
+                },
+                m.settle_time * 1e3,
+                m.steady_state_error / RAD_PER_COUNT,
+                m.max_error / RAD_PER_COUNT
             ));
             let h = (ui.available_height() - 10.0).max(100.0);
             let e = s.error.clone();
@@ -952,19 +950,16 @@ impl App {
             .iter()
             .map(|s| [s.t - t0, s.error / RAD_PER_COUNT])
             .collect();
-        // Past the target: the error's sign reversed against the step's.
-        let overshoot = error.iter().map(|e| -e[1] * d.signum()).fold(0.0, f64::max);
-        let settle = error
+        let rows: Vec<[f64; 6]> = rec
             .iter()
-            .rposition(|e| e[1].abs() > 1.0)
-            .and_then(|i| error.get(i + 1))
-            .map(|e| e[0]);
+            .map(|s| [s.t, s.reference, s.pos, s.error, s.ff, s.friction])
+            .collect();
+        let (_, metrics) = crate::run::step_figures(&rows, d, 0.5);
         self.step = Some(StepResult {
             step: d,
             t0,
             error,
-            overshoot,
-            settle,
+            metrics,
         });
     }
 }
