@@ -182,6 +182,42 @@ impl Link {
         }
     }
 
+    /// The telemetry stream of `fields` (comma-separated) at `rate` \[Hz\] for `seconds` of
+    /// wall time, as rows of the fields (NaN where one is missing); the stream is off after.
+    pub fn record(
+        &mut self,
+        fields: &str,
+        rate: f64,
+        seconds: f64,
+    ) -> Result<Vec<Vec<f64>>, LinkError> {
+        self.telemetry.clear();
+        self.request(&format!("stream {fields} {rate}"))?;
+        let listened = self.listen(Duration::from_secs_f64(seconds));
+        let off = self.request("stream off");
+        listened?;
+        off?;
+        // The samples that arrive until `stream off` is answered, or in a burst from a device
+        // catching up after a stall, would stretch the record past `seconds` of device time.
+        self.telemetry.truncate((seconds * rate).ceil() as usize);
+        Ok(self.telemetry_rows(fields))
+    }
+
+    /// The telemetry collected so far as rows of `fields` (comma-separated; NaN where
+    /// missing).
+    pub fn telemetry_rows(&self, fields: &str) -> Vec<Vec<f64>> {
+        let names: Vec<&str> = fields.split(',').map(str::trim).collect();
+        self.telemetry
+            .iter()
+            .map(|(_, l)| {
+                let kv = parse_telemetry(l);
+                names
+                    .iter()
+                    .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
+                    .collect()
+            })
+            .collect()
+    }
+
     /// Collects telemetry for `d`.
     pub fn listen(&mut self, d: Duration) -> Result<(), LinkError> {
         let deadline = Instant::now() + d;

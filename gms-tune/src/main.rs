@@ -266,29 +266,7 @@ pub(crate) fn load(link: &mut Link, file: &Path) -> Result<usize, Fail> {
 }
 
 fn record(link: &mut Link, fields: &str, rate: f64, seconds: f64) -> Result<Vec<Vec<f64>>, Fail> {
-    link.telemetry.clear();
-    link.request(&format!("stream {fields} {rate}"))?;
-    link.listen(Duration::from_secs_f64(seconds))?;
-    link.request("stream off")?;
-    // The samples that arrive until `stream off` is answered, or in a burst from a device
-    // catching up after a stall, would stretch the record past `seconds` of device time.
-    link.telemetry.truncate((seconds * rate).ceil() as usize);
-    Ok(telemetry_rows(link, fields))
-}
-
-/// The telemetry collected so far as rows of `fields` (comma-separated; NaN where missing).
-fn telemetry_rows(link: &Link, fields: &str) -> Vec<Vec<f64>> {
-    let names: Vec<&str> = fields.split(',').collect();
-    link.telemetry
-        .iter()
-        .map(|(_, l)| {
-            let kv = parse_telemetry(l);
-            names
-                .iter()
-                .map(|n| kv.iter().find(|(k, _)| k == n).map_or(f64::NAN, |x| x.1))
-                .collect()
-        })
-        .collect()
+    Ok(link.record(fields, rate, seconds)?)
 }
 
 fn write_csv(path: &Path, fields: &str, rows: &[Vec<f64>]) -> Result<(), Fail> {
@@ -390,26 +368,9 @@ fn run(cli: Cli) -> Result<(), Fail> {
             }
             std::fs::create_dir_all(&out)
                 .map_err(|e| Fail::Usage(format!("{}: {e}", out.display())))?;
-            link.request("enable")?;
-            let fields = "t,ref,pos,error,ff,friction";
-            let pos0 = record(&mut link, "pos", 100.0, 0.05)?
-                .last()
-                .and_then(|r| r.first().copied())
-                .unwrap_or(0.0);
-            link.telemetry.clear();
-            link.request(&format!("stream {fields} 1000"))?;
-            link.request(&format!("move {}", pos0 + distance))?;
-            link.listen(Duration::from_secs_f64(seconds))?;
-            link.request("stream off")?;
-            let rows = telemetry_rows(&link, fields);
-            write_csv(&out.join("trace.csv"), fields, &rows)?;
-            let six: Vec<[f64; 6]> = rows
-                .iter()
-                .filter(|r| r.len() == 6)
-                .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
-                .collect();
-            // hil-sim's own figures, for the one move the device made.
-            let (trace, m) = gms_tune::run::step_figures(&six, distance, seconds);
+            let (six, trace, m) = gms_tune::run::step_test(&mut link, distance, seconds)?;
+            let rows: Vec<Vec<f64>> = six.iter().map(|r| r.to_vec()).collect();
+            write_csv(&out.join("trace.csv"), gms_tune::run::STEP_FIELDS, &rows)?;
             let rpc = gms_tune::run::RAD_PER_COUNT;
             for (name, v) in m.named() {
                 if name != "sine_rms_error" {

@@ -174,3 +174,44 @@ pub fn step_figures(
 
 /// Radians per count of the default encoder (3.8 µrad), for figures in counts.
 pub const RAD_PER_COUNT: f64 = 3.8e-6;
+
+/// The fields a step test records, in [`step_figures`]' order.
+pub const STEP_FIELDS: &str = "t,ref,pos,error,ff,friction";
+
+/// `gms-tune step-test`: the bridge on, the position read, the stream of [`STEP_FIELDS`] at
+/// 1 kHz, a `move` by `distance` \[rad\] with the device's default profile, `seconds` of
+/// recording; the rows, the trace and its figures ([`step_figures`]).
+#[allow(clippy::type_complexity)]
+pub fn step_test(
+    link: &mut Link,
+    distance: f64,
+    seconds: f64,
+) -> Result<
+    (
+        Vec<[f64; 6]>,
+        Vec<gms_ident::trace::TraceRow>,
+        gms_ident::trace::Metrics,
+    ),
+    crate::LinkError,
+> {
+    link.request("enable")?;
+    let pos0 = link
+        .record("pos", 100.0, 0.05)?
+        .last()
+        .and_then(|r| r.first().copied())
+        .unwrap_or(0.0);
+    link.telemetry.clear();
+    link.request(&format!("stream {STEP_FIELDS} 1000"))?;
+    link.request(&format!("move {}", pos0 + distance))?;
+    let listened = link.listen(std::time::Duration::from_secs_f64(seconds));
+    let off = link.request("stream off");
+    listened?;
+    off?;
+    let six: Vec<[f64; 6]> = link
+        .telemetry_rows(STEP_FIELDS)
+        .iter()
+        .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
+        .collect();
+    let (trace, m) = step_figures(&six, distance, seconds);
+    Ok((six, trace, m))
+}

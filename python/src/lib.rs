@@ -589,7 +589,7 @@ impl Device {
     }
 
     /// record(fields="t,pos,error,current", rate=1000.0, seconds=1.0) -> dict: the telemetry
-    /// stream for `seconds` (wall time) as {field: numpy array}.
+    /// stream for `seconds` (wall time) as {field: numpy array}, as `gms-tune record`.
     #[pyo3(signature = (fields = "t,pos,error,current", rate = 1000.0, seconds = 1.0))]
     fn record<'py>(
         &mut self,
@@ -598,35 +598,141 @@ impl Device {
         rate: f64,
         seconds: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
-        if !(seconds.is_finite() && seconds > 0.0 && seconds <= 3600.0) {
-            return Err(err(format!("seconds {seconds}: above 0, at most 3600")));
+        if !(seconds > 0.0 && seconds <= 3600.0 && rate > 0.0 && rate <= 1000.0) {
+            return Err(err("seconds in (0, 3600], rate in (0, 1000]"));
         }
-        let names: Vec<&str> = fields.split(',').map(str::trim).collect();
-        self.link.telemetry.clear();
-        self.link
-            .request(&format!("stream {fields} {rate}"))
-            .map_err(link_err)?;
-        let listened = self.link.listen(Duration::from_secs_f64(seconds));
-        let _ = self.link.request("stream off");
-        listened.map_err(link_err)?;
-        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
-        for (_, line) in self.link.telemetry.drain(..) {
-            let kv = gms_tune::parse_telemetry(&line);
-            let row: Option<Vec<f64>> = names
-                .iter()
-                .map(|n| kv.iter().find(|(k, _)| k == n).map(|(_, v)| *v))
-                .collect();
-            if let Some(row) = row {
-                for (c, v) in cols.iter_mut().zip(row) {
-                    c.push(v);
-                }
-            }
-        }
+        let rows = self.link.record(fields, rate, seconds).map_err(link_err)?;
         let d = PyDict::new(py);
-        for (n, c) in names.iter().zip(cols) {
-            d.set_item(*n, PyArray1::from_vec(py, c))?;
+        for (c, n) in fields.split(',').map(str::trim).enumerate() {
+            d.set_item(
+                n,
+                PyArray1::from_vec(py, rows.iter().map(|r| r[c]).collect()),
+            )?;
         }
         Ok(d)
+    }
+
+    /// step_test(distance=2e-4, seconds=0.5) -> dict: `gms-tune step-test` — the bridge on,
+    /// a move by `distance` [rad], `seconds` recorded: {"trace": {t, ref, pos, error, ff,
+    /// friction: arrays}, "metrics": the figures of hil-sim run}.
+    #[pyo3(signature = (distance = 2e-4, seconds = 0.5))]
+    fn step_test<'py>(
+        &mut self,
+        py: Python<'py>,
+        distance: f64,
+        seconds: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(distance.is_finite() && seconds > 0.0 && seconds <= 60.0) {
+            return Err(err("distance finite, seconds in (0, 60]"));
+        }
+        let (rows, _, m) =
+            gms_tune::run::step_test(&mut self.link, distance, seconds).map_err(link_err)?;
+        let trace = PyDict::new(py);
+        for (c, n) in gms_tune::run::STEP_FIELDS.split(',').enumerate() {
+            trace.set_item(
+                n,
+                PyArray1::from_vec(py, rows.iter().map(|r| r[c]).collect()),
+            )?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("trace", trace)?;
+        d.set_item("metrics", debug_dict(py, &m)?)?;
+        Ok(d)
+    }
+
+    /// tune_ff(amplitude=2e-3, freq=1.0, seconds=3.0, start=0.7, stop=1.2, steps=11) -> dict:
+    /// `gms-tune tune-ff` — the sine test at each ff.gain: {"curve": [(gain, RMS [rad])],
+    /// "chosen", "before"}; the device keeps `before` (set ff.gain to apply).
+    #[pyo3(signature = (amplitude = 2e-3, freq = 1.0, seconds = 3.0, start = 0.7, stop = 1.2, steps = 11))]
+    #[allow(clippy::too_many_arguments)]
+    fn tune_ff<'py>(
+        &mut self,
+        py: Python<'py>,
+        amplitude: f64,
+        freq: f64,
+        seconds: f64,
+        start: f64,
+        stop: f64,
+        steps: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let plan = gms_ident::bench::TuneFfPlan {
+            amp: amplitude,
+            freq,
+            seconds,
+            from: start,
+            to: stop,
+            steps,
+        };
+        plan.check().map_err(err)?;
+        let t = self.run_bench(|b| gms_ident::bench::tune_ff(b, &plan, |_, _, _| {}))?;
+        let d = PyDict::new(py);
+        d.set_item("curve", t.curve.clone())?;
+        d.set_item("chosen", t.chosen)?;
+        d.set_item("before", t.before)?;
+        Ok(d)
+    }
+
+    /// commission(speed=1.0) -> dict: `gms-tune commission` — {"lines": a line per step,
+    /// "settings": {protocol path: value}}; nothing applied (send the settings to apply).
+    #[pyo3(signature = (speed = 1.0))]
+    fn commission<'py>(&mut self, py: Python<'py>, speed: f64) -> PyResult<Bound<'py, PyDict>> {
+        let c = self.run_bench(|b| gms_ident::bench::commission(b, speed))?;
+        let d = PyDict::new(py);
+        d.set_item("lines", c.lines.clone())?;
+        let s = PyDict::new(py);
+        for (k, v) in c.settings() {
+            s.set_item(k, v)?;
+        }
+        d.set_item("settings", s)?;
+        Ok(d)
+    }
+
+    /// identify(report="identify-report", blocks=6) -> dict: `gms-tune identify` — the
+    /// experiments on the device (CSVs in `report`), the fits: {"params": the parameter
+    /// file's text, "report": lines, "presliding": [(x, f)], "sliding": [(v, f)]}; nothing
+    /// applied.
+    #[pyo3(signature = (report = PathBuf::from("identify-report"), blocks = 6))]
+    fn identify<'py>(
+        &mut self,
+        py: Python<'py>,
+        report: PathBuf,
+        blocks: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use gms_ident::bench;
+        let dev = bench::DeviceInfo::read(&mut self.link).map_err(err)?;
+        let plans = bench::Plans::new(&dev, &bench::Ranges::default()).map_err(err)?;
+        let (g, id) = self.run_bench(|b| {
+            bench::identify_on(b, &plans, &report, blocks, false, &mut |_, _, _| {})
+        })?;
+        gms_ident::identify::write_report(&id, &report).map_err(err)?;
+        let (_, text) = gms_tune::run::identified_file(&id, &report);
+        let d = PyDict::new(py);
+        d.set_item("params", text)?;
+        d.set_item("report", id.report.clone())?;
+        d.set_item("presliding", g.presliding)?;
+        d.set_item("sliding", g.sliding)?;
+        Ok(d)
+    }
+}
+
+/// Hooks that report nothing (Python's caller waits for the result).
+struct Quiet;
+
+impl gms_tune::run::Hooks for Quiet {
+    fn stage(&mut self, _: &str, _: f64) {}
+    fn waited(&mut self, _: &mut gms_tune::Link, _: f64) {}
+}
+
+impl Device {
+    /// Runs `f` on the link as the command line's run bench.
+    fn run_bench<T>(
+        &mut self,
+        f: impl FnOnce(&mut gms_tune::run::RunBench<'_, '_>) -> Result<T, gms_ident::Error>,
+    ) -> PyResult<T> {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let mut quiet = Quiet;
+        let mut b = gms_tune::run::RunBench::new(&mut self.link, stop, "stopped", &mut quiet);
+        f(&mut b).map_err(|e| err(format!("{e}; the bridge is off")))
     }
 }
 

@@ -207,3 +207,47 @@ def test_identify_is_hil_sim_identify(tmp_path):
     assert len(res["virgin"]["blocks"]) == 6 and res["report"]
     with pytest.raises(gms.GmsError):
         gms.identify(presliding=tmp_path / "none.csv")
+
+
+def serve(*args):
+    """`hil-sim serve --tcp 127.0.0.1:0 ARGS`: the process and its address."""
+    p = subprocess.Popen(
+        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0", *map(str, args)],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    line = p.stdout.readline()
+    assert line.startswith("listening on "), line
+    return p, line.split()[-1]
+
+
+def test_device_runs_the_bench_experiments(tmp_path):
+    import tomllib
+
+    # The default plant, its friction exactly nominal and the guideway negligible, 20 x real time.
+    sc = tmp_path / "quiet.toml"
+    sc.write_text("[plant]\nvariability = 0.0\n[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n")
+    p, addr = serve("--speed", 20, "--scenario", sc)
+    try:
+        d = gms.Device(tcp=addr, timeout=2.0)
+        st = d.step_test(2e-4, 0.5)
+        assert len(st["trace"]["t"]) > 100
+        assert st["metrics"]["steady_state_error"] < 2 * 3.8e-6
+        ff = d.tune_ff(seconds=2.0, steps=5)
+        assert len(ff["curve"]) == 5 and 0.7 <= ff["chosen"] <= 1.2
+        assert d.get("ff.gain") == 0.94
+        c = d.commission(1.0)
+        assert c["settings"]["motor.r"] == pytest.approx(10.0, rel=0.05)
+        assert c["settings"]["enc.dir"] == 1.0 and c["lines"]
+        assert d.get("motor.r") == 10.0
+        rep = tmp_path / "rep"
+        idf = d.identify(report=rep)
+        fr = tomllib.loads(idf["params"])["friction"]
+        assert fr["fs"] == pytest.approx(220e-6, rel=0.05)
+        assert (rep / "presliding.csv").exists() and (rep / "sliding.csv").exists()
+        assert d.status()["enabled"] == 0
+    finally:
+        p.kill()
+        p.wait()
