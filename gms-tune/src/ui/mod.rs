@@ -26,16 +26,26 @@ struct Window {
     app: App,
     opened: Instant,
     screenshot: Option<Screenshot>,
+    /// Frames drawn since the window opened.
+    frames: u64,
 }
 
 impl eframe::App for Window {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.app.show(ui);
+        self.frames += 1;
         if let Some(s) = &self.screenshot
             && self.opened.elapsed().as_secs_f64() >= s.after
         {
             let path = s.path.clone();
             self.screenshot = None;
+            let secs = self.opened.elapsed().as_secs_f64();
+            eprintln!(
+                "{} frames in {secs:.1} s ({:.1} frames/s), {} samples received",
+                self.frames,
+                self.frames as f64 / secs,
+                self.app.received
+            );
             let ctx = ui.ctx().clone();
             ui.ctx().request_screenshot(move |img| {
                 let [w, h] = img.size;
@@ -78,6 +88,7 @@ pub fn run(
                 app,
                 opened: Instant::now(),
                 screenshot,
+                frames: 0,
             }))
         }),
     )
