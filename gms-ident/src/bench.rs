@@ -488,9 +488,7 @@ pub fn presliding(
     // The device's own guard: its stroke limits narrowed around the start.
     let limits = narrow_limits(b, plan.guard)?;
     let result = guarded(b, |b| staircase(b, plan, out));
-    // The limits back, widening each side (best effort: the link may be gone).
-    let _ = b.request(&format!("set lim.pos_min {}", limits.0));
-    let _ = b.request(&format!("set lim.pos_max {}", limits.1));
+    restore_limits(b, limits);
     result
 }
 
@@ -893,6 +891,13 @@ pub fn narrow_limits(b: &mut impl Bench, window: f64) -> Result<(f64, f64), Erro
     Ok((lo, hi))
 }
 
+/// The stroke limits `(pos_min, pos_max)` \\[rad\\] that [`narrow_limits`] returned put back,
+/// widening each side (best effort: the link may be gone).
+pub fn restore_limits(b: &mut impl Bench, (lo, hi): (f64, f64)) {
+    let _ = b.request(&format!("set lim.pos_min {lo}"));
+    let _ = b.request(&format!("set lim.pos_max {hi}"));
+}
+
 /// What a bench identification gathered.
 #[derive(Debug, Clone, Default)]
 pub struct Gathered {
@@ -956,9 +961,8 @@ pub fn identify_on<B: Bench>(
     });
     // Whatever happened: the bridge off, the limits back (best effort: the link may be gone).
     let _ = b.request("disable");
-    if let Ok((lo, hi)) = limits {
-        let _ = b.request(&format!("set lim.pos_min {lo}"));
-        let _ = b.request(&format!("set lim.pos_max {hi}"));
+    if let Ok(l) = limits {
+        restore_limits(b, l);
     }
     let written = (|| {
         std::fs::create_dir_all(dir)
@@ -1401,7 +1405,7 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
         get_param(b, "pos.ki")?,
         get_param(b, "pos.kd")?,
     );
-    let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, speed));
+    let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, gains0, speed));
     // The position gains as they were (the back-EMF runs soften them).
     let _ = b.request(&format!("set pos.kp {}", gains0.0));
     let _ = b.request(&format!("set pos.ki {}", gains0.1));
@@ -1410,8 +1414,7 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
     let _ = b.request("disable");
     let _ = b.request(&format!("set sense.dir {}", dirs0.0));
     let _ = b.request(&format!("set enc.dir {}", dirs0.1));
-    let _ = b.request(&format!("set lim.pos_min {}", limits.0));
-    let _ = b.request(&format!("set lim.pos_max {}", limits.1));
+    restore_limits(b, limits);
     r
 }
 
@@ -1428,6 +1431,7 @@ fn commission_steps(
     dev: &DeviceInfo,
     dt: f64,
     (sense0, enc0): (f64, f64),
+    (kp, ki, kd): (f64, f64, f64),
     speed: f64,
 ) -> Result<Commissioned, Error> {
     let mut c = Commissioned {
@@ -1520,11 +1524,6 @@ fn commission_steps(
     //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
     //    use a softer position loop (kp / 4, ki / 8, kd / 2; `commission` puts the gains
     //    back), which tracks a constant speed well enough.
-    let (kp, ki, kd) = (
-        get_param(b, "pos.kp")?,
-        get_param(b, "pos.ki")?,
-        get_param(b, "pos.kd")?,
-    );
     b.request(&format!("set pos.kd {}", kd / 2.0))?;
     b.request(&format!("set pos.kp {}", kp / 4.0))?;
     b.request(&format!("set pos.ki {}", ki / 8.0))?;

@@ -41,6 +41,16 @@ pub struct Stribeck {
 }
 
 impl Stribeck {
+    /// The paper's Table 1 in SI (docs/design.md#reading-table-1): the device's default
+    /// compensator.
+    pub const TABLE1: Stribeck = Stribeck {
+        fs: 220e-6,
+        fc: 125e-6,
+        vs: 0.2,
+        delta: 0.9,
+        sigma: 10.5e-6,
+    };
+
     /// The friction's negative damping the derivative gain must exceed [N·m·s/rad]: the
     /// Stribeck curve's slope at its Stribeck velocity, −s'(Vs) = (Fs − Fc) δ / (e Vs), less
     /// the viscous coefficient. (Below Vs the curve is steeper — infinitely so at 0 for
@@ -75,6 +85,27 @@ pub struct Axis {
     /// The friction's initial pre-sliding stiffness (the sum of the blocks' k) [N·m/rad]: at
     /// rest the friction is a spring to the frame.
     pub k_presliding: f64,
+}
+
+impl Axis {
+    /// The default motor and loops — R 10 Ω, L 0.24 mH (what the default `cur.kp` 1.5 is
+    /// designed for), k 6.6 mN·m/A, J 6e-8 kg·m², the current PI of [`current_pi`], 20 kHz
+    /// and 10 kHz, the derivative filter at 2 kHz, 12 V — with Table 1's pre-sliding
+    /// stiffness (1.2501 N·m/rad).
+    pub fn default_motor() -> Axis {
+        Axis {
+            r: 10.0,
+            l: 0.24e-3,
+            k_m: 6.6e-3,
+            inertia: 6e-8,
+            cur_pi: current_pi(10.0, 0.24e-3, 20e3),
+            cur_hz: 20e3,
+            pos_hz: 10e3,
+            d_filter_hz: 2000.0,
+            v_supply: 12.0,
+            k_presliding: 1.2501,
+        }
+    }
 }
 
 /// The position loop's gains and their margins.
@@ -217,34 +248,9 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
 mod tests {
     use super::*;
 
-    /// The default motor and loops.
-    fn default_axis() -> Axis {
-        Axis {
-            r: 10.0,
-            l: 0.24e-3,
-            k_m: 6.6e-3,
-            inertia: 6e-8,
-            cur_pi: current_pi(10.0, 0.24e-3, 20e3),
-            cur_hz: 20e3,
-            pos_hz: 10e3,
-            d_filter_hz: 2000.0,
-            v_supply: 12.0,
-            k_presliding: 1.2501,
-        }
-    }
-
-    /// Table 1's Stribeck curve (docs/design.md#reading-table-1).
-    const TABLE1: Stribeck = Stribeck {
-        fs: 220e-6,
-        fc: 125e-6,
-        vs: 0.2,
-        delta: 0.9,
-        sigma: 10.5e-6,
-    };
-
     #[test]
     fn the_default_motor_gets_the_default_tune() {
-        let g = position_gains(&default_axis(), &TABLE1).unwrap();
+        let g = position_gains(&Axis::default_motor(), &Stribeck::TABLE1).unwrap();
         eprintln!("{g:?}");
         // The defaults: kp 0.2, ki 100 (here 91: ki = kp ω_n / 4), kd 2.5e-4.
         assert!((g.kp / 0.2 - 1.0).abs() < 0.01, "kp {}", g.kp);
@@ -261,20 +267,22 @@ mod tests {
     /// pre-sliding spring takes less (it raises the frequency the loop must damp).
     #[test]
     fn the_stability_limit_moves_with_the_axis() {
-        let base = position_gains(&default_axis(), &TABLE1).unwrap().kd_max;
+        let base = position_gains(&Axis::default_motor(), &Stribeck::TABLE1)
+            .unwrap()
+            .kd_max;
         let heavy = Axis {
             inertia: 1.2e-7,
-            ..default_axis()
+            ..Axis::default_motor()
         };
         let stiff = Axis {
             k_presliding: 2.5,
-            ..default_axis()
+            ..Axis::default_motor()
         };
         let free = Axis {
             k_presliding: 0.0,
-            ..default_axis()
+            ..Axis::default_motor()
         };
-        let kd = |a: &Axis| position_gains(a, &TABLE1).unwrap().kd_max;
+        let kd = |a: &Axis| position_gains(a, &Stribeck::TABLE1).unwrap().kd_max;
         eprintln!(
             "kd_max {base:.3e}, J x2 {:.3e}, spring x2 {:.3e}, no spring {:.3e}",
             kd(&heavy),

@@ -8,7 +8,6 @@ use std::time::Instant;
 
 use gms_ident::Error;
 use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
-use gms_ident::identify::write_report;
 use gms_tune::Link;
 
 use crate::Fail;
@@ -87,9 +86,8 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     for l in &id.report {
         println!("{l}");
     }
-    write_report(&id, &a.report).map_err(|e| Fail::Usage(e.to_string()))?;
-    let (_, text) = gms_tune::run::identified_file(&id, &a.report);
-    gms_ident::io::write_atomic(&a.out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
+    gms_tune::run::write_identified(&id, &a.report, Some(&a.out))
+        .map_err(|e| Fail::Usage(e.to_string()))?;
     println!(
         "wrote {} and the report in {}",
         a.out.display(),

@@ -147,6 +147,20 @@ impl Link {
         }
     }
 
+    /// [`Link::request`]'s reply as one text: the lines before `ok`, then the text after it,
+    /// newline-separated (empty parts left out).
+    pub fn request_text(&mut self, line: &str) -> Result<String, LinkError> {
+        let (body, text) = self.request(line)?;
+        let mut out = body.join("\n");
+        if !text.is_empty() {
+            if !out.is_empty() {
+                out.push('\n');
+            }
+            out.push_str(&text);
+        }
+        Ok(out)
+    }
+
     /// The device's clock (`status` key `t`) \[s\].
     pub fn device_time(&mut self) -> Result<f64, LinkError> {
         let (_, text) = self.request("status")?;

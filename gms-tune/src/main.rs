@@ -324,12 +324,9 @@ fn run(cli: Cli) -> Result<(), Fail> {
             link.request("save")?;
         }
         Cmd::Send { words } => {
-            let (body, rest) = link.request(&words.join(" "))?;
-            for l in body {
-                println!("{l}");
-            }
-            if !rest.is_empty() {
-                println!("{rest}");
+            let text = link.request_text(&words.join(" "))?;
+            if !text.is_empty() {
+                println!("{text}");
             }
         }
         Cmd::Params {

@@ -15,8 +15,8 @@ use crate::Link;
 pub trait Hooks {
     /// A stage starts (`what`), expected to take `seconds` of device time.
     fn stage(&mut self, what: &str, seconds: f64);
-    /// `seconds` of device time were waited; the link is free for a look (its telemetry).
-    fn waited(&mut self, link: &mut Link, seconds: f64);
+    /// `seconds` of device time were waited.
+    fn waited(&mut self, seconds: f64);
 }
 
 /// The link as a stoppable bench.
@@ -82,7 +82,7 @@ impl Bench for RunBench<'_, '_> {
         self.stopped()?;
         Bench::wait(&mut *self.link, seconds)?;
         if seconds.is_finite() && seconds > 0.0 {
-            self.hooks.waited(self.link, seconds);
+            self.hooks.waited(seconds);
         }
         self.stopped()
     }
@@ -108,6 +108,22 @@ pub fn identified_file(
         file.to_toml()
     );
     (file, text)
+}
+
+/// An identification's results written as `gms-tune identify` writes them: the report and
+/// its plots in `report`, and (with `out`) the parameter file of [`identified_file`]; returns
+/// the file and its text.
+pub fn write_identified(
+    id: &gms_ident::identify::Identified,
+    report: &std::path::Path,
+    out: Option<&std::path::Path>,
+) -> Result<(gms_ident::paramfile::ParamFile, String), gms_ident::Error> {
+    gms_ident::identify::write_report(id, report)?;
+    let (file, text) = identified_file(id, report);
+    if let Some(out) = out {
+        gms_ident::io::write_atomic(out, text.as_bytes())?;
+    }
+    Ok((file, text))
 }
 
 /// The parameter file of a commissioning — the device's parameters `pf` with the settings

@@ -5,7 +5,6 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use gms_tune::Link;
 use gms_tune::run::Hooks;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -41,7 +40,7 @@ impl Hooks for Bar {
         self.bar = bar;
     }
 
-    fn waited(&mut self, _link: &mut Link, seconds: f64) {
+    fn waited(&mut self, seconds: f64) {
         self.bar.inc((seconds * 1000.0) as u64);
     }
 }

@@ -257,26 +257,8 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
 /// 0.71-0.83 × the limit; the chosen kd, 2.49e-4, is 0.59 × it.)
 #[test]
 fn the_position_gains_bounds_hold_on_the_simulated_axis() {
-    use gms_ident::gains::{Axis, Stribeck, current_pi, position_gains};
-    let axis = Axis {
-        r: 10.0,
-        l: 0.24e-3,
-        k_m: 6.6e-3,
-        inertia: 6e-8,
-        cur_pi: current_pi(10.0, 0.24e-3, 20e3),
-        cur_hz: 20e3,
-        pos_hz: 10e3,
-        d_filter_hz: 2000.0,
-        v_supply: 12.0,
-        k_presliding: 1.2501,
-    };
-    let s = Stribeck {
-        fs: 220e-6,
-        fc: 125e-6,
-        vs: 0.2,
-        delta: 0.9,
-        sigma: 10.5e-6,
-    };
+    use gms_ident::gains::{Axis, Stribeck, position_gains};
+    let (axis, s) = (Axis::default_motor(), Stribeck::TABLE1);
     let g = position_gains(&axis, &s).unwrap();
     let (low, ok) = (
         error_swing(0.7 * g.kd_min, Some(0.05), 1.0),

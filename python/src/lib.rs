@@ -519,15 +519,7 @@ impl Device {
     /// request(line) -> str: one protocol line; the text after `ok` (with the lines before it,
     /// newline-separated); an `err` reply raises GmsError with the device's line.
     fn request(&mut self, line: &str) -> PyResult<String> {
-        let (body, text) = self.link.request(line).map_err(link_err)?;
-        let mut out = body.join("\n");
-        if !text.is_empty() {
-            if !out.is_empty() {
-                out.push('\n');
-            }
-            out.push_str(&text);
-        }
-        Ok(out)
+        self.link.request_text(line).map_err(link_err)
     }
 
     /// get(path) -> float | str: a parameter's value (a number where it is one).
@@ -704,8 +696,7 @@ impl Device {
         let (g, id) = self.run_bench(|b| {
             bench::identify_on(b, &plans, &report, blocks, false, &mut |_, _, _| {})
         })?;
-        gms_ident::identify::write_report(&id, &report).map_err(err)?;
-        let (_, text) = gms_tune::run::identified_file(&id, &report);
+        let (_, text) = gms_tune::run::write_identified(&id, &report, None).map_err(err)?;
         let d = PyDict::new(py);
         d.set_item("params", text)?;
         d.set_item("report", id.report.clone())?;
@@ -720,7 +711,7 @@ struct Quiet;
 
 impl gms_tune::run::Hooks for Quiet {
     fn stage(&mut self, _: &str, _: f64) {}
-    fn waited(&mut self, _: &mut gms_tune::Link, _: f64) {}
+    fn waited(&mut self, _: f64) {}
 }
 
 impl Device {

@@ -103,10 +103,10 @@ def test_run_is_hil_sim_run(tmp_path):
     assert np.all(np.diff(tr["t"]) > 0)
 
 
-@pytest.fixture
-def server():
+def serve(*args):
+    """`hil-sim serve --tcp 127.0.0.1:0 ARGS`: the process and its address."""
     p = subprocess.Popen(
-        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0"],
+        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0", *map(str, args)],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
@@ -114,7 +114,13 @@ def server():
     )
     line = p.stdout.readline()
     assert line.startswith("listening on "), line
-    yield line.split()[-1]
+    return p, line.split()[-1]
+
+
+@pytest.fixture
+def server():
+    p, addr = serve()
+    yield addr
     p.kill()
     p.wait()
 
@@ -207,20 +213,6 @@ def test_identify_is_hil_sim_identify(tmp_path):
     assert len(res["virgin"]["blocks"]) == 6 and res["report"]
     with pytest.raises(gms.GmsError):
         gms.identify(presliding=tmp_path / "none.csv")
-
-
-def serve(*args):
-    """`hil-sim serve --tcp 127.0.0.1:0 ARGS`: the process and its address."""
-    p = subprocess.Popen(
-        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0", *map(str, args)],
-        cwd=ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.DEVNULL,
-        text=True,
-    )
-    line = p.stdout.readline()
-    assert line.startswith("listening on "), line
-    return p, line.split()[-1]
 
 
 def test_device_runs_the_bench_experiments(tmp_path):

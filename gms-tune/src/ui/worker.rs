@@ -431,17 +431,8 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             });
         }
         Cmd::Request(line) => {
-            let result = match l.request(&line) {
-                Ok((body, text)) => {
-                    let mut t = body.join("\n");
-                    if !text.is_empty() {
-                        if !t.is_empty() {
-                            t.push('\n');
-                        }
-                        t.push_str(&text);
-                    }
-                    Ok(t)
-                }
+            let result = match l.request_text(&line) {
+                Ok(t) => Ok(t),
                 Err(e) if gone(&e) => return Err(e.to_string()),
                 Err(e) => Err(e.to_string()),
             };
@@ -496,7 +487,7 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
     Ok(out)
 }
 
-/// The window's hooks for a long run: its progress, and the telemetry that came meanwhile.
+/// The window's hooks for a long run: its progress (the stream is off during a run).
 struct Reporter<'e> {
     events: &'e Sender<Event>,
     wake: &'e dyn Fn(),
@@ -512,17 +503,9 @@ impl crate::run::Hooks for Reporter<'_> {
         self.report();
     }
 
-    fn waited(&mut self, link: &mut Link, seconds: f64) {
+    fn waited(&mut self, seconds: f64) {
         self.done += seconds;
         if self.last.elapsed() >= Duration::from_millis(50) {
-            let samples: Vec<Sample> = link
-                .telemetry
-                .drain(..)
-                .filter_map(|(_, line)| Sample::parse(&line))
-                .collect();
-            if !samples.is_empty() {
-                let _ = self.events.send(Event::Samples(samples));
-            }
             self.report();
         }
     }
@@ -599,9 +582,8 @@ fn run_job(
                 &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
             )
             .map_err(|e| e.to_string())?;
-            gms_ident::identify::write_report(&id, &report).map_err(|e| e.to_string())?;
-            let (file, text) = crate::run::identified_file(&id, &report);
-            gms_ident::io::write_atomic(&out, text.as_bytes()).map_err(|e| e.to_string())?;
+            let (file, _) = crate::run::write_identified(&id, &report, Some(&out))
+                .map_err(|e| e.to_string())?;
             let mut lines = id.report.clone();
             lines.push(format!(
                 "wrote {} and the report in {}",
