@@ -13,6 +13,12 @@ use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::static_map::{StaticMap, StaticParams};
 
+/// The least stiffness of a GMS block in use on the device [N·m/rad] (0 marks an unused one).
+pub const MIN_BLOCK_K: f32 = 1e-12;
+
+/// The least weight of a GMS block in use on the device [-] (0 marks an unused one).
+pub const MIN_BLOCK_ALPHA: f32 = 1e-6;
+
 /// Which friction feedforward the controller adds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -238,9 +244,11 @@ impl<const N: usize> ControllerParams<N> {
         if self.sense_dir != 1.0 && self.sense_dir != -1.0 {
             return Err(ControllerError::Invalid("sense.dir"));
         }
-        const K: (f32, f32) = range("gms.k1");
-        const ALPHA: (f32, f32) = range("gms.a1");
-        for b in &a.blocks {
+        // The protocol's ranges admit 0 (an unused block); a block in use needs at least
+        // these (the model's structure, used blocks first, is checked by its own validate).
+        const K: (f32, f32) = (MIN_BLOCK_K, range("gms.k1").1);
+        const ALPHA: (f32, f32) = (MIN_BLOCK_ALPHA, range("gms.a1").1);
+        for b in a.blocks.iter().take(a.blocks_used()) {
             if !(b.k.is_finite() && b.k >= K.0 && b.k <= K.1) {
                 return Err(ControllerError::Invalid("gms.k"));
             }

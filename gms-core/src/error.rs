@@ -88,6 +88,9 @@ pub enum ParamError {
     CNotPositive,
     /// LuGre bristle stiffness zero or negative.
     Sigma0NotPositive,
+    /// A GMS block in use after an unused one (`k = alpha = 0`): the used blocks come first
+    /// (block index, 0-based).
+    AfterUnused(usize),
     /// Negative LuGre bristle damping.
     Sigma1Negative,
 }
@@ -108,6 +111,7 @@ impl ParamError {
             ParamError::CNotPositive => Field::C,
             ParamError::Sigma0NotPositive => Field::Sigma0,
             ParamError::Sigma1Negative => Field::Sigma1,
+            ParamError::AfterUnused(i) => Field::K(i),
         }
     }
 }
@@ -117,6 +121,10 @@ impl fmt::Display for ParamError {
         let field = self.field();
         match self {
             ParamError::NonFinite(_) => write!(f, "{field} is not a finite number"),
+            ParamError::AfterUnused(i) => write!(
+                f,
+                "blocks[{i}] follows an unused block (k = alpha = 0): the used blocks come first"
+            ),
             ParamError::AlphaSum => write!(f, "{field} must be 1 within ±0.01"),
             ParamError::FsBelowFc(Side::Positive) => write!(f, "{field} must be >= fc"),
             ParamError::FsBelowFc(Side::Negative) => write!(f, "{field} must be >= negative.fc"),

@@ -5,16 +5,22 @@ use crate::math;
 use crate::model::{FrictionModel, Step, step_velocity};
 use crate::stribeck::{Stribeck, StribeckParams};
 
-/// One elementary Maxwell-slip block.
+/// One elementary Maxwell-slip block. A block with `k = 0` and `alpha = 0` is *unused*: it
+/// holds no force (a parameter set of `N` blocks may describe fewer; the used ones come
+/// first, see [`GmsParams::blocks_used`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Block {
-    /// Stiffness `k_i` [N/m or N·m/rad], `> 0`.
+    /// Stiffness `k_i` [N/m or N·m/rad], `> 0` (0 in an unused block).
     pub k: f32,
-    /// Relative weight `alpha_i` [-], `> 0`; the weights of a model sum to 1 ± 0.01.
+    /// Relative weight `alpha_i` [-], `> 0` (0 in an unused block); the weights of a model sum
+    /// to 1 ± 0.01.
     pub alpha: f32,
 }
+
+/// An unused block: no stiffness, no weight.
+pub const UNUSED_BLOCK: Block = Block { k: 0.0, alpha: 0.0 };
 
 impl Block {
     /// The pre-sliding displacement at which the block saturates on the virgin curve,
@@ -43,6 +49,33 @@ pub struct GmsParams<const N: usize> {
 }
 
 impl<const N: usize> GmsParams<N> {
+    /// The number of blocks in use: those before the first unused one (`k = alpha = 0`).
+    /// A valid set uses at least one, and every block after the first unused one is unused.
+    pub fn blocks_used(&self) -> usize {
+        self.blocks
+            .iter()
+            .position(|b| *b == UNUSED_BLOCK)
+            .unwrap_or(N)
+    }
+
+    /// These parameters using the first `n` blocks (`1 <= n <= N`): the blocks past `n`
+    /// become unused; those kept are left as they are, and a block that joins (it was unused)
+    /// is marked as waiting for its values (`k = 0`, `alpha = -1`), so that the set does not
+    /// validate until they are given.
+    pub fn with_blocks_used(mut self, n: usize) -> Self {
+        for (i, b) in self.blocks.iter_mut().enumerate() {
+            if i >= n {
+                *b = UNUSED_BLOCK;
+            } else if *b == UNUSED_BLOCK {
+                *b = Block {
+                    k: 0.0,
+                    alpha: -1.0,
+                };
+            }
+        }
+        self
+    }
+
     /// Checks every rule of the model; the error names the first offending field.
     pub fn validate(&self) -> Result<(), ParamError> {
         Stribeck::try_new(self.stribeck, self.negative)?;
@@ -54,8 +87,15 @@ impl<const N: usize> GmsParams<N> {
         if self.c <= 0.0 {
             return Err(ParamError::CNotPositive);
         }
+        let used = self.blocks_used();
+        if used == 0 {
+            return Err(ParamError::KNotPositive(0));
+        }
+        if let Some(i) = (used..N).find(|&i| self.blocks[i] != UNUSED_BLOCK) {
+            return Err(ParamError::AfterUnused(i));
+        }
         let mut sum = 0.0f32;
-        for (i, b) in self.blocks.iter().enumerate() {
+        for (i, b) in self.blocks.iter().enumerate().take(used) {
             finite(b.k, Field::K(i))?;
             finite(b.alpha, Field::Alpha(i))?;
             if b.k <= 0.0 {
@@ -89,10 +129,13 @@ pub struct Gms<const N: usize> {
     f: [f32; N],
     /// Rounding error of each `f` not yet added (Kahan compensation of the elastic sums).
     comp: [f32; N],
-    /// alpha_i Fc for positive and negative motion: the least alpha_i |s(v)| can be.
+    /// alpha_i Fc for positive and negative motion: the least alpha_i |s(v)| can be; +inf for
+    /// an unused block, so that it never leaves the fast path (its force stays 0 on both).
     alpha_fc: [[f32; N]; 2],
     viscous: f32,
     force: f32,
+    /// Blocks in use (the first ones).
+    used: usize,
 }
 
 impl<const N: usize> Gms<N> {
@@ -100,6 +143,13 @@ impl<const N: usize> Gms<N> {
     pub fn try_new(params: GmsParams<N>) -> Result<Self, ParamError> {
         params.validate()?;
         let stribeck = Stribeck::try_new(params.stribeck, params.negative)?;
+        let afc = |i: usize, dir: f32| {
+            if params.blocks[i] == UNUSED_BLOCK {
+                f32::INFINITY
+            } else {
+                params.blocks[i].alpha * stribeck.coulomb(dir)
+            }
+        };
         Ok(Gms {
             params,
             stribeck,
@@ -108,9 +158,10 @@ impl<const N: usize> Gms<N> {
             f: [0.0; N],
             comp: [0.0; N],
             alpha_fc: [
-                core::array::from_fn(|i| params.blocks[i].alpha * stribeck.coulomb(1.0)),
-                core::array::from_fn(|i| params.blocks[i].alpha * stribeck.coulomb(-1.0)),
+                core::array::from_fn(|i| afc(i, 1.0)),
+                core::array::from_fn(|i| afc(i, -1.0)),
             ],
+            used: params.blocks_used(),
             viscous: 0.0,
             force: 0.0,
         })
@@ -265,7 +316,8 @@ impl<const N: usize> FrictionModel for Gms<N> {
         self.force = 0.0;
     }
 
+    /// The forces of the blocks in use.
     fn state(&self) -> &[f32] {
-        &self.f
+        &self.f[..self.used.min(N)]
     }
 }

@@ -44,7 +44,7 @@ pub mod store;
 pub mod stribeck;
 
 pub use error::{Field, ParamError, Side};
-pub use gms::{Block, Gms, GmsParams};
+pub use gms::{Block, Gms, GmsParams, UNUSED_BLOCK};
 pub use lugre::{LuGre, LugreParams};
 pub use model::FrictionModel;
 pub use static_map::{StaticMap, StaticParams};

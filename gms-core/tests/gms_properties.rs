@@ -507,3 +507,65 @@ proptest! {
         prop_assert!(drift < 1e-5 * xmax, "drift {drift:e} over 9 cycles, amplitude {xmax:e}");
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Unused blocks: a set of 6 that uses 4 is the 4-block model.
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// A 6-block set whose last two blocks are unused (k = alpha = 0) gives, on any
+    /// trajectory, the same force bit for bit as the 4-block model of its used blocks, and
+    /// its state is the 4 used blocks' forces.
+    #[test]
+    fn unused_blocks_are_the_smaller_model_bit_for_bit(
+        p in params::<4>(),
+        steps in prop::collection::vec((-1.0f64..1.0, 1e-5f64..1e-2), 1..400),
+    ) {
+        let mut six = GmsParams::<6> {
+            stribeck: p.stribeck,
+            negative: p.negative,
+            sigma: p.sigma,
+            c: p.c,
+            blocks: [gms_core::UNUSED_BLOCK; 6],
+        };
+        six.blocks[..4].copy_from_slice(&p.blocks);
+        prop_assert_eq!(six.blocks_used(), 4);
+        let mut a = Gms::try_new(p).unwrap();
+        let mut b = Gms::try_new(six).unwrap();
+        // Steps up to a few times the largest breakpoint: pre-sliding and sliding.
+        let scale = p.blocks.iter().map(|b| b.breakpoint(p.stribeck.fs)).fold(0.0f32, f32::max);
+        for (dx, dt) in steps {
+            let dx = (dx * 3.0) as f32 * scale;
+            let (fa, fb) = (a.advance(dx, dt as f32), b.advance(dx, dt as f32));
+            prop_assert_eq!(fa.to_bits(), fb.to_bits());
+        }
+        prop_assert_eq!(a.state(), b.state());
+    }
+}
+
+/// The used blocks come first; a set uses at least one.
+#[test]
+fn unused_blocks_only_at_the_end() {
+    let mut p = gms_core::presets::table1();
+    assert_eq!(p.blocks_used(), 6);
+    let four = p.with_blocks_used(4);
+    assert_eq!(four.blocks_used(), 4);
+    assert_eq!(four.blocks[4], gms_core::UNUSED_BLOCK);
+    // Weights no longer sum to 1: the set is invalid until they are given again.
+    assert_eq!(four.validate(), Err(gms_core::ParamError::AlphaSum));
+    // A gap: block 3 unused, block 4 in use.
+    p.blocks[3] = gms_core::UNUSED_BLOCK;
+    assert_eq!(p.validate(), Err(gms_core::ParamError::AfterUnused(4)));
+    assert_eq!(
+        p.validate().unwrap_err().to_string(),
+        "blocks[4] follows an unused block (k = alpha = 0): the used blocks come first"
+    );
+    // Half a block (k = 0, alpha > 0) is not unused.
+    let mut q = gms_core::presets::table1();
+    q.blocks[5].k = 0.0;
+    assert_eq!(q.validate(), Err(gms_core::ParamError::KNotPositive(5)));
+    // None used.
+    let none = q.with_blocks_used(0);
+    assert_eq!(none.validate(), Err(gms_core::ParamError::KNotPositive(0)));
+}

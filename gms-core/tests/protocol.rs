@@ -447,3 +447,58 @@ fn staged_changes_apply_together_or_not_at_all() {
     assert_eq!(ask(&mut d, "get pos.ki"), "ok 100\n");
     assert_ne!(ask(&mut d, "get pos.kp"), "ok 0.3\n");
 }
+
+/// The block count: `gms.blocks N` leaves the blocks past N unused (k = alpha = 0, read back
+/// as 0), staged with the new blocks as one set; a fraction, 0 or 7 are refused, and so is a
+/// count whose set would not validate, with nothing changed.
+#[test]
+fn block_count_is_staged_and_applied_with_the_blocks() {
+    let mut d = Mock::new();
+    assert_eq!(ask(&mut d, "get gms.blocks"), "ok 6\n");
+    for bad in ["0", "7", "4.5", "nan"] {
+        assert!(
+            ask(&mut d, &format!("set gms.blocks {bad}")).starts_with("err 6 "),
+            "{bad}"
+        );
+    }
+    // Alone, 4 blocks of the 6 weights do not sum to 1: refused, nothing changed.
+    let before = d.s;
+    assert!(ask(&mut d, "set gms.blocks 4").starts_with("err 7 "));
+    assert_eq!(d.s, before);
+    // Staged with weights that sum to 1: applied as one.
+    for line in [
+        "stage gms.blocks 4",
+        "stage gms.k1 1.2",
+        "stage gms.a1 0.5",
+        "stage gms.k2 0.06",
+        "stage gms.a2 0.25",
+        "stage gms.k3 0.01",
+        "stage gms.a3 0.15",
+        "stage gms.k4 0.002",
+        "stage gms.a4 0.1",
+        "commit",
+    ] {
+        assert_eq!(ask(&mut d, line), "ok\n", "{line}");
+    }
+    assert_eq!(ask(&mut d, "get gms.blocks"), "ok 4\n");
+    assert_eq!(ask(&mut d, "get gms.k5"), "ok 0\n");
+    assert_eq!(ask(&mut d, "get gms.a6"), "ok 0\n");
+    assert_eq!(d.s.ff.actuator.blocks_used(), 4);
+    // The record keeps the count: encoded and decoded, the same set.
+    let rec = gms_core::drive::encode_settings(&d.s);
+    let back = gms_core::drive::decode_settings(&rec, &selftest::controller_params());
+    assert_eq!(back, Ok(d.s));
+    // A used block after an unused one is refused; growing back needs the new blocks.
+    assert!(ask(&mut d, "set gms.k6 0.001").starts_with("err 7 "));
+    assert!(ask(&mut d, "set gms.blocks 5").starts_with("err 7 "));
+    for line in [
+        "stage gms.blocks 5",
+        "stage gms.k5 0.001",
+        "stage gms.a5 0.1",
+        "stage gms.a1 0.4",
+        "commit",
+    ] {
+        assert_eq!(ask(&mut d, line), "ok\n", "{line}");
+    }
+    assert_eq!(ask(&mut d, "get gms.blocks"), "ok 5\n");
+}

@@ -1010,24 +1010,31 @@ pub fn identify_on<B: Bench>(
     Ok((g, id))
 }
 
-/// Sends a parameter file to the device: its `[friction]` (a 6-block GMS model, the
-/// compensator's) as `gms.*`, its `[device]` table by protocol path, staged and committed as
+/// Sends a parameter file to the device: its `[friction]` (a GMS model of 1 to 6 blocks, the
+/// compensator's) as `gms.*` (with `gms.blocks` when fewer than 6), its `[device]` table by protocol path, staged and committed as
 /// one set (weights that must sum to 1 cannot change one `set` at a time), so the device
 /// takes all or nothing. A firmware without staging gets one `set` at a time, retried while
 /// that makes progress. Returns the number of parameters sent.
 pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Result<usize, Error> {
     use crate::paramfile::ModelKind;
     let f = &pf.friction;
-    if f.model != ModelKind::Gms || f.blocks.as_ref().map_or(0, Vec::len) != 6 {
-        return Err(Error::Params(
-            "[friction] must be a 6-block gms model for the device's compensator".into(),
-        ));
+    let n = f.blocks.as_ref().map_or(0, Vec::len);
+    if f.model != ModelKind::Gms || !(1..=6).contains(&n) {
+        return Err(Error::Params(format!(
+            "[friction] must be a gms model of 1 to 6 blocks for the device's compensator \
+             (it is {} with {n} blocks)",
+            f.model
+        )));
     }
     f.gms_params::<6>()
         .map_err(|e| e.to_string())
         .and_then(|p| p.validate().map_err(|e| e.to_string()))
         .map_err(|e| Error::Params(format!("[friction] {e}")))?;
     let mut sets: Vec<(String, String)> = Vec::new();
+    if n < 6 {
+        // First: the blocks past n become unused, then the n blocks are set.
+        sets.push(("gms.blocks".into(), format!("{n}")));
+    }
     for (k, v) in [
         ("fs", f.fs),
         ("fc", f.fc),

@@ -241,7 +241,8 @@ impl FrictionSpec {
         Ok((pos, neg))
     }
 
-    /// The GMS parameters with exactly `N` blocks (unvalidated), or why not.
+    /// The GMS parameters in a set of `N` blocks (unvalidated), or why not: a table with
+    /// fewer blocks fills the first ones and leaves the rest unused (`k = alpha = 0`).
     pub fn gms_params<const N: usize>(&self) -> Result<GmsParams<N>, Error> {
         self.gms_params_inner::<N>().map_err(Error::Params)
     }
@@ -249,9 +250,9 @@ impl FrictionSpec {
     fn gms_params_inner<const N: usize>(&self) -> Result<GmsParams<N>, String> {
         let (stribeck, negative) = self.stribeck()?;
         let blocks = self.blocks.as_deref().unwrap_or(&[]);
-        if blocks.len() != N {
+        if blocks.len() > N {
             return Err(format!(
-                "[friction] has {} blocks, expected {N}",
+                "[friction] has {} blocks, at most {N} fit",
                 blocks.len()
             ));
         }
@@ -260,9 +261,11 @@ impl FrictionSpec {
             negative,
             sigma: self.sigma.unwrap_or(0.0) as f32,
             c: need(self.c, "c", self.model)? as f32,
-            blocks: core::array::from_fn(|i| Block {
-                k: blocks[i].k as f32,
-                alpha: blocks[i].alpha as f32,
+            blocks: core::array::from_fn(|i| {
+                blocks.get(i).map_or(gms_core::UNUSED_BLOCK, |b| Block {
+                    k: b.k as f32,
+                    alpha: b.alpha as f32,
+                })
             }),
         })
     }
@@ -316,7 +319,7 @@ impl FrictionSpec {
         }
     }
 
-    /// The table of a GMS parameter set.
+    /// The table of a GMS parameter set (its blocks in use).
     pub fn from_gms<const N: usize>(p: &GmsParams<N>) -> FrictionSpec {
         FrictionSpec {
             model: ModelKind::Gms,
@@ -329,6 +332,7 @@ impl FrictionSpec {
             blocks: Some(
                 p.blocks
                     .iter()
+                    .take(p.blocks_used())
                     .map(|b| BlockSpec {
                         k: b.k as f64,
                         alpha: b.alpha as f64,

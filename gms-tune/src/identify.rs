@@ -35,10 +35,12 @@ pub struct Args {
 /// Runs the experiments, writes the data, fits, writes the results; on any failure the bridge
 /// is off, the stroke limits are back, and the data gathered so far is on disk.
 pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
-    if (a.apply || a.save) && a.blocks != 6 {
-        return Err(Fail::Usage(
-            "--apply/--save need --blocks 6: the device's compensator has 6 blocks".into(),
-        ));
+    if (a.apply || a.save) && !(1..=6).contains(&a.blocks) {
+        return Err(Fail::Usage(format!(
+            "--apply/--save need --blocks 1 to 6: the device's compensator has at most 6 \
+             blocks (asked for {})",
+            a.blocks
+        )));
     }
     let dev = DeviceInfo::read(link).map_err(|e| Fail::Device(e.to_string()))?;
     check_faults(link).map_err(|e| Fail::Device(format!("{e}: `clear` it first")))?;

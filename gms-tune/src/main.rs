@@ -133,7 +133,7 @@ enum Cmd {
         /// Directory for the experiments' CSVs, report.txt and the plots.
         #[arg(long, default_value = "identify-report", value_name = "DIR")]
         report: PathBuf,
-        /// Maxwell-slip blocks fitted (6 for the device's compensator).
+        /// Maxwell-slip blocks fitted (1 to 6 for --apply/--save: the device holds up to 6).
         #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(1..=32))]
         blocks: u32,
         /// Fit each sliding direction separately ([friction.negative]).

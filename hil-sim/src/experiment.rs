@@ -278,10 +278,11 @@ pub enum Rig {
 }
 
 /// Runs `kind` (pre-sliding, sliding or lag) on the device core with the actuator friction
-/// `spec` (drawn within ±variability with `seed`); returns the CSV text, in the formats of
-/// [`run`]. The device's compensator holds the nominal `spec` (so the experiments' ranges come
-/// from it, as on a bench from the values the user set), which must therefore be a 6-block
-/// GMS model.
+/// `spec` of any model (drawn within ±variability with `seed`); returns the CSV text, in the
+/// formats of [`run`]. The experiments' ranges come from the device's parameters, as on a
+/// bench from the values the user set: the device starts from the truth's nominal friction
+/// where it can hold it (`ff.start = "plant"`: a GMS of up to 6 blocks exactly, otherwise
+/// the Stribeck curve), and from its default model for a GMS of more blocks.
 pub fn run_on_device(
     kind: Kind,
     spec: &FrictionSpec,
@@ -302,11 +303,28 @@ pub fn run_on_device(
     sc.plant.actuator = spec.clone();
     sc.plant.variability = variability;
     sc.plant.seed = seed;
-    let mut dev = crate::device::LocalDevice::new(&sc).map_err(|e| {
-        Error::Run(format!(
-            "{e} (the device rig's compensator takes a 6-block GMS model; --rig ideal takes any)"
-        ))
-    })?;
+    sc.set_controller("ff.start", toml::Value::String("plant".into()));
+    if sc.controller_params().is_err() {
+        // A truth the device cannot hold (a GMS of more than 6 blocks): its Stribeck curve
+        // on the device's blocks, as a user would enter what they know.
+        let mut g = spec.clone();
+        g.model = gms_ident::paramfile::ModelKind::Static;
+        g.blocks = None;
+        g.c = None;
+        let base = gms_core::device::default_settings().ff.actuator;
+        let p = crate::scenario::compensator_from_plant(&g, &base).map_err(Error::Run)?;
+        for (path, v) in [
+            ("gms.fs", p.stribeck.fs),
+            ("gms.fc", p.stribeck.fc),
+            ("gms.vs", p.stribeck.vs),
+            ("gms.delta", p.stribeck.delta),
+            ("gms.sigma", p.sigma),
+        ] {
+            sc.set_controller(path, toml::Value::Float(v as f64));
+        }
+        sc.set_controller("ff.start", toml::Value::String("device".into()));
+    }
+    let mut dev = crate::device::LocalDevice::new(&sc).map_err(|e| Error::Run(e.to_string()))?;
     let info = DeviceInfo::read(&mut dev).map_err(|e| Error::Run(e.to_string()))?;
     let plans = Plans::new(&info, &Ranges::default()).map_err(|e| Error::Run(e.to_string()))?;
     let run = |e: gms_ident::Error| Error::Run(e.to_string());

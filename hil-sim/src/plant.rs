@@ -26,6 +26,20 @@
 //! pre-sliding oscillation (sqrt(sum k / J) ≈ 4.6 krad/s, 0.023 rad per 5 us step); both
 //! friction sources are gms-core models driven by each step's displacement. Energy is
 //! accounted in f64 for the balance check.
+//!
+//! The truth is the plant's: its friction (actuator and guideway) may be any model the core
+//! has (GMS of up to 32 blocks, LuGre, a static map), whatever the compensator believes.
+//! Two options make it a real stage (both off by default):
+//! - `[plant.compliance]`: a two-mass stage. The rotor side (J_m = inertia − J_l: motor,
+//!   gearhead, screw) and the slide (J_l = m r², r the slide travel per motor radian) are
+//!   joined by the screw/nut's axial stiffness K = J_l (2π f_hz)² and damping
+//!   c = 2 zeta J_l (2π f_hz), reflected to the motor. The encoder and the actuator friction
+//!   are on the rotor, the guideway friction on the slide. Seen from the encoder: the
+//!   rigid-body line of the whole inertia, an anti-resonance at f_hz, a resonance at
+//!   f_hz √(J / J_m).
+//! - `[plant.ripple]`: the cogging torque (conservative, periodic in the motor angle, its
+//!   potential energy in the ledger) and the screw's once-per-revolution modulation of the
+//!   actuator friction.
 
 use crate::Error;
 use rand::{Rng, SeedableRng};
@@ -46,10 +60,38 @@ pub struct Energy {
     pub converted: f64,
     /// Work done against friction (both sources), ∫ T_f dθ.
     pub friction: f64,
-    /// Kinetic energy now, ½ J ω².
+    /// Kinetic energy now, ½ J ω² (both masses of a compliant stage).
     pub kinetic: f64,
     /// Magnetic energy now, ½ L i².
     pub magnetic: f64,
+    /// Energy stored in the screw/nut's axial compliance now, ½ K (θ_m − θ_l)².
+    pub spring: f64,
+    /// Energy lost in the compliance's damping, ∫ c (ω_m − ω_l)² dt.
+    pub damping: f64,
+    /// The cogging's potential energy now, relative to the start (it is conservative).
+    pub cogging: f64,
+}
+
+impl Energy {
+    /// What the mechanics hold and have dissipated: friction work, kinetic, spring and
+    /// cogging energy, damping loss \[J\] (equals [`converted`](Self::converted) when the
+    /// integration is right).
+    pub fn mechanical(&self) -> f64 {
+        self.friction + self.kinetic + self.spring + self.damping + self.cogging
+    }
+}
+
+/// The two-mass stage's constants at the motor (reflected).
+#[derive(Debug, Clone, Copy)]
+struct TwoMass {
+    /// Rotor side inertia [kg·m^2].
+    j_m: f64,
+    /// Slide inertia reflected [kg·m^2].
+    j_l: f64,
+    /// Axial stiffness reflected [N·m/rad].
+    k: f64,
+    /// Axial damping reflected [N·m·s/rad].
+    c: f64,
 }
 
 /// The plant's state and models.
@@ -70,6 +112,9 @@ pub struct Plant {
     actuator: AnyModel,
     guideway: AnyModel,
     drift: crate::scenario::Drift,
+    ripple: crate::scenario::Ripple,
+    gear_ratio: f64,
+    two_mass: Option<TwoMass>,
     glitch: crate::scenario::Glitch,
     /// -1 when the encoder is wired the other way round, else 1.
     enc_sign: f64,
@@ -83,8 +128,19 @@ pub struct Plant {
     pub omega: f64,
     /// Motor angle \[rad\].
     pub theta: f64,
+    /// The slide's position as a motor angle (slide travel / travel per radian) \[rad\];
+    /// equal to `theta` on a rigid stage.
+    pub theta_slide: f64,
+    /// The slide's speed as a motor speed [rad/s].
+    pub omega_slide: f64,
     /// Friction torque acting now (actuator + reflected guideway) [N·m].
     pub friction: f64,
+    /// The actuator's friction torque now (on the rotor) [N·m].
+    friction_act: f64,
+    /// The guideway's friction now, reflected to the motor (on the slide) [N·m].
+    friction_gw: f64,
+    /// The cogging torque now [N·m].
+    pub cogging: f64,
     /// Voltage applied by the bridge now \[V\].
     pub voltage: f64,
     /// Duty waiting to be applied at the next current-loop period.
@@ -149,6 +205,19 @@ impl Plant {
             actuator,
             guideway,
             drift: spec.drift.clone(),
+            ripple: spec.ripple.clone(),
+            gear_ratio: spec.gear_ratio,
+            two_mass: (spec.compliance.f_hz > 0.0).then(|| {
+                let r = spec.ratio();
+                let j_l = spec.compliance.slide_mass * r * r;
+                let w = 2.0 * std::f64::consts::PI * spec.compliance.f_hz;
+                TwoMass {
+                    j_m: spec.inertia - j_l,
+                    j_l,
+                    k: j_l * w * w,
+                    c: 2.0 * spec.compliance.zeta * j_l * w,
+                }
+            }),
             glitch: spec.encoder_glitch,
             enc_sign: if spec.encoder_reversed { -1.0 } else { 1.0 },
             sense_sign: if spec.sense_reversed { -1.0 } else { 1.0 },
@@ -156,7 +225,12 @@ impl Plant {
             i: 0.0,
             omega: 0.0,
             theta: 0.0,
+            theta_slide: 0.0,
+            omega_slide: 0.0,
             friction: 0.0,
+            friction_act: 0.0,
+            friction_gw: 0.0,
+            cogging: 0.0,
             voltage: 0.0,
             pending_duty: 0.0,
             energy: Energy::default(),
@@ -213,18 +287,54 @@ impl Plant {
         self.energy.copper += self.r * i2_int;
         self.energy.converted += self.k_e * self.omega * i_int;
         self.energy.magnetic = 0.5 * self.l * self.i * self.i;
-        // Mechanics: semi-implicit Euler with the friction of the current state.
+        // Mechanics: semi-implicit Euler with the friction, cogging and coupling of the
+        // current state.
         let torque = self.k_m * i_avg;
-        self.omega += (torque - self.friction) / self.j * dt;
-        let dtheta = self.omega * dt;
-        self.energy.friction += self.friction * dtheta;
+        let (dtheta, dslide) = match self.two_mass {
+            None => {
+                self.omega += (torque - self.friction - self.cogging) / self.j * dt;
+                let d = self.omega * dt;
+                self.omega_slide = self.omega;
+                self.energy.friction += self.friction * d;
+                (d, d)
+            }
+            Some(m) => {
+                let dw = self.omega - self.omega_slide;
+                let coupling = m.k * (self.theta - self.theta_slide) + m.c * dw;
+                self.omega += (torque - self.friction_act - self.cogging - coupling) / m.j_m * dt;
+                self.omega_slide += (coupling - self.friction_gw) / m.j_l * dt;
+                let (d, dl) = (self.omega * dt, self.omega_slide * dt);
+                // The damper's loss over the step at the new relative speed (the one that
+                // moves the masses; the step's work of the coupling is c dw_new (d - dl)).
+                let dw_new = self.omega - self.omega_slide;
+                self.energy.damping += m.c * dw * dw_new * dt;
+                self.energy.friction += self.friction_act * d + self.friction_gw * dl;
+                (d, dl)
+            }
+        };
         self.theta += dtheta;
+        self.theta_slide += dslide;
         let ta = self.actuator.advance(dtheta as f32, dt as f32) as f64;
         let fg = self
             .guideway
-            .advance((self.ratio * dtheta) as f32, dt as f32) as f64;
+            .advance((self.ratio * dslide) as f32, dt as f32) as f64;
         self.t += dt;
-        self.friction = self.drift.factor(self.t, self.theta) * (ta + self.ratio * fg);
-        self.energy.kinetic = 0.5 * self.j * self.omega * self.omega;
+        let drift = self.drift.factor(self.t, self.theta);
+        let ta = self.ripple.screw_factor(self.theta, self.gear_ratio) * ta;
+        self.friction = drift * (ta + self.ratio * fg);
+        self.friction_act = drift * ta;
+        self.friction_gw = drift * self.ratio * fg;
+        let (cog, cog_energy) = self.ripple.cogging(self.theta);
+        self.cogging = cog;
+        self.energy.cogging = cog_energy;
+        match self.two_mass {
+            None => self.energy.kinetic = 0.5 * self.j * self.omega * self.omega,
+            Some(m) => {
+                let d = self.theta - self.theta_slide;
+                self.energy.spring = 0.5 * m.k * d * d;
+                self.energy.kinetic = 0.5 * m.j_m * self.omega * self.omega
+                    + 0.5 * m.j_l * self.omega_slide * self.omega_slide;
+            }
+        }
     }
 }

@@ -8,6 +8,7 @@ use crate::Error;
 use std::path::Path;
 use std::sync::OnceLock;
 
+use gms_core::GmsParams;
 use gms_core::controller::{ControllerParams, FfMode};
 use gms_core::protocol;
 use gms_core::reference::Segment;
@@ -48,10 +49,12 @@ pub struct Scenario {
     /// The simulated axis.
     pub plant: Plant,
     /// The controller: the device's parameters by their protocol paths (`pos.kp`, `ff.mode`,
-    /// …, as nested tables: `[controller.pos] kp = 0.2`), plus `ff.guideway` (compensate the
-    /// guideway too). What is left out is the device's default
-    /// ([`gms_core::device::default_settings`]); `motor.*` and `gms.*` default to the plant's
-    /// nominal values.
+    /// …, as nested tables: `[controller.pos] kp = 0.2`), plus two keys of the scenario only:
+    /// `ff.guideway` (compensate the guideway too) and `ff.start` (`"device"`: the compensator
+    /// starts from the device's default friction model; `"plant"`: from the plant's nominal
+    /// friction). What is left out is the device's default
+    /// ([`gms_core::device::default_settings`]); `motor.*` and the encoder resolution, supply
+    /// and transmission default to the plant's values (the axis the user describes).
     pub controller: toml::Table,
     /// The reference trajectory.
     pub reference: Reference,
@@ -114,6 +117,92 @@ pub struct Plant {
     /// The current sense wired the other way round: it reads the current negated (a wiring
     /// fault for the bench tools to detect).
     pub sense_reversed: bool,
+    /// The screw/nut's axial compliance: a two-mass stage (rigid by default).
+    pub compliance: Compliance,
+    /// Position-dependent torque: cogging and the screw's once-per-revolution friction.
+    pub ripple: Ripple,
+}
+
+/// The stage's structural mode: the rotor side (motor, gearhead, screw) and the slide joined
+/// by the screw/nut's axial stiffness and damping. `inertia` stays the whole axis's inertia
+/// at the motor; of it, the slide's share is `slide_mass` × (slide travel per motor radian)².
+/// The encoder stays on the motor, the guideway friction acts on the slide.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Compliance {
+    /// The anti-resonance seen from the motor's encoder \[Hz\]: the slide's natural frequency
+    /// against the axial stiffness with the rotor held, `(1/2π) √(K / J_l)`; 0: rigid.
+    pub f_hz: f64,
+    /// Its damping ratio \[-\], in [0, 1).
+    pub zeta: f64,
+    /// The slide's mass (carriage and load) \[kg\], `> 0`.
+    pub slide_mass: f64,
+}
+
+/// One harmonic of the cogging torque.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Harmonic {
+    /// Its order: `order × per_rev` cycles per motor revolution \[-\], `>= 1`.
+    pub order: u32,
+    /// Its amplitude \[N·m\].
+    pub amplitude: f64,
+    /// Its phase \[rad\].
+    #[serde(default)]
+    pub phase: f64,
+}
+
+/// Position-dependent torque on the rotor: a conservative cogging torque periodic in the motor
+/// angle, `amplitude sin(per_rev θ + phase) + Σ a_h sin(order_h per_rev θ + phase_h)` (the
+/// torque the motor must supply to turn, positive against positive motion on the rising
+/// half), and a once-per-screw-revolution modulation of the actuator friction,
+/// `1 + screw_friction sin(θ / gear_ratio + screw_phase)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ripple {
+    /// The cogging's fundamental amplitude \[N·m\]; 0: none.
+    pub amplitude: f64,
+    /// Cogging cycles per motor revolution \[-\], `>= 1`.
+    pub per_rev: u32,
+    /// Phase of the fundamental \[rad\].
+    pub phase: f64,
+    /// Further harmonics.
+    pub harmonics: Vec<Harmonic>,
+    /// The actuator friction's modulation once per screw revolution, ± fraction \[-\], in
+    /// (-0.9, 0.9).
+    pub screw_friction: f64,
+    /// Its phase \[rad\].
+    pub screw_phase: f64,
+}
+
+impl Ripple {
+    /// The cogging torque at motor angle `theta` \[N·m\] and its potential energy relative
+    /// to angle 0 \[J\] (the torque's integral from 0 to `theta`).
+    pub fn cogging(&self, theta: f64) -> (f64, f64) {
+        let n = self.per_rev as f64;
+        let mut torque = 0.0;
+        let mut energy = 0.0;
+        let terms = core::iter::once((1.0, self.amplitude, self.phase)).chain(
+            self.harmonics
+                .iter()
+                .map(|h| (h.order as f64, h.amplitude, h.phase)),
+        );
+        for (order, a, ph) in terms {
+            if a == 0.0 {
+                continue;
+            }
+            let w = order * n;
+            torque += a * (w * theta + ph).sin();
+            energy += a / w * (ph.cos() - (w * theta + ph).cos());
+        }
+        (torque, energy)
+    }
+
+    /// The factor on the actuator friction at motor angle `theta` \[-\], for a gearhead of
+    /// `gear_ratio` (the screw turns once per `gear_ratio` motor revolutions).
+    pub fn screw_factor(&self, theta: f64, gear_ratio: f64) -> f64 {
+        1.0 + self.screw_friction * (theta / gear_ratio + self.screw_phase).sin()
+    }
 }
 
 /// Fault injection for testing what the device does about a bad encoder signal (a burst of
@@ -365,6 +454,56 @@ impl Scenario {
         if !(10..=1000).contains(&p.substeps) {
             return Err("plant.substeps must be in 10..=1000".into());
         }
+        let c = &p.compliance;
+        if !(c.f_hz.is_finite() && c.f_hz >= 0.0) {
+            return Err("plant.compliance.f_hz must be a finite number >= 0 (0: rigid)".into());
+        }
+        if !(c.zeta.is_finite() && (0.0..1.0).contains(&c.zeta)) {
+            return Err("plant.compliance.zeta must be in [0, 1)".into());
+        }
+        if !(c.slide_mass.is_finite() && c.slide_mass > 0.0) {
+            return Err("plant.compliance.slide_mass must be a finite number > 0".into());
+        }
+        if c.f_hz > 0.0 {
+            let j_l = c.slide_mass * p.ratio() * p.ratio();
+            if j_l >= 0.99 * p.inertia {
+                return Err(format!(
+                    "plant.compliance.slide_mass: the slide's {j_l:.3e} kg·m^2 at the motor \
+                     leaves no rotor inertia of plant.inertia = {:.3e}",
+                    p.inertia
+                ));
+            }
+            // The resonance must be resolved by the integration step (symplectic Euler is
+            // stable for ω dt < 2; keep it accurate).
+            let f_r = c.f_hz * (p.inertia / (p.inertia - j_l)).sqrt();
+            let f_step = 20_000.0 * p.substeps as f64;
+            if 2.0 * std::f64::consts::PI * f_r / f_step > 0.1 {
+                return Err(format!(
+                    "plant.compliance.f_hz: the resonance at {f_r:.0} Hz is too fast for the \
+                     integration step (1/{f_step:.0} s): raise plant.substeps"
+                ));
+            }
+        }
+        let r = &p.ripple;
+        if !(r.amplitude.is_finite() && r.phase.is_finite()) {
+            return Err("plant.ripple.amplitude and phase must be finite numbers".into());
+        }
+        if r.per_rev == 0 {
+            return Err("plant.ripple.per_rev must be >= 1".into());
+        }
+        for (i, h) in r.harmonics.iter().enumerate() {
+            if h.order == 0 || !(h.amplitude.is_finite() && h.phase.is_finite()) {
+                return Err(format!(
+                    "plant.ripple.harmonics[{i}]: order >= 1, finite amplitude and phase"
+                ));
+            }
+        }
+        if !(r.screw_friction.is_finite() && r.screw_friction.abs() < 0.9) {
+            return Err("plant.ripple.screw_friction must be in (-0.9, 0.9)".into());
+        }
+        if !r.screw_phase.is_finite() {
+            return Err("plant.ripple.screw_phase must be a finite number".into());
+        }
         p.actuator
             .build()
             .map_err(|e| format!("plant.actuator: {e}"))?;
@@ -405,44 +544,58 @@ impl Scenario {
             .unwrap_or_default()
     }
 
-    /// The controller's parameters: the device's defaults, the plant's nominal motor and
-    /// friction (the compensator knows the nominal plant), then the `[controller]` table by
-    /// protocol paths, each checked against the protocol's range table, and the whole set
-    /// validated. Errors name the scenario key.
+    /// The controller's parameters: the device's defaults with the axis the user describes to
+    /// the device taken from the plant (encoder resolution, motor constants, supply,
+    /// transmission ratio); the compensator's friction is the device's default model unless
+    /// `[controller.ff] start = "plant"` (then the plant's nominal friction, where the device
+    /// can hold it: see [`compensator_from_plant`]); then the `[controller]` table by protocol
+    /// paths, each checked against the protocol's range table, and the whole set validated.
+    /// The plant's friction is the truth, never read here otherwise. Errors name the scenario
+    /// key.
     pub fn controller_params(&self) -> Result<ControllerParams<FF_BLOCKS>, Error> {
         self.controller_params_inner().map_err(Error::Scenario)
     }
 
     fn controller_params_inner(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
         let p = &self.plant;
-        let gms = |spec: &FrictionSpec, what: &str| {
-            if spec.model != gms_ident::paramfile::ModelKind::Gms {
-                return Err(format!(
-                    "plant.{what}: the compensator needs model \"gms\" (it has {})",
-                    spec.model
-                ));
-            }
-            spec.gms_params::<FF_BLOCKS>().map_err(|e| {
-                format!("plant.{what}: {e} (the compensator is built for {FF_BLOCKS})")
-            })
-        };
         let mut s = gms_core::device::default_settings();
         s.rad_per_count = p.rad_per_count as f32;
         s.motor.k_m = p.k_m as f32;
         s.motor.r = p.resistance as f32;
         s.motor.k_e = p.k_e as f32;
         s.v_supply = p.supply_v as f32;
-        s.ff.actuator = gms(&p.actuator, "actuator")?;
         s.ff.ratio = p.ratio() as f32;
         let mut guideway = true;
+        let mut start = Start::Device;
         let mut keys = Vec::new();
         flatten("", &self.controller, &mut keys);
+        // The starting model first, so that `gms.*` keys edit it whatever the key order.
+        for (path, value) in &keys {
+            let key = format!("controller.{path}");
+            match path.as_str() {
+                "ff.guideway" => {
+                    guideway = value
+                        .as_bool()
+                        .ok_or_else(|| format!("{key}: true or false"))?;
+                }
+                "ff.start" => {
+                    start = match value.as_str() {
+                        Some("device") => Start::Device,
+                        Some("plant") => Start::Plant,
+                        _ => return Err(format!("{key}: \"device\" or \"plant\"")),
+                    };
+                }
+                _ => {}
+            }
+        }
+        let default_guideway = s.ff.guideway;
+        if start == Start::Plant {
+            s.ff.actuator = compensator_from_plant(&p.actuator, &s.ff.actuator)
+                .map_err(|e| format!("plant.actuator: {e} (controller.ff.start = \"plant\")"))?;
+        }
         for (path, value) in keys {
             let key = format!("controller.{path}");
-            if path == "ff.guideway" {
-                guideway = value
-                    .as_bool()
-                    .ok_or_else(|| format!("{key}: true or false"))?;
+            if path == "ff.guideway" || path == "ff.start" {
                 continue;
             }
             let param = protocol::find(&path).ok_or_else(|| {
@@ -464,10 +617,14 @@ impl Scenario {
                 _ => format!("{key} = {text}: {}", e.reason),
             })?;
         }
-        s.ff.guideway = if guideway {
-            Some(gms(&p.guideway, "guideway")?)
-        } else {
-            None
+        s.ff.guideway = match (guideway, start, default_guideway) {
+            (false, _, _) => None,
+            (true, Start::Plant, Some(d)) => {
+                Some(compensator_from_plant(&p.guideway, &d).map_err(|e| {
+                    format!("plant.guideway: {e} (controller.ff.start = \"plant\")")
+                })?)
+            }
+            (true, _, d) => d,
         };
         s.validate()
             .map_err(|e| format!("controller: {}", controller_key(e)))?;
@@ -559,6 +716,51 @@ impl Scenario {
         }
         Ok(out)
     }
+}
+
+/// Where the compensator's friction model starts from (`[controller.ff] start`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Start {
+    /// The device's defaults (Table 1 and the guideway preset): what a device fresh from the
+    /// factory holds, whatever the plant's friction is.
+    Device,
+    /// The plant's nominal friction, where the device can hold it.
+    Plant,
+}
+
+/// The compensator's GMS model (at most [`FF_BLOCKS`] blocks) for a plant friction `truth`,
+/// where it can be represented: a GMS of up to [`FF_BLOCKS`] blocks exactly; LuGre or a
+/// static map by their Stribeck curve (both directions) and viscous term, with the blocks and
+/// `c` of `base` (those models have no Maxwell-slip blocks to copy); a GMS of more blocks is
+/// refused (the device cannot hold it: start from the device's model instead).
+pub fn compensator_from_plant(
+    truth: &FrictionSpec,
+    base: &GmsParams<FF_BLOCKS>,
+) -> Result<GmsParams<FF_BLOCKS>, String> {
+    use gms_ident::paramfile::ModelKind;
+    let p = match truth.model {
+        ModelKind::Gms => {
+            let n = truth.blocks.as_ref().map_or(0, Vec::len);
+            if n > FF_BLOCKS {
+                return Err(format!(
+                    "a gms model of {n} blocks cannot be the compensator's (it holds at most \
+                     {FF_BLOCKS}): start from the device's model (ff.start = \"device\")"
+                ));
+            }
+            truth.gms_params::<FF_BLOCKS>().map_err(|e| e.to_string())?
+        }
+        ModelKind::Lugre | ModelKind::Static => {
+            let mut tmp = truth.clone();
+            tmp.model = ModelKind::Gms;
+            tmp.c = Some(base.c as f64);
+            tmp.blocks = None;
+            let mut g = tmp.gms_params::<FF_BLOCKS>().map_err(|e| e.to_string())?;
+            g.blocks = base.blocks;
+            g
+        }
+    };
+    p.validate().map_err(|e| e.to_string())?;
+    Ok(p)
 }
 
 /// The scenario key of a controller error (the protocol path under `[controller]`, or the

@@ -18,6 +18,8 @@ pub enum Access {
         min: f32,
         /// Largest allowed value.
         max: f32,
+        /// Only whole numbers (a count).
+        integer: bool,
     },
     /// The feedforward mode: `none`, `static`, `gms` or `gms-adaptive`.
     Mode,
@@ -53,6 +55,7 @@ macro_rules! num {
                 set: |$s: &mut Settings, v: f32| $field = v,
                 min: $min,
                 max: $max,
+                integer: false,
             },
         }
     };
@@ -113,30 +116,39 @@ pub const PARAMS: &[Param] = &[
         .actuator
         .sigma),
     num!("gms.c", "N·m/s", 1e-12, 1e6, |s| s.ff.actuator.c),
-    num!("gms.k1", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [0]
-    .k),
-    num!("gms.k2", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [1]
-    .k),
-    num!("gms.k3", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [2]
-    .k),
-    num!("gms.k4", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [3]
-    .k),
-    num!("gms.k5", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [4]
-    .k),
-    num!("gms.k6", "N·m/rad", 1e-12, 1e9, |s| s.ff.actuator.blocks
-        [5]
-    .k),
-    num!("gms.a1", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[0].alpha),
-    num!("gms.a2", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[1].alpha),
-    num!("gms.a3", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[2].alpha),
-    num!("gms.a4", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[3].alpha),
-    num!("gms.a5", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[4].alpha),
-    num!("gms.a6", "-", 1e-6, 1.0, |s| s.ff.actuator.blocks[5].alpha),
+    Param {
+        path: "gms.blocks",
+        unit: "-",
+        access: Access::Number {
+            get: |s: &Settings| s.ff.actuator.blocks_used() as f32,
+            // The blocks past the count become unused (k = alpha = 0); those kept keep their
+            // values (a count that grows needs its new blocks set before the set validates).
+            set: |s: &mut Settings, v: f32| {
+                s.ff.actuator = s.ff.actuator.with_blocks_used(v as usize);
+            },
+            min: 1.0,
+            max: 6.0,
+            integer: true,
+        },
+    },
+    num!("gms.k1", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[0]
+        .k),
+    num!("gms.k2", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[1]
+        .k),
+    num!("gms.k3", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[2]
+        .k),
+    num!("gms.k4", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[3]
+        .k),
+    num!("gms.k5", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[4]
+        .k),
+    num!("gms.k6", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[5]
+        .k),
+    num!("gms.a1", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[0].alpha),
+    num!("gms.a2", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[1].alpha),
+    num!("gms.a3", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[2].alpha),
+    num!("gms.a4", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[3].alpha),
+    num!("gms.a5", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[4].alpha),
+    num!("gms.a6", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[5].alpha),
 ];
 
 const fn str_eq(a: &str, b: &str) -> bool {
@@ -200,9 +212,15 @@ pub fn write_param<D: Device + ?Sized>(
 /// name), without validating the whole set (see [`with_value`]); on error `s` is unchanged.
 pub fn set_param(s: &mut Settings, p: &Param, value: &str) -> Result<(), ParseError> {
     match p.access {
-        Access::Number { set, min, max, .. } => {
+        Access::Number {
+            set,
+            min,
+            max,
+            integer,
+            ..
+        } => {
             let v = parse_f32(value)
-                .filter(|v| *v >= min && *v <= max)
+                .filter(|v| *v >= min && *v <= max && (!integer || *v == (*v as i32) as f32))
                 .ok_or(ParseError {
                     code: ErrorCode::OutOfRange,
                     reason: "not a finite number within the range (see list)",
