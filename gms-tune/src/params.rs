@@ -68,8 +68,11 @@ pub fn to_file(listed: &[Listed]) -> Result<ParamFile, String> {
             .find(|p| p.path == k)
             .and_then(|p| p.value.parse::<f64>().ok())
     };
+    // The blocks in use (`gms.blocks`; a firmware without it has all six), unused ones
+    // (k = alpha = 0) left out of the file.
+    let used = num("gms.blocks").map_or(6, |n| n as usize).clamp(1, 6);
     let mut blocks = Vec::new();
-    for i in 1..=6 {
+    for i in 1..=used {
         match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
             (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
             _ => return Err(format!("list has no gms.k{i}/gms.a{i}")),

@@ -44,7 +44,10 @@ fn run_inner(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
             friction: e.friction,
             kinetic: e.kinetic,
             magnetic: e.magnetic,
-            residual: e.input - e.copper - e.friction - e.kinetic - e.magnetic,
+            spring: e.spring,
+            damping: e.damping,
+            cogging: e.cogging,
+            residual: e.input - e.copper - e.magnetic - e.mechanical(),
         },
     })
     .map_err(|e| e.to_string())?;
@@ -67,6 +70,12 @@ struct EnergyOut {
     friction: f64,
     kinetic: f64,
     magnetic: f64,
+    /// Stored in the stage's compliance now (0 on a rigid stage).
+    spring: f64,
+    /// Lost in the compliance's damping.
+    damping: f64,
+    /// The cogging's potential energy now.
+    cogging: f64,
     residual: f64,
 }
 

@@ -412,13 +412,29 @@ impl NorFlash for HostFlash {
 /// The virtual device's protocol side.
 type Dev = Front<HostLink, FlashStore<HostFlash>>;
 
+/// The one line a client connecting while another is served receives before it is closed.
+pub const BUSY: &str = "err 8 busy: another client is connected to the device\n";
+
+/// How long a client connecting while another is served waits before it is refused (the
+/// other may just have left, unseen yet).
+const BUSY_GRACE: Duration = Duration::from_millis(100);
+
 /// Serves one client until it disconnects. `conn` reads must not block for long: a TCP
-/// socket with a read timeout, or a non-blocking PTY master.
-fn serve_client<C: Read + Write>(dev: &mut Dev, shared: &Shared, mut conn: C) {
+/// socket with a read timeout, or a non-blocking PTY master. `refuse_others` is called at
+/// every turn of the loop while this client is still there: it answers clients that came
+/// meanwhile with [`BUSY`].
+fn serve_client<C: Read + Write>(
+    dev: &mut Dev,
+    shared: &Shared,
+    mut conn: C,
+    refuse_others: &mut dyn FnMut(),
+) {
     let mut reader = LineReader::default();
     let mut buf = [0u8; 512];
     shared.telemetry().clear();
     loop {
+        // Read first: a client that has just left is seen gone (end of stream) before the
+        // next one, which connected after it left, would be refused.
         match conn.read(&mut buf) {
             Ok(0) => break,
             Ok(n) => {
@@ -438,6 +454,7 @@ fn serve_client<C: Read + Write>(dev: &mut Dev, shared: &Shared, mut conn: C) {
             Err(e) if e.kind() == ErrorKind::TimedOut => {}
             Err(_) => break,
         }
+        refuse_others();
         let samples: Vec<Sample> = shared.telemetry().drain(..).collect();
         if dev.streaming() && !samples.is_empty() {
             let mut lines = String::new();
@@ -548,11 +565,46 @@ fn serve_inner(
                 .map_err(|e| e.to_string())?
                 .to_string();
             on_ready(&addr, why);
-            for conn in listener.incoming() {
-                let Ok(c) = conn else { continue };
+            // Connections are accepted on their own thread, so that one arriving while a
+            // client is served gets a one-line refusal at once rather than silence.
+            let (tx, rx) = std::sync::mpsc::channel::<std::net::TcpStream>();
+            std::thread::spawn(move || {
+                for conn in listener.incoming() {
+                    let Ok(c) = conn else { continue };
+                    if tx.send(c).is_err() {
+                        break;
+                    }
+                }
+            });
+            // A client that connects just after the previous one left may arrive before that
+            // one is seen gone: a newcomer waits for a grace period before it is refused, and
+            // is served if the current client leaves meanwhile.
+            let waiting =
+                std::cell::RefCell::new(VecDeque::<(std::net::TcpStream, Instant)>::new());
+            let mut refuse = || {
+                let mut w = waiting.borrow_mut();
+                while let Ok(c) = rx.try_recv() {
+                    w.push_back((c, Instant::now()));
+                }
+                while w.front().is_some_and(|(_, at)| at.elapsed() >= BUSY_GRACE) {
+                    if let Some((mut other, _)) = w.pop_front() {
+                        let _ = other.write_all(BUSY.as_bytes());
+                        let _ = other.shutdown(std::net::Shutdown::Both);
+                    }
+                }
+            };
+            loop {
+                let next = waiting.borrow_mut().pop_front().map(|(c, _)| c);
+                let c = match next {
+                    Some(c) => c,
+                    None => match rx.recv() {
+                        Ok(c) => c,
+                        Err(_) => break,
+                    },
+                };
                 let _ = c.set_read_timeout(Some(Duration::from_millis(2)));
                 let _ = c.set_nodelay(true);
-                serve_client(&mut dev, &shared, c);
+                serve_client(&mut dev, &shared, c, &mut refuse);
             }
             Ok(())
         }
@@ -579,7 +631,7 @@ fn serve_pty(dev: &mut Dev, shared: &Shared, on_ready: impl FnOnce(&str)) -> Res
     let _slave = pty.slave;
     loop {
         // serve_client returns only on an I/O error; start over after a pause.
-        serve_client(dev, shared, &master);
+        serve_client(dev, shared, &master, &mut || {});
         std::thread::sleep(Duration::from_millis(10));
     }
 }

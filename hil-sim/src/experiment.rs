@@ -296,7 +296,7 @@ pub fn run_on_device(
         ));
     }
     let mut sc = crate::scenario::Scenario::parse(
-        "[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n",
+        "[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n[controller.ff]\nguideway = false\n",
         "hil-sim experiment",
     )
     .map_err(|e| Error::Run(e.to_string()))?;

@@ -152,7 +152,9 @@ pub fn write_rows(path: &Path, rows: &[FrictionRow]) -> std::io::Result<()> {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         writeln!(w, "t,x,v,f")?;
         for r in rows {
-            writeln!(w, "{},{},{},{}", r.t, r.x, r.v, r.f)?;
+            // f as the f64 of its exact f32 value: read back as f64 by any reader, the same
+            // number the model computed (the shortest f32 text is not, as f64).
+            writeln!(w, "{},{},{},{}", r.t, r.x, r.v, r.f as f64)?;
         }
         w.flush()?;
     }

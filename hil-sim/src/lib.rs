@@ -16,6 +16,7 @@ pub mod friction_cmd;
 pub mod plant;
 pub mod scenario;
 pub mod sim;
+pub mod study;
 
 /// What went wrong in the simulator. `Display` gives the one-line message the CLI prints; the
 /// variant says what kind of failure it is.

@@ -66,6 +66,20 @@ enum Cmd {
         #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
         threads: Option<u32>,
     },
+    /// The mismatch study: the device's GMS compensation (its default model, Table 1)
+    /// against plants whose actuator friction is another model (4 and 12 blocks, LuGre, a
+    /// static map); prints a markdown table (docs/results.md#mismatch).
+    Mismatch {
+        /// Number of friction draws per plant and mode.
+        #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        runs: u32,
+        /// First seed (draw i uses seed + i).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+        threads: Option<u32>,
+    },
     /// The virtual device: the simulated axis in real time behind the bench protocol.
     Serve {
         /// Listen on this TCP address, e.g. 127.0.0.1:7878 (port 0: any free port).
@@ -253,6 +267,16 @@ fn main() -> ExitCode {
             threads: t,
         } => load_scenario(scenario.as_deref())
             .and_then(|sc| compare_and_write(&sc, runs, seed, &json, threads(t))),
+        Cmd::Mismatch {
+            runs,
+            seed,
+            threads: t,
+        } => (|| {
+            let rows = hil_sim::study::mismatch(runs as usize, seed, threads(t), true)?;
+            let rpc = Scenario::default().plant.rad_per_count;
+            print!("{}", hil_sim::study::table(&rows, rpc));
+            Ok(())
+        })(),
         Cmd::Serve {
             tcp,
             pty,

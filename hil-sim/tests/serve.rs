@@ -259,3 +259,36 @@ fn serve_faster_than_real_time() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--speed 0"), "{err}");
 }
+
+/// A second client while one is served gets one line, `err 8 busy: …`, and is closed; the
+/// first is undisturbed (its requests answered, its stream not mixed with the refusal), and
+/// once it leaves the next client is served.
+#[test]
+fn a_second_client_is_refused_with_one_line_and_the_first_is_undisturbed() {
+    let dir = tempfile::tempdir().unwrap();
+    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.img"));
+    let mut first = connect(&srv);
+    assert_eq!(first.ask("set pos.ki 120"), "ok");
+    let mut second = connect(&srv);
+    second.s.write_all(b"get pos.ki\n").unwrap();
+    let mut got = String::new();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut buf = [0u8; 256];
+    loop {
+        match second.s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.push_str(&String::from_utf8_lossy(&buf[..n])),
+            Err(_) => assert!(Instant::now() < deadline, "no refusal; got {got:?}"),
+        }
+    }
+    assert_eq!(
+        got,
+        "err 8 busy: another client is connected to the device\n"
+    );
+    // The first goes on as before.
+    assert_eq!(first.ask("get pos.ki"), "ok 120");
+    assert_eq!(first.ask("set pos.ki 130"), "ok");
+    drop(first);
+    let mut third = connect(&srv);
+    assert_eq!(third.ask("get pos.ki"), "ok 130");
+}

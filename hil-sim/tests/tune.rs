@@ -76,10 +76,12 @@ fn hidden_motor(r: f64, k: f64, j: f64, l: f64, enc_rev: bool, sense_rev: bool) 
     let text = format!(
         "{QUIET}\n[plant]\nresistance = {r}\nk_m = {k}\nk_e = {k}\ninertia = {j}\ninductance = {l}\n\
          encoder_reversed = {enc_rev}\nsense_reversed = {sense_rev}\n\
-         [controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n[controller.ff]\ninertia = 6e-8\n"
+         [controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n[controller.ff]\ninertia = 6e-8\n\
+         guideway = false\n"
     );
-    // QUIET's [plant] table and this one merge: write them as one.
+    // QUIET's [plant] and [controller.ff] tables and these merge: write them as one.
     let text = text
+        .replacen("[controller.ff]\nguideway = false\n", "", 1)
         .replacen("[plant]\nvariability = 0.0\n", "", 1)
         .replacen("[plant]\n", "[plant]\nvariability = 0.0\n", 1);
     LocalDevice::new(&Scenario::parse(&text, "test").unwrap()).unwrap()
@@ -155,14 +157,15 @@ fn commission_then_identify_tracks_like_the_true_parameters() {
     use gms_ident::paramfile::ParamFile;
     let w = 2.0 * std::f64::consts::PI * 1000.0;
     let mut truth = hidden_axis(&format!(
-        "[controller.ff]\ninertia = 9e-8\n[controller.cur]\nkp = {}\nki = {}\n",
+        "[controller.ff]\ninertia = 9e-8\nstart = \"plant\"\nguideway = false\n\
+         [controller.cur]\nkp = {}\nki = {}\n",
         w * 0.4e-3,
         w * 7.5
     ));
     let rms_true = sine_test(&mut truth, 2e-3, 1.0, 3.0).unwrap();
     // The device told nothing: the default motor, Table 1.
     let table1 = "[controller.motor]\nr = 10.0\nk_m = 6.6e-3\nk_e = 6.6e-3\n\
-                  [controller.ff]\ninertia = 6e-8\n\
+                  [controller.ff]\ninertia = 6e-8\nguideway = false\n\
                   [controller.gms]\nfs = 220e-6\nfc = 125e-6\nvs = 0.2\ndelta = 0.9\n\
                   sigma = 10.5e-6\nc = 5e-3\nk1 = 1.159\nk2 = 64.417e-3\nk3 = 13.066e-3\n\
                   k4 = 8.027e-3\nk5 = 2.043e-3\nk6 = 0.961e-3\n";

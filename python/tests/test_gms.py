@@ -52,6 +52,28 @@ def test_friction_is_hil_sim_friction(tmp_path):
     assert np.array_equal(gms.friction(params, traj["t"], traj["x"]), f)
 
 
+def test_friction_is_hil_sim_friction_bit_for_bit_on_random_17_digit_inputs(tmp_path):
+    # Random trajectories written with 17 significant digits (every f64 round-trips): the
+    # CSV's f, read as f64 as any reader would, equals gms.friction's exactly (the CLI writes
+    # the f64 of the model's f32, not the f32's shortest text, which is another f64).
+    rng = np.random.default_rng(24)
+    for trial in range(5):
+        n = 400
+        t = np.cumsum(rng.uniform(1e-4, 5e-3, n))
+        x = np.cumsum(rng.normal(0.0, 3e-4, n)) + 1e-3 * np.sin(40 * t)
+        path = tmp_path / f"traj{trial}.csv"
+        with open(path, "w") as fh:
+            fh.write("t,x\n")
+            for a, b in zip(t, x):
+                fh.write(f"{a:.17g},{b:.17g}\n")
+        out = tmp_path / f"f{trial}.csv"
+        hil_sim("friction", "--params", TABLE1, "--input", path, "--output", out)
+        cli = read_csv(out)
+        assert np.array_equal(cli["t"], t) and np.array_equal(cli["x"], x)
+        f = gms.friction(str(TABLE1), t, x)
+        assert np.array_equal(f, cli["f"]), np.max(np.abs(f - cli["f"]))
+
+
 def test_model_objects_step_run_and_reset():
     m = gms.Model(str(TABLE1))
     assert m.kind == "gms"

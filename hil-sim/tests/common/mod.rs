@@ -7,13 +7,17 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
 /// The default plant with its friction exactly nominal (no draw) and the guideway negligible:
-/// a bench sees the actuator's Table 1 friction alone.
+/// a bench sees the actuator's Table 1 friction alone, and the device compensates it alone
+/// (its default guideway model off).
 pub const QUIET: &str = "[plant]
 variability = 0.0
 
 [plant.guideway]
 fs = 1e-6
 fc = 1e-6
+
+[controller.ff]
+guideway = false
 ";
 
 /// Runs `cmd` to its end; returns (exit code, stdout, stderr).

@@ -1,0 +1,178 @@
+//! The plant is the truth, the compensator a model: `hil-sim run`, `compare` and `serve`
+//! take a plant whose friction is any model the core has, and the compensator starts from
+//! the device's model unless told otherwise.
+
+use std::io::{BufRead, BufReader, Write};
+use std::net::TcpStream;
+use std::time::Duration;
+
+mod common;
+use common::hil;
+use hil_sim::scenario::Scenario;
+
+/// A short reference (a sine with reversals, then a step) for the CLI runs.
+const SHORT: &str = r#"
+[reference]
+segments = [
+  { kind = "hold", duration = 0.02 },
+  { kind = "sine", amplitude = 0.02, freq = 2.0, cycles = 2.0 },
+  { kind = "steps", counts = [10], dwell = 0.05 },
+]
+"#;
+
+/// A LuGre actuator (Table 1's Stribeck curve, one bristle of Table 1's initial stiffness,
+/// Fs 15 % above the device's default).
+const LUGRE: &str = "[plant.actuator]\nmodel = \"lugre\"\nfs = 253e-6\nfc = 125e-6\nvs = 0.2\n\
+                     delta = 0.9\nsigma = 10.5e-6\nsigma0 = 1.25\nsigma1 = 0.0\n";
+
+/// A 4-block GMS actuator.
+const FOUR: &str = "[plant.actuator]\nmodel = \"gms\"\nfs = 220e-6\nfc = 125e-6\nvs = 0.2\n\
+                    delta = 0.9\nsigma = 10.5e-6\nc = 5e-3\nblocks = [{ k = 1.2, alpha = 0.6 }, \
+                    { k = 0.05, alpha = 0.2 }, { k = 0.01, alpha = 0.1 }, \
+                    { k = 0.002, alpha = 0.1 }]\n";
+
+/// The sine RMS error of a run's metrics.json [rad].
+fn sine_rms(dir: &std::path::Path) -> f64 {
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("metrics.json")).unwrap()).unwrap();
+    m["metrics"]["sine_rms_error"].as_f64().unwrap()
+}
+
+/// `run` and `compare` accept a LuGre and a 4-block plant; against either, the device's GMS
+/// feedforward (its default model, not the plant's) still tracks the sine better than no
+/// feedforward.
+#[test]
+fn run_and_compare_take_any_plant_friction() {
+    let d = tempfile::tempdir().unwrap();
+    for (name, plant) in [("lugre", LUGRE), ("four", FOUR)] {
+        for mode in ["none", "gms"] {
+            let file = format!("{name}-{mode}.toml");
+            std::fs::write(
+                d.path().join(&file),
+                format!("{SHORT}\n{plant}\n[controller.ff]\nmode = \"{mode}\"\n"),
+            )
+            .unwrap();
+            let out = format!("out-{name}-{mode}");
+            let (code, _, err) = hil(&["run", &file, "--out", &out], d.path());
+            assert_eq!(code, 0, "{name} {mode}: {err}");
+        }
+        let (none, gms) = (
+            sine_rms(&d.path().join(format!("out-{name}-none"))),
+            sine_rms(&d.path().join(format!("out-{name}-gms"))),
+        );
+        println!("{name}: sine RMS none {none:e}, gms {gms:e}");
+        assert!(gms < 0.6 * none, "{name}: gms {gms:e} none {none:e}");
+        let (code, out, err) = hil(
+            &[
+                "compare",
+                &format!("{name}-gms.toml"),
+                "--runs",
+                "2",
+                "--json",
+                "c.json",
+            ],
+            d.path(),
+        );
+        assert_eq!(code, 0, "{name}: {err}");
+        assert!(out.contains("gms-adaptive"), "{out}");
+    }
+}
+
+/// The compensator's model: the device's defaults whatever the plant (`ff.start = "device"`),
+/// the plant's nominal where the device can hold it (`"plant"`), refused with the reason where
+/// it cannot (12 blocks); `[controller.gms]` keys edit the starting model.
+#[test]
+fn the_compensator_starts_from_the_device_or_the_plant() {
+    let defaults = gms_core::device::default_settings().ff.actuator;
+    let four = Scenario::parse(FOUR, "t").unwrap();
+    assert_eq!(four.controller_params().unwrap().ff.actuator, defaults);
+    let from_plant = Scenario::parse(
+        &format!("{FOUR}\n[controller.ff]\nstart = \"plant\"\n"),
+        "t",
+    )
+    .unwrap();
+    let a = from_plant.controller_params().unwrap().ff.actuator;
+    assert_eq!(a.blocks_used(), 4);
+    assert_eq!((a.blocks[0].k, a.blocks[3].alpha), (1.2, 0.1));
+    // LuGre from the plant: its Stribeck curve and viscous term, the device's blocks and C.
+    let lugre = Scenario::parse(
+        &format!("{LUGRE}\n[controller.ff]\nstart = \"plant\"\n"),
+        "t",
+    )
+    .unwrap();
+    let l = lugre.controller_params().unwrap().ff.actuator;
+    assert_eq!(l.stribeck.fs, 253e-6);
+    assert_eq!((l.blocks, l.c), (defaults.blocks, defaults.c));
+    // gms.* keys edit the starting model, whatever their order in the file.
+    let edited = Scenario::parse(
+        &format!("{FOUR}\n[controller.gms]\nfs = 2.5e-4\n[controller.ff]\nstart = \"plant\"\n"),
+        "t",
+    )
+    .unwrap();
+    let e = edited.controller_params().unwrap().ff.actuator;
+    assert_eq!((e.stribeck.fs, e.blocks_used()), (2.5e-4, 4));
+    // Twelve blocks cannot be the compensator's.
+    let blocks: Vec<String> = (0..12)
+        .map(|i| format!("{{ k = {}, alpha = {} }}", 1.0 / 2f64.powi(i), 1.0 / 12.0))
+        .collect();
+    let twelve = format!(
+        "[plant.actuator]\nmodel = \"gms\"\nfs = 220e-6\nfc = 125e-6\nvs = 0.2\nc = 5e-3\n\
+         blocks = [{}]\n",
+        blocks.join(", ")
+    );
+    assert!(Scenario::parse(&twelve, "t").is_ok());
+    let err = Scenario::parse(
+        &format!("{twelve}[controller.ff]\nstart = \"plant\"\n"),
+        "t",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("12 blocks") && err.contains("at most 6"),
+        "{err}"
+    );
+    let err = Scenario::parse("[controller.ff]\nstart = \"oracle\"\n", "t")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("controller.ff.start"), "{err}");
+}
+
+/// `hil-sim serve` on a LuGre plant: the virtual device starts at its own defaults (it is not
+/// told the plant's friction), answers, and moves.
+#[test]
+fn serve_takes_a_lugre_plant_and_is_not_told_its_friction() {
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(d.path().join("s.toml"), LUGRE).unwrap();
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_hil-sim"))
+        .args(["serve", "--tcp", "127.0.0.1:0", "--scenario", "s.toml"])
+        .current_dir(d.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on ")
+        .unwrap()
+        .to_string();
+    let s = TcpStream::connect(&addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    let mut w = s.try_clone().unwrap();
+    let mut r = BufReader::new(s);
+    let mut ask = |q: &str| {
+        w.write_all(format!("{q}\n").as_bytes()).unwrap();
+        let mut l = String::new();
+        r.read_line(&mut l).unwrap();
+        l.trim().to_string()
+    };
+    assert_eq!(ask("get gms.fs"), "ok 0.00022");
+    assert_eq!(ask("get gms.blocks"), "ok 6");
+    assert_eq!(ask("enable"), "ok");
+    assert_eq!(ask("move 0.01"), "ok");
+    let _ = child.kill();
+    let _ = child.wait();
+}
