@@ -52,8 +52,11 @@ pub fn table1() -> GmsParams<6> {
 /// C = 25 N/s (slip time constant |s|/C ≈ 30 ms, like the actuator's).
 pub fn guideway() -> GmsParams<6> {
     const FS: f32 = 0.9;
-    const D: [f32; 6] = [0.5e-6, 2e-6, 5e-6, 10e-6, 20e-6, 40e-6];
     const ALPHA: [f32; 6] = [0.25, 0.25, 0.20, 0.15, 0.10, 0.05];
+    // alpha_i Fs / D_i for D = 0.5, 2, 5, 10, 20, 40 um, written out: the same decimals as the
+    // default scenario's plant guideway, so that the device's model is the default plant's
+    // nominal bit for bit (in f32 the quotient can land an ulp away).
+    const K: [f32; 6] = [450_000.0, 112_500.0, 36_000.0, 13_500.0, 4_500.0, 1_125.0];
     GmsParams {
         stribeck: StribeckParams {
             fs: FS,
@@ -65,7 +68,7 @@ pub fn guideway() -> GmsParams<6> {
         sigma: 5.0,
         c: 25.0,
         blocks: core::array::from_fn(|i| Block {
-            k: ALPHA[i] * FS / D[i],
+            k: K[i],
             alpha: ALPHA[i],
         }),
     }

@@ -140,9 +140,10 @@ pub fn mismatch(
     Ok(out)
 }
 
-/// The study as a markdown table: per truth, the sine RMS error and the peak after reversals
-/// (median [p95] in counts) without compensation and with the GMS feedforward, and the GMS
-/// figures relative to those against its own model.
+/// The study as a markdown table: per truth, the sine RMS error (median [p95] in counts)
+/// without compensation, with the static map, the GMS and the adaptive GMS feedforward; the
+/// peak after reversals without and with the GMS feedforward; and the GMS figures relative to
+/// those against its own model.
 pub fn table(rows: &[(Truth, Comparison)], rad_per_count: f64) -> String {
     let get = |c: &Comparison, mode: &str, metric: &str| {
         c.modes
@@ -159,9 +160,9 @@ pub fn table(rows: &[(Truth, Comparison)], rad_per_count: f64) -> String {
     });
     let mut s = format!(
         "{} friction draws, median [p95], counts\n\n\
-         | plant's actuator friction | sine RMS, none | sine RMS, gms | gms-adaptive | \
-         reversal peak, none | reversal peak, gms | gms vs own model (RMS, peak) |\n\
-         |---|---|---|---|---|---|---|\n",
+         | plant's actuator friction | sine RMS, none | static | gms | gms-adaptive | \
+         reversal peak, none | gms | gms vs own model (RMS, peak) |\n\
+         |---|---|---|---|---|---|---|---|\n",
         rows.first().map_or(0, |r| r.1.runs)
     );
     for (t, c) in rows {
@@ -176,9 +177,10 @@ pub fn table(rows: &[(Truth, Comparison)], rad_per_count: f64) -> String {
             _ => "-".into(),
         };
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
             t.name,
             cell(get(c, "none", "sine_rms_error")),
+            cell(get(c, "static", "sine_rms_error")),
             cell(g_rms),
             cell(get(c, "gms-adaptive", "sine_rms_error")),
             cell(get(c, "none", "reversal_error")),

@@ -176,3 +176,62 @@ fn serve_takes_a_lugre_plant_and_is_not_told_its_friction() {
     let _ = child.kill();
     let _ = child.wait();
 }
+
+/// The mismatch study's plants: five valid models sharing Table 1's sliding friction; the
+/// 4-block plant's virgin curve within 3 % of Fs of Table 1's (RMS over its range), the
+/// 12-block plant's within 1 % of the smooth curve it stands for.
+#[test]
+fn the_mismatch_studys_plants_are_what_they_say() {
+    let base = Scenario::default().plant.actuator;
+    let truths = hil_sim::study::truths(&base).unwrap();
+    assert_eq!(truths.len(), 5);
+    let fs = base.fs.unwrap();
+    let k0: f64 = base.blocks.iter().flatten().map(|b| b.k).sum();
+    let curve = |spec: &gms_ident::paramfile::FrictionSpec, x: f64| -> f64 {
+        spec.blocks
+            .iter()
+            .flatten()
+            .map(|b| (b.k * x).min(b.alpha * fs))
+            .sum()
+    };
+    let rms = |spec: &gms_ident::paramfile::FrictionSpec, want: &dyn Fn(f64) -> f64, xmax: f64| {
+        let n = 500;
+        ((1..=n)
+            .map(|i| {
+                let x = xmax * i as f64 / n as f64;
+                (curve(spec, x) - want(x)).powi(2)
+            })
+            .sum::<f64>()
+            / n as f64)
+            .sqrt()
+            / fs
+    };
+    for t in &truths {
+        let mut sc = Scenario::default();
+        sc.plant.actuator = t.spec.clone();
+        sc.check().unwrap();
+        assert_eq!(
+            (t.spec.fs, t.spec.fc, t.spec.vs, t.spec.delta, t.spec.sigma),
+            (base.fs, base.fc, base.vs, base.delta, base.sigma),
+            "{}",
+            t.name
+        );
+    }
+    let four = &truths[1].spec;
+    assert_eq!(four.blocks.as_ref().unwrap().len(), 4);
+    let e4 = rms(four, &|x| curve(&base, x), base.largest_breakpoint());
+    let twelve = &truths[2].spec;
+    assert_eq!(twelve.blocks.as_ref().unwrap().len(), 12);
+    let e12 = rms(
+        twelve,
+        &|x| fs * (1.0 - (-k0 * x / fs).exp()),
+        7.0 * fs / k0,
+    );
+    println!(
+        "virgin curves: 4 blocks {:.2} % of Fs, 12 blocks {:.2} %",
+        e4 * 100.0,
+        e12 * 100.0
+    );
+    assert!(e4 < 0.03, "{e4}");
+    assert!(e12 < 0.01, "{e12}");
+}
