@@ -134,8 +134,6 @@ pub struct Gms<const N: usize> {
     alpha_fc: [[f32; N]; 2],
     viscous: f32,
     force: f32,
-    /// Blocks in use (the first ones).
-    used: usize,
 }
 
 impl<const N: usize> Gms<N> {
@@ -161,7 +159,6 @@ impl<const N: usize> Gms<N> {
                 core::array::from_fn(|i| afc(i, 1.0)),
                 core::array::from_fn(|i| afc(i, -1.0)),
             ],
-            used: params.blocks_used(),
             viscous: 0.0,
             force: 0.0,
         })
@@ -318,6 +315,6 @@ impl<const N: usize> FrictionModel for Gms<N> {
 
     /// The forces of the blocks in use.
     fn state(&self) -> &[f32] {
-        &self.f[..self.used.min(N)]
+        self.f.get(..self.params.blocks_used()).unwrap_or(&self.f)
     }
 }

@@ -225,7 +225,8 @@ enum ParamsCmd {
     /// Print the device's parameters: a `[friction]` table (the compensator's GMS model, the
     /// parameter-file format) and a `[device]` table (everything else, by protocol path).
     Dump,
-    /// Send a file written by `dump` (or any parameter file with a 6-block GMS `[friction]`).
+    /// Send a file written by `dump` (or any parameter file with a GMS `[friction]` of 1 to 6
+    /// blocks).
     Load {
         /// The parameter file.
         file: PathBuf,

@@ -140,10 +140,10 @@ pub fn mismatch(
     Ok(out)
 }
 
-/// The study as a markdown table: per truth, the sine RMS error (median [p95] in counts)
-/// without compensation, with the static map, the GMS and the adaptive GMS feedforward; the
-/// peak after reversals without and with the GMS feedforward; and the GMS figures relative to
-/// those against its own model.
+/// The study as a markdown table: per truth, the sine RMS error (median and 95th
+/// percentile, in counts) without compensation, with the static map, the GMS and the adaptive
+/// GMS feedforward; the peak after reversals without and with the GMS feedforward; and the
+/// GMS figures relative to those against its own model.
 pub fn table(rows: &[(Truth, Comparison)], rad_per_count: f64) -> String {
     let get = |c: &Comparison, mode: &str, metric: &str| {
         c.modes
