@@ -91,7 +91,7 @@ class Device:
         """The telemetry stream for `seconds` of wall time, as arrays by field."""
     def step_test(self, distance: float = 2e-4, seconds: float = 0.5) -> dict[str, Any]:
         """`gms-tune step-test`: {"trace": {t, ref, pos, error, ff, friction}, "metrics"}."""
-    def tune_ff(self, amplitude: float = 2e-3, freq: float = 1.0, seconds: float = 3.0, start: float = 0.7, stop: float = 1.2, steps: int = 11) -> dict[str, Any]:
+    def tune_ff(self, amplitude: float = 2e-3, freq: float = 1.0, seconds: float = 3.0, start: float = 0.5, stop: float = 1.3, steps: int = 9) -> dict[str, Any]:
         """`gms-tune tune-ff`: {"curve": [(gain, rms)], "chosen", "before"}; nothing applied."""
     def commission(self, speed: float = 1.0) -> dict[str, Any]:
         """`gms-tune commission`: {"lines", "settings": {path: value}}; nothing applied."""

@@ -1103,8 +1103,10 @@ pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Resu
     Ok(n)
 }
 
-/// The feedforward-gain sweep's settings: the sine test (amplitude \\[rad\\], frequency \\[Hz\\],
-/// duration \\[s\\]) repeated at `steps` gains from `from` to `to` \\[-\\].
+/// The feedforward-gain tuning's settings: the sine test (amplitude \\[rad\\], frequency
+/// \\[Hz\\], duration \\[s\\]); a coarse sweep of `steps` gains from `from` to `to` \\[-\\] (widened
+/// when its lowest point is at an edge); then a refinement of `fine_steps` gains around the
+/// coarse optimum, each tested `repeats` times.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TuneFfPlan {
     /// Sine amplitude \\[rad\\].
@@ -1113,17 +1115,43 @@ pub struct TuneFfPlan {
     pub freq: f64,
     /// Each test's duration \\[s\\].
     pub seconds: f64,
-    /// The lowest gain \\[-\\].
+    /// The coarse sweep's lowest gain \\[-\\].
     pub from: f64,
-    /// The highest gain \\[-\\].
+    /// The coarse sweep's highest gain \\[-\\].
     pub to: f64,
-    /// Gains tried, evenly spaced (≥ 3).
+    /// The coarse sweep's gains, evenly spaced (≥ 4).
     pub steps: usize,
+    /// The refinement's gains (≥ 4).
+    pub fine_steps: usize,
+    /// Tests at each of the refinement's gains (≥ 1).
+    pub repeats: usize,
 }
+
+impl Default for TuneFfPlan {
+    /// 2 mrad at 1 Hz for 3 s; 0.5 to 1.3 in 9 gains; 9 gains twice around the optimum.
+    fn default() -> Self {
+        TuneFfPlan {
+            amp: 2e-3,
+            freq: 1.0,
+            seconds: 3.0,
+            from: 0.5,
+            to: 1.3,
+            steps: 9,
+            fine_steps: 9,
+            repeats: 2,
+        }
+    }
+}
+
+/// How far the coarse range may be widened, each time by half its span.
+pub const TUNE_FF_WIDENINGS: usize = 3;
+
+/// The standard error of the optimum above which the curve is too flat to choose \\[-\\].
+pub const TUNE_FF_FLAT_SE: f64 = 0.05;
 
 impl TuneFfPlan {
     /// Checks the plan: a valid sine test, 0 ≤ from < to ≤ 2 (the protocol's range of
-    /// `ff.gain`), 3 to 101 steps.
+    /// `ff.gain`), 4 to 101 coarse and fine gains, 1 to 10 repeats.
     pub fn check(&self) -> Result<(), Error> {
         let sine_ok = self.amp > 0.0
             && self.amp.is_finite()
@@ -1138,120 +1166,211 @@ impl TuneFfPlan {
             )));
         }
         let range_ok = 0.0 <= self.from && self.from < self.to && self.to <= 2.0;
-        if !(range_ok && (3..=101).contains(&self.steps)) {
+        if !(range_ok && (4..=101).contains(&self.steps)) {
             return Err(Error::Params(format!(
-                "gains {} to {} in {} steps: 0 <= from < to <= 2, 3 to 101 steps",
+                "gains {} to {} in {} steps: 0 <= from < to <= 2, 4 to 101 steps",
                 self.from, self.to, self.steps
+            )));
+        }
+        if !((4..=101).contains(&self.fine_steps) && (1..=10).contains(&self.repeats)) {
+            return Err(Error::Params(format!(
+                "refinement of {} gains × {} repeats: 4 to 101 gains, 1 to 10 repeats",
+                self.fine_steps, self.repeats
             )));
         }
         Ok(())
     }
 
-    /// The gains tried.
+    /// The coarse sweep's gains.
     pub fn gains(&self) -> Vec<f64> {
-        (0..self.steps)
-            .map(|i| self.from + (self.to - self.from) * i as f64 / (self.steps - 1) as f64)
-            .collect()
+        spaced(self.from, self.to, self.steps)
+    }
+
+    /// The sine tests of a tuning without widening, and the device time they take (each test
+    /// plus about 0.3 s of set-up) \\[s\\].
+    pub fn tests(&self) -> (usize, f64) {
+        let n = self.steps + self.fine_steps * self.repeats;
+        (n, n as f64 * (self.seconds + 0.3))
     }
 }
 
-/// What the sweep found.
+/// `n` evenly spaced values from `a` to `b`.
+fn spaced(a: f64, b: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|i| a + (b - a) * i as f64 / (n.max(2) - 1) as f64)
+        .collect()
+}
+
+/// What the tuning found.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TuneFf {
-    /// `(gain, RMS error [rad])` for each gain tried.
+    /// `(gain, RMS error [rad])` of every test, in the order run (coarse, then refinement).
     pub curve: Vec<(f64, f64)>,
-    /// The chosen gain \\[-\\]: [`choose_gain`] of the curve.
+    /// The coarse sweep's range after any widening \\[-\\].
+    pub range: (f64, f64),
+    /// The refinement's window \\[-\\].
+    pub window: (f64, f64),
+    /// The optimum fitted to the refinement (mean-square parabola, its vertex and standard
+    /// error: [`crate::optimum::fit_minimum`]); `None` when the curve has no minimum there.
+    pub optimum: Option<crate::optimum::Optimum>,
+    /// Whether the optimum is clear enough to choose: it exists, lies within the refinement's
+    /// window, and its standard error is below [`TUNE_FF_FLAT_SE`].
+    pub decided: bool,
+    /// The gain to use \\[-\\]: the optimum when decided, else the device's gain as it was.
     pub chosen: f64,
     /// The gain the device had before \\[-\\].
     pub before: f64,
+    /// What the tuning did or found beyond the plan, a sentence each (widening, flatness).
+    pub notes: Vec<String>,
 }
 
-/// The feedforward gain by experiment: the same sine test with reversals at each gain of the
-/// plan, the RMS error of each, the best gain from a parabola fitted around the minimum
-/// ([`choose_gain`]). Leaves the device at `before` (the caller applies `chosen` if asked), holding; on
-/// a failure the gain goes back and the bridge off.
+/// The feedforward gain by experiment. The same sine test with reversals at each gain; a
+/// coarse sweep, widened by half its span on the side of its lowest point while that point
+/// is at an edge (at most [`TUNE_FF_WIDENINGS`] times, within 0..2); then a refinement
+/// around the coarse optimum, over the window where the fitted mean square rises to about
+/// twice its minimum, every gain tested `repeats` times (alternately up and down the
+/// window); the optimum is the vertex of the mean-square parabola fitted to the refinement,
+/// with its standard error ([`crate::optimum`]). Leaves the device at `before` (the caller
+/// applies `chosen` if asked), holding; on a failure the gain goes back and the bridge off.
+/// `progress(test, gain, rms)` after each test.
 pub fn tune_ff(
     b: &mut impl Bench,
     plan: &TuneFfPlan,
     mut progress: impl FnMut(usize, f64, f64),
 ) -> Result<TuneFf, Error> {
+    use crate::optimum::fit_minimum;
     plan.check()?;
     let before = get_param(b, "ff.gain")?;
     let r = guarded(b, |b| {
-        let mut curve = Vec::new();
-        for (i, g) in plan.gains().into_iter().enumerate() {
-            b.request(&format!("set ff.gain {g}"))?;
+        let mut curve: Vec<(f64, f64)> = Vec::new();
+        let mut notes = Vec::new();
+        let mut test = |b: &mut _, g: f64, curve: &mut Vec<(f64, f64)>| -> Result<(), Error> {
+            b_set_gain(b, g)?;
             let rms = sine_test(b, plan.amp, plan.freq, plan.seconds)?;
-            progress(i, g, rms);
+            progress(curve.len(), g, rms);
             curve.push((g, rms));
+            Ok(())
+        };
+        // The coarse sweep, widened while its lowest point sits at an edge.
+        let (mut lo, mut hi) = (plan.from, plan.to);
+        let step = (plan.to - plan.from) / (plan.steps - 1) as f64;
+        for g in plan.gains() {
+            test(b, g, &mut curve)?;
         }
-        Ok(curve)
+        for _ in 0..TUNE_FF_WIDENINGS {
+            let Some(&(g_min, _)) = curve.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                break;
+            };
+            let half = 0.5 * (hi - lo);
+            let n_new = ((half / step).round() as usize).max(1);
+            let new: Vec<f64> = if g_min <= lo + 1e-9 && lo > 0.0 {
+                let from = (lo - n_new as f64 * step).max(0.0);
+                let gs: Vec<f64> = (1..=n_new)
+                    .map(|i| lo - i as f64 * step)
+                    .filter(|g| *g >= from - 1e-9)
+                    .collect();
+                notes.push(format!(
+                    "the lowest error was at the range's low end ({lo:.3}): widened down to {:.3}",
+                    from.max(0.0)
+                ));
+                lo = from.max(0.0);
+                gs
+            } else if g_min >= hi - 1e-9 && hi < 2.0 {
+                let to = (hi + n_new as f64 * step).min(2.0);
+                let gs: Vec<f64> = (1..=n_new)
+                    .map(|i| hi + i as f64 * step)
+                    .filter(|g| *g <= to + 1e-9)
+                    .collect();
+                notes.push(format!(
+                    "the lowest error was at the range's high end ({hi:.3}): widened up to {to:.3}"
+                ));
+                hi = to;
+                gs
+            } else {
+                break;
+            };
+            for g in new {
+                test(b, g.clamp(0.0, 2.0), &mut curve)?;
+            }
+        }
+        // The refinement: where the coarse parabola rises to about twice its minimum.
+        let coarse = fit_minimum(&curve);
+        let best = curve
+            .iter()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(before, |p| p.0);
+        let (centre, half) = match coarse {
+            Some(o) if o.at >= lo && o.at <= hi => {
+                (o.at, (o.min / o.curvature).sqrt().clamp(0.1, 0.4))
+            }
+            _ => (best, 0.2),
+        };
+        let (w_lo, w_hi) = ((centre - half).max(0.0), (centre + half).min(2.0));
+        let fine = spaced(w_lo, w_hi, plan.fine_steps);
+        let start = curve.len();
+        for r in 0..plan.repeats {
+            let order: Vec<f64> = if r % 2 == 0 {
+                fine.clone()
+            } else {
+                fine.iter().rev().copied().collect()
+            };
+            for g in order {
+                test(b, g, &mut curve)?;
+            }
+        }
+        let optimum = fit_minimum(&curve[start..]);
+        Ok((curve, (lo, hi), (w_lo, w_hi), optimum, notes))
     });
     // The gain as it was, whatever happened (best effort after a failure).
     let restored = b.request(&format!("set ff.gain {before}"));
-    let curve = r?;
+    let (curve, range, window, optimum, mut notes) = r?;
     restored?;
-    let chosen = choose_gain(&curve);
+    let decided = match optimum {
+        None => {
+            notes.push(
+                "the refinement's errors have no minimum (the curve is flat or falls): no \
+                 gain chosen"
+                    .into(),
+            );
+            false
+        }
+        Some(o) if o.at < window.0 || o.at > window.1 => {
+            notes.push(format!(
+                "the fitted optimum {:.3} lies outside the refinement's window {:.3} to {:.3}: \
+                 no gain chosen (try a range around it)",
+                o.at, window.0, window.1
+            ));
+            false
+        }
+        Some(o) if o.se > TUNE_FF_FLAT_SE => {
+            notes.push(format!(
+                "the curve is too flat to choose: the optimum {:.3} has a standard error of \
+                 {:.3} (over {TUNE_FF_FLAT_SE})",
+                o.at, o.se
+            ));
+            false
+        }
+        Some(_) => true,
+    };
+    let chosen = match optimum {
+        Some(o) if decided => o.at,
+        _ => before,
+    };
     Ok(TuneFf {
         curve,
+        range,
+        window,
+        optimum,
+        decided,
         chosen,
         before,
+        notes,
     })
 }
 
-/// The gain at the minimum of a measured `(gain, RMS)` curve: the vertex of a least-squares
-/// parabola through the points within 1.5 × the lowest RMS (the test's scatter of a few %
-/// makes the single lowest point a poor estimate on a flat bottom), kept within those points;
-/// the lowest point if fewer than three qualify or the parabola opens downwards.
-pub fn choose_gain(curve: &[(f64, f64)]) -> f64 {
-    let Some(&(g_best, r_best)) = curve.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-        return f64::NAN;
-    };
-    let near: Vec<(f64, f64)> = curve
-        .iter()
-        .copied()
-        .filter(|p| p.1 <= 1.5 * r_best)
-        .collect();
-    if near.len() < 3 {
-        return g_best;
-    }
-    // Centred on the best gain for conditioning: y = a + b u + c u², u = g - g_best.
-    let mut m = [[0.0f64; 3]; 3];
-    let mut v = [0.0f64; 3];
-    for &(g, r) in &near {
-        let u = g - g_best;
-        let basis = [1.0, u, u * u];
-        for i in 0..3 {
-            for j in 0..3 {
-                m[i][j] += basis[i] * basis[j];
-            }
-            v[i] += basis[i] * r;
-        }
-    }
-    let det = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(&m);
-    if d.abs() < 1e-300 {
-        return g_best;
-    }
-    // Cramer's rule for b and c.
-    let col = |k: usize| {
-        let mut mk = m;
-        for i in 0..3 {
-            mk[i][k] = v[i];
-        }
-        det(&mk) / d
-    };
-    let (bl, c) = (col(1), col(2));
-    if c <= 0.0 {
-        return g_best;
-    }
-    let lo = near.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
-    let hi = near.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
-    (g_best - bl / (2.0 * c)).clamp(lo, hi)
+/// `set ff.gain G`.
+fn b_set_gain(b: &mut impl Bench, g: f64) -> Result<(), Error> {
+    b.request(&format!("set ff.gain {g}")).map(|_| ())
 }
 
 /// What commissioning measured and decided.

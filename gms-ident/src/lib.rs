@@ -14,6 +14,7 @@ pub mod bench;
 pub mod gains;
 pub mod identify;
 pub mod io;
+pub mod optimum;
 pub mod paramfile;
 pub mod plot;
 pub mod trace;

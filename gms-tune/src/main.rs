@@ -186,9 +186,11 @@ enum Cmd {
         save: bool,
     },
     /// Tune the friction feedforward's gain: the same sine test with reversals at each gain
-    /// of a sweep, the RMS error of each, the best gain from a parabola fitted around the
-    /// minimum; prints the curve and the choice, writes curve.csv and curve.svg. The device's
-    /// gain is left as it was unless --apply/--save.
+    /// of a coarse sweep (widened where the error is least at an edge), then repeated around
+    /// its optimum; the optimum of a parabola fitted to the mean square, with its uncertainty;
+    /// says when the curve is too flat to choose. Prints the time up front, each test, the
+    /// result; writes curve.csv and curve.svg. The device's gain is left as it was unless
+    /// --apply/--save (and only to a clear optimum, unless --force).
     TuneFf {
         /// Sine amplitude \[rad\] (the axis swings this far from where it is, and back).
         #[arg(long, default_value_t = 2e-3)]
@@ -199,15 +201,28 @@ enum Cmd {
         /// Each test's duration \[s\] (the first period is left out of the RMS).
         #[arg(long, default_value_t = 3.0)]
         seconds: f64,
-        /// The lowest gain tried.
-        #[arg(long, default_value_t = 0.7)]
+        /// The coarse sweep's lowest gain (widened down if the error is least there).
+        #[arg(long, default_value_t = 0.5)]
         from: f64,
-        /// The highest gain tried.
-        #[arg(long, default_value_t = 1.2)]
+        /// The coarse sweep's highest gain (widened up if the error is least there).
+        #[arg(long, default_value_t = 1.3)]
         to: f64,
-        /// Gains tried, evenly spaced (3 to 101).
-        #[arg(long, default_value_t = 11)]
+        /// The coarse sweep's gains, evenly spaced (4 to 101).
+        #[arg(long, default_value_t = 9)]
         steps: usize,
+        /// The refinement's gains around the coarse optimum (4 to 101).
+        #[arg(long, default_value_t = 9)]
+        fine_steps: usize,
+        /// Tests at each of the refinement's gains (1 to 10).
+        #[arg(long, default_value_t = 2)]
+        repeats: usize,
+        /// With --apply/--save: set the fitted optimum even when the curve is too flat to
+        /// choose (otherwise the gain stays as it was).
+        #[arg(long)]
+        force: bool,
+        /// Print the result as JSON (raw values, SI) instead of the readable summary.
+        #[arg(long)]
+        json: bool,
         /// Output directory.
         #[arg(long, default_value = "tune-ff")]
         out: PathBuf,
@@ -399,6 +414,10 @@ fn run(cli: Cli) -> Result<(), Fail> {
             from,
             to,
             steps,
+            fine_steps,
+            repeats,
+            force,
+            json,
             out,
             apply,
             save,
@@ -412,10 +431,14 @@ fn run(cli: Cli) -> Result<(), Fail> {
                     from,
                     to,
                     steps,
+                    fine_steps,
+                    repeats,
                 },
                 out,
                 apply,
                 save,
+                force,
+                json,
             },
         )?,
         #[cfg(feature = "ui")]

@@ -231,3 +231,47 @@ pub fn step_test(
     let (trace, m) = step_figures(&six, distance, seconds);
     Ok((six, trace, m))
 }
+
+/// `tune-ff`'s result as summary lines, for the terminal (gains to 3 decimals, errors in counts).
+pub fn tune_ff_summary(t: &gms_ident::bench::TuneFf) -> Vec<String> {
+    let mut out = Vec::new();
+    for n in &t.notes {
+        out.push(format!("note: {n}"));
+    }
+    match t.optimum {
+        Some(o) if t.decided => out.push(format!(
+            "ff.gain {:.3} ± {:.3} (95 %; a repeat of this tuning lands within ±{:.3}), \
+             RMS error there {:.2} counts; was {:.3}",
+            o.at,
+            o.half_width(),
+            o.repeat_half_width(),
+            o.min.max(0.0).sqrt() / RAD_PER_COUNT,
+            t.before
+        )),
+        Some(o) => out.push(format!(
+            "no clear optimum: the fit says {:.3} ± {:.3}; ff.gain stays {:.3}",
+            o.at,
+            o.half_width(),
+            t.before
+        )),
+        None => out.push(format!("no optimum found; ff.gain stays {:.3}", t.before)),
+    }
+    out
+}
+
+/// `tune-ff`'s result as JSON: raw values in SI (gains, RMS errors in rad).
+pub fn tune_ff_json(t: &gms_ident::bench::TuneFf) -> serde_json::Value {
+    serde_json::json!({
+        "before": t.before,
+        "chosen": t.chosen,
+        "decided": t.decided,
+        "optimum": t.optimum.map(|o| o.at),
+        "standard_error": t.optimum.map(|o| o.se),
+        "half_width_95": t.optimum.map(|o| o.half_width()),
+        "rms_at_optimum_rad": t.optimum.map(|o| o.min.max(0.0).sqrt()),
+        "range": [t.range.0, t.range.1],
+        "window": [t.window.0, t.window.1],
+        "notes": t.notes,
+        "curve": t.curve.iter().map(|(g, r)| serde_json::json!({"gain": g, "rms_rad": r})).collect::<Vec<_>>(),
+    })
+}

@@ -1,11 +1,13 @@
-//! `gms-tune tune-ff`: the feedforward gain by experiment (`gms_ident::bench::tune_ff`, the
-//! same sine test with reversals at each gain), printed, written (CSV and plot), and applied
-//! or saved on request.
+//! `gms-tune tune-ff`: the feedforward gain by experiment (`gms_ident::bench::tune_ff`: a
+//! coarse sweep of the sine test with reversals, widened at an edge, then a repeated
+//! refinement around the optimum, fitted with its uncertainty), printed, written (CSV and
+//! plot), and applied or saved on request.
 
 use std::path::PathBuf;
 
-use gms_ident::bench::{TuneFfPlan, tune_ff};
+use gms_ident::bench::{TUNE_FF_FLAT_SE, TuneFfPlan, tune_ff};
 use gms_tune::Link;
+use gms_tune::run::{RAD_PER_COUNT, tune_ff_json, tune_ff_summary};
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
@@ -21,65 +23,120 @@ pub struct Args {
     pub apply: bool,
     /// And save it.
     pub save: bool,
+    /// Set the fitted optimum even when the curve is too flat to choose.
+    pub force: bool,
+    /// Print JSON instead of the readable summary.
+    pub json: bool,
 }
 
-/// Runs the sweep; prints the curve and the choice; writes the files; applies or saves.
+/// Runs the tuning; prints the plan, each test and the result; writes the files; applies or
+/// saves.
 pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     a.plan.check().map_err(|e| Fail::Usage(e.to_string()))?;
     std::fs::create_dir_all(&a.out)
         .map_err(|e| Fail::Usage(format!("{}: cannot create: {e}", a.out.display())))?;
-    let rpc = 3.8e-6;
+    let (tests, seconds) = a.plan.tests();
     eprintln!(
-        "sine test {} rad at {} Hz for {} s, ff.gain {} to {} in {} steps: about {:.0} s of device time",
-        a.plan.amp,
+        "sine test {} mrad at {} Hz for {} s; ff.gain {} to {} in {} steps, then {} gains × {} \
+         around the optimum: {tests} tests, about {seconds:.0} s of device time (more if the \
+         range is widened)",
+        a.plan.amp * 1e3,
         a.plan.freq,
         a.plan.seconds,
         a.plan.from,
         a.plan.to,
         a.plan.steps,
-        a.plan.steps as f64 * (a.plan.seconds + 0.2)
+        a.plan.fine_steps,
+        a.plan.repeats,
     );
-    println!("ff.gain  RMS error [rad]  [counts of 3.8 µrad]");
+    if !a.json {
+        println!("test  ff.gain  RMS error [counts]");
+    }
     let mut bar = Bar::new();
     let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
-    bench.stage("tune-ff", a.plan.steps as f64 * a.plan.seconds);
-    let r = tune_ff(&mut bench, &a.plan, |_, g, rms| {
-        println!("{g:7.4}  {rms:.4e}  {:.3}", rms / rpc)
+    bench.stage("tune-ff", seconds);
+    let quiet = a.json;
+    let r = tune_ff(&mut bench, &a.plan, |i, g, rms| {
+        if !quiet {
+            println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / RAD_PER_COUNT)
+        }
     });
     let link = bench.link;
     bar.bar.finish_and_clear();
     let t = r.map_err(|e| Fail::Device(format!("{e}; the bridge is off, ff.gain as it was")))?;
-    println!("chosen ff.gain {:.4} (was {})", t.chosen, t.before);
-    let mut csv = String::from("gain,rms\n");
+    let mut csv = String::from("gain,rms_rad\n");
     for (g, r) in &t.curve {
         csv += &format!("{g},{r}\n");
     }
     gms_ident::io::write_atomic(&a.out.join("curve.csv"), csv.as_bytes())
         .map_err(|e| Fail::Usage(e.to_string()))?;
-    let pts: Vec<(f64, f64)> = t.curve.iter().map(|(g, r)| (*g, r / rpc)).collect();
-    let (lo, hi) = pts
+    let pts: Vec<(f64, f64)> = t
+        .curve
         .iter()
-        .fold((f64::MAX, f64::MIN), |(l, h), p| (l.min(p.1), h.max(p.1)));
-    let marker = vec![(t.chosen, lo), (t.chosen, hi)];
+        .map(|(g, r)| (*g, r / RAD_PER_COUNT))
+        .collect();
+    // The fitted parabola (RMS = √(mean square)) over the refinement's window.
+    let fit: Vec<(f64, f64)> = match t.optimum {
+        Some(o) => (0..=60)
+            .map(|i| {
+                let g = t.window.0 + (t.window.1 - t.window.0) * i as f64 / 60.0;
+                let ms = o.min + o.curvature * (g - o.at).powi(2);
+                (g, ms.max(0.0).sqrt() / RAD_PER_COUNT)
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    let title = match t.optimum {
+        Some(o) if t.decided => format!(
+            "tune-ff: sine RMS error against ff.gain; optimum {:.3} ± {:.3}",
+            o.at,
+            o.half_width()
+        ),
+        _ => "tune-ff: sine RMS error against ff.gain; no clear optimum".to_string(),
+    };
     gms_ident::plot::fit_plot(
         &a.out.join("curve.svg"),
-        &format!(
-            "tune-ff: sine RMS error against ff.gain; chosen {:.4}",
-            t.chosen
-        ),
+        &title,
         ("ff.gain [-]", "RMS error [counts]"),
         &pts,
-        &marker,
+        &fit,
     )
     .map_err(Fail::Usage)?;
-    println!("wrote {}/curve.csv and curve.svg", a.out.display());
+    if a.json {
+        println!("{}", tune_ff_json(&t));
+    } else {
+        for l in tune_ff_summary(&t) {
+            println!("{l}");
+        }
+        println!("wrote {}/curve.csv and curve.svg", a.out.display());
+    }
     if a.apply || a.save {
-        link.request(&format!("set ff.gain {}", t.chosen))?;
-        println!("set ff.gain {:.4}", t.chosen);
-        if a.save {
-            link.request("disable")?;
-            link.request("save")?;
-            println!("saved");
+        let gain = match t.optimum {
+            _ if t.decided => Some(t.chosen),
+            Some(o) if a.force => Some(o.at.clamp(0.0, 2.0)),
+            _ => None,
+        };
+        match gain {
+            Some(g) => {
+                link.request(&format!("set ff.gain {g}"))?;
+                if !a.json {
+                    println!("set ff.gain {g:.3}");
+                }
+                if a.save {
+                    link.request("disable")?;
+                    link.request("save")?;
+                    if !a.json {
+                        println!("saved");
+                    }
+                }
+            }
+            None => {
+                return Err(Fail::Device(format!(
+                    "nothing applied: no clear optimum (standard error over {TUNE_FF_FLAT_SE} \
+                     or none); ff.gain stays {:.3} (--force sets the fitted one)",
+                    t.before
+                )));
+            }
         }
     }
     Ok(())

@@ -736,23 +736,46 @@ fn tune_ff_sweeps_chooses_and_applies_on_request() {
     let before = gain(&srv);
     let (code, out, err) = tune(&srv, &["tune-ff", "--steps", "5", "--out", "tf"], d);
     assert_eq!(code, 0, "{out}\n{err}");
-    // Five lines of the curve and the choice.
-    assert_eq!(
-        out.lines()
-            .filter(|l| l.starts_with(" 0.") || l.starts_with(" 1."))
-            .count(),
-        5,
-        "{out}"
+    // The time up front; a line per test (5 coarse, 9 × 2 around the optimum) with the gain
+    // to 3 decimals and the error in counts; the optimum with its interval.
+    assert!(
+        err.contains("23 tests, about") && err.contains("s of device time"),
+        "{err}"
     );
-    let chosen: f64 = out
+    let tests: Vec<&str> = out
         .lines()
-        .find_map(|l| l.strip_prefix("chosen ff.gain "))
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
+        .filter(|l| {
+            let w: Vec<&str> = l.split_whitespace().collect();
+            w.len() == 3 && w[0].parse::<usize>().is_ok() && w[1].len() == 5
+        })
+        .collect();
+    assert_eq!(tests.len(), 23, "{out}");
+    let (chosen, half): (f64, f64) = out
+        .lines()
+        .find_map(|l| {
+            let r = l.strip_prefix("ff.gain ")?;
+            let w: Vec<&str> = r.split_whitespace().collect();
+            Some((w[0].parse().ok()?, w[2].parse().ok()?))
+        })
         .unwrap_or_else(|| panic!("{out}"));
-    assert!((0.7..=1.2).contains(&chosen), "{chosen}");
+    assert!(
+        (0.5..=1.3).contains(&chosen) && half < 0.05,
+        "{chosen} ± {half}"
+    );
     assert!(d.join("tf/curve.csv").exists() && d.join("tf/curve.svg").exists());
     assert_eq!(gain(&srv), before);
+    // --json: the raw values for scripts.
+    let (code, out, err) = tune(
+        &srv,
+        &["tune-ff", "--steps", "5", "--out", "tf", "--json"],
+        d,
+    );
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value =
+        serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!(j["decided"], true);
+    assert!(j["curve"].as_array().unwrap().len() >= 23);
+    assert!((j["optimum"].as_f64().unwrap() - chosen).abs() < 0.1, "{j}");
     let (code, out, err) = tune(
         &srv,
         &["tune-ff", "--steps", "5", "--out", "tf", "--apply"],
@@ -1104,9 +1127,10 @@ fn the_window_runs_tune_ff_and_applies_it() {
         Ok(Outcome::TunedFf(t)) => (t.chosen, t.before, t.curve.len()),
         other => panic!("{other:?}"),
     };
-    assert_eq!(points, 5);
-    assert_eq!(h.state().ff_points.len(), 5);
-    assert!((0.7..=1.2).contains(&chosen), "{chosen}");
+    // 5 coarse tests, then 9 gains twice around the optimum.
+    assert_eq!(points, 23);
+    assert_eq!(h.state().ff_points.len(), 23);
+    assert!((0.5..=1.3).contains(&chosen), "{chosen}");
     assert_eq!(before, 0.94);
     h.step();
     h.get_by_label("Apply the gain").click();

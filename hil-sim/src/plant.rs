@@ -185,6 +185,9 @@ impl Plant {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let act = draw_friction(&spec.actuator, spec.variability, &mut rng);
         let gw = draw_friction(&spec.guideway, spec.variability, &mut rng);
+        if spec.noise_seed != 0 {
+            rng = ChaCha8Rng::seed_from_u64(spec.noise_seed);
+        }
         let actuator = act.build().map_err(|e| format!("plant.actuator: {e}"))?;
         let guideway = gw.build().map_err(|e| format!("plant.guideway: {e}"))?;
         let lsb = 2.0 * spec.adc_range / (1u64 << spec.adc_bits) as f64;

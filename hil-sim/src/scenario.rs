@@ -103,6 +103,9 @@ pub struct Plant {
     pub variability: f64,
     /// Seed of the friction draw and the noise.
     pub seed: u64,
+    /// Seed of the noise alone, drawn after the friction (0: the noise goes on from `seed`'s
+    /// stream): the same plant with another realisation of its noise.
+    pub noise_seed: u64,
     /// Actuator friction (motor side, N·m, rad).
     pub actuator: FrictionSpec,
     /// Guideway friction (slide, N, m).

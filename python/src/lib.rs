@@ -632,10 +632,13 @@ impl Device {
         Ok(d)
     }
 
-    /// tune_ff(amplitude=2e-3, freq=1.0, seconds=3.0, start=0.7, stop=1.2, steps=11) -> dict:
-    /// `gms-tune tune-ff` — the sine test at each ff.gain: {"curve": [(gain, RMS [rad])],
-    /// "chosen", "before"}; the device keeps `before` (set ff.gain to apply).
-    #[pyo3(signature = (amplitude = 2e-3, freq = 1.0, seconds = 3.0, start = 0.7, stop = 1.2, steps = 11))]
+    /// tune_ff(amplitude=2e-3, freq=1.0, seconds=3.0, start=0.5, stop=1.3, steps=9) -> dict:
+    /// `gms-tune tune-ff` — the sine test at each ff.gain of a coarse sweep (widened at an
+    /// edge), then twice at 9 gains around its optimum: {"curve": [(gain, RMS [rad])],
+    /// "optimum", "standard_error" (None without a minimum), "decided", "chosen" (the optimum
+    /// when decided, else "before"), "before", "notes"}; the device keeps `before` (set
+    /// ff.gain to apply).
+    #[pyo3(signature = (amplitude = 2e-3, freq = 1.0, seconds = 3.0, start = 0.5, stop = 1.3, steps = 9))]
     #[allow(clippy::too_many_arguments)]
     fn tune_ff<'py>(
         &mut self,
@@ -654,6 +657,7 @@ impl Device {
             from: start,
             to: stop,
             steps,
+            ..Default::default()
         };
         plan.check().map_err(err)?;
         let t = self.run_bench(|b| gms_ident::bench::tune_ff(b, &plan, |_, _, _| {}))?;
@@ -661,6 +665,10 @@ impl Device {
         d.set_item("curve", t.curve.clone())?;
         d.set_item("chosen", t.chosen)?;
         d.set_item("before", t.before)?;
+        d.set_item("decided", t.decided)?;
+        d.set_item("optimum", t.optimum.map(|o| o.at))?;
+        d.set_item("standard_error", t.optimum.map(|o| o.se))?;
+        d.set_item("notes", t.notes.clone())?;
         Ok(d)
     }
 

@@ -824,6 +824,7 @@ impl App {
                             .trim()
                             .parse()
                             .map_err(|_| format!("steps {}: a whole number", inp.steps))?,
+                        ..Default::default()
                     })
                 })();
                 start = Some(("tune-ff", plan.map(Job::TuneFf)));
@@ -873,9 +874,14 @@ impl App {
                 }
             }
             Some(Ok(Outcome::TunedFf(t))) => {
+                for l in crate::run::tune_ff_summary(t) {
+                    ui.label(l);
+                }
                 ui.horizontal(|ui| {
-                    ui.label(format!("chosen ff.gain {:.4} (was {})", t.chosen, t.before));
-                    if ui.button("Apply the gain").clicked() {
+                    if ui
+                        .add_enabled(t.decided, egui::Button::new("Apply the gain"))
+                        .clicked()
+                    {
                         apply = Some(Cmd::Set {
                             path: "ff.gain".into(),
                             value: format!("{}", t.chosen),
