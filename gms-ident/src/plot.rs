@@ -27,12 +27,22 @@ fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// What a trace's `friction` column is, for the legend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrictionSource {
+    /// A simulated plant's true friction.
+    True,
+    /// A device's estimate (k_M·i − J·a_ref: what a board can know).
+    Estimate,
+}
+
 /// One run: reference and position, error in counts, friction and feedforward, over time.
 pub fn run_plot(
     path: &Path,
     title: &str,
     trace: &[TraceRow],
     rad_per_count: f64,
+    friction: FrictionSource,
 ) -> Result<(), String> {
     let root = SVGBackend::new(path, (1200, 900)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
@@ -116,7 +126,10 @@ pub fn run_plot(
         BLACK,
     ))
     .map_err(|x| e(&x))?
-    .label("true friction")
+    .label(match friction {
+        FrictionSource::True => "true friction (simulated plant)",
+        FrictionSource::Estimate => "friction estimate (k_M·i − J·a_ref)",
+    })
     .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK));
     c.draw_series(LineSeries::new(
         trace.iter().map(|r| (r.t, r.feedforward * 1e6)),

@@ -48,16 +48,116 @@ pub struct Metrics {
     pub reversal_error: f64,
     /// RMS error over the sine segments only \[rad\].
     pub sine_rms_error: f64,
-    /// Longest time, after a step's reference has come to rest at its target, until |error|
-    /// stays within 1 count (the rest of the dwell when it never does) \[s\].
+    /// Longest time, after a step's reference has come to rest at its target, until the
+    /// error stays within the step's settle band, excursions shorter than [`SPIKE`] ignored
+    /// (the rest of the dwell when it never does) \[s\]. See [`settle_band`].
     pub settle_time: f64,
     /// Largest mean |error| over the last 20 % of a step's dwell \[rad\].
     pub steady_state_error: f64,
-    /// Steps that did not settle within ±1 count before their dwell ended.
+    /// Steps that did not settle within their band before their dwell ended.
     pub unsettled_steps: f64,
-    /// Sign changes of the error beyond ±1 count in the second half of step dwells (a hunting
-    /// limit cycle shows as many).
+    /// Crossings of the mean (±1 count of hysteresis) by a sustained oscillation of the
+    /// error in the second half of step dwells: a hunting limit cycle (more than one count
+    /// RMS, periodic); 0 when the error only dithers or is noisy, however it crosses.
     pub hunting_crossings: f64,
+    /// The widest settle band of the steps, ± \[rad\] ([`settle_band`]).
+    pub settle_band: f64,
+}
+
+/// Excursions beyond the settle band shorter than this are spikes of noise, not a departure
+/// from the target \[s\].
+pub const SPIKE: f64 = 2e-3;
+
+/// The settle band of a step, ± \[rad\]: one encoder count (the encoder cannot tell closer)
+/// plus twice the standard deviation of the error about its mean over the last 20 % of the
+/// dwell (the noise the axis dithers with at rest), that deviation taken at most one count
+/// (more is not noise but motion: a limit cycle must not widen its own band), with 1 %
+/// allowance for a target between counts.
+pub fn settle_band(tail: &[f64], rad_per_count: f64) -> f64 {
+    let n = tail.len().max(1) as f64;
+    let mean = tail.iter().sum::<f64>() / n;
+    let sd = (tail.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / n).sqrt();
+    (rad_per_count + 2.0 * sd.min(rad_per_count)) * 1.01
+}
+
+/// `(settle time, settled)`: the time from `rows[0]` after which `(t, error)` stays within
+/// ±`band` but for excursions shorter than [`SPIKE`]; not settled when the last excursion
+/// lasts to the end.
+fn settle(rows: &[(f64, f64)], band: f64) -> (f64, bool) {
+    let t0 = rows.first().map_or(0.0, |r| r.0);
+    let t_end = rows.last().map_or(0.0, |r| r.0);
+    // Walk back from the end: the last excursion that lasts at least SPIKE.
+    let mut i = rows.len();
+    while i > 0 {
+        i -= 1;
+        if rows[i].1.abs() <= band {
+            continue;
+        }
+        // An excursion ends at i; find where it starts.
+        let end = i;
+        while i > 0 && rows[i - 1].1.abs() > band {
+            i -= 1;
+        }
+        let lasts = rows[end].0 - rows[i].0;
+        if end + 1 == rows.len() {
+            return (t_end - t0, false);
+        }
+        if lasts + 1e-12 >= SPIKE || i == 0 {
+            return (rows[end + 1].0 - t0, true);
+        }
+    }
+    (0.0, true)
+}
+
+/// Hunting in `(t, error)`: a sustained oscillation about the error's mean — its RMS about
+/// the mean above one count (more than the encoder's quantisation dither) and periodic (the
+/// normalised autocorrelation, after its first negative lobe, comes back to 0.5 or more at a
+/// lag up to 0.25 s). Returns the crossings of the mean with ±1 count of hysteresis when it
+/// hunts, 0 when it does not (dither and noise are not hunting, however they cross).
+fn hunting(rows: &[(f64, f64)], rad_per_count: f64) -> usize {
+    let n = rows.len();
+    if n < 8 {
+        return 0;
+    }
+    let mean = rows.iter().map(|r| r.1).sum::<f64>() / n as f64;
+    let x: Vec<f64> = rows.iter().map(|r| r.1 - mean).collect();
+    let var: f64 = x.iter().map(|v| v * v).sum();
+    if (var / n as f64).sqrt() <= rad_per_count || var <= 0.0 {
+        return 0;
+    }
+    let dt = (rows[n - 1].0 - rows[0].0) / (n - 1) as f64;
+    let max_lag = ((0.25 / dt.max(1e-9)) as usize).min(n / 2);
+    let r = |k: usize| x.iter().zip(&x[k..]).map(|(a, b)| a * b).sum::<f64>() / var;
+    let mut lobe = false;
+    let mut periodic = false;
+    for k in 1..=max_lag {
+        let v = r(k);
+        if v < -0.2 {
+            lobe = true;
+        } else if lobe && v >= 0.5 {
+            periodic = true;
+            break;
+        }
+    }
+    if !periodic {
+        return 0;
+    }
+    let mut count = 0;
+    let mut side = 0.0f64;
+    for v in &x {
+        let s = if *v > rad_per_count {
+            1.0
+        } else if *v < -rad_per_count {
+            -1.0
+        } else {
+            continue;
+        };
+        if side != 0.0 && s != side {
+            count += 1;
+        }
+        side = s;
+    }
+    count
 }
 
 /// Time of the first trace row of segment `idx`.
@@ -104,8 +204,6 @@ pub fn metrics(trace: &[TraceRow], segments: &[Segment], rad_per_count: f64) -> 
         }
     }
     // Steps: per step segment, settling and steady state.
-    // ±1 count, with 1 % allowance for a target that is not exactly on a count boundary.
-    let band = rad_per_count * 1.01;
     for (idx, seg) in segments.iter().enumerate() {
         // Time from the segment's start until the reference is at rest at its target.
         let motion = match *seg {
@@ -113,42 +211,26 @@ pub fn metrics(trace: &[TraceRow], segments: &[Segment], rad_per_count: f64) -> 
             Segment::Move { dwell, .. } => (seg.duration() - dwell) as f64,
             _ => continue,
         };
-        let rows: Vec<&TraceRow> = trace
+        let rows: Vec<(f64, f64)> = trace
             .iter()
             .filter(|r| r.segment == idx)
             .skip_while(|r| r.t < trace_start(trace, idx) + motion)
+            .map(|r| (r.t, r.error))
             .collect();
         if rows.is_empty() {
             continue;
         }
-        let t0 = rows[0].t;
-        let t_end = rows[rows.len() - 1].t;
-        let last_out = rows.iter().rposition(|r| r.error.abs() > band);
-        let settle = match last_out {
-            None => 0.0,
-            Some(i) if i + 1 < rows.len() => rows[i + 1].t - t0,
-            Some(_) => {
-                m.unsettled_steps += 1.0;
-                t_end - t0
-            }
-        };
-        m.settle_time = m.settle_time.max(settle);
-        let tail: Vec<f64> = rows[rows.len() * 4 / 5..]
-            .iter()
-            .map(|r| r.error.abs())
-            .collect();
-        let mean_tail = tail.iter().sum::<f64>() / tail.len().max(1) as f64;
-        m.steady_state_error = m.steady_state_error.max(mean_tail);
-        let mut prev = 0.0f64;
-        for r in &rows[rows.len() / 2..] {
-            if r.error.abs() > band {
-                let s = r.error.signum();
-                if prev != 0.0 && s != prev {
-                    m.hunting_crossings += 1.0;
-                }
-                prev = s;
-            }
+        let tail: Vec<f64> = rows[rows.len() * 4 / 5..].iter().map(|r| r.1).collect();
+        let band = settle_band(&tail, rad_per_count);
+        m.settle_band = m.settle_band.max(band);
+        let (t_settle, settled) = settle(&rows, band);
+        if !settled {
+            m.unsettled_steps += 1.0;
         }
+        m.settle_time = m.settle_time.max(t_settle);
+        let mean_tail = tail.iter().map(|e| e.abs()).sum::<f64>() / tail.len().max(1) as f64;
+        m.steady_state_error = m.steady_state_error.max(mean_tail);
+        m.hunting_crossings += hunting(&rows[rows.len() / 2..], rad_per_count) as f64;
     }
     m
 }
@@ -194,4 +276,77 @@ pub fn trace_csv(trace: &[TraceRow]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const C: f64 = 3.8e-6;
+
+    /// A deterministic "noise": ±1-count dither (the encoder's quantisation of a position
+    /// that wanders by a fraction of a count), with a 2-count spike of one sample every 50 ms.
+    fn dither(i: usize) -> f64 {
+        let q = ((i as f64 * 0.731).sin() * 1.4).round(); // -1, 0 or 1 counts
+        let spike = if i % 500 == 250 { 2.0 } else { 0.0 };
+        (q + spike) * C
+    }
+
+    /// An error that decays as 100 counts e^(-t/5 ms) onto the dither, at 10 kHz for 1 s:
+    /// it settles when the decay is inside the band (the dither and the spikes do not reset
+    /// the clock), and nothing hunts.
+    #[test]
+    fn a_decay_into_dither_settles_when_the_decay_is_inside_the_band() {
+        let rows: Vec<(f64, f64)> = (0..10_000)
+            .map(|i| {
+                let t = i as f64 * 1e-4;
+                (t, 100.0 * C * (-t / 5e-3).exp() + dither(i))
+            })
+            .collect();
+        let tail: Vec<f64> = rows[8000..].iter().map(|r| r.1).collect();
+        let band = settle_band(&tail, C);
+        // The dither's deviation is about 0.7 count: the band 2.4 counts or so, capped at 3.
+        assert!(
+            band > 1.5 * C && band <= 3.03 * C,
+            "band {} counts",
+            band / C
+        );
+        let (t, settled) = settle(&rows, band);
+        // With the dither of ±1 count the decay is inside the band for good once it is below
+        // band − 1 count, and cannot be before it is below band + 1 count.
+        let lo = 5e-3 * (100.0 * C / (band + 1.0 * C)).ln() - 1e-4;
+        let hi = 5e-3 * (100.0 * C / (band - 1.0 * C)).ln() + 2e-4;
+        assert!(
+            settled && t >= lo - 1e-4 && t <= hi,
+            "{t} not in [{lo}, {hi}]"
+        );
+        assert_eq!(hunting(&rows[5000..], C), 0);
+    }
+
+    /// A limit cycle: 6 counts at 8 Hz around the target never settles and hunts (two
+    /// crossings a period, each excursion lasting tens of ms).
+    #[test]
+    fn a_limit_cycle_hunts_and_never_settles() {
+        let rows: Vec<(f64, f64)> = (0..10_000)
+            .map(|i| {
+                let t = i as f64 * 1e-4;
+                (
+                    t,
+                    6.0 * C * (2.0 * std::f64::consts::PI * 8.0 * t).sin() + dither(i),
+                )
+            })
+            .collect();
+        let tail: Vec<f64> = rows[8000..].iter().map(|r| r.1).collect();
+        let band = settle_band(&tail, C);
+        assert!(
+            band <= 3.03 * C,
+            "the cycle widens its own band: {}",
+            band / C
+        );
+        let (_, settled) = settle(&rows, band);
+        assert!(!settled || settle(&rows, band).0 > 0.9);
+        let n = hunting(&rows[5000..], C);
+        // Half a second at 8 Hz: 8 crossings (7 to 9 by phase and the dither).
+        assert!((7..=9).contains(&n), "{n}");
+    }
 }

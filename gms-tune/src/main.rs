@@ -78,10 +78,12 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
-    /// Enable, command a step, record it, print its figures, write trace.csv and plot.svg.
+    /// Enable, command a step, record it, print its figures (settle time within a band
+    /// that allows for quantisation and noise, steady-state error, hunting), write trace.csv,
+    /// metrics.json and plot.svg.
     StepTest {
         /// Step size \[rad\].
-        #[arg(long, allow_negative_numbers = true)]
+        #[arg(long, allow_hyphen_values = true)]
         distance: f64,
         /// Recording time \[s\].
         #[arg(long, default_value_t = 0.5)]
@@ -89,6 +91,15 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "step-test")]
         out: PathBuf,
+        /// Print the figures as JSON (raw values, SI) instead of the readable summary.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The device's status as a table (what `send status` answers, readable).
+    Status {
+        /// Print the status as JSON (every key, raw values).
+        #[arg(long)]
+        json: bool,
     },
     /// A live view of the position error and the friction feedforward (Ctrl-C to stop).
     Watch {
@@ -369,10 +380,36 @@ fn run(cli: Cli) -> Result<(), Fail> {
             write_csv(&out, &fields, &rows)?;
             eprintln!("{} samples to {}", rows.len(), out.display());
         }
+        Cmd::Status { json } => {
+            let text = link.request("status")?.1;
+            let pairs = gms_tune::run::status_pairs(&text);
+            if json {
+                let map: serde_json::Map<String, serde_json::Value> = pairs
+                    .iter()
+                    .map(|(k, v)| {
+                        let val = v
+                            .parse::<f64>()
+                            .ok()
+                            .and_then(serde_json::Number::from_f64)
+                            .map_or(
+                                serde_json::Value::String(v.clone()),
+                                serde_json::Value::Number,
+                            );
+                        (k.clone(), val)
+                    })
+                    .collect();
+                println!("{}", serde_json::Value::Object(map));
+            } else {
+                for l in gms_tune::run::status_table(&pairs) {
+                    println!("{l}");
+                }
+            }
+        }
         Cmd::StepTest {
             distance,
             seconds,
             out,
+            json,
         } => {
             if !(distance.is_finite() && seconds > 0.0 && seconds <= 60.0) {
                 return Err(Fail::Usage(
@@ -385,17 +422,24 @@ fn run(cli: Cli) -> Result<(), Fail> {
             let rows: Vec<Vec<f64>> = six.iter().map(|r| r.to_vec()).collect();
             write_csv(&out.join("trace.csv"), gms_tune::run::STEP_FIELDS, &rows)?;
             let rpc = gms_tune::run::RAD_PER_COUNT;
-            for (name, v) in m.named() {
-                if name != "sine_rms_error" {
-                    println!("{name} {v:e}");
+            let text = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
+            if json {
+                println!("{text}");
+            } else {
+                for l in gms_tune::run::step_summary(&m, distance, &trace) {
+                    println!("{l}");
                 }
             }
-            println!("samples {}", trace.len());
-            let json = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
-            gms_ident::io::write_atomic(&out.join("metrics.json"), json.as_bytes())
+            gms_ident::io::write_atomic(&out.join("metrics.json"), text.as_bytes())
                 .map_err(|e| Fail::Usage(e.to_string()))?;
-            gms_ident::plot::run_plot(&out.join("plot.svg"), "gms-tune step-test", &trace, rpc)
-                .map_err(Fail::Usage)?;
+            gms_ident::plot::run_plot(
+                &out.join("plot.svg"),
+                "gms-tune step-test",
+                &trace,
+                rpc,
+                gms_ident::plot::FrictionSource::Estimate,
+            )
+            .map_err(Fail::Usage)?;
         }
         Cmd::Watch {
             seconds,

@@ -275,3 +275,123 @@ pub fn tune_ff_json(t: &gms_ident::bench::TuneFf) -> serde_json::Value {
         "curve": t.curve.iter().map(|(g, r)| serde_json::json!({"gain": g, "rms_rad": r})).collect::<Vec<_>>(),
     })
 }
+
+/// A `status` reply's `key=value` pairs, in order.
+pub fn status_pairs(text: &str) -> Vec<(String, String)> {
+    text.split_whitespace()
+        .filter_map(|kv| kv.split_once('='))
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+}
+
+/// What a status key means and its unit, for the table.
+fn status_meaning(key: &str) -> (&'static str, &'static str) {
+    match key {
+        "mode" => ("feedforward mode", ""),
+        "enabled" => ("bridge on (1) or off (0)", ""),
+        "faults" => ("latched faults, bit mask", ""),
+        "fault_names" => ("latched faults", ""),
+        "t" => ("device time", "s"),
+        "pos" => ("position from power-up", "rad"),
+        "error_counts" => ("position error", "counts"),
+        "moving" => ("a move under way", ""),
+        "current" => ("measured current", "A"),
+        "ff" => ("friction feedforward (estimate of the friction)", "N·m"),
+        "duty" => ("PWM duty", ""),
+        "step_us_worst" => ("longest control step", "µs"),
+        "step_us_mean" => ("mean control step", "µs"),
+        "sense_offset" => ("current-sense zero", "ADC codes"),
+        "missed" => ("control periods missed", ""),
+        "drive" => ("what the loop drives", ""),
+        _ => ("", ""),
+    }
+}
+
+/// The status as aligned lines: key, value (numbers to a sensible precision, with the unit),
+/// and what it means.
+pub fn status_table(pairs: &[(String, String)]) -> Vec<String> {
+    let width = pairs.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
+    pairs
+        .iter()
+        .map(|(k, v)| {
+            let (meaning, unit) = status_meaning(k);
+            let value = match v.parse::<f64>() {
+                Ok(x) if v.contains('.') || v.contains('e') => format!("{} {unit}", sig4(x)),
+                _ => format!("{v} {unit}"),
+            };
+            format!("{k:<width$}  {:<22}  {meaning}", value.trim_end())
+                .trim_end()
+                .to_string()
+        })
+        .collect()
+}
+
+/// A step test's figures as readable lines: the step in mrad and counts, the settle time and
+/// its band, the steady-state error, the largest error, hunting (no sine or reversal figures:
+/// they do not apply to a step).
+pub fn step_summary(
+    m: &gms_ident::trace::Metrics,
+    distance: f64,
+    trace: &[gms_ident::trace::TraceRow],
+) -> Vec<String> {
+    let c = RAD_PER_COUNT;
+    let span = match (trace.first(), trace.last()) {
+        (Some(a), Some(b)) => b.t - a.t,
+        _ => 0.0,
+    };
+    let mut out = vec![format!(
+        "step {:.3} mrad ({:.0} counts), {} samples over {:.2} s",
+        distance * 1e3,
+        distance / c,
+        trace.len(),
+        span
+    )];
+    let band = format!(
+        "band ±{:.1} counts: 1 count + 2 standard deviations of the error at rest, \
+         excursions under {:.0} ms ignored",
+        m.settle_band / c,
+        gms_ident::trace::SPIKE * 1e3
+    );
+    if m.unsettled_steps > 0.0 {
+        out.push(format!(
+            "settle time        not settled within the record ({band})"
+        ));
+    } else {
+        out.push(format!(
+            "settle time        {:.1} ms after the reference stopped ({band})",
+            m.settle_time * 1e3
+        ));
+    }
+    out.push(format!(
+        "steady-state error {:.2} counts (mean |error| over the last 20 % of the record)",
+        m.steady_state_error / c
+    ));
+    out.push(format!(
+        "largest error      {:.1} counts (during the move: the following error)",
+        m.max_error / c
+    ));
+    out.push(if m.hunting_crossings > 0.0 {
+        format!(
+            "hunting            yes: a sustained oscillation about the target, {:.0} crossings \
+             (a limit cycle)",
+            m.hunting_crossings
+        )
+    } else {
+        "hunting            none (the error dithers: within 1 count RMS, or not periodic)"
+            .to_string()
+    });
+    out
+}
+
+/// `x` to four significant digits: fixed notation from 0.001 to 10⁶, else scientific.
+pub fn sig4(x: f64) -> String {
+    let a = x.abs();
+    if x == 0.0 {
+        "0".into()
+    } else if (1e-3..1e6).contains(&a) {
+        let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+        format!("{x:.decimals$}")
+    } else {
+        format!("{x:.3e}")
+    }
+}

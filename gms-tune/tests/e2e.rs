@@ -129,6 +129,10 @@ fn main() {
         ),
         ("send_and_watch", send_and_watch),
         (
+            "step_test_settles_and_tells_hunting_from_dither",
+            step_test_settles_and_tells_hunting_from_dither,
+        ),
+        (
             "the_library_captures_a_velocity_run",
             the_library_captures_a_velocity_run,
         ),
@@ -298,14 +302,17 @@ fn record_and_step_test_write_their_files() {
         d,
     );
     assert_eq!(code, 0, "{err}");
+    // Readable: the step in mrad and counts, only the figures that apply to a step.
+    assert!(out.starts_with("step 1.000 mrad (263 counts)"), "{out}");
     for k in [
-        "rms_error",
-        "max_error",
-        "settle_time",
-        "steady_state_error",
+        "settle time ",
+        "steady-state error ",
+        "largest error ",
+        "hunting ",
     ] {
         assert!(out.lines().any(|l| l.starts_with(k)), "{k} missing: {out}");
     }
+    assert!(!out.contains("sine") && !out.contains("reversal"), "{out}");
     assert!(d.join("st/trace.csv").exists() && d.join("st/plot.svg").exists());
     assert!(d.join("st/metrics.json").exists());
     // The axis followed: the last recorded position is within a few counts of the target.
@@ -1232,4 +1239,84 @@ fn the_window_exports_dumps_and_steps() {
     assert!(m.max_error < 0.5 * 2e-4, "{m:?}");
     h.step();
     assert!(h.query_by_label_contains("steady-state").is_some());
+}
+
+/// `step-test` on the default virtual device (20× real time): a 1 mrad step settles in under
+/// 0.2 s, and the trace agrees — after the printed settle time the recorded error stays within
+/// the printed band but for excursions under 2 ms; no hunting. With the feedforward off and
+/// an integral gain 30× the default the axis oscillates about the target: "hunting yes".
+/// `status` prints a table and `--json` the raw figures.
+fn step_test_settles_and_tells_hunting_from_dither() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start_with("tcp", &d.join("flash.img"), 20.0, None);
+    let (code, out, err) = tune(&srv, &["step-test", "--distance", "1e-3", "--out", "st"], d);
+    assert_eq!(code, 0, "{err}");
+    let field = |line: &str, after: &str| -> f64 {
+        out.lines()
+            .find_map(|l| l.strip_prefix(line))
+            .and_then(|r| r.split(after).nth(1))
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.trim_start_matches('±').parse().ok())
+            .unwrap_or_else(|| panic!("{line}: {out}"))
+    };
+    let settle_ms: f64 = out
+        .lines()
+        .find_map(|l| l.strip_prefix("settle time"))
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{out}"));
+    let band = field("settle time", "band ") * 3.8e-6;
+    assert!(settle_ms < 200.0, "{out}");
+    assert!(out.contains("hunting            none"), "{out}");
+    // The trace: the reference at rest from some row on; from the settle time after that,
+    // every excursion beyond the band shorter than 2 ms.
+    let rows: Vec<Vec<f64>> = std::fs::read_to_string(d.join("st/trace.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    let target = rows.last().unwrap()[1];
+    let rest = rows
+        .iter()
+        .position(|r| (r[1] - target).abs() < 1e-12)
+        .unwrap();
+    let t_settled = rows[rest][0] + settle_ms * 1e-3;
+    let mut excursion_start: Option<f64> = None;
+    for r in rows.iter().filter(|r| r[0] >= t_settled) {
+        if r[3].abs() > band {
+            let s = *excursion_start.get_or_insert(r[0]);
+            assert!(r[0] - s < 2e-3, "out of the band from {s} to {} s", r[0]);
+        } else {
+            excursion_start = None;
+        }
+    }
+    // --json: the raw figures.
+    let (code, out, _) = tune(
+        &srv,
+        &["step-test", "--distance", "-1e-3", "--out", "st", "--json"],
+        d,
+    );
+    assert_eq!(code, 0);
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(j["settle_time"].as_f64().unwrap() < 0.2 && j["settle_band"].as_f64().unwrap() > 0.0);
+    // status as a table, and as JSON.
+    let (code, out, _) = tune(&srv, &["status"], d);
+    assert_eq!(code, 0);
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("enabled") && l.contains("bridge on")),
+        "{out}"
+    );
+    let (_, out, _) = tune(&srv, &["status", "--json"], d);
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(j["enabled"], 1.0);
+    // A genuine limit cycle.
+    for (p, v) in [("ff.mode", "none"), ("pos.ki", "3000")] {
+        assert_eq!(tune(&srv, &["set", p, v], d).0, 0);
+    }
+    let (code, out, err) = tune(&srv, &["step-test", "--distance", "1e-3", "--out", "st"], d);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("hunting            yes"), "{out}");
 }

@@ -58,6 +58,7 @@ fn run_inner(sc: &Scenario, out: &Path) -> Result<RunResult, String> {
         &format!("hil-sim run: feedforward {mode}, seed {}", sc.plant.seed),
         &res.trace,
         sc.plant.rad_per_count,
+        plot::FrictionSource::True,
     )?;
     Ok(res)
 }
