@@ -118,6 +118,8 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         };
         match gain {
             Some(g) => {
+                // To the 3 decimals printed: the interval is a hundredth wide or more.
+                let g = (g * 1e3).round() / 1e3;
                 link.request(&format!("set ff.gain {g}"))?;
                 if !a.json {
                     println!("set ff.gain {g:.3}");
