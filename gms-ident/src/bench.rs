@@ -4,6 +4,7 @@
 //! only sends protocol requests and lets device time pass, so it runs alike on all of them.
 
 use crate::Error;
+use crate::units::{num4, si};
 
 /// A device speaking the bench protocol.
 pub trait Bench {
@@ -1325,33 +1326,8 @@ pub fn tune_ff(
     let restored = b.request(&format!("set ff.gain {before}"));
     let (curve, range, window, optimum, mut notes) = r?;
     restored?;
-    let decided = match optimum {
-        None => {
-            notes.push(
-                "the refinement's errors have no minimum (the curve is flat or falls): no \
-                 gain chosen"
-                    .into(),
-            );
-            false
-        }
-        Some(o) if o.at < window.0 || o.at > window.1 => {
-            notes.push(format!(
-                "the fitted optimum {:.3} lies outside the refinement's window {:.3} to {:.3}: \
-                 no gain chosen (try a range around it)",
-                o.at, window.0, window.1
-            ));
-            false
-        }
-        Some(o) if o.se > TUNE_FF_FLAT_SE => {
-            notes.push(format!(
-                "the curve is too flat to choose: the optimum {:.3} has a standard error of \
-                 {:.3} (over {TUNE_FF_FLAT_SE})",
-                o.at, o.se
-            ));
-            false
-        }
-        Some(_) => true,
-    };
+    let (decided, note) = decide(optimum, window);
+    notes.extend(note);
     let chosen = match optimum {
         Some(o) if decided => o.at,
         _ => before,
@@ -1366,6 +1342,42 @@ pub fn tune_ff(
         before,
         notes,
     })
+}
+
+/// Whether a fitted optimum is clear enough to choose: it exists, lies within the
+/// refinement's `window`, and its standard error is at most [`TUNE_FF_FLAT_SE`]; otherwise
+/// the note that says why not.
+pub fn decide(
+    optimum: Option<crate::optimum::Optimum>,
+    window: (f64, f64),
+) -> (bool, Option<String>) {
+    match optimum {
+        None => (
+            false,
+            Some(
+                "the refinement's errors have no minimum (the curve is flat or falls): no gain \
+                 chosen"
+                    .into(),
+            ),
+        ),
+        Some(o) if o.at < window.0 || o.at > window.1 => (
+            false,
+            Some(format!(
+                "the fitted optimum {:.3} lies outside the refinement's window {:.3} to {:.3}: \
+                 no gain chosen (try a range around it)",
+                o.at, window.0, window.1
+            )),
+        ),
+        Some(o) if o.se > TUNE_FF_FLAT_SE => (
+            false,
+            Some(format!(
+                "the curve is too flat to choose: the optimum {:.3} has a standard error of \
+                 {:.3} (over {TUNE_FF_FLAT_SE})",
+                o.at, o.se
+            )),
+        ),
+        Some(_) => (true, None),
+    }
 }
 
 /// `set ff.gain G`.
@@ -1573,8 +1585,9 @@ fn commission_steps(
     let var = rows.iter().map(|r| (r[0] - m).powi(2)).sum::<f64>() / rows.len().max(1) as f64;
     (c.sense_offset, c.sense_noise) = (m, var.sqrt());
     c.lines.push(format!(
-        "current sense at rest: offset {:+.3e} A, noise {:.3e} A rms",
-        c.sense_offset, c.sense_noise
+        "current sense at rest: offset {}, noise {} rms",
+        si(c.sense_offset, "A"),
+        si(c.sense_noise, "A")
     ));
     // 2. Its polarity: a small current in current mode.
     let mut polarity_ok = false;
@@ -1623,11 +1636,13 @@ fn commission_steps(
         b.request(&format!("set enc.dir {}", c.enc_dir))?;
         primitive(b, "enable current")?;
         c.lines.push(format!(
-            "encoder: counted {moved:.2e} rad under a positive current: reversed; enc.dir flipped"
+            "encoder: counted {} under a positive current: reversed; enc.dir flipped",
+            si(moved, "rad")
         ));
     } else {
         c.lines.push(format!(
-            "encoder: direction right ({moved:.2e} rad under a positive current)"
+            "encoder: direction right ({} under a positive current)",
+            si(moved, "rad")
         ));
     }
     // 4. R at standstill: ±40 % of the expected breakaway, friction holds the axis.
@@ -1643,8 +1658,12 @@ fn commission_steps(
     }
     c.r = (vp - vn) / (ip - in_);
     c.lines.push(format!(
-        "winding resistance: {:.4} ohm ({vp:.4} V at {ip:.4e} A, {vn:.4} V at {in_:.4e} A)",
-        c.r
+        "winding resistance: {} ({} at {}, {} at {})",
+        si(c.r, "Ω"),
+        si(vp, "V"),
+        si(ip, "A"),
+        si(vn, "V"),
+        si(in_, "A")
     ));
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
     //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
@@ -1685,8 +1704,8 @@ fn commission_steps(
     }
     c.k_e = swe / sww;
     c.lines.push(format!(
-        "back-EMF constant: {:.4e} V·s/rad from {} runs up to {} rad/s (k_M = k_e in SI)",
-        c.k_e,
+        "back-EMF constant: {} from {} runs up to {} rad/s (k_M = k_e in SI)",
+        si(c.k_e, "V·s/rad"),
         pts.len(),
         3.0 * speed
     ));
@@ -1701,12 +1720,12 @@ fn commission_steps(
     // The loop's delay: the sample, the computation and the update, about 1.5 periods.
     let margin = 90.0 - 360.0 * CURRENT_BW_FRACTION * 1.5;
     c.lines.push(format!(
-        "current loop: bandwidth {:.0} Hz ({} of its rate): cur.kp {:.4} V/A, cur.ki {:.4e} V/(A·s); \
+        "current loop: bandwidth {:.0} Hz ({} of its rate): cur.kp {} V/A, cur.ki {} V/(A·s); \
          phase margin about {margin:.0}° (1.5 periods of delay)",
         CURRENT_BW_FRACTION * cur_hz,
         CURRENT_BW_FRACTION,
-        c.cur_pi.0,
-        c.cur_pi.1
+        num4(c.cur_pi.0),
+        num4(c.cur_pi.1)
     ));
     // 9. The position loop's gains for this motor and loop, kd between the device's
     //    friction model's Stribeck slope and the loops' stability limit.
@@ -1753,22 +1772,22 @@ fn position_gains_for(
         ))
     })?;
     c.lines.push(format!(
-        "position loop: pos.kp {:.4} N·m/rad, pos.ki {:.4} N·m/(rad·s), pos.kd {:.3e} N·m·s/rad \
+        "position loop: pos.kp {} N·m/rad, pos.ki {} N·m/(rad·s), pos.kd {} N·m·s/rad \
          (natural frequency {:.0} Hz)",
-        g.kp,
-        g.ki,
-        g.kd,
+        num4(g.kp),
+        num4(g.ki),
+        num4(g.kd),
         (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
     ));
     c.lines.push(format!(
-        "  kd above the friction's negative damping {:.3e} (the device's Stribeck curve at Vs: \
-         Fs {:.3e}, Fc {:.3e}, Vs {:.3}) by ×{:.2}; below the stability limit {:.3e} by ×{:.2}",
-        g.kd_min,
-        s.fs,
-        s.fc,
-        s.vs,
+        "  kd above the friction's negative damping {} (the device's Stribeck curve at Vs: \
+         Fs {}, Fc {}, Vs {}) by ×{:.2}; below the stability limit {} by ×{:.2}",
+        num4(g.kd_min),
+        si(s.fs, "N·m"),
+        si(s.fc, "N·m"),
+        si(s.vs, "rad/s"),
         g.margin_low(),
-        g.kd_max,
+        num4(g.kd_max),
         g.margin_high()
     ));
     if g.kd_max <= g.kd_min {
@@ -1874,11 +1893,13 @@ fn inertia(
     b.request("current 0")?;
     let j = js.iter().sum::<f64>() / js.len() as f64;
     c.lines.push(format!(
-        "reflected inertia: {j:.4e} kg·m² from four current pulses of {amps:.3e} A for {} ms \
-         and the coasts after (each {:.3e} … {:.3e})",
+        "reflected inertia: {} kg·m² from four current pulses of {} for {} ms and the coasts \
+         after (each {} … {})",
+        num4(j),
+        si(amps, "A"),
         pulse * 1e3,
-        js.iter().cloned().fold(f64::INFINITY, f64::min),
-        js.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        num4(js.iter().cloned().fold(f64::INFINITY, f64::min)),
+        num4(js.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
     ));
     Ok(j)
 }
@@ -1968,10 +1989,10 @@ fn inductance(b: &mut impl Bench, c: &mut Commissioned, dt: f64, i_fs: f64) -> R
         ));
     }
     c.lines.push(format!(
-        "winding inductance: {:.4e} H from the current loop's response to {steps} steps of \
-         {:.3e} A (L/R {:.1} µs)",
-        l,
-        2.0 * amps,
+        "winding inductance: {} from the current loop's response to {steps} steps of {} \
+         (L/R {:.1} µs)",
+        si(l, "H"),
+        si(2.0 * amps, "A"),
         l / r * 1e6
     ));
     if l / r < h / 6.0 {

@@ -18,6 +18,7 @@ pub mod optimum;
 pub mod paramfile;
 pub mod plot;
 pub mod trace;
+pub mod units;
 
 /// What went wrong in an identification or analysis step. `Display` gives the one-line
 /// message the tools print; the variant says what kind of failure it is.

@@ -12,7 +12,14 @@ use crate::tracked::{Bar, ctrl_c};
 use gms_tune::run::RunBench;
 
 /// Runs the commissioning; writes `out`; applies/saves on request.
-pub fn run(link: &mut Link, out: &Path, speed: f64, apply: bool, save: bool) -> Result<(), Fail> {
+pub fn run(
+    link: &mut Link,
+    out: &Path,
+    speed: f64,
+    apply: bool,
+    save: bool,
+    json: bool,
+) -> Result<(), Fail> {
     let pf = crate::device_params(link)?;
     let mut bar = Bar::new();
     let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
@@ -22,25 +29,45 @@ pub fn run(link: &mut Link, out: &Path, speed: f64, apply: bool, save: bool) -> 
         Error::Params(m) => Fail::Usage(m),
         e => Fail::Device(format!("{e}; the bridge is off, nothing changed")),
     })?;
-    for l in &c.lines {
-        println!("{l}");
-    }
     let (pf, text) = gms_tune::run::commissioned_file(&c, pf);
     gms_ident::io::write_atomic(out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
-    println!(
-        "summary: sense.dir {} enc.dir {} motor.r {:.4} ohm motor.k_e = motor.k_m {:.4e}; wrote {}",
-        c.sense_dir,
-        c.enc_dir,
-        c.r,
-        c.k_e,
-        out.display()
-    );
+    if json {
+        let settings: serde_json::Map<String, serde_json::Value> = c
+            .settings()
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), serde_json::json!(v)))
+            .collect();
+        let v = serde_json::json!({
+            "settings": settings,
+            "inductance_h": c.inductance,
+            "sense_offset_a": c.sense_offset,
+            "sense_noise_a": c.sense_noise,
+            "lines": c.lines,
+            "file": out.display().to_string(),
+        });
+        println!("{v}");
+    } else {
+        for l in &c.lines {
+            println!("{l}");
+        }
+        use gms_ident::units::{num4, si};
+        println!(
+            "summary: sense.dir {}, enc.dir {}, motor.r {}, motor.k_e = motor.k_m {} V·s/rad \
+             ({}); wrote {}",
+            c.sense_dir,
+            c.enc_dir,
+            si(c.r, "Ω"),
+            num4(c.k_e),
+            si(c.k_e, "V·s/rad"),
+            out.display()
+        );
+    }
     if apply || save {
         let n = load_params(link, &pf).map_err(|e| Fail::Device(e.to_string()))?;
-        println!("loaded {n} parameters into the device");
+        eprintln!("loaded {n} parameters into the device");
         if save {
             link.request("save")?;
-            println!("saved");
+            eprintln!("saved");
         }
     }
     Ok(())

@@ -30,6 +30,8 @@ pub struct Args {
     pub save: bool,
     /// The experiments' ranges.
     pub ranges: Ranges,
+    /// Print JSON instead of the readable report.
+    pub json: bool,
 }
 
 /// Runs the experiments, writes the data, fits, writes the results; on any failure the bridge
@@ -85,23 +87,53 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         g.sliding.len(),
         g.lag.as_ref().map_or(0, |l| l.0.len())
     );
-    for l in &id.report {
-        println!("{l}");
-    }
     gms_tune::run::write_identified(&id, &a.report, Some(&a.out))
         .map_err(|e| Fail::Usage(e.to_string()))?;
-    println!(
-        "wrote {} and the report in {}",
-        a.out.display(),
-        a.report.display()
-    );
+    if a.json {
+        let v = serde_json::json!({
+            "friction": id.spec,
+            "report": id.report,
+            "file": a.out.display().to_string(),
+        });
+        println!("{v}");
+    } else {
+        for l in &id.report {
+            println!("{l}");
+        }
+        println!("{}", summary(&id.spec));
+        println!(
+            "wrote {} and the report in {}",
+            a.out.display(),
+            a.report.display()
+        );
+    }
     if a.apply || a.save {
         let n = crate::load(link, &a.out)?;
-        println!("loaded {n} parameters into the device");
+        eprintln!("loaded {n} parameters into the device");
         if a.save {
             link.request("save")?;
-            println!("saved");
+            eprintln!("saved");
         }
     }
     Ok(())
+}
+
+/// The identified set in one readable line, in the device's units (motor side: N·m, rad).
+pub fn summary(f: &gms_ident::paramfile::FrictionSpec) -> String {
+    use gms_ident::units::si;
+    let v = |x: Option<f64>, unit: &str| x.map_or("-".to_string(), |x| si(x, unit));
+    let blocks = f.blocks.as_ref().map_or(0, Vec::len);
+    let k0: f64 = f.blocks.iter().flatten().map(|b| b.k).sum();
+    format!(
+        "identified: Fs {}, Fc {}, Vs {}, delta {}, sigma {}, C {}; {blocks} blocks, initial \
+         stiffness {}, pre-sliding to {}",
+        v(f.fs, "N·m"),
+        v(f.fc, "N·m"),
+        v(f.vs, "rad/s"),
+        f.delta.map_or("-".to_string(), |d| format!("{d:.3}")),
+        v(f.sigma, "N·m·s/rad"),
+        v(f.c, "N·m/s"),
+        si(k0, "N·m/rad"),
+        si(f.largest_breakpoint(), "rad"),
+    )
 }

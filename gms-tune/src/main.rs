@@ -176,6 +176,10 @@ enum Cmd {
         /// narrowed to it while the experiments run.
         #[arg(long, default_value_t = 5.0)]
         window: f64,
+        /// Print the result as JSON (the identified [friction] table, raw values in SI, and
+        /// the report's lines) instead of the readable report.
+        #[arg(long)]
+        json: bool,
     },
     /// Commission a motor: the current sense at rest, its polarity and the encoder's direction
     /// (fixed by `sense.dir`/`enc.dir`), the winding resistance at standstill, the back-EMF
@@ -195,6 +199,9 @@ enum Cmd {
         /// Load it and save it (implies --apply).
         #[arg(long)]
         save: bool,
+        /// Print the result as JSON (the settings found, raw values in SI, and the lines).
+        #[arg(long)]
+        json: bool,
     },
     /// Tune the friction feedforward's gain: the same sine test with reversals at each gain
     /// of a coarse sweep (widened where the error is least at an edge), then repeated around
@@ -450,7 +457,8 @@ fn run(cli: Cli) -> Result<(), Fail> {
             speed,
             apply,
             save,
-        } => commission::run(&mut link, &out, speed, apply, save)?,
+            json,
+        } => commission::run(&mut link, &out, speed, apply, save, json)?,
         Cmd::TuneFf {
             amplitude,
             freq,
@@ -500,6 +508,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             speeds,
             window,
             no_erase,
+            json,
         } => identify::run(
             &mut link,
             &identify::Args {
@@ -509,6 +518,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 asymmetric,
                 apply,
                 save,
+                json,
                 ranges: gms_ident::bench::Ranges {
                     torque_step,
                     v_min,

@@ -316,7 +316,9 @@ pub fn status_table(pairs: &[(String, String)]) -> Vec<String> {
         .map(|(k, v)| {
             let (meaning, unit) = status_meaning(k);
             let value = match v.parse::<f64>() {
-                Ok(x) if v.contains('.') || v.contains('e') => format!("{} {unit}", sig4(x)),
+                Ok(x) if v.contains('.') || v.contains('e') => {
+                    format!("{} {unit}", gms_ident::units::num4(x))
+                }
                 _ => format!("{v} {unit}"),
             };
             format!("{k:<width$}  {:<22}  {meaning}", value.trim_end())
@@ -381,17 +383,4 @@ pub fn step_summary(
             .to_string()
     });
     out
-}
-
-/// `x` to four significant digits: fixed notation from 0.001 to 10⁶, else scientific.
-pub fn sig4(x: f64) -> String {
-    let a = x.abs();
-    if x == 0.0 {
-        "0".into()
-    } else if (1e-3..1e6).contains(&a) {
-        let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
-        format!("{x:.decimals$}")
-    } else {
-        format!("{x:.3e}")
-    }
 }

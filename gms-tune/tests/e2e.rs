@@ -497,6 +497,12 @@ fn identify_finds_the_hidden_friction_and_applies_it() {
     );
     assert_eq!(code, 0, "{out}\n{err}");
     assert!(err.contains("experiments done in"), "{err}");
+    // The identified set in one readable line, in the device's units.
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("identified: Fs ") && l.contains(" µN·m, Fc ")),
+        "{out}"
+    );
     for f in [
         "presliding.csv",
         "sliding.csv",
@@ -836,6 +842,21 @@ fn commission_measures_a_hidden_motor_and_applies_it() {
     assert!(text.contains("\"enc.dir\" = -1.0"), "{text}");
     // The file loads back (`params load`) as it is.
     assert_eq!(tune(&srv, &["params", "load", "m.toml"], d).0, 0);
+    // Readable: measurements with prefixes (R 7.5 Ω, k_e 8 mV·s/rad, L in µH).
+    assert!(
+        out.contains("winding resistance: 7.") && out.contains(" Ω ("),
+        "{out}"
+    );
+    assert!(out.contains(" mV·s/rad") && out.contains(" µH "), "{out}");
+    // --json: the settings found, raw.
+    let (code, out, err) = tune(&srv, &["commission", "--out", "m2.toml", "--json"], d);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value =
+        serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert!(
+        (j["settings"]["motor.r"].as_f64().unwrap() / 7.5 - 1.0).abs() < 0.05,
+        "{j}"
+    );
     drop(srv);
     let dir2 = tempfile::tempdir().unwrap();
     let d2 = dir2.path();
