@@ -1020,6 +1020,13 @@ pub fn load_params(b: &mut impl Bench, pf: &crate::paramfile::ParamFile) -> Resu
     use crate::paramfile::ModelKind;
     let f = &pf.friction;
     let n = f.blocks.as_ref().map_or(0, Vec::len);
+    if f.negative.is_some() {
+        return Err(Error::Params(
+            "[friction.negative]: the device's compensator has one Stribeck curve for both \
+             directions; nothing loaded (fit without --asymmetric, or remove the table)"
+                .into(),
+        ));
+    }
     if f.model != ModelKind::Gms || !(1..=6).contains(&n) {
         return Err(Error::Params(format!(
             "[friction] must be a gms model of 1 to 6 blocks for the device's compensator \

@@ -37,6 +37,14 @@ pub struct Args {
 /// Runs the experiments, writes the data, fits, writes the results; on any failure the bridge
 /// is off, the stroke limits are back, and the data gathered so far is on disk.
 pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
+    if (a.apply || a.save) && a.asymmetric {
+        return Err(Fail::Usage(
+            "--asymmetric with --apply/--save: the device's compensator has one Stribeck curve \
+             for both directions, so [friction.negative] could not be loaded (fit without \
+             --asymmetric to apply)"
+                .into(),
+        ));
+    }
     if (a.apply || a.save) && !(1..=6).contains(&a.blocks) {
         return Err(Fail::Usage(format!(
             "--apply/--save need --blocks 1 to 6: the device's compensator has at most 6 \

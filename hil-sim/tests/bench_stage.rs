@@ -157,3 +157,28 @@ fn a_compliant_stage_with_a_heavy_slide_is_identified_but_delta_is_off() {
     assert!(within_bench_bounds(&others), "{e:?}");
     assert!(e[3] < 0.15, "delta {:.1} % off", e[3] * 100.0);
 }
+
+/// A parameter file with `[friction.negative]` (an asymmetric fit) is refused by the device's
+/// loader with the reason, and nothing is loaded (the device cannot hold a second curve).
+#[test]
+fn an_asymmetric_set_is_refused_whole() {
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let mut spec = sc.plant.actuator.clone();
+    spec.fs = Some(250e-6);
+    spec.negative = Some(gms_ident::paramfile::NegativeSpec {
+        fs: Some(240e-6),
+        ..Default::default()
+    });
+    let err = load_params(
+        &mut dev,
+        &ParamFile {
+            friction: spec,
+            device: None,
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("[friction.negative]"), "{err}");
+    assert_eq!(get_param(&mut dev, "gms.fs").unwrap(), 220e-6);
+}
