@@ -229,3 +229,44 @@ fn a_timed_current_ends_on_the_device() {
     assert!(held[60..].iter().all(|a| *a == 0.0), "{held:?}");
     assert!(lp.enabled());
 }
+
+/// A `save` holds the CPU for up to 2 s (a flash erase): the first step after it sees the
+/// whole motion of that time as one increment. Checked against the periods that really
+/// elapsed, an axis that drifted at a legal 50 rad/s (half the board's 100 rad/s) is no
+/// encoder jump; one that moved faster than the board allows over that time still is.
+#[test]
+fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
+    let period = 168_000_000 / 20_000;
+    let rpc = default_settings().rad_per_count as f64;
+    let stall_s = 2.0;
+    let moved = |speed: f64| (speed * stall_s / rpc) as u32;
+    for (speed, jump) in [(50.0, false), (150.0, true)] {
+        let mut lp = rest();
+        // Position steps come every other PWM step (10 kHz of 20 kHz): settle the phase.
+        for _ in 0..4 {
+            step(&mut lp, period, None);
+        }
+        assert_eq!(lp.faults(), Faults::NONE);
+        // The stall: the next steps come 2 s later, the counter far away.
+        let far = moved(speed);
+        for k in 0..2 {
+            let inp = Inputs {
+                encoder: far,
+                current_codes: 16 * 2048,
+                since_last: if k == 0 {
+                    (stall_s * 168e6) as u32
+                } else {
+                    period
+                },
+            };
+            lp.step(inp, |_, _| None);
+            lp.finish(1000);
+        }
+        assert_eq!(
+            lp.faults().contains(Faults::ENCODER_JUMP),
+            jump,
+            "{speed} rad/s: {:?}",
+            lp.faults()
+        );
+    }
+}

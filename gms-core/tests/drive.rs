@@ -181,6 +181,7 @@ fn each_fault_alone() {
         current: 0.1,
         error: 1e-4,
         delta: 10,
+        periods: 1,
         pos: 500,
         cycles: 3_000,
     };
@@ -240,15 +241,36 @@ fn each_fault_alone() {
         current: 0.75,
         error: 0.01,
         delta: 2_000,
+        periods: 1,
         pos: 1_000_000,
         cycles: 6_720,
     };
     assert_eq!(drive::check(&edge, &lim, true), Faults::NONE);
+    // After the loop stood still for 1000 periods (a flash erase), the increment of that
+    // whole time is checked against 1000 periods' worth; one count more is a jump.
+    let stood = Measured {
+        delta: 2_000_000,
+        periods: 1000,
+        ..edge
+    };
+    assert_eq!(drive::check(&stood, &lim, false), Faults::NONE);
+    assert_eq!(
+        drive::check(
+            &Measured {
+                delta: 2_000_001,
+                ..stood
+            },
+            &lim,
+            false
+        ),
+        Faults::ENCODER_JUMP
+    );
     // Bridge off: only the encoder is watched.
     let bad = Measured {
         current: 5.0,
         error: 1.0,
         delta: 5_000,
+        periods: 1,
         pos: i64::MAX,
         cycles: u32::MAX,
     };

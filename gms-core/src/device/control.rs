@@ -98,6 +98,8 @@ pub struct ControlLoop {
     /// The encoder counter's last raw reading, before the direction is applied.
     last_raw: u32,
     last_pos: i64,
+    /// PWM periods missed since the last position step (the loop stood still).
+    missed_since_pos: u32,
     sense: CurrentSense,
     faults: Faults,
     enabled: bool,
@@ -147,6 +149,7 @@ impl ControlLoop {
             enc: CountExtender::new(board.encoder_bits, directed(encoder, enc_dir)),
             last_raw: encoder,
             last_pos: 0,
+            missed_since_pos: 0,
             sense,
             faults,
             enabled: false,
@@ -373,9 +376,12 @@ impl ControlLoop {
         let mut sample = None;
         let mut new_faults = Faults::NONE;
         let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
-        if missed > 0 && self.enabled {
-            self.stats.record_missed(missed);
-            new_faults.latch(Faults::OVERRUN);
+        if missed > 0 {
+            self.missed_since_pos = self.missed_since_pos.saturating_add(missed);
+            if self.enabled {
+                self.stats.record_missed(missed);
+                new_faults.latch(Faults::OVERRUN);
+            }
         }
         if self.phase == 0 {
             let chunk = self.chunk.take();
@@ -416,10 +422,19 @@ impl ControlLoop {
                 };
                 self.out = PositionOutput::default();
             }
+            // The position periods the increment took: one, plus the PWM periods missed since
+            // the last position step in whole position periods (rounded up).
+            let periods = if self.missed_since_pos == 0 {
+                1
+            } else {
+                1 + self.missed_since_pos.div_ceil(self.ratio.max(1))
+            };
+            self.missed_since_pos = 0;
             let m = Measured {
                 current: self.current,
                 error: self.out.error,
                 delta,
+                periods,
                 pos,
                 cycles: self.last_cycles,
             };

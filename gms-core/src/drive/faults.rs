@@ -200,8 +200,11 @@ pub struct Measured {
     pub current: f32,
     /// Position error \[rad\] (0 while the bridge is off).
     pub error: f32,
-    /// Encoder increment over the last position period \[counts\].
+    /// Encoder increment since the last position step \[counts\].
     pub delta: i64,
+    /// Position periods that increment took (1 normally; more after the loop stood still,
+    /// e.g. through a flash erase): the encoder-jump limit scales with it.
+    pub periods: u32,
     /// Position \[counts\].
     pub pos: i64,
     /// Duration of the previous control step \[cycles\].
@@ -212,7 +215,13 @@ pub struct Measured {
 /// encoder jump is checked (the others follow from driving).
 pub fn check(m: &Measured, lim: &Limits, enabled: bool) -> Faults {
     let mut f = Faults::NONE;
-    if encoder_jump(m.delta, lim.max_step_counts) {
+    // The common case (one period) without the 64-bit multiply.
+    let max_step = if m.periods > 1 {
+        lim.max_step_counts.saturating_mul(m.periods as i64)
+    } else {
+        lim.max_step_counts
+    };
+    if encoder_jump(m.delta, max_step) {
         f.latch(Faults::ENCODER_JUMP);
     }
     if !enabled {

@@ -204,6 +204,7 @@ fn main() -> ! {
             current: amps,
             error: black_box(1e-4),
             delta,
+            periods: black_box(1),
             pos: enc.count(),
             cycles: black_box(3000),
         };
