@@ -235,3 +235,36 @@ fn the_mismatch_studys_plants_are_what_they_say() {
     assert!(e4 < 0.03, "{e4}");
     assert!(e12 < 0.01, "{e12}");
 }
+
+/// `hil-sim mismatch`: the study's table, one row per plant; against every plant the device's
+/// GMS feedforward beats no feedforward on the sine, against its own model it is the
+/// reference (×1.00), and a plant whose pre-sliding has another shape (12 blocks of a smooth
+/// curve, LuGre) costs it more than 30 %.
+#[test]
+fn the_mismatch_command_prints_the_studys_table() {
+    let d = tempfile::tempdir().unwrap();
+    let (code, out, err) = hil(&["mismatch", "--runs", "2"], d.path());
+    assert_eq!(code, 0, "{err}");
+    let rows: Vec<Vec<String>> = out
+        .lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| plant"))
+        .map(|l| l.split('|').map(|c| c.trim().to_string()).collect())
+        .collect();
+    assert_eq!(rows.len(), 5, "{out}");
+    let median = |cell: &str| -> f64 { cell.split_whitespace().next().unwrap().parse().unwrap() };
+    for r in &rows {
+        // Columns: name, none, static, gms, gms-adaptive, reversal none, reversal gms, ratio.
+        assert!(median(&r[4]) < median(&r[2]), "{r:?}");
+    }
+    assert!(rows[0][8].starts_with("×1.00, ×1.00"), "{:?}", rows[0]);
+    for r in &rows[2..4] {
+        let ratio: f64 = r[8]
+            .trim_start_matches('×')
+            .split(',')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!(ratio > 1.3, "{r:?}");
+    }
+}
