@@ -270,6 +270,17 @@ impl FrictionSpec {
         })
     }
 
+    /// The quasi-static virgin curve of its GMS blocks at displacement `x` \[m or rad\]:
+    /// Σ min(k_i x, alpha_i Fs) \[N or N·m\] (paper eq. 3; 0 without blocks or fs).
+    pub fn virgin(&self, x: f64) -> f64 {
+        let fs = self.fs.unwrap_or(0.0);
+        self.blocks
+            .iter()
+            .flatten()
+            .map(|b| (b.k * x).min(b.alpha * fs))
+            .sum()
+    }
+
     /// The end of the pre-sliding range: the largest block breakpoint alpha_i Fs / k_i
     /// [m or rad] (0 without blocks or fs).
     pub fn largest_breakpoint(&self) -> f64 {

@@ -25,16 +25,6 @@ pub struct Truth {
     pub spec: FrictionSpec,
 }
 
-/// Table 1's virgin curve (quasi-static, from rest) at `x` \[rad\].
-fn table1_virgin(spec: &FrictionSpec, x: f64) -> f64 {
-    let fs = spec.fs.unwrap_or(0.0);
-    spec.blocks
-        .iter()
-        .flatten()
-        .map(|b| (b.k * x).min(b.alpha * fs))
-        .sum()
-}
-
 /// The study's truths, from the default scenario's actuator (Table 1).
 pub fn truths(base: &FrictionSpec) -> Result<Vec<Truth>, Error> {
     let fs = base.fs.unwrap_or(0.0);
@@ -57,11 +47,7 @@ pub fn truths(base: &FrictionSpec) -> Result<Vec<Truth>, Error> {
     let xs: Vec<f64> = (0..n_pts)
         .map(|i| x0 * (dmax / x0).powf(i as f64 / (n_pts - 1) as f64))
         .collect();
-    let four = fit(
-        xs.clone(),
-        xs.iter().map(|&x| table1_virgin(base, x)).collect(),
-        4,
-    )?;
+    let four = fit(xs.clone(), xs.iter().map(|&x| base.virgin(x)).collect(), 4)?;
     // A smooth curve of the same initial stiffness, to breakaway at 7 Fs/k0 (99.9 % of Fs).
     let xe = 7.0 * fs / k0;
     let xs2: Vec<f64> = (0..n_pts)

@@ -4,7 +4,7 @@
 //! hidden friction.
 
 mod common;
-use common::QUIET;
+use common::{QUIET, identification_errors};
 use gms_ident::bench::{SlidingPlan, sliding};
 use gms_ident::identify::fit_stribeck;
 use hil_sim::device::LocalDevice;
@@ -258,49 +258,6 @@ impl Hidden {
             blocks.join(", ")
         )
     }
-
-    fn virgin(&self, x: f64) -> f64 {
-        TABLE1_BLOCKS
-            .iter()
-            .map(|(k, a)| (k * self.k * x).min(a * self.fs))
-            .sum()
-    }
-}
-
-/// The relative errors of an identification against the hidden friction, and the virgin
-/// curve's RMS (uniform in x over the measured range) in % of Fs.
-fn accuracy(
-    h: &Hidden,
-    g: &gms_ident::bench::Gathered,
-    spec: &gms_ident::paramfile::FrictionSpec,
-) -> [f64; 7] {
-    let rel = |got: Option<f64>, want: f64| (got.unwrap() - want).abs() / want;
-    let found: Vec<(f64, f64)> = spec
-        .blocks
-        .iter()
-        .flatten()
-        .map(|b| (b.k, b.alpha))
-        .collect();
-    let fs = spec.fs.unwrap();
-    let xmax = g.presliding.iter().map(|p| p.0).fold(0.0, f64::max);
-    let n = 400;
-    let rms = ((1..=n)
-        .map(|i| {
-            let x = xmax * i as f64 / n as f64;
-            (virgin(&found, fs, x) - h.virgin(x)).powi(2)
-        })
-        .sum::<f64>()
-        / n as f64)
-        .sqrt();
-    [
-        rel(spec.fs, h.fs),
-        rel(spec.fc, h.fc),
-        rel(spec.vs, h.vs),
-        rel(spec.delta, h.delta),
-        rel(spec.sigma, h.sigma),
-        rel(spec.c, h.c),
-        rms / h.fs,
-    ]
 }
 
 /// A whole bench identification (`gms_ident::bench::identify_on`, what `gms-tune identify`
@@ -319,7 +276,7 @@ fn identify_hidden(h: &Hidden) -> ([f64; 7], LocalDevice, gms_ident::paramfile::
     for f in ["presliding.csv", "sliding.csv", "lag.csv"] {
         assert!(dir.path().join(f).exists(), "{f}");
     }
-    let acc = accuracy(h, &g, &id.spec);
+    let acc = identification_errors(&sc.plant.actuator, &g, &id.spec);
     eprintln!(
         "{h:?}\n  errors: fs {:.1} %, fc {:.1} %, vs {:.1} %, delta {:.1} %, sigma {:.1} %, c {:.1} %, virgin curve {:.2} % of Fs",
         acc[0] * 100.0,

@@ -4,10 +4,8 @@
 //! device starts from its defaults (Table 1): the tool is told nothing of the truth.
 
 mod common;
-use common::QUIET;
-use gms_ident::bench::{
-    DeviceInfo, Gathered, Plans, Ranges, get_param, identify_on, load_params, sine_test,
-};
+use common::{QUIET, identification_errors};
+use gms_ident::bench::{DeviceInfo, Plans, Ranges, get_param, identify_on, load_params, sine_test};
 use gms_ident::paramfile::{FrictionSpec, ParamFile};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
@@ -17,41 +15,6 @@ const FOUR: &str = "[plant.actuator]\nmodel = \"gms\"\nfs = 220e-6\nfc = 125e-6\
                     delta = 0.9\nsigma = 10.5e-6\nc = 5e-3\nblocks = [{ k = 1.21, alpha = 0.55 }, \
                     { k = 0.055, alpha = 0.2 }, { k = 0.011, alpha = 0.15 }, \
                     { k = 3.142857e-3, alpha = 0.1 }]\n";
-
-/// Σ min(k x, alpha fs).
-fn virgin(spec: &FrictionSpec, x: f64) -> f64 {
-    let fs = spec.fs.unwrap();
-    spec.blocks
-        .iter()
-        .flatten()
-        .map(|b| (b.k * x).min(b.alpha * fs))
-        .sum()
-}
-
-/// The relative errors of Fs, Fc, Vs, delta, sigma, C against the truth, and the virgin
-/// curve's RMS difference over the measured range as a fraction of Fs.
-fn errors(truth: &FrictionSpec, g: &Gathered, found: &FrictionSpec) -> [f64; 7] {
-    let rel = |a: Option<f64>, b: Option<f64>| (a.unwrap() / b.unwrap() - 1.0).abs();
-    let xmax = g.presliding.iter().map(|p| p.0).fold(0.0, f64::max);
-    let n = 400;
-    let rms = ((1..=n)
-        .map(|i| {
-            let x = xmax * i as f64 / n as f64;
-            (virgin(found, x) - virgin(truth, x)).powi(2)
-        })
-        .sum::<f64>()
-        / n as f64)
-        .sqrt();
-    [
-        rel(found.fs, truth.fs),
-        rel(found.fc, truth.fc),
-        rel(found.vs, truth.vs),
-        rel(found.delta, truth.delta),
-        rel(found.sigma, truth.sigma),
-        rel(found.c, truth.c),
-        rms / truth.fs.unwrap(),
-    ]
-}
 
 /// Identifies `blocks` blocks on a device over the scenario `text`; prints and returns the
 /// errors against the plant's actuator friction, the identified set and the device.
@@ -70,7 +33,7 @@ fn identify(text: &str, blocks: usize, what: &str) -> ([f64; 7], FrictionSpec, L
         &mut |_, _, _| {},
     )
     .unwrap();
-    let e = errors(&sc.plant.actuator, &g, &id.spec);
+    let e = identification_errors(&sc.plant.actuator, &g, &id.spec);
     eprintln!(
         "{what}: errors fs {:.1} %, fc {:.1} %, vs {:.1} %, delta {:.1} %, sigma {:.1} %, \
          c {:.1} %, virgin curve {:.2} % of Fs",

@@ -209,29 +209,3 @@ fn energy_balance_closes_on_a_compliant_stage_with_ripple() {
         assert!(e.damping > 1e-4 * e.converted, "{e:?}");
     }
 }
-
-/// The closed loop's physics on a real stage (the mode at 700 Hz with a 2 kg slide, cogging
-/// of 20 µN·m at 12 per revolution, ±10 % screw friction): the compensation's ordering holds
-/// as on the rigid stage — sine RMS gms < static < none for each draw, and gms has the
-/// smallest peak after reversals.
-#[test]
-fn the_compensation_ordering_holds_on_a_real_stage() {
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../examples/scenarios/real-stage.toml"
-    );
-    let sc = Scenario::load(std::path::Path::new(path)).unwrap();
-    assert!(sc.plant.compliance.f_hz > 0.0 && sc.plant.ripple.amplitude > 0.0);
-    for seed in 1..=2 {
-        let m = |mode| sim::run(&sc, mode, seed).unwrap().metrics;
-        let (none, stat, gms) = (m(FfMode::None), m(FfMode::Static), m(FfMode::Gms));
-        assert!(
-            gms.sine_rms_error < stat.sine_rms_error && stat.sine_rms_error < none.sine_rms_error,
-            "seed {seed}: gms {:e} static {:e} none {:e}",
-            gms.sine_rms_error,
-            stat.sine_rms_error,
-            none.sine_rms_error
-        );
-        assert!(gms.reversal_error < stat.reversal_error.min(none.reversal_error));
-    }
-}

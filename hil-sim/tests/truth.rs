@@ -7,7 +7,7 @@ use std::net::TcpStream;
 use std::time::Duration;
 
 mod common;
-use common::hil;
+use common::{Server, hil};
 use hil_sim::scenario::Scenario;
 
 /// A short reference (a sine with reversals, then a step) for the CLI runs.
@@ -142,24 +142,18 @@ fn the_compensator_starts_from_the_device_or_the_plant() {
 #[test]
 fn serve_takes_a_lugre_plant_and_is_not_told_its_friction() {
     let d = tempfile::tempdir().unwrap();
-    std::fs::write(d.path().join("s.toml"), LUGRE).unwrap();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_hil-sim"))
-        .args(["serve", "--tcp", "127.0.0.1:0", "--scenario", "s.toml"])
-        .current_dir(d.path())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on ")
-        .unwrap()
-        .to_string();
-    let s = TcpStream::connect(&addr).unwrap();
+    let scenario = d.path().join("s.toml");
+    std::fs::write(&scenario, LUGRE).unwrap();
+    let srv = Server::start(
+        &[
+            "--tcp",
+            "127.0.0.1:0",
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        &d.path().join("flash.img"),
+    );
+    let s = TcpStream::connect(&srv.addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
     let mut w = s.try_clone().unwrap();
     let mut r = BufReader::new(s);
@@ -173,8 +167,6 @@ fn serve_takes_a_lugre_plant_and_is_not_told_its_friction() {
     assert_eq!(ask("get gms.blocks"), "ok 6");
     assert_eq!(ask("enable"), "ok");
     assert_eq!(ask("move 0.01"), "ok");
-    let _ = child.kill();
-    let _ = child.wait();
 }
 
 /// The mismatch study's plants: five valid models sharing Table 1's sliding friction; the
@@ -187,19 +179,12 @@ fn the_mismatch_studys_plants_are_what_they_say() {
     assert_eq!(truths.len(), 5);
     let fs = base.fs.unwrap();
     let k0: f64 = base.blocks.iter().flatten().map(|b| b.k).sum();
-    let curve = |spec: &gms_ident::paramfile::FrictionSpec, x: f64| -> f64 {
-        spec.blocks
-            .iter()
-            .flatten()
-            .map(|b| (b.k * x).min(b.alpha * fs))
-            .sum()
-    };
     let rms = |spec: &gms_ident::paramfile::FrictionSpec, want: &dyn Fn(f64) -> f64, xmax: f64| {
         let n = 500;
         ((1..=n)
             .map(|i| {
                 let x = xmax * i as f64 / n as f64;
-                (curve(spec, x) - want(x)).powi(2)
+                (spec.virgin(x) - want(x)).powi(2)
             })
             .sum::<f64>()
             / n as f64)
@@ -219,7 +204,7 @@ fn the_mismatch_studys_plants_are_what_they_say() {
     }
     let four = &truths[1].spec;
     assert_eq!(four.blocks.as_ref().unwrap().len(), 4);
-    let e4 = rms(four, &|x| curve(&base, x), base.largest_breakpoint());
+    let e4 = rms(four, &|x| base.virgin(x), base.largest_breakpoint());
     let twelve = &truths[2].spec;
     assert_eq!(twelve.blocks.as_ref().unwrap().len(), 12);
     let e12 = rms(

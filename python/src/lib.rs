@@ -569,12 +569,10 @@ impl Device {
     fn status<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let (_, text) = self.link.request("status").map_err(link_err)?;
         let d = PyDict::new(py);
-        for kv in text.split_whitespace() {
-            if let Some((k, v)) = kv.split_once('=') {
-                match v.parse::<f64>() {
-                    Ok(x) => d.set_item(k, x)?,
-                    Err(_) => d.set_item(k, v)?,
-                }
+        for (k, v) in gms_tune::run::status_pairs(&text) {
+            match v.parse::<f64>() {
+                Ok(x) => d.set_item(k, x)?,
+                Err(_) => d.set_item(k, v)?,
             }
         }
         Ok(d)

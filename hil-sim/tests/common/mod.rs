@@ -20,6 +20,39 @@ fc = 1e-6
 guideway = false
 ";
 
+/// The errors of an identified friction `found` against the truth: the relative errors of
+/// Fs, Fc, Vs, delta, sigma and C, and the virgin curves' RMS difference (uniform in x over
+/// the pre-sliding range `g` measured) as a fraction of the true Fs.
+pub fn identification_errors(
+    truth: &gms_ident::paramfile::FrictionSpec,
+    g: &gms_ident::bench::Gathered,
+    found: &gms_ident::paramfile::FrictionSpec,
+) -> [f64; 7] {
+    let rel = |got: Option<f64>, want: Option<f64>| {
+        let want = want.unwrap();
+        (got.unwrap() - want).abs() / want
+    };
+    let xmax = g.presliding.iter().map(|p| p.0).fold(0.0, f64::max);
+    let n = 400;
+    let rms = ((1..=n)
+        .map(|i| {
+            let x = xmax * i as f64 / n as f64;
+            (found.virgin(x) - truth.virgin(x)).powi(2)
+        })
+        .sum::<f64>()
+        / n as f64)
+        .sqrt();
+    [
+        rel(found.fs, truth.fs),
+        rel(found.fc, truth.fc),
+        rel(found.vs, truth.vs),
+        rel(found.delta, truth.delta),
+        rel(found.sigma, truth.sigma),
+        rel(found.c, truth.c),
+        rms / truth.fs.unwrap(),
+    ]
+}
+
 /// Runs `cmd` to its end; returns (exit code, stdout, stderr).
 pub fn run(cmd: &mut Command) -> (i32, String, String) {
     let out = cmd.output().expect("the command runs");
