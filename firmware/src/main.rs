@@ -83,10 +83,23 @@ async fn main(spawner: Spawner) {
         }
     };
     info!("{}", start.note);
+    info!(
+        "encoder {} counts/rev, current sense {} V/A (the power stage as built: {} V/A){}",
+        start.settings.counts_per_rev,
+        start.settings.sense_v_per_a,
+        board::SENSE_V_PER_A,
+        if start.configured {
+            ""
+        } else {
+            ": the built-in defaults, set enc.counts_per_rev and sense.v_per_a for your axis"
+        }
+    );
     faults.latch(start.faults);
 
     // Current-sense zero, with the bridge off (the decision is gms-core's).
-    let zero = device::calibrate_sense(&board::BOARD, || hw.next_current_codes());
+    let zero = device::calibrate_sense(&board::BOARD, start.settings.sense_v_per_a, || {
+        hw.next_current_codes()
+    });
     if zero.faults.is_empty() {
         info!("current-sense zero at {} codes", zero.sense.offset);
     } else {
@@ -130,13 +143,15 @@ async fn main(spawner: Spawner) {
     let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
     let usb = builder.build();
 
+    // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     let dev = comms::Dev::new(
         comms::IrqLink,
         store,
         board::BOARD,
         start.settings,
         defaults,
-    );
+    )
+    .with_configured(start.configured, false);
     spawner.spawn(unwrap!(usb_task(usb)));
     spawner.spawn(unwrap!(comms_task(class, dev)));
     spawner.spawn(unwrap!(supervisor(

@@ -135,8 +135,15 @@ pub struct ControllerParams<const N: usize> {
     pub pos_rate_hz: f32,
     /// Current-loop rate \[Hz\], an integer multiple (1 to 16) of `pos_rate_hz`.
     pub cur_rate_hz: f32,
-    /// Encoder resolution [rad/count], `> 0`.
-    pub rad_per_count: f32,
+    /// Encoder resolution \[counts/rev\]: counts per motor revolution after quadrature (4 × the
+    /// lines of an incremental encoder), `> 0`; the radians per count derive from it
+    /// ([`ControllerParams::rad_per_count`]). Not necessarily whole: the paper's encoder is given
+    /// as 3.8 µrad per count, 1653469.8 counts/rev.
+    pub counts_per_rev: f32,
+    /// Current-sense transimpedance \[V/A\]: volts at the ADC per ampere of motor current (the
+    /// shunt's resistance times the amplifier's gain), `> 0`; the amps per ADC code derive from
+    /// it and the board's ADC ([`crate::device::SenseChain::amps_per_code`]).
+    pub sense_v_per_a: f32,
     /// Position PID.
     pub pid: PidParams,
     /// Current PI.
@@ -185,6 +192,12 @@ impl core::fmt::Display for ControllerError {
 }
 
 impl<const N: usize> ControllerParams<N> {
+    /// The encoder's resolution \[rad/count\]: 2π / `counts_per_rev`, divided in double
+    /// precision (a default of 3.8e-6 round-trips through its counts per revolution exactly).
+    pub fn rad_per_count(&self) -> f32 {
+        (core::f64::consts::TAU / self.counts_per_rev as f64) as f32
+    }
+
     /// The number of current-loop steps per position-loop step.
     pub fn ratio(&self) -> u32 {
         let r = self.cur_rate_hz / self.pos_rate_hz;
@@ -203,7 +216,7 @@ impl<const N: usize> ControllerParams<N> {
                 ($path, $v, const { range($path) })
             };
         }
-        let scalars: [(&'static str, f32, (f32, f32)); 25] = [
+        let scalars: [(&'static str, f32, (f32, f32)); 27] = [
             row!("rate.pos_hz", self.pos_rate_hz),
             row!("rate.cur_hz", self.cur_rate_hz),
             row!("pos.kp", self.pid.kp),
@@ -220,6 +233,8 @@ impl<const N: usize> ControllerParams<N> {
             row!("lim.v_supply", self.v_supply),
             row!("lim.pos_min", self.pos_min),
             row!("lim.pos_max", self.pos_max),
+            row!("enc.counts_per_rev", self.counts_per_rev),
+            row!("sense.v_per_a", self.sense_v_per_a),
             row!("ff.gain", self.ff.gain),
             row!("ff.inertia", self.motor.inertia),
             row!("ff.static_band", self.ff.static_band),
@@ -255,12 +270,6 @@ impl<const N: usize> ControllerParams<N> {
             if !(b.alpha.is_finite() && b.alpha >= ALPHA.0 && b.alpha <= ALPHA.1) {
                 return Err(ControllerError::Invalid("gms.a"));
             }
-        }
-        if !(self.rad_per_count.is_finite()
-            && self.rad_per_count >= 1e-12
-            && self.rad_per_count <= 1.0)
-        {
-            return Err(ControllerError::Invalid("rad_per_count"));
         }
         if !(self.ff.ratio.is_finite() && self.ff.ratio > 0.0) {
             return Err(ControllerError::Invalid("ff.ratio"));
@@ -323,6 +332,9 @@ pub struct CurrentOutput {
 #[derive(Debug, Clone)]
 pub struct Controller<const N: usize> {
     p: ControllerParams<N>,
+    /// The encoder's resolution \[rad/count\] ([`ControllerParams::rad_per_count`], divided
+    /// once here, not in every step).
+    rpc: f32,
     dt_pos: f32,
     dt_cur: f32,
     d_alpha: f32,
@@ -376,6 +388,7 @@ impl<const N: usize> Controller<N> {
         adapt.reset(&p.ff.adapt);
         Ok(Controller {
             adapt,
+            rpc: p.rad_per_count(),
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
             d_alpha: 1.0 - math::exp(-2.0 * core::f32::consts::PI * p.pid.d_filter_hz * dt_pos),
@@ -465,12 +478,18 @@ impl<const N: usize> Controller<N> {
         self.out = PositionOutput::default();
     }
 
+    /// The encoder's resolution \[rad/count\] this controller runs with (divided once, when it
+    /// was built: cheap in a control step, unlike [`ControllerParams::rad_per_count`]).
+    pub fn rad_per_count(&self) -> f32 {
+        self.rpc
+    }
+
     /// True when `p` runs at other loop rates than this controller (a change that cannot be
     /// made while the bridge drives: the timer and the step ratio change).
     pub fn rates_differ(&self, p: &ControllerParams<N>) -> bool {
         p.pos_rate_hz != self.p.pos_rate_hz
             || p.cur_rate_hz != self.p.cur_rate_hz
-            || p.rad_per_count != self.p.rad_per_count
+            || p.counts_per_rev != self.p.counts_per_rev
     }
 
     /// Live tuning: this controller (new, built by [`Controller::try_new`] from the new set,
@@ -591,7 +610,7 @@ impl<const N: usize> Controller<N> {
     /// One position-loop step: measured encoder count `meas` and the reference sample `r`.
     /// Returns the per-term breakdown; the current command is kept for the current loop.
     pub fn position_step(&mut self, meas: i64, r: &RefSample) -> PositionOutput {
-        let rpc = self.p.rad_per_count;
+        let rpc = self.rpc;
         let meas_sub = meas.saturating_mul(SUB_PER_COUNT as i64);
         let error = (r.pos.saturating_sub(meas_sub)) as f32 * (rpc / SUB_PER_COUNT);
         // Reference increment for the GMS feedforward (exact in fixed point).

@@ -12,14 +12,14 @@ fn board() -> Board {
         encoder_bits: 32,
         sense_oversample: 16,
         sense: SenseChain {
-            amps_per_code: 2.37e-4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: 0.0,
         },
         limits: BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,
@@ -40,7 +40,7 @@ fn buffer() -> &'static mut [f32] {
 fn rest() -> ControlLoop {
     let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, || 16 * 2048);
+    let zero = calibrate_sense(&b, 3.4, || 16 * 2048);
     ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer())
 }
 
@@ -87,7 +87,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     let mut b = board();
     b.bridge_wake_s = 1e-3;
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, || 16 * 2048);
+    let zero = calibrate_sense(&b, 3.4, || 16 * 2048);
     let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer());
     let period = 168_000_000 / 20_000;
     let mut req = Some(Requests {
@@ -237,7 +237,7 @@ fn a_timed_current_ends_on_the_device() {
 #[test]
 fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
     let period = 168_000_000 / 20_000;
-    let rpc = default_settings().rad_per_count as f64;
+    let rpc = default_settings().rad_per_count() as f64;
     let stall_s = 2.0;
     let moved = |speed: f64| (speed * stall_s / rpc) as u32;
     for (speed, jump) in [(50.0, false), (150.0, true)] {
@@ -269,4 +269,181 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
             lp.faults()
         );
     }
+}
+
+#[test]
+fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales() {
+    let b = board();
+    let mut lp = rest();
+    // One position step (the loop takes requests at position steps only: every other PWM
+    // period here).
+    let run = |lp: &mut ControlLoop, encoder: u32, codes: u32, req: Option<Requests>| {
+        let mut req = req;
+        let inp = Inputs {
+            encoder,
+            current_codes: codes,
+            since_last: 168_000_000 / 20_000,
+        };
+        while let Some(r) = req.take() {
+            let mut once = Some(r);
+            lp.step(inp, |_, _| once.take());
+            lp.finish(1000);
+            req = once;
+        }
+        lp.step(inp, |_, _| None);
+        lp.finish(1000);
+    };
+    let enable = Requests {
+        enable: true,
+        ..Requests::default()
+    };
+    // 100 codes above the zero in each of the 16 conversions.
+    let codes = 16 * 2148;
+    run(&mut lp, 0, codes, Some(enable));
+    for _ in 0..4 {
+        run(&mut lp, 7, codes, None);
+    }
+    assert!(lp.enabled());
+    let before = lp.status();
+    assert_eq!(before.pos, 7);
+    let per_code = 3.3f32 / 4095.0 / 3.4;
+    assert!((before.current - 100.0 * per_code).abs() < 1e-6 * 100.0 * per_code);
+    // A gear motor's encoder (2000 counts/rev) and a 15 mohm × 50 sense.
+    let mut s = default_settings();
+    s.counts_per_rev = 2000.0;
+    s.sense_v_per_a = 0.75;
+    let apply = Requests {
+        apply: Some(prepare(&s, &b).unwrap()),
+        ..Requests::default()
+    };
+    run(&mut lp, 7, codes, Some(apply));
+    run(&mut lp, 7, codes, None);
+    assert!(!lp.enabled(), "a new scale must switch the bridge off");
+    let after = lp.status();
+    // The same count, read as 7 × 2π/2000 rad from the power-up position.
+    assert_eq!(after.pos, 7);
+    assert_eq!(
+        lp.controller().params().rad_per_count(),
+        (std::f64::consts::TAU / 2000.0) as f32
+    );
+    let per_code = 3.3f32 / 4095.0 / 0.75;
+    assert!((after.current - 100.0 * per_code).abs() < 1e-6 * 100.0 * per_code);
+    // The limits follow: the trip under the new sense range (1.5 × 0.5 A; the range is
+    // 2047 × 1.07 mA = 2.2 A), a following-error limit of at least 64 counts (0.2 rad).
+    let l = b.limits(&s);
+    assert!((l.i_trip - 0.75).abs() < 1e-6, "{}", l.i_trip);
+    assert!((l.max_error - 64.0 * std::f32::consts::TAU / 2000.0).abs() < 1e-6);
+    // 100 rad/s over a 0.1 ms position period: 0.01 rad = 3.18 counts of 3.14 mrad, so 4.
+    assert_eq!(l.max_step_counts, 4);
+}
+
+#[test]
+fn the_default_encoder_is_the_papers_exactly() {
+    let s = default_settings();
+    assert_eq!(s.rad_per_count(), 3.8e-6f32);
+    // Whole counts per revolution read back as set (the radians per count are derived).
+    for cpr in [4.0f32, 1320.0, 2000.0, 4096.0, 65_536.0, 1e6, 1e9] {
+        let mut s = default_settings();
+        s.counts_per_rev = cpr;
+        assert_eq!(s.counts_per_rev, cpr);
+        let back = std::f64::consts::TAU / s.rad_per_count() as f64;
+        assert!((back / cpr as f64 - 1.0).abs() < 1e-7, "{cpr}: {back}");
+    }
+}
+
+/// A device core in one thread: waiting on the loop runs it one PWM period, at rest.
+struct InlineLink {
+    lp: ControlLoop,
+    mb: gms_core::device::Mailbox,
+    t_us: u64,
+}
+
+impl gms_core::device::Link for InlineLink {
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut gms_core::device::Mailbox) -> R) -> R {
+        f(&mut self.mb)
+    }
+    fn now_us(&self) -> u64 {
+        self.t_us
+    }
+    fn pause(&mut self) {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: 16 * 2048,
+            since_last: 168_000_000 / 20_000,
+        };
+        let mb = &mut self.mb;
+        self.lp.step(inp, |st, c| mb.exchange(st, c));
+        self.lp.finish(1000);
+        self.t_us += 50;
+    }
+}
+
+/// A store in memory.
+struct MemStore(Option<[u8; gms_core::drive::RECORD_LEN]>);
+
+impl gms_core::device::ParamStore for MemStore {
+    fn save(
+        &mut self,
+        rec: &[u8; gms_core::drive::RECORD_LEN],
+    ) -> Result<(), gms_core::device::StoreError> {
+        self.0 = Some(*rec);
+        Ok(())
+    }
+    fn load(
+        &mut self,
+    ) -> Result<Option<[u8; gms_core::drive::RECORD_LEN]>, gms_core::device::StoreError> {
+        Ok(self.0)
+    }
+}
+
+/// A board's device from its store as `startup` decides, as the firmware builds it.
+fn board_device(
+    stored: Option<[u8; gms_core::drive::RECORD_LEN]>,
+) -> gms_core::device::Front<InlineLink, MemStore> {
+    use gms_core::device::{Front, ParamStore as _, startup};
+    let b = board();
+    let mut store = MemStore(stored);
+    let defaults = default_settings();
+    let start = startup(store.load(), &defaults, &b).unwrap();
+    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || 16 * 2048);
+    let lp = ControlLoop::new(b, start.applied, zero.sense, zero.faults, 0, buffer());
+    let link = InlineLink {
+        lp,
+        mb: gms_core::device::Mailbox::new(),
+        t_us: 0,
+    };
+    Front::new(link, store, b, start.settings, defaults).with_configured(start.configured, false)
+}
+
+fn ask(dev: &mut gms_core::device::Front<InlineLink, MemStore>, line: &str) -> String {
+    let mut out = String::new();
+    let mut reader = gms_core::protocol::LineReader::default();
+    for b in line.bytes().chain(std::iter::once(b'\n')) {
+        if let Some(l) = reader.push(b) {
+            gms_core::protocol::execute(dev, l, &mut out).unwrap();
+        }
+    }
+    out
+}
+
+#[test]
+fn a_board_on_its_built_in_defaults_says_it_was_never_configured() {
+    let mut dev = board_device(None);
+    assert!(ask(&mut dev, "status").contains(" configured=0"));
+    assert!(ask(&mut dev, "set enc.counts_per_rev 1320").starts_with("ok"));
+    assert!(ask(&mut dev, "status").contains(" configured=1"));
+    assert_eq!(ask(&mut dev, "get enc.counts_per_rev").trim(), "ok 1320");
+    assert!(ask(&mut dev, "save").starts_with("ok"));
+    // `defaults` puts the built-in set back: never configured again.
+    assert!(ask(&mut dev, "defaults").starts_with("ok"));
+    assert!(ask(&mut dev, "status").contains(" configured=0"));
+    // A power-up on the saved record: configured, with its resolution.
+    let (_, store) = dev.into_parts();
+    let mut dev = board_device(store.0);
+    assert!(ask(&mut dev, "status").contains(" configured=1"));
+    assert_eq!(ask(&mut dev, "get enc.counts_per_rev").trim(), "ok 1320");
+    // Out of range: refused, nothing changed.
+    assert!(ask(&mut dev, "set enc.counts_per_rev 2").starts_with("err"));
+    assert!(ask(&mut dev, "set sense.v_per_a 0").starts_with("err"));
+    assert_eq!(ask(&mut dev, "get enc.counts_per_rev").trim(), "ok 1320");
 }

@@ -342,13 +342,12 @@ fn limits_from_settings_and_board() {
     s.pos_max = 19.0;
     let b = drive::BoardLimits {
         trip_factor: 1.5,
-        sense_range: 0.48,
         max_error: 0.01,
         max_speed: 100.0,
         clock_hz: 168_000_000,
         budget_fraction: 0.8,
     };
-    let l = drive::limits_for(&s, &b);
+    let l = drive::limits_for(&s, &b, 0.48);
     // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
     assert!((l.i_trip - 0.456).abs() < 1e-6);
     assert_eq!(l.max_error, 0.01);
@@ -360,11 +359,7 @@ fn limits_from_settings_and_board() {
     // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
     assert_eq!(l.budget_cycles, 6720);
     assert_eq!(l.period_cycles, 8400);
-    let roomy = drive::BoardLimits {
-        sense_range: 10.0,
-        ..b
-    };
-    assert!((drive::limits_for(&s, &roomy).i_trip - 0.75).abs() < 1e-6);
+    assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.75).abs() < 1e-6);
 }
 
 #[test]
@@ -376,14 +371,14 @@ fn sense_zero_at_start() {
         encoder_bits: 32,
         sense_oversample: 2,
         sense: SenseChain {
-            amps_per_code: 2.37e-4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: 0.0,
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,
@@ -395,25 +390,28 @@ fn sense_zero_at_start() {
     };
     // Sums of two conversions alternating 2100+2101 and 2100+2100: the zero is 2100.25 codes.
     let mut i = 0u32;
-    let z = calibrate_sense(&board, || {
+    let z = calibrate_sense(&board, 3.4, || {
         i += 1;
         if i % 2 == 0 { 4201 } else { 4200 }
     });
     assert_eq!(i, ZERO_SAMPLES);
     assert_eq!(z.faults, Faults::NONE);
     assert_eq!(z.sense.offset, 2100.25);
-    assert_eq!(z.sense.amps_per_code, 2.37e-4);
+    assert_eq!(z.sense.amps_per_code, 3.3f32 / 4095.0 / 3.4);
     // 151 codes off (per conversion): the amplifier is not what the board says.
-    let z = calibrate_sense(&board, || 2 * (2048 + 151));
+    let z = calibrate_sense(&board, 3.4, || 2 * (2048 + 151));
     assert_eq!(z.faults, Faults::CURRENT_SENSE);
     assert_eq!(z.sense.offset, 2048.0);
     // 150 off is still inside; a dead amplifier (0) is not.
     assert!(
-        calibrate_sense(&board, || 2 * (2048 - 150))
+        calibrate_sense(&board, 3.4, || 2 * (2048 - 150))
             .faults
             .is_empty()
     );
-    assert_eq!(calibrate_sense(&board, || 0).faults, Faults::CURRENT_SENSE);
+    assert_eq!(
+        calibrate_sense(&board, 3.4, || 0).faults,
+        Faults::CURRENT_SENSE
+    );
 }
 
 /// A model of a bridge input pin: the timer drives it while it is its alternate function,
@@ -565,14 +563,14 @@ fn rates_the_current_sense_cannot_sample_are_refused() {
         encoder_bits: 32,
         sense_oversample: 16,
         sense: SenseChain {
-            amps_per_code: 2.37e-4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: timing.window_s(),
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,

@@ -256,14 +256,14 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
         encoder_bits: 32,
         sense_oversample: 2,
         sense: SenseChain {
-            amps_per_code: 3.3 / 4095.0 / 3.4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: 0.0,
         },
         limits: BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,

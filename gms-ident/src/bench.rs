@@ -105,6 +105,18 @@ pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
         .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
 }
 
+/// The device's encoder resolution \[rad/count\]: 2π / `enc.counts_per_rev`, for figures in
+/// counts (the device's own, never an assumed encoder).
+pub fn rad_per_count(b: &mut impl Bench) -> Result<f64, Error> {
+    let counts = get_param(b, "enc.counts_per_rev")?;
+    if !(counts.is_finite() && counts > 0.0) {
+        return Err(Error::Device(format!(
+            "enc.counts_per_rev: {counts} is not a resolution"
+        )));
+    }
+    Ok(std::f64::consts::TAU / counts)
+}
+
 /// The velocity mode's ramp [rad/s²] (the device's `velocity` ramps at `MOVE_AMAX`).
 const VELOCITY_ACC: f64 = gms_core::reference::MOVE_AMAX as f64;
 
@@ -146,6 +158,38 @@ impl DeviceInfo {
     pub fn dt(&self) -> f64 {
         1.0 / self.pos_hz
     }
+}
+
+/// The device's answer to a bench tool that is about to measure: an error when it runs on
+/// its built-in defaults (its status says `configured=0`: the encoder's resolution and the
+/// sense's scale are the paper's rig's, which no user's axis is), naming what to set. A device
+/// that does not report it passes.
+pub fn check_configured(b: &mut impl Bench) -> Result<(), Error> {
+    let (_, text) = b.request("status")?;
+    let configured = text
+        .split_whitespace()
+        .find_map(|w| w.strip_prefix("configured="));
+    if configured == Some("0") {
+        return Err(Error::Device(
+            "the device runs on its built-in defaults (never configured): set \
+             enc.counts_per_rev and sense.v_per_a for this axis, then save (docs/bring-up.md)"
+                .into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The device's encoder and current sense as one line for a report: counts per revolution,
+/// radians per count, volts per ampere.
+pub fn scales_line(b: &mut impl Bench) -> Result<String, Error> {
+    let counts = get_param(b, "enc.counts_per_rev")?;
+    let rpc = rad_per_count(b)?;
+    let v_per_a = get_param(b, "sense.v_per_a")?;
+    Ok(format!(
+        "encoder: {counts} counts/rev ({}/count); current sense: {} V/A",
+        si(rpc, "rad"),
+        crate::units::num4(v_per_a)
+    ))
 }
 
 /// The device's latched faults, as an error naming them, if any.
@@ -1230,6 +1274,8 @@ pub struct TuneFf {
     pub before: f64,
     /// What the tuning did or found beyond the plan, a sentence each (widening, flatness).
     pub notes: Vec<String>,
+    /// The device's encoder resolution \[rad/count\] (for errors in counts).
+    pub rad_per_count: f64,
 }
 
 /// The feedforward gain by experiment. The same sine test with reversals at each gain; a
@@ -1249,6 +1295,7 @@ pub fn tune_ff(
     use crate::optimum::fit_minimum;
     plan.check()?;
     let before = get_param(b, "ff.gain")?;
+    let rpc = rad_per_count(b)?;
     let r = guarded(b, |b| {
         let mut curve: Vec<(f64, f64)> = Vec::new();
         let mut notes = Vec::new();
@@ -1348,6 +1395,7 @@ pub fn tune_ff(
         chosen,
         before,
         notes,
+        rad_per_count: rpc,
     })
 }
 
@@ -1536,6 +1584,8 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
             "speed {speed} rad/s: positive, three times it at most {VELOCITY_MAX_BENCH} rad/s"
         )));
     }
+    check_configured(b)?;
+    let scales = scales_line(b)?;
     let dev = DeviceInfo::read(b)?;
     let dt = dev.dt();
     check_faults(b)?;
@@ -1550,7 +1600,10 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
         get_param(b, "pos.ki")?,
         get_param(b, "pos.kd")?,
     );
-    let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, gains0, speed));
+    let r = guarded(b, |b| commission_steps(b, &dev, dt, dirs0, gains0, speed)).map(|mut c| {
+        c.lines.insert(0, scales);
+        c
+    });
     // The position gains as they were (the back-EMF runs soften them).
     let _ = b.request(&format!("set pos.kp {}", gains0.0));
     let _ = b.request(&format!("set pos.ki {}", gains0.1));

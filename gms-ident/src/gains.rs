@@ -203,7 +203,8 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
     p.motor.inertia = axis.inertia as f32;
     p.ff.mode = FfMode::None;
     // A nanoradian count: the loop as if continuous in position.
-    p.rad_per_count = 1e-9;
+    p.counts_per_rev = (std::f64::consts::TAU / 1e-9) as f32;
+    let rpc = p.rad_per_count() as f64;
     p.i_max = 100.0;
     let mut c = Controller::try_new(p).ok()?;
     let ratio = (axis.cur_hz / axis.pos_hz).round().max(1.0) as usize;
@@ -211,7 +212,7 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
     // A step of 1e-5 rad: 1e4 counts of a nanoradian.
     let step = 1e-5;
     let target = RefSample {
-        pos: (1e4 * 65536.0) as i64,
+        pos: (step / rpc * 65536.0).round() as i64,
         vel: 0.0,
         acc: 0.0,
     };
@@ -221,7 +222,7 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
     // The position's swing (max - min) over the fourth and the last fifth of the run.
     let mut swing = [(f64::INFINITY, f64::NEG_INFINITY); 2];
     for k in 0..n {
-        c.position_step((x / 1e-9).round() as i64, &target);
+        c.position_step((x / rpc).round() as i64, &target);
         for _ in 0..ratio {
             let v = c.current_step(i as f32).voltage as f64;
             // The voltage computed now drives the next period.

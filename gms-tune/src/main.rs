@@ -425,15 +425,14 @@ fn run(cli: Cli) -> Result<(), Fail> {
             }
             std::fs::create_dir_all(&out)
                 .map_err(|e| Fail::Usage(format!("{}: {e}", out.display())))?;
-            let (six, trace, m) = gms_tune::run::step_test(&mut link, distance, seconds)?;
+            let (six, trace, m, rpc) = gms_tune::run::step_test(&mut link, distance, seconds)?;
             let rows: Vec<Vec<f64>> = six.iter().map(|r| r.to_vec()).collect();
             write_csv(&out.join("trace.csv"), gms_tune::run::STEP_FIELDS, &rows)?;
-            let rpc = gms_tune::run::RAD_PER_COUNT;
             let text = serde_json::to_string_pretty(&m).map_err(|e| Fail::Usage(e.to_string()))?;
             if json {
                 println!("{text}");
             } else {
-                for l in gms_tune::run::step_summary(&m, distance, &trace) {
+                for l in gms_tune::run::step_summary(&m, distance, &trace, rpc) {
                     println!("{l}");
                 }
             }
@@ -537,7 +536,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
 /// its extremes, and the feedforward.
 fn watch(link: &mut Link, seconds: Option<f64>, refresh: Duration) -> Result<(), Fail> {
     use std::io::Write;
-    const RPC: f64 = 3.8e-6;
+    let rpc = gms_ident::bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
     link.request("stream t,error,ff 200")?;
     println!("  t [s]   error [counts]: last   min    max   |-50 .. 0 .. +50|   ff [uN·m]");
@@ -553,7 +552,7 @@ fn watch(link: &mut Link, seconds: Option<f64>, refresh: Duration) -> Result<(),
         let errs: Vec<f64> = samples
             .iter()
             .filter_map(|kv| get(kv, "error"))
-            .map(|e| e / RPC)
+            .map(|e| e / rpc)
             .collect();
         if let (Some(last), Some(kv)) = (errs.last(), samples.last()) {
             let (lo, hi) = errs

@@ -151,12 +151,13 @@ pub fn commissioned_file(
 
 /// A step test's samples `(t, ref, pos, error, ff, friction)` (SI) as a trace, and its figures
 /// by `gms_ident::trace::metrics` for the one move of `distance` \[rad\] the device made with
-/// its default profile (`move POS`), dwelling `seconds` after it: what `gms-tune step-test`
-/// and the window both report.
+/// its default profile (`move POS`), dwelling `seconds` after it, on an encoder of
+/// `rad_per_count` \[rad\]: what `gms-tune step-test` and the window both report.
 pub fn step_figures(
     rows: &[[f64; 6]],
     distance: f64,
     seconds: f64,
+    rad_per_count: f64,
 ) -> (Vec<gms_ident::trace::TraceRow>, gms_ident::trace::Metrics) {
     use gms_core::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
     let trace: Vec<gms_ident::trace::TraceRow> = rows
@@ -184,19 +185,17 @@ pub fn step_figures(
         jmax: MOVE_JMAX,
         dwell: seconds as f32,
     };
-    let m = gms_ident::trace::metrics(&trace, &[seg], RAD_PER_COUNT);
+    let m = gms_ident::trace::metrics(&trace, &[seg], rad_per_count);
     (trace, m)
 }
-
-/// Radians per count of the default encoder (3.8 µrad), for figures in counts.
-pub const RAD_PER_COUNT: f64 = 3.8e-6;
 
 /// The fields a step test records, in [`step_figures`]' order.
 pub const STEP_FIELDS: &str = "t,ref,pos,error,ff,friction";
 
 /// `gms-tune step-test`: the bridge on, the position read, the stream of [`STEP_FIELDS`] at
 /// 1 kHz, a `move` by `distance` \[rad\] with the device's default profile, `seconds` of
-/// recording; the rows, the trace and its figures ([`step_figures`]).
+/// recording; the rows, the trace, its figures ([`step_figures`]) and the device's encoder
+/// resolution \[rad/count\].
 #[allow(clippy::type_complexity)]
 pub fn step_test(
     link: &mut Link,
@@ -207,9 +206,12 @@ pub fn step_test(
         Vec<[f64; 6]>,
         Vec<gms_ident::trace::TraceRow>,
         gms_ident::trace::Metrics,
+        f64,
     ),
     crate::LinkError,
 > {
+    let rpc = gms_ident::bench::rad_per_count(link)
+        .map_err(|e| crate::LinkError::Device(e.to_string()))?;
     link.request("enable")?;
     let pos0 = link
         .record("pos", 100.0, 0.05)?
@@ -228,8 +230,8 @@ pub fn step_test(
         .iter()
         .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
         .collect();
-    let (trace, m) = step_figures(&six, distance, seconds);
-    Ok((six, trace, m))
+    let (trace, m) = step_figures(&six, distance, seconds, rpc);
+    Ok((six, trace, m, rpc))
 }
 
 /// `tune-ff`'s result as summary lines, for the terminal (gains to 3 decimals, errors in counts).
@@ -245,7 +247,7 @@ pub fn tune_ff_summary(t: &gms_ident::bench::TuneFf) -> Vec<String> {
             o.at,
             o.half_width(),
             o.repeat_half_width(),
-            o.min.max(0.0).sqrt() / RAD_PER_COUNT,
+            o.min.max(0.0).sqrt() / t.rad_per_count,
             t.before
         )),
         Some(o) => out.push(format!(
@@ -303,6 +305,10 @@ fn status_meaning(key: &str) -> (&'static str, &'static str) {
         "sense_offset" => ("current-sense zero", "ADC codes"),
         "missed" => ("control periods missed", ""),
         "drive" => ("what the loop drives", ""),
+        "configured" => (
+            "settings chosen for this axis (1) or built-in defaults (0)",
+            "",
+        ),
         _ => ("", ""),
     }
 }
@@ -335,8 +341,9 @@ pub fn step_summary(
     m: &gms_ident::trace::Metrics,
     distance: f64,
     trace: &[gms_ident::trace::TraceRow],
+    rad_per_count: f64,
 ) -> Vec<String> {
-    let c = RAD_PER_COUNT;
+    let c = rad_per_count;
     let span = match (trace.first(), trace.last()) {
         (Some(a), Some(b)) => b.t - a.t,
         _ => 0.0,

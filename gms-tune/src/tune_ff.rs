@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 use gms_ident::bench::{TUNE_FF_FLAT_SE, TuneFfPlan, tune_ff};
 use gms_tune::Link;
-use gms_tune::run::{RAD_PER_COUNT, tune_ff_json, tune_ff_summary};
+use gms_tune::run::{tune_ff_json, tune_ff_summary};
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
@@ -52,13 +52,14 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     if !a.json {
         println!("test  ff.gain  RMS error [counts]");
     }
+    let rpc = gms_ident::bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let mut bar = Bar::new();
     let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
     bench.stage("tune-ff", seconds);
     let quiet = a.json;
     let r = tune_ff(&mut bench, &a.plan, |i, g, rms| {
         if !quiet {
-            println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / RAD_PER_COUNT)
+            println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / rpc)
         }
     });
     let link = bench.link;
@@ -70,18 +71,14 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     }
     gms_ident::io::write_atomic(&a.out.join("curve.csv"), csv.as_bytes())
         .map_err(|e| Fail::Usage(e.to_string()))?;
-    let pts: Vec<(f64, f64)> = t
-        .curve
-        .iter()
-        .map(|(g, r)| (*g, r / RAD_PER_COUNT))
-        .collect();
+    let pts: Vec<(f64, f64)> = t.curve.iter().map(|(g, r)| (*g, r / rpc)).collect();
     // The fitted parabola (RMS = √(mean square)) over the refinement's window.
     let fit: Vec<(f64, f64)> = match t.optimum {
         Some(o) => (0..=60)
             .map(|i| {
                 let g = t.window.0 + (t.window.1 - t.window.0) * i as f64 / 60.0;
                 let ms = o.min + o.curvature * (g - o.at).powi(2);
-                (g, ms.max(0.0).sqrt() / RAD_PER_COUNT)
+                (g, ms.max(0.0).sqrt() / rpc)
             })
             .collect(),
         None => Vec::new(),

@@ -42,7 +42,9 @@ pub const QUEUE: usize = 4000;
 
 /// The simulated board: the F405's PWM timer and encoder counter, the plant's ADC as the
 /// current sense (one conversion per sample, zero at mid-scale within the firmware board's
-/// ±150 codes), its range as the sense range, the firmware board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
+/// ±150 codes; a 3.3 V ADC, so that the plant's range ±`adc_range` is the sense scale
+/// `sense.v_per_a` = 1.65 V / `adc_range` of [`Scenario::controller_params`]), the firmware
+/// board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
 /// at 20 kHz: the host is shared, so only a stalled simulation counts as an overrun.
 pub fn board(sc: &Scenario) -> Board {
     Board {
@@ -53,7 +55,8 @@ pub fn board(sc: &Scenario) -> Board {
         sense: {
             let adc = Adc::new(sc);
             SenseChain {
-                amps_per_code: adc.lsb as f32,
+                vref: SIM_ADC_VREF,
+                full_scale: (2.0 * adc.mid) as f32,
                 zero_code: adc.mid as f32,
                 zero_tolerance: 150.0,
                 window_s: 0.0,
@@ -61,7 +64,6 @@ pub fn board(sc: &Scenario) -> Board {
         },
         limits: BoardLimits {
             trip_factor: 1.5,
-            sense_range: sc.plant.adc_range as f32,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 1_000_000_000,
@@ -72,6 +74,9 @@ pub fn board(sc: &Scenario) -> Board {
         capture_values: CAPTURE_VALUES,
     }
 }
+
+/// The simulated ADC's reference \[V\]: the plant's ±`adc_range` spans it.
+pub const SIM_ADC_VREF: f32 = 3.3;
 
 /// The plant's current sense as ADC codes: one code per LSB, zero current mid-scale.
 struct Adc {
@@ -173,7 +178,9 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
         .map_err(|e| format!("the scenario's controller: {e}"))?;
     let adc = Adc::new(sc);
     let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
-    let zero = device::calibrate_sense(&board, || adc.code(plant.adc()));
+    let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
+        adc.code(plant.adc())
+    });
     let mut faults = start.faults;
     faults.latch(zero.faults);
     let why = if !start.faults.is_empty() {
@@ -557,7 +564,9 @@ fn serve_inner(
         shared: Arc::clone(&shared),
         start: Instant::now(),
     };
-    let mut dev = Front::new(link, flash_store, board, settings, defaults);
+    // The scenario describes the axis: its defaults are configured for it.
+    let mut dev =
+        Front::new(link, flash_store, board, settings, defaults).with_configured(true, true);
     match endpoint {
         Endpoint::Tcp(listener) => {
             let addr = listener
@@ -672,6 +681,11 @@ impl LocalLink {
 }
 
 impl LocalDevice {
+    /// The plant as it is now: the truth a test holds the device's readings against.
+    pub fn plant(&mut self) -> &Plant {
+        &self.dev.link_mut().sim.plant
+    }
+
     /// A device on the scenario `sc`, its store in memory (erased).
     pub fn new(sc: &Scenario) -> Result<LocalDevice, Error> {
         Self::new_inner(sc).map_err(Error::Device)
@@ -699,7 +713,8 @@ impl LocalDevice {
             queue: Mutex::new(VecDeque::with_capacity(QUEUE)),
         };
         Ok(LocalDevice {
-            dev: Front::new(link, p.store, p.board, p.settings, p.defaults),
+            dev: Front::new(link, p.store, p.board, p.settings, p.defaults)
+                .with_configured(true, true),
         })
     }
 

@@ -375,7 +375,12 @@ impl Scenario {
 
     /// Parses and checks scenario text; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<Scenario, FileError> {
-        let user: toml::Table = parse_toml(text, file)?;
+        let mut user: toml::Table = parse_toml(text, file)?;
+        counts_to_radians(&mut user).map_err(|reason| FileError {
+            file: file.to_string(),
+            at: None,
+            reason,
+        })?;
         let mut merged = default_table().clone();
         merge(&mut merged, user);
         let sc: Scenario =
@@ -562,7 +567,8 @@ impl Scenario {
     fn controller_params_inner(&self) -> Result<ControllerParams<FF_BLOCKS>, String> {
         let p = &self.plant;
         let mut s = gms_core::device::default_settings();
-        s.rad_per_count = p.rad_per_count as f32;
+        s.counts_per_rev = device_counts_per_rev(p.rad_per_count);
+        s.sense_v_per_a = crate::device::SIM_ADC_VREF / 2.0 / p.adc_range as f32;
         s.motor.k_m = p.k_m as f32;
         s.motor.r = p.resistance as f32;
         s.motor.k_e = p.k_e as f32;
@@ -766,13 +772,62 @@ pub fn compensator_from_plant(
     Ok(p)
 }
 
+/// `plant.counts_per_rev` (counts per motor revolution after quadrature), the usual way to
+/// give an encoder, as the plant's `rad_per_count` (2π / counts); both given is an error.
+fn counts_to_radians(user: &mut toml::Table) -> Result<(), String> {
+    let Some(toml::Value::Table(plant)) = user.get_mut("plant") else {
+        return Ok(());
+    };
+    let Some(v) = plant.remove("counts_per_rev") else {
+        return Ok(());
+    };
+    if plant.contains_key("rad_per_count") {
+        return Err("plant: give counts_per_rev or rad_per_count, not both".into());
+    }
+    let counts = match v {
+        toml::Value::Integer(i) => i as f64,
+        toml::Value::Float(x) => x,
+        _ => return Err("plant.counts_per_rev: expected a number".into()),
+    };
+    if !(counts.is_finite() && counts >= 4.0) {
+        return Err("plant.counts_per_rev must be a finite number >= 4".into());
+    }
+    plant.insert(
+        "rad_per_count".into(),
+        toml::Value::Float(std::f64::consts::TAU / counts),
+    );
+    Ok(())
+}
+
+/// The device's `enc.counts_per_rev` for a plant of `rad_per_count` \[rad\]: of the two
+/// single-precision neighbours of 2π / `rad_per_count` (from the exact and from the
+/// single-precision resolution), the one whose derived radians per count come nearest the
+/// plant's; the paper's 3.8 µrad gives 1653469.75, whose radians per count are 3.8e-6 in
+/// single precision exactly, as the device had them before the resolution was a parameter.
+pub fn device_counts_per_rev(rad_per_count: f64) -> f32 {
+    let tau = std::f64::consts::TAU;
+    let candidates = [
+        (tau / rad_per_count) as f32,
+        (tau / rad_per_count as f32 as f64) as f32,
+    ];
+    let err = |c: f32| ((tau / c as f64) as f32 as f64 - rad_per_count).abs();
+    if err(candidates[1]) < err(candidates[0]) {
+        candidates[1]
+    } else {
+        candidates[0]
+    }
+}
+
 /// The scenario key of a controller error (the protocol path under `[controller]`, or the
 /// plant's key a value came from).
 fn controller_key(e: gms_core::controller::ControllerError) -> String {
     use gms_core::controller::ControllerError as E;
     match e {
         E::Invalid("ff.ratio") => "plant.lead / plant.gear_ratio out of range".into(),
-        E::Invalid("rad_per_count") => "plant.rad_per_count is out of range".into(),
+        E::Invalid("enc.counts_per_rev") => {
+            "plant.rad_per_count (plant.counts_per_rev) is out of range".into()
+        }
+        E::Invalid("sense.v_per_a") => "plant.adc_range is out of range".into(),
         E::Invalid(name) if name.starts_with("motor.") || name == "lim.v_supply" => {
             format!("controller.{name} (from [plant] unless set) is out of range")
         }

@@ -200,6 +200,7 @@ fn status_keys_are_one_set() {
         "sense_offset",
         "missed",
         "drive",
+        "configured",
     ];
     both(|d| {
         let st = d.ask("status");

@@ -111,14 +111,14 @@ fn device_period(out: &mut hio::HostStream) {
         encoder_bits: 32,
         sense_oversample: 2,
         sense: SenseChain {
-            amps_per_code: 3.3 / 4095.0 / 3.4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: 0.0,
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,
@@ -132,8 +132,8 @@ fn device_period(out: &mut hio::HostStream) {
     let Ok(a) = device::prepare(&settings, &board) else {
         return;
     };
-    let zero = device::calibrate_sense(&board, || 2 * 2048);
-    let rpc = settings.rad_per_count;
+    let zero = device::calibrate_sense(&board, 3.4, || 2 * 2048);
+    let rpc = settings.rad_per_count();
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the benchmark's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };

@@ -23,5 +23,6 @@ fn the_description_holds_together() {
         chip: memory::PROBE_RS_CHIP,
         encoder_max_rate: power_stage::ENCODER_MAX_RATE,
         watchdog_us: power_stage::WATCHDOG_US,
+        sense_v_per_a: power_stage::SENSE_V_PER_A,
     });
 }

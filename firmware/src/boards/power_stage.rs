@@ -50,7 +50,9 @@ pub const ENCODER_MAX_RATE: f32 = 1.0e6;
 pub const ADC_VREF: f32 = 3.3;
 /// ADC full scale \[codes\].
 pub const ADC_FULL_SCALE: f32 = 4095.0;
-/// Current-sense transimpedance [V/A]: 68 mohm shunt × INA240A2 gain 50.
+/// Current-sense transimpedance [V/A]: 68 mohm shunt × INA240A2 gain 50, as built; the
+/// default of the parameter `sense.v_per_a` (gms-core's `default_settings`, checked equal on
+/// the host), which a board with another shunt sets and saves.
 pub const SENSE_V_PER_A: f32 = 0.068 * 50.0;
 /// ADC code at zero current the board is built for \[code\] (REF at VDD/2).
 pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
@@ -89,7 +91,6 @@ pub const WATCHDOG_US: u32 = 4_000_000;
 pub const fn limits(clocks: &F4Clocks) -> BoardLimits {
     BoardLimits {
         trip_factor: 1.5,
-        sense_range: 0.48,
         max_error: 0.01,
         max_speed: 100.0,
         clock_hz: clocks.hclk_hz(),
@@ -109,7 +110,8 @@ pub const fn board(clocks: &F4Clocks) -> Board {
         encoder_bits: ENCODER_BITS,
         sense_oversample: timing.conversions,
         sense: SenseChain {
-            amps_per_code: ADC_VREF / ADC_FULL_SCALE / SENSE_V_PER_A,
+            vref: ADC_VREF,
+            full_scale: ADC_FULL_SCALE,
             zero_code: SENSE_OFFSET_EXPECTED,
             zero_tolerance: SENSE_OFFSET_TOLERANCE,
             window_s: timing.window_s(),

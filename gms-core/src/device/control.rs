@@ -26,10 +26,11 @@ pub struct SenseStart {
 /// The current-sense zero at start-up: the mean of [`ZERO_SAMPLES`] readings taken by `read`
 /// (a sum of [`Board::sense_oversample`] codes, bridge off). A zero outside the board's
 /// window (amplifier missing, wrong reference) latches `current_sense` and runs on the nominal
-/// zero.
-pub fn calibrate_sense(board: &Board, mut read: impl FnMut() -> u32) -> SenseStart {
+/// zero. The scale is the amplifier's `v_per_a` \[V/A\] (the settings' `sense.v_per_a`).
+pub fn calibrate_sense(board: &Board, v_per_a: f32, mut read: impl FnMut() -> u32) -> SenseStart {
     let n = board.sense_oversample.max(1) as f32;
     let chain = board.sense;
+    let amps_per_code = chain.amps_per_code(v_per_a);
     let mut cal = drive::OffsetCalibration::default();
     for _ in 0..ZERO_SAMPLES {
         cal.push(read());
@@ -37,14 +38,14 @@ pub fn calibrate_sense(board: &Board, mut read: impl FnMut() -> u32) -> SenseSta
     match cal.finish(chain.zero_code * n, chain.zero_tolerance * n) {
         Some(sum) => SenseStart {
             sense: CurrentSense {
-                amps_per_code: chain.amps_per_code,
+                amps_per_code,
                 offset: sum / n,
             },
             faults: Faults::NONE,
         },
         None => SenseStart {
             sense: CurrentSense {
-                amps_per_code: chain.amps_per_code,
+                amps_per_code,
                 offset: chain.zero_code,
             },
             faults: Faults::CURRENT_SENSE,
@@ -270,13 +271,20 @@ impl ControlLoop {
             let mut next = a.ctrl;
             next.take_state_from(&self.ctrl);
             let (old, new) = (self.ctrl.params(), next.params());
-            let dirs = old.enc_dir != new.enc_dir || old.sense_dir != new.sense_dir;
+            // A direction or a scale changed: the loop's feedback changes sign or size.
+            let dirs = old.enc_dir != new.enc_dir
+                || old.sense_dir != new.sense_dir
+                || old.counts_per_rev != new.counts_per_rev
+                || old.sense_v_per_a != new.sense_v_per_a;
+            let amps_per_code = self.board.sense.amps_per_code(new.sense_v_per_a);
             let new_enc_dir = new.enc_dir;
             if dirs {
-                // A direction changed: the bridge goes off (the loop's feedback changes sign),
-                // and the count goes on from where it is, counting the new way.
+                // The bridge goes off, and the count goes on from where it is, counting the
+                // new way (the same count is the same place: a new resolution reads it in
+                // other radians from the power-up position on).
                 self.switch_off();
                 self.enc.rebase(directed(self.last_raw, new_enc_dir));
+                self.sense.amps_per_code = amps_per_code;
             }
             if rates {
                 // The bridge goes off for the change.
@@ -446,7 +454,7 @@ impl ControlLoop {
                 dt: self.ctrl.dt_pos(),
                 pos,
                 reference: self.r.pos,
-                rad_per_count: p.rad_per_count,
+                rad_per_count: self.ctrl.rad_per_count(),
                 error: self.out.error,
                 ff: self.out.ff_friction,
                 current: self.current,

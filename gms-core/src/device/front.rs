@@ -59,7 +59,7 @@ pub fn prepare(s: &Settings, board: &Board) -> Result<Applied, &'static str> {
     }
     Ok(Applied {
         ctrl,
-        limits: drive::limits_for(s, &board.limits),
+        limits: board.limits(s),
         psc,
         arr,
     })
@@ -76,6 +76,9 @@ pub struct Startup {
     pub faults: Faults,
     /// What happened, for the log.
     pub note: &'static str,
+    /// True when the settings came from the store (someone configured this axis and saved);
+    /// false on the built-in defaults (the status reply's `configured`).
+    pub configured: bool,
 }
 
 /// The start-up decision: the stored set if it is valid and the board runs it; the defaults
@@ -93,6 +96,7 @@ pub fn startup(
             applied: prepare(defaults, board)?,
             faults,
             note,
+            configured: false,
         })
     };
     match stored {
@@ -112,6 +116,7 @@ pub fn startup(
                     applied,
                     faults: Faults::NONE,
                     note: "parameters loaded from the store",
+                    configured: true,
                 }),
                 Err(_) => fallback(
                     Faults::INVALID_PARAMS,
@@ -133,6 +138,10 @@ pub struct Front<L: Link, S: ParamStore> {
     staged: Option<Settings>,
     fields: [u8; FIELDS.len()],
     nfields: usize,
+    /// The running settings were set for this axis (stored, set, or given by the shell).
+    configured: bool,
+    /// `defaults` configures the axis (a simulator's defaults describe its plant).
+    defaults_configured: bool,
 }
 
 impl<L: Link, S: ParamStore> Front<L, S> {
@@ -148,7 +157,21 @@ impl<L: Link, S: ParamStore> Front<L, S> {
             staged: None,
             fields: [0; FIELDS.len()],
             nfields: 0,
+            configured: false,
+            defaults_configured: false,
         }
+    }
+
+    /// Whether the running settings were configured for the axis (`running`: [`Startup`]'s
+    /// `configured` on a board) and whether the `defaults` are (`defaults`: true on a simulator,
+    /// whose defaults come from its plant; false on a board, whose defaults are the paper's
+    /// rig). Any `set`, `commit` or `load` configures it; `defaults` sets it to `defaults`.
+    /// The status reply reports it (`configured=0|1`), so that a bench tool can refuse to
+    /// measure an axis in units nobody chose.
+    pub fn with_configured(mut self, running: bool, defaults: bool) -> Self {
+        self.configured = running;
+        self.defaults_configured = defaults;
+        self
     }
 
     /// The loop's latest status.
@@ -220,7 +243,7 @@ impl<L: Link, S: ParamStore> Front<L, S> {
 
     /// One telemetry line (`# t=… pos=…\n`) of the fields streamed, SI units.
     pub fn telemetry_line(&self, out: &mut impl Write, s: &Sample) -> fmt::Result {
-        let rpc = self.settings.rad_per_count;
+        let rpc = self.settings.rad_per_count();
         out.write_char('#')?;
         for &f in self.fields.get(..self.nfields).unwrap_or(&[]) {
             let v = match f {
@@ -253,6 +276,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         let a = prepare(&new, &self.board)?;
         self.post(|r| r.apply = Some(a))?;
         self.settings = new;
+        self.configured = true;
         Ok(())
     }
 
@@ -282,7 +306,9 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
 
     fn defaults(&mut self) -> Result<(), &'static str> {
         let d = self.defaults;
-        self.apply(d)
+        self.apply(d)?;
+        self.configured = self.defaults_configured;
+        Ok(())
     }
 
     fn enable(&mut self) -> Result<(), &'static str> {
@@ -320,7 +346,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
 
     fn status(&mut self, out: &mut dyn Write) -> fmt::Result {
         let st = self.status_now();
-        let rpc = self.settings.rad_per_count;
+        let rpc = self.settings.rad_per_count();
         let clock = self.board.limits.clock_hz;
         let t = st.steps as f64 / st.pos_rate_hz.max(1.0) as f64;
         write!(
@@ -339,7 +365,8 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         st.faults.write_names(out)?;
         write!(
             out,
-            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={}",
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={} \
+             configured={}",
             Num(st.ff),
             Num(st.duty),
             Num(drive::cycles_to_us(st.stats.worst() as f32, clock)),
@@ -347,6 +374,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
             Num(st.sense_offset),
             st.stats.missed(),
             st.drive.name(),
+            self.configured as u8,
         )
     }
 
@@ -381,7 +409,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
 
     fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result {
         let st = self.status_now();
-        let origin = st.capture_origin as f64 * self.settings.rad_per_count as f64;
+        let origin = st.capture_origin as f64 * self.settings.rad_per_count() as f64;
         write!(
             out,
             "state={} samples={} capacity={} origin={}",
@@ -458,7 +486,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         if !st.enabled {
             return Err("disabled (enable first)");
         }
-        let rpc = self.settings.rad_per_count;
+        let rpc = self.settings.rad_per_count();
         let profile = VelocityProfile::new(st.reference, vel, sweep, MOVE_AMAX, rpc)
             .map_err(|_| "bad velocity (|VEL| + AMP <= 20 rad/s; frequencies and duration > 0)")?;
         let req = VelocityRequest {
@@ -477,7 +505,7 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
             Drive::Current(_) => self.post(|r| r.hold_here = true),
             Drive::Velocity => {
                 // Stop where the acceleration limit allows, continuing from the reference.
-                let rpc = self.settings.rad_per_count;
+                let rpc = self.settings.rad_per_count();
                 let v = st.reference.vel;
                 let here = (st.reference.pos as f64 / SUB_PER_COUNT as f64 * rpc as f64) as f32;
                 let target = here + v * v.abs() / (2.0 * MOVE_AMAX);
@@ -497,8 +525,8 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         if !st.enabled {
             return Err("disabled (enable first)");
         }
-        let rpc = self.settings.rad_per_count;
-        let limits = drive::limits_for(&self.settings, &self.board.limits);
+        let rpc = self.settings.rad_per_count();
+        let limits = self.board.limits(&self.settings);
         let target = pos / rpc;
         if !(target >= limits.pos_min as f32 && target <= limits.pos_max as f32) {
             return Err("beyond the soft limits");

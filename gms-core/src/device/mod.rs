@@ -63,11 +63,14 @@ pub struct Board {
     pub capture_values: u32,
 }
 
-/// A board's current-sense chain, as the start-up calibration needs it.
+/// A board's current-sense chain: its ADC, the zero the start-up calibration expects, and its
+/// timing. The amplifier's scale is a parameter (`sense.v_per_a`), for the shunt the user fits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SenseChain {
-    /// Current per ADC code [A/code] (negative if the amplifier's sign is reversed).
-    pub amps_per_code: f32,
+    /// The ADC's reference voltage \[V\] (the input that reads `full_scale`).
+    pub vref: f32,
+    /// The ADC's codes per `vref` \[code\] (4095 for a 12-bit ADC whose top code is `vref`).
+    pub full_scale: f32,
     /// ADC code at zero current the board is built for \[code\].
     pub zero_code: f32,
     /// How far the measured zero may lie from `zero_code` \[code\] (amplifier offset, resistor
@@ -78,6 +81,31 @@ pub struct SenseChain {
     /// and the control step starts at its end, so it must leave the step its budget:
     /// `window_s <= 2 (1 - budget_fraction) / rate.cur_hz` ([`prepare`] refuses other rates).
     pub window_s: f32,
+}
+
+impl Board {
+    /// The limits the loop checks for the settings `s` on this board (the trip below the
+    /// current sense's range with `s`'s `sense.v_per_a`).
+    pub fn limits(&self, s: &Settings) -> crate::drive::Limits {
+        crate::drive::limits_for(s, &self.limits, self.sense.range(s.sense_v_per_a))
+    }
+}
+
+impl SenseChain {
+    /// Current per ADC code \[A/code\] with an amplifier of `v_per_a` \[V/A\].
+    pub fn amps_per_code(&self, v_per_a: f32) -> f32 {
+        self.vref / self.full_scale / v_per_a
+    }
+
+    /// The largest current the chain shows in either direction around its nominal zero
+    /// \[A\], with an amplifier of `v_per_a` \[V/A\].
+    pub fn range(&self, v_per_a: f32) -> f32 {
+        let room = self
+            .zero_code
+            .min(self.full_scale - self.zero_code)
+            .max(0.0);
+        room * self.amps_per_code(v_per_a)
+    }
 }
 
 /// A complete, validated parameter set prepared for the loop (built on the protocol side,
@@ -381,7 +409,11 @@ pub fn default_settings() -> Settings {
     ControllerParams {
         pos_rate_hz: 10_000.0,
         cur_rate_hz: 20_000.0,
-        rad_per_count: 3.8e-6,
+        // The paper's encoder: 2π / 3.8 µrad in single precision (1653469.75), whose radians
+        // per count are 3.8e-6 exactly again (`ControllerParams::rad_per_count`).
+        counts_per_rev: 1_653_469.8,
+        // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (firmware/src/boards).
+        sense_v_per_a: 3.4,
         pid: PidParams {
             kp: 0.2,
             ki: 100.0,

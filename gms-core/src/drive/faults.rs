@@ -138,9 +138,7 @@ pub struct Limits {
 pub struct BoardLimits {
     /// Over-current trip as a multiple of the current limit `i_max` [-] (e.g. 1.5).
     pub trip_factor: f32,
-    /// Largest current the sense chain can show \[A\]; the trip stays below 95 % of it.
-    pub sense_range: f32,
-    /// Following-error limit \[rad\].
+    /// Following-error limit \[rad\] (at least [`MIN_ERROR_COUNTS`] counts of the encoder).
     pub max_error: f32,
     /// Highest plausible speed [rad/s]: a faster encoder step is a jump.
     pub max_speed: f32,
@@ -150,15 +148,26 @@ pub struct BoardLimits {
     pub budget_fraction: f32,
 }
 
-/// The limits the control step checks for the settings `s` on a board `b`.
-pub fn limits_for(s: &Settings, b: &BoardLimits) -> Limits {
+/// The smallest following-error limit \[counts\]: with a coarse encoder the board's limit in
+/// radians may be only a few counts, which quantisation and an ordinary move's lag exceed.
+pub const MIN_ERROR_COUNTS: f32 = 64.0;
+
+/// The limits the control step checks for the settings `s` on a board `b` whose current
+/// sense shows up to `sense_range` \[A\] with the settings' `sense.v_per_a` (the trip stays
+/// below 95 % of it; see `device::Board::limits`).
+pub fn limits_for(s: &Settings, b: &BoardLimits, sense_range: f32) -> Limits {
     let trip = b.trip_factor * s.i_max;
-    let cap = 0.95 * b.sense_range;
-    let rpc = s.rad_per_count;
+    let cap = 0.95 * sense_range;
+    let rpc = s.rad_per_count();
+    let min_error = MIN_ERROR_COUNTS * rpc;
     let per_step = b.max_speed / rpc / s.pos_rate_hz;
     Limits {
         i_trip: if trip < cap { trip } else { cap },
-        max_error: b.max_error,
+        max_error: if b.max_error > min_error {
+            b.max_error
+        } else {
+            min_error
+        },
         // Float to int casts saturate (NaN gives 0).
         max_step_counts: (libm_ceil(per_step as f64) as i64).max(1),
         pos_min: (s.pos_min as f64 / rpc as f64) as i64,

@@ -81,7 +81,10 @@ pub const PARAMS: &[Param] = &[
     num!("lim.pos_min", "rad", -1e5, 1e5, |s| s.pos_min),
     num!("lim.pos_max", "rad", -1e5, 1e5, |s| s.pos_max),
     num!("enc.dir", "-", -1.0, 1.0, |s| s.enc_dir),
+    num!("enc.counts_per_rev", "count/rev", 4.0, 1e10, |s| s
+        .counts_per_rev),
     num!("sense.dir", "-", -1.0, 1.0, |s| s.sense_dir),
+    num!("sense.v_per_a", "V/A", 1e-3, 1e3, |s| s.sense_v_per_a),
     Param {
         path: "ff.mode",
         unit: "-",

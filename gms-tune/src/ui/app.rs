@@ -15,8 +15,6 @@ use crate::params::Listed;
 /// Samples kept: 60 s of the 1 kHz stream.
 const KEEP: usize = 60_000;
 
-use crate::run::RAD_PER_COUNT;
-
 /// One parameter of the tree.
 #[derive(Debug, Clone)]
 pub struct Row {
@@ -239,6 +237,20 @@ impl App {
         self.log.push_back(line);
     }
 
+    /// The device's encoder resolution \[rad/count\]: 2π / its `enc.counts_per_rev` as listed
+    /// (the device's default until the list has come).
+    pub fn rad_per_count(&self) -> f64 {
+        self.rows
+            .iter()
+            .find(|r| r.listed.path == "enc.counts_per_rev")
+            .and_then(|r| r.listed.value.parse::<f64>().ok())
+            .filter(|c| c.is_finite() && *c > 0.0)
+            .map_or(
+                gms_core::device::default_settings().rad_per_count() as f64,
+                |c| std::f64::consts::TAU / c,
+            )
+    }
+
     /// Takes in what the worker reported.
     pub fn poll(&mut self) {
         while let Ok(e) = self.worker.rx.try_recv() {
@@ -293,7 +305,10 @@ impl App {
                         (r.stage, r.done, r.total) = (stage, done, total);
                     }
                 }
-                Event::FfPoint(g, rms) => self.ff_points.push([g, rms / RAD_PER_COUNT]),
+                Event::FfPoint(g, rms) => {
+                    let rpc = self.rad_per_count();
+                    self.ff_points.push([g, rms / rpc])
+                }
                 Event::Done(r) => {
                     let what = self.running.take().map_or(String::new(), |r| r.what);
                     match &r {
@@ -517,6 +532,7 @@ impl App {
     }
 
     fn live(&mut self, ui: &mut egui::Ui) {
+        let rpc = self.rad_per_count();
         ui.horizontal(|ui| {
             let label = if self.paused { "Resume" } else { "Pause" };
             if ui.button(label).clicked() {
@@ -540,7 +556,7 @@ impl App {
         let width = ui.available_width().max(100.0) as usize;
         let h = ((ui.available_height() - 20.0) / 4.0).max(60.0);
         let link = ui.make_persistent_id("live-x");
-        let series = |f: fn(&Sample) -> f64| -> Vec<[f64; 2]> {
+        let series = |f: &dyn Fn(&Sample) -> f64| -> Vec<[f64; 2]> {
             decimate(&w.iter().map(|s| [s.t, f(s)]).collect::<Vec<_>>(), width)
         };
         let resp = Plot::new("pos")
@@ -551,9 +567,9 @@ impl App {
             .show(ui, |p| {
                 p.line(Line::new(
                     "reference",
-                    PlotPoints::from(series(|s| s.reference)),
+                    PlotPoints::from(series(&|s| s.reference)),
                 ));
-                p.line(Line::new("position", PlotPoints::from(series(|s| s.pos))));
+                p.line(Line::new("position", PlotPoints::from(series(&|s| s.pos))));
             });
         let b = resp.transform.bounds();
         self.visible = (b.min()[0], b.max()[0]);
@@ -565,7 +581,7 @@ impl App {
             .show(ui, |p| {
                 p.line(Line::new(
                     "error [counts]",
-                    PlotPoints::from(series(|s| s.error / RAD_PER_COUNT)),
+                    PlotPoints::from(series(&|s| s.error / rpc)),
                 ));
             });
         Plot::new("friction")
@@ -574,10 +590,13 @@ impl App {
             .legend(Legend::default())
             .y_axis_label("N·m")
             .show(ui, |p| {
-                p.line(Line::new("feedforward", PlotPoints::from(series(|s| s.ff))));
+                p.line(Line::new(
+                    "feedforward",
+                    PlotPoints::from(series(&|s| s.ff)),
+                ));
                 p.line(Line::new(
                     "friction (estimate)",
-                    PlotPoints::from(series(|s| s.friction)),
+                    PlotPoints::from(series(&|s| s.friction)),
                 ));
             });
         Plot::new("current")
@@ -589,7 +608,7 @@ impl App {
             .show(ui, |p| {
                 p.line(Line::new(
                     "current",
-                    PlotPoints::from(series(|s| s.current)),
+                    PlotPoints::from(series(&|s| s.current)),
                 ));
             });
     }
@@ -687,6 +706,7 @@ impl App {
     }
 
     fn motion(&mut self, ui: &mut egui::Ui) {
+        let rpc = self.rad_per_count();
         let pos = self.status_value("pos").and_then(|v| v.parse::<f64>().ok());
         ui.horizontal(|ui| {
             let l = ui.label("jog [rad]");
@@ -748,8 +768,8 @@ impl App {
                     "settled"
                 },
                 m.settle_time * 1e3,
-                m.steady_state_error / RAD_PER_COUNT,
-                m.max_error / RAD_PER_COUNT
+                m.steady_state_error / rpc,
+                m.max_error / rpc
             ));
             let h = (ui.available_height() - 10.0).max(100.0);
             let e = s.error.clone();
@@ -762,6 +782,7 @@ impl App {
     }
 
     fn experiments(&mut self, ui: &mut egui::Ui) {
+        let rpc = self.rad_per_count();
         let idle = self.running.is_none();
         if let Some(r) = &self.running {
             let frac = if r.total > 0.0 {
@@ -888,11 +909,7 @@ impl App {
                         });
                     }
                 });
-                let pts = t
-                    .curve
-                    .iter()
-                    .map(|(g, r)| [*g, r / RAD_PER_COUNT])
-                    .collect();
+                let pts = t.curve.iter().map(|(g, r)| [*g, r / rpc]).collect();
                 ff_plot(ui, pts, Some(t.chosen));
             }
             Some(Ok(Outcome::Identified {
@@ -941,6 +958,7 @@ impl App {
 
     /// A step test's figures once 0.5 s of samples has come after its command.
     fn finish_step(&mut self) {
+        let rpc = self.rad_per_count();
         let Some((d, t0)) = self.step_pending else {
             return;
         };
@@ -952,15 +970,12 @@ impl App {
         }
         self.step_pending = None;
         let rec: Vec<&Sample> = self.samples.iter().filter(|s| s.t > t0).collect();
-        let error: Vec<[f64; 2]> = rec
-            .iter()
-            .map(|s| [s.t - t0, s.error / RAD_PER_COUNT])
-            .collect();
+        let error: Vec<[f64; 2]> = rec.iter().map(|s| [s.t - t0, s.error / rpc]).collect();
         let rows: Vec<[f64; 6]> = rec
             .iter()
             .map(|s| [s.t, s.reference, s.pos, s.error, s.ff, s.friction])
             .collect();
-        let (_, metrics) = crate::run::step_figures(&rows, d, 0.5);
+        let (_, metrics) = crate::run::step_figures(&rows, d, 0.5, rpc);
         self.step = Some(StepResult {
             step: d,
             t0,

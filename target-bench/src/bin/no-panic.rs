@@ -139,14 +139,14 @@ fn main() -> ! {
         encoder_bits: 32,
         sense_oversample: 2,
         sense: SenseChain {
-            amps_per_code: 3.3 / 4095.0 / 3.4,
+            vref: 3.3,
+            full_scale: 4095.0,
             zero_code: 2048.0,
             zero_tolerance: 150.0,
             window_s: 0.0,
         },
         limits: drive::BoardLimits {
             trip_factor: 1.5,
-            sense_range: 0.48,
             max_error: 0.01,
             max_speed: 100.0,
             clock_hz: 168_000_000,
@@ -156,7 +156,7 @@ fn main() -> ! {
         bridge_wake_s: 0.0,
         capture_values: 8192,
     };
-    let limits = drive::limits_for(&selftest::controller_params(), black_box(&board.limits));
+    let limits = black_box(&board).limits(&selftest::controller_params());
     let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
     let sense = drive::CurrentSense::new(3.3, 4095.0, 3.4, black_box(2048.0));
     let mut stats = drive::StepStats::new();
@@ -168,7 +168,7 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    let zero = device::calibrate_sense(black_box(&board), || black_box(4096));
+    let zero = device::calibrate_sense(black_box(&board), black_box(3.4), || black_box(4096));
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the check's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };

@@ -17,6 +17,8 @@ pub struct Desc {
     pub chip: &'static str,
     pub encoder_max_rate: f32,
     pub watchdog_us: u32,
+    /// The power stage's shunt × amplifier gain \[V/A\].
+    pub sense_v_per_a: f32,
 }
 
 /// Clock tree within the part's limits, memory map whole, the store's sectors the format's.
@@ -41,6 +43,12 @@ pub fn device_view(d: &Desc) {
     assert_eq!(b.sense.window_s, d.timing.window_s(), "{}", d.name);
     assert_eq!(d.timing.adc_hz, d.clocks.adc_hz(), "{}", d.name);
     assert!(d.timing.adc_hz <= 36_000_000, "{}", d.name);
+    // The device's default `sense.v_per_a` is the power stage as built: 68 mohm × 50 shows
+    // ±0.485 A around the 1.65 V zero (2047 codes of 0.237 mA).
+    let s = default_settings();
+    assert_eq!(s.sense_v_per_a, d.sense_v_per_a, "{}", d.name);
+    let range = b.sense.range(s.sense_v_per_a);
+    assert!((range - 0.4852).abs() < 1e-4, "{}: {range}", d.name);
     // The encoder filter for the board's timer clock passes the design rate.
     let (code, window) = drive::encoder_filter(d.clocks.tim_apb1_hz(), d.encoder_max_rate);
     assert!(code > 0 && window <= 0.5 / d.encoder_max_rate, "{}", d.name);

@@ -1,0 +1,163 @@
+//! A user's own axis end to end: a gear motor with a 2000 counts/rev encoder and a ±2 A
+//! current sense (`examples/scenarios/gear-motor.toml`), not the paper's rig. The device takes
+//! the plant's resolution and sense scale as its parameters (`enc.counts_per_rev`,
+//! `sense.v_per_a`); commissioning and identification run on it in its own units, the motor
+//! and the friction hidden from the device.
+
+mod common;
+use common::identification_errors;
+use gms_ident::bench::{DeviceInfo, Plans, Ranges, commission, get_param, identify_on};
+use hil_sim::device::LocalDevice;
+use hil_sim::scenario::Scenario;
+
+const GEAR_MOTOR: &str = include_str!("../../examples/scenarios/gear-motor.toml");
+
+/// The scenario with `extra` tables appended (the plant's draw off: the truth is nominal).
+fn scenario(extra: &str) -> Scenario {
+    let text = GEAR_MOTOR.replacen("[plant]\n", "[plant]\nvariability = 0.0\n", 1);
+    Scenario::parse(&format!("{text}\n{extra}"), "gear-motor").unwrap()
+}
+
+#[test]
+fn the_device_runs_in_the_plants_encoder_counts_and_sense_scale() {
+    let sc = scenario("");
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    assert_eq!(get_param(&mut dev, "enc.counts_per_rev").unwrap(), 2000.0);
+    // 1.65 V over ±2 A.
+    assert!((get_param(&mut dev, "sense.v_per_a").unwrap() - 0.825).abs() < 1e-6);
+    let (_, status) = gms_ident::bench::Bench::request(&mut dev, "status").unwrap();
+    assert!(status.contains(" configured=1"), "{status}");
+    // A move of 100 counts ends within a count of 100 × 2π/2000 rad.
+    let rpc = std::f64::consts::TAU / 2000.0;
+    let bench = &mut dev;
+    use gms_ident::bench::Bench;
+    bench.request("enable").unwrap();
+    bench.request(&format!("move {}", 100.0 * rpc)).unwrap();
+    bench.wait(2.0).unwrap();
+    let (_, status) = bench.request("status").unwrap();
+    let field = |k: &str| -> f64 {
+        status
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert_eq!(field("faults"), 0.0, "{status}");
+    // Within a few counts of the target (the default gains' integral, `pos.i_limit` 1 mN·m,
+    // cannot push this motor's 3 mN·m of friction the last counts: commissioning sets them),
+    // and position plus error is the target in counts.
+    let pos = field("pos") / rpc;
+    assert!((pos - 100.0).abs() <= 3.0, "{status}");
+    assert!(
+        (pos + field("error_counts") - 100.0).abs() < 1e-3,
+        "{status}"
+    );
+    // The plant's true angle is where the device reads it, within the count.
+    let truth = dev.plant().theta / rpc;
+    assert!(
+        (truth - pos).abs() <= 1.0,
+        "true angle {truth} counts, read {pos}"
+    );
+}
+
+/// The device told the motor as a datasheet gives it, 20 % off (R 3 Ω against 2.5, k 10 against
+/// 12 mN·m/A, J 1.6e-6 against 2e-6 kg·m²): commissioning measures the gear motor in its own
+/// units and reports the resolution it ran with.
+#[test]
+#[ignore = "issue 25, not reached yet: commissioning expects the breakaway from the device's \
+            gms.fs (Table 1, 14 times below this motor's) and measures the inertia from 2 ms \
+            pulses, two counts of this encoder"]
+fn commissioning_measures_the_gear_motor() {
+    let sc = scenario(
+        "[controller.motor]\nr = 3.0\nk_m = 10e-3\nk_e = 10e-3\n[controller.ff]\ninertia = 1.6e-6\n",
+    );
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let c = commission(&mut dev, 1.0).unwrap();
+    for l in &c.lines {
+        eprintln!("  {l}");
+    }
+    let p = &sc.plant;
+    eprintln!(
+        "R {} -> {:.4} ({:+.2} %), k {} -> {:.4e} ({:+.2} %), J {} -> {:.3e} ({:+.1} %), \
+         L {} -> {:.3e} ({:+.1} %)",
+        p.resistance,
+        c.r,
+        (c.r / p.resistance - 1.0) * 100.0,
+        p.k_e,
+        c.k_e,
+        (c.k_e / p.k_e - 1.0) * 100.0,
+        p.inertia,
+        c.inertia,
+        (c.inertia / p.inertia - 1.0) * 100.0,
+        p.inductance,
+        c.inductance,
+        (c.inductance / p.inductance - 1.0) * 100.0,
+    );
+    assert!(
+        c.lines[0].starts_with("encoder: 2000 counts/rev (3.142 mrad/count)"),
+        "{}",
+        c.lines[0]
+    );
+    assert!((c.r / p.resistance - 1.0).abs() < 0.05, "R {}", c.r);
+    assert!((c.k_e / p.k_e - 1.0).abs() < 0.05, "k_e {}", c.k_e);
+    assert!(
+        (c.inertia / p.inertia - 1.0).abs() < 0.15,
+        "J {}",
+        c.inertia
+    );
+    assert!(
+        (c.inductance / p.inductance - 1.0).abs() < 0.20,
+        "L {}",
+        c.inductance
+    );
+}
+
+/// The friction identified on the coarse encoder: the sliding curve (Fs, Fc, Vs, sigma)
+/// within bounds of the hidden truth; what a 3.14 mrad count can say of the pre-sliding.
+#[test]
+#[ignore = "issue 25, not reached yet: the staircase stops at 3 × the device's gms.fs \
+            (Table 1), below this motor's breakaway"]
+fn identification_on_a_coarse_encoder() {
+    let sc = scenario("");
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let info = DeviceInfo::read(&mut dev).unwrap();
+    let plans = Plans::new(&info, &Ranges::default()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (g, id) = identify_on(&mut dev, &plans, dir.path(), 4, false, &mut |_, _, _| {}).unwrap();
+    let e = identification_errors(&sc.plant.actuator, &g, &id.spec);
+    eprintln!(
+        "gear motor: errors fs {:.1} %, fc {:.1} %, vs {:.1} %, delta {:.1} %, sigma {:.1} %, \
+         c {:.1} %, virgin curve {:.2} % of Fs; {} pre-sliding points",
+        e[0] * 100.0,
+        e[1] * 100.0,
+        e[2] * 100.0,
+        e[3] * 100.0,
+        e[4] * 100.0,
+        e[5] * 100.0,
+        e[6] * 100.0,
+        g.presliding.len()
+    );
+    assert!(e[0] < 0.10 && e[1] < 0.10, "{e:?}");
+}
+
+#[test]
+fn a_scenario_gives_its_encoder_in_counts_per_revolution_or_radians_per_count() {
+    let sc = Scenario::parse("[plant]\ncounts_per_rev = 2000\n", "t").unwrap();
+    assert_eq!(sc.plant.rad_per_count, std::f64::consts::TAU / 2000.0);
+    assert_eq!(sc.controller_params().unwrap().counts_per_rev, 2000.0);
+    // The default, 3.8 µrad: the device's 3.8e-6 in single precision exactly, as before.
+    let p = Scenario::default().controller_params().unwrap();
+    assert_eq!(p.rad_per_count(), 3.8e-6f32);
+    for (text, why) in [
+        (
+            "[plant]\ncounts_per_rev = 2000\nrad_per_count = 1e-3\n",
+            "not both",
+        ),
+        ("[plant]\ncounts_per_rev = 2\n", "counts_per_rev must be"),
+        ("[plant]\ncounts_per_rev = \"many\"\n", "expected a number"),
+    ] {
+        let e = Scenario::parse(text, "t").unwrap_err().to_string();
+        assert!(e.contains(why), "{text}: {e}");
+    }
+}
