@@ -553,7 +553,7 @@ fn staircase(
     if plan.erase {
         // The encoder's direction first, in current mode: a position loop on a reversed
         // encoder would run away at once.
-        if slide(b, &dev, dt)? < 0.0 {
+        if slide(b, &dev, dt)?.moved < 0.0 {
             return Err(Error::Device(
                 "the axis moved backwards under a positive current: the encoder counts \
                  against the motor (swap its A and B channels, or the motor leads; or set \
@@ -1459,6 +1459,9 @@ pub struct Commissioned {
     pub inertia: f64,
     /// Winding inductance \\[H\\].
     pub inductance: f64,
+    /// The current of the pulse that first slid the axis \\[A\\] (an upper bound of the
+    /// breakaway current within a quarter of it; × k_M: the breakaway torque).
+    pub breakaway_a: f64,
     /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
     pub cur_pi: (f64, f64),
     /// The position loop's gains and their bounds (once that step has run).
@@ -1499,36 +1502,55 @@ fn means(rows: &[Vec<f64>]) -> Vec<f64> {
         .collect()
 }
 
-/// Which way the encoder counts when the motor pushes: in current mode, pulses of current
-/// that the device ends by itself after 10 ms (so a slow link cannot hold the current on a
-/// sliding axis), from half the expected breakaway up by a quarter of it each (to three times
-/// it, within the current limit), until the axis has slid (2 mrad: beyond the pre-sliding
-/// range, which a stiff or blocked axis travels too). Returns the signed slide \\[rad\\]
-/// (negative: the encoder counts against the motor). Fails when no current flows (a current
-/// friction holds, measured) or the axis does not slide.
-pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<f64, Error> {
+/// What [`slide`] found: which way the encoder counts when the motor pushes, and the pulse
+/// that broke the axis away.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slide {
+    /// The signed slide \\[rad\\] (negative: the encoder counts against the motor).
+    pub moved: f64,
+    /// The current of the pulse that moved the axis \\[A\\] (the one before it held): an
+    /// upper bound of the breakaway current, within a quarter of it.
+    pub amps: f64,
+}
+
+/// How far a pulse must move the axis to count as a slide \\[rad\\]: 2 mrad (beyond the
+/// pre-sliding range, which a stiff or blocked axis travels too) or eight counts of the
+/// encoder, whichever is more.
+pub fn slide_threshold(rad_per_count: f64) -> f64 {
+    (8.0 * rad_per_count).max(2e-3)
+}
+
+/// Which way the encoder counts when the motor pushes, and at what current the axis breaks
+/// away: in current mode, pulses of current that the device ends by itself after 10 ms (so a
+/// slow link cannot hold the current on a sliding axis), from half the expected breakaway
+/// (the device's `gms.fs`) up by a quarter of it each to three times it, then on by a
+/// quarter of the last each (an axis whose friction the device's model underestimates),
+/// within 80 % of the current limit, until the axis has slid ([`slide_threshold`]). Fails when
+/// no current flows (a current friction holds, measured) or the axis does not slide.
+pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Error> {
     let i_fs = dev.fs / dev.k_m;
+    let threshold = slide_threshold(rad_per_count(b)?);
     primitive(b, "enable current")?;
     b.request("current 0")?;
     b.wait(0.05)?;
     let x0 = position(b)?;
     let mut moved = 0.0;
-    for k in 2..=12 {
-        let amps = 0.25 * k as f64 * i_fs;
-        if amps > dev.i_max {
-            break;
-        }
+    let mut amps = 0.5 * i_fs;
+    let mut last = 0.0;
+    while amps <= 0.8 * dev.i_max {
         primitive(b, &format!("current {amps} 0.01"))?;
         b.wait(0.05)?;
         moved = position(b)? - x0;
-        if moved.abs() > 2e-3 {
+        last = amps;
+        if moved.abs() > threshold {
             break;
         }
+        amps += 0.25 * if amps < 3.0 * i_fs { i_fs } else { amps };
     }
     b.request("current 0")?;
     b.wait(0.2)?;
     check_faults(b)?;
-    if moved.abs() <= 2e-3 {
+    if moved.abs() <= threshold {
         // Which of the two: a current friction holds (40 % of the expected breakaway).
         let (i, _, _) = hold_current(b, 0.4 * i_fs, 0.1, dt)?;
         b.request("current 0")?;
@@ -1540,12 +1562,13 @@ pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<f64, Error
             )));
         }
         return Err(Error::Device(format!(
-            "the axis did not move with current pulses up to 3 × the expected breakaway \
-             ({:.3e} N·m): blocked?",
-            3.0 * dev.fs
+            "the axis did not move with current pulses up to {} ({} N·m, 80 % of lim.i_max): \
+             blocked?",
+            si(last, "A"),
+            num4(last * dev.k_m)
         )));
     }
-    Ok(moved)
+    Ok(Slide { moved, amps: last })
 }
 
 /// Holds `amps` in current mode for `seconds` and returns the mean current \\[A\\] and voltage
@@ -1689,7 +1712,28 @@ fn commission_steps(
         ));
     }
     // 3. The encoder's direction.
-    let moved = slide(b, dev, dt)?;
+    let sl = slide(b, dev, dt)?;
+    let moved = sl.moved;
+    // The experiments below need the breakaway current (the sense's polarity above only a
+    // small current): the device's friction model's when the axis agrees with it, else the
+    // pulse that moved it (a user's motor whose friction the model, Table 1 by default, is far
+    // from).
+    let expected = i_fs;
+    let i_fs = if sl.amps > 1.5 * expected {
+        c.lines.push(format!(
+            "breakaway: the axis slid under a pulse of {}, {:.1} times what the device's \
+             friction model expects (gms.fs {} N·m over motor.k_m {} N·m/A): the experiments \
+             use the pulse's current",
+            si(sl.amps, "A"),
+            sl.amps / expected,
+            num4(dev.fs),
+            num4(dev.k_m)
+        ));
+        sl.amps
+    } else {
+        expected
+    };
+    c.breakaway_a = sl.amps;
     if moved < 0.0 {
         c.enc_dir = -c.enc_dir;
         // The bridge goes off with the change; back into current mode.
@@ -1744,11 +1788,18 @@ fn commission_steps(
                 .into_iter()
                 .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
                 .collect();
-            let (Some(first), Some(last)) = (rows.first(), rows.last()) else {
+            if rows.len() < 2 {
                 return Err(Error::Device("an empty capture".into()));
-            };
-            let w = (last[1] - first[1]) / (last[0] - first[0]).max(dt);
+            }
+            // The speed: the least-squares slope of the position (every sample, so that a
+            // coarse encoder's counts average out rather than only the two ends').
             let m = means(&rows);
+            let (mut stt, mut stx) = (0.0, 0.0);
+            for r in &rows {
+                stt += (r[0] - m[0]).powi(2);
+                stx += (r[0] - m[0]) * (r[1] - m[1]);
+            }
+            let w = stx / stt.max(dt * dt);
             pts.push((w, m[3] - c.r * m[2]));
         }
     }
@@ -1817,6 +1868,8 @@ fn position_gains_for(
         d_filter_hz: get_param(b, "pos.d_filter_hz")?,
         v_supply: get_param(b, "lim.v_supply")?,
         k_presliding: k0,
+        rad_per_count: rad_per_count(b)?,
+        i_max: get_param(b, "lim.i_max")?,
     };
     let s = Stribeck {
         fs: get_param(b, "gms.fs")?,
@@ -1839,6 +1892,15 @@ fn position_gains_for(
         num4(g.kd),
         (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
     ));
+    if g.count_limited {
+        c.lines.push(format!(
+            "  limited by the encoder's count ({}): one count of error asks at most {:.0} % \
+             of lim.i_max through kp, a one-count step {:.0} % through kd",
+            si(axis.rad_per_count, "rad"),
+            100.0 * crate::gains::COUNT_SHARE.0,
+            100.0 * crate::gains::COUNT_SHARE.1
+        ));
+    }
     c.lines.push(format!(
         "  kd above the friction's negative damping {} (the device's Stribeck curve at Vs: \
          Fs {}, Fc {}, Vs {}) by ×{:.2}; below the stability limit {} by ×{:.2}",
@@ -1861,10 +1923,13 @@ fn position_gains_for(
     Ok(g)
 }
 
-/// The reflected inertia from current pulses (3 × the expected breakaway current for 2 ms,
-/// timed on the device, each way twice) and the coast that follows: at the same speed the
-/// friction is the same in both, so J = k_M × i / (a_pulse − a_coast), the accelerations from
-/// local parabolas through the captured positions, compared at 30-80 % of the top speed.
+/// The reflected inertia from current pulses, timed on the device, each way twice, and the
+/// coast that follows: at the same speed the friction is the same in both, so
+/// J = k_M × i / (a_pulse − a_coast), the accelerations from local parabolas through the
+/// captured positions, compared at 30-80 % of the top speed. The pulses and the parabolas are
+/// sized for the encoder ([`InertiaPlan::for_encoder`]): 3 × the breakaway current for 2 ms and
+/// 7-sample parabolas on a fine one; on a coarse one (a count above 20 µrad) 1.5 × for 20 ms,
+/// parabolas over 6 ms, so that quantisation averages out.
 fn inertia(
     b: &mut impl Bench,
     c: &mut Commissioned,
@@ -1873,13 +1938,14 @@ fn inertia(
     i_fs: f64,
 ) -> Result<f64, Error> {
     let k_m = c.k_e;
-    let amps = (3.0 * i_fs).min(0.8 * dev.i_max);
-    let pulse = 0.002;
+    let plan = InertiaPlan::for_encoder(rad_per_count(b)?, dt);
+    let amps = (plan.breakaways * i_fs).min(0.8 * dev.i_max);
+    let pulse = plan.pulse;
     let mut js = Vec::new();
     primitive(b, "enable current")?;
     b.wait(0.05)?;
     for dir in [1.0, -1.0, 1.0, -1.0] {
-        let n = (0.03 / dt).ceil() as u32;
+        let n = (plan.record / dt).ceil() as u32;
         b.request(&format!("capture t,pos,current 1 {n} next"))?;
         primitive(b, &format!("current {} {pulse}", dir * amps))?;
         b.wait(n as f64 * dt)?;
@@ -1887,8 +1953,8 @@ fn inertia(
         check_faults(b)?;
         let rows = capture_rows(b)?;
         b.wait(0.05)?;
-        // Local parabolas over 7 samples: speed and acceleration at each sample.
-        let h = 3usize;
+        // Local parabolas over 2h + 1 samples: speed and acceleration at each sample.
+        let h = plan.half_window;
         let mut va = Vec::new();
         for k in h..rows.len().saturating_sub(h) {
             let (mut s0, mut s1, mut s2, mut s3, mut s4) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -1925,12 +1991,12 @@ fn inertia(
         // The pulse's samples after the current has settled (0.4 ms), the coast's after it.
         let push: Vec<_> = va
             .iter()
-            .filter(|p| p.0 > 0.0004 && p.0 < pulse - 0.0002)
+            .filter(|p| p.0 > 0.0004 + plan.edge && p.0 < pulse - 0.0002 - plan.edge)
             .filter(band)
             .collect();
         let coast: Vec<_> = va
             .iter()
-            .filter(|p| p.0 > pulse + 0.0004)
+            .filter(|p| p.0 > pulse + 0.0004 + plan.edge)
             .filter(band)
             .collect();
         if push.is_empty() || coast.is_empty() {
@@ -1962,6 +2028,50 @@ fn inertia(
         num4(js.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
     ));
     Ok(j)
+}
+
+/// How [`inertia`] pulses the axis for an encoder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InertiaPlan {
+    /// The pulse's current in breakaway currents \\[-\\].
+    pub breakaways: f64,
+    /// The pulse's length \\[s\\].
+    pub pulse: f64,
+    /// The record from the pulse's start \\[s\\] (the pulse and the coast).
+    pub record: f64,
+    /// The local parabolas' half width \\[samples\\].
+    pub half_window: usize,
+    /// How far from the pulse's ends a parabola's centre keeps \\[s\\] (its half width on a
+    /// coarse encoder, so that none straddles the switch; 0 on a fine one).
+    pub edge: f64,
+}
+
+impl InertiaPlan {
+    /// The plan for an encoder of `rad_per_count` \\[rad\\] sampled every `dt` \\[s\\]: on the
+    /// paper's (3.8 µrad) or any finer than 20 µrad, 3 × the breakaway for 2 ms, recorded 30
+    /// ms, 7-sample parabolas; on a coarser one, 1.5 × for 20 ms (about 50 counts of a 3 mrad
+    /// count on a motor that its breakaway accelerates at 1500 rad/s²), recorded 60 ms,
+    /// parabolas over 6 ms.
+    pub fn for_encoder(rad_per_count: f64, dt: f64) -> InertiaPlan {
+        if rad_per_count <= 20e-6 {
+            InertiaPlan {
+                breakaways: 3.0,
+                pulse: 0.002,
+                record: 0.03,
+                half_window: 3,
+                edge: 0.0,
+            }
+        } else {
+            let h = ((0.003 / dt).round() as usize).max(3);
+            InertiaPlan {
+                breakaways: 1.5,
+                pulse: 0.02,
+                record: 0.06,
+                half_window: h,
+                edge: h as f64 * dt,
+            }
+        }
+    }
 }
 
 /// The winding inductance from the current loop's response to current steps at standstill

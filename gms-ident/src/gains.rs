@@ -85,7 +85,19 @@ pub struct Axis {
     /// The friction's initial pre-sliding stiffness (the sum of the blocks' k) [N·m/rad]: at
     /// rest the friction is a spring to the frame.
     pub k_presliding: f64,
+    /// The encoder's resolution \[rad/count\]: one count of error must not ask for more than
+    /// a share of the current limit ([`COUNT_SHARE`]).
+    pub rad_per_count: f64,
+    /// The current limit (`lim.i_max`) \[A\].
+    pub i_max: f64,
 }
+
+/// The share of the current limit one count of position error may ask for through `pos.kp`,
+/// and a one-count step through the filtered derivative `pos.kd` \[-\]: on a coarse encoder
+/// (a gear motor's 2000 counts/rev) the loop's own quantisation would otherwise swing the
+/// current by amps per count and trip `over_current`; on the paper's 3.8 µrad it never
+/// binds (a count asks 0.02 % of the limit at the default gains).
+pub const COUNT_SHARE: (f64, f64) = (0.1, 0.25);
 
 impl Axis {
     /// The default motor and loops — R 10 Ω, L 0.24 mH (what the default `cur.kp` 1.5 is
@@ -104,19 +116,37 @@ impl Axis {
             d_filter_hz: 2000.0,
             v_supply: 12.0,
             k_presliding: 1.2501,
+            rad_per_count: 3.8e-6,
+            i_max: 0.5,
         }
+    }
+
+    /// The largest `pos.kp` whose answer to one count of error is [`COUNT_SHARE`]`.0` of the
+    /// current limit [N·m/rad].
+    pub fn kp_count_limit(&self) -> f64 {
+        COUNT_SHARE.0 * self.k_m * self.i_max / self.rad_per_count
+    }
+
+    /// The largest `pos.kd` whose filtered derivative answers a one-count step with
+    /// [`COUNT_SHARE`]`.1` of the current limit [N·m·s/rad]: the filter's first output after
+    /// a step of one count is (1 − e^(−2π f_d T)) / T counts per second.
+    pub fn kd_count_limit(&self) -> f64 {
+        let t = 1.0 / self.pos_hz;
+        let first = (1.0 - (-2.0 * std::f64::consts::PI * self.d_filter_hz * t).exp()) / t;
+        COUNT_SHARE.1 * self.k_m * self.i_max / (self.rad_per_count * first)
     }
 }
 
 /// The position loop's gains and their margins.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PositionGains {
-    /// `pos.kp` [N·m/rad]: J ω_n², ω_n = [`POS_NATURAL_FRACTION`] × the current bandwidth.
+    /// `pos.kp` [N·m/rad]: J ω_n², ω_n = [`POS_NATURAL_FRACTION`] × the current bandwidth,
+    /// or lower where the encoder's count limits it ([`Axis::kp_count_limit`]).
     pub kp: f64,
     /// `pos.ki` [N·m/(rad·s)]: kp ω_n / 4 (the integral's corner two octaves below ω_n).
     pub ki: f64,
     /// `pos.kd` [N·m·s/rad]: the geometric mean of `kd_min` and `kd_max` when they leave
-    /// room, else `kd_max` / 1.5 (stability first).
+    /// room, else `kd_max` / 1.5 (stability first); at most [`Axis::kd_count_limit`].
     pub kd: f64,
     /// The lower bound: the friction's negative damping [N·m·s/rad].
     pub kd_min: f64,
@@ -124,6 +154,8 @@ pub struct PositionGains {
     /// and the inertia, simulated with the device's own controller) goes unstable
     /// [N·m·s/rad].
     pub kd_max: f64,
+    /// Whether the encoder's count lowered kp or kd below the rule's.
+    pub count_limited: bool,
 }
 
 impl PositionGains {
@@ -141,8 +173,10 @@ impl PositionGains {
 /// figures cannot make a controller (not finite, not positive).
 pub fn position_gains(axis: &Axis, s: &Stribeck) -> Option<PositionGains> {
     let w_cur = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * axis.cur_hz;
-    let wn = POS_NATURAL_FRACTION * w_cur;
-    let kp = axis.inertia * wn * wn;
+    let wn_rule = POS_NATURAL_FRACTION * w_cur;
+    let kp_rule = axis.inertia * wn_rule * wn_rule;
+    let kp = kp_rule.min(axis.kp_count_limit());
+    let wn = (kp / axis.inertia).sqrt();
     let ki = kp * wn / 4.0;
     if !(kp.is_finite() && kp > 0.0) {
         return None;
@@ -166,17 +200,19 @@ pub fn position_gains(axis: &Axis, s: &Stribeck) -> Option<PositionGains> {
     }
     let kd_max = lo;
     let kd_min = s.negative_slope().max(0.0);
-    let kd = if kd_max > kd_min {
+    let kd_rule = if kd_max > kd_min {
         (kd_min.max(kd_max / 1e3) * kd_max).sqrt()
     } else {
         kd_max / 1.5
     };
+    let kd = kd_rule.min(axis.kd_count_limit());
     Some(PositionGains {
         kp,
         ki,
         kd,
         kd_min,
         kd_max,
+        count_limited: kp < kp_rule || kd < kd_rule,
     })
 }
 

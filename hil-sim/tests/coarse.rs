@@ -63,17 +63,16 @@ fn the_device_runs_in_the_plants_encoder_counts_and_sense_scale() {
 
 /// The device told the motor as a datasheet gives it, 20 % off (R 3 Ω against 2.5, k 10 against
 /// 12 mN·m/A, J 1.6e-6 against 2e-6 kg·m²): commissioning measures the gear motor in its own
-/// units and reports the resolution it ran with.
+/// units and reports the resolution it ran with (`gms-tune commission --speed 5`).
 #[test]
-#[ignore = "issue 25, not reached yet: commissioning expects the breakaway from the device's \
-            gms.fs (Table 1, 14 times below this motor's) and measures the inertia from 2 ms \
-            pulses, two counts of this encoder"]
 fn commissioning_measures_the_gear_motor() {
     let sc = scenario(
         "[controller.motor]\nr = 3.0\nk_m = 10e-3\nk_e = 10e-3\n[controller.ff]\ninertia = 1.6e-6\n",
     );
     let mut dev = LocalDevice::new(&sc).unwrap();
-    let c = commission(&mut dev, 1.0).unwrap();
+    // The speed runs at 5, 10 and 15 rad/s: at the default 1 rad/s this motor's back-EMF
+    // (12 mV) is 2 % of its R·i, and a 0.1 % error in R is 5 % in k_e.
+    let c = commission(&mut dev, 5.0).unwrap();
     for l in &c.lines {
         eprintln!("  {l}");
     }
@@ -111,6 +110,37 @@ fn commissioning_measures_the_gear_motor() {
         "L {}",
         c.inductance
     );
+    // Applied, the gains move the axis 100 counts and hold it, without a fault.
+    for (k, v) in c.settings() {
+        dev.ask(&format!("set {k} {v}"));
+    }
+    let (pos, err, status) = move_counts(&mut dev, 100.0);
+    eprintln!(
+        "after commissioning: a 100-count move ends at {pos:.1} counts, error {err}: {status}"
+    );
+    assert!(status.contains(" faults=0 "), "{status}");
+    assert!((pos - 100.0).abs() <= 1.0 && err.abs() <= 1.0, "{status}");
+}
+
+/// Enables, moves by `counts` of the gear motor's encoder, waits 2 s; the position and the
+/// error \[counts\] and the status.
+fn move_counts(dev: &mut LocalDevice, counts: f64) -> (f64, f64, String) {
+    use gms_ident::bench::Bench;
+    let rpc = std::f64::consts::TAU / 2000.0;
+    dev.request("enable").unwrap();
+    let x0 = gms_ident::bench::position(dev).unwrap();
+    dev.request(&format!("move {}", x0 + counts * rpc)).unwrap();
+    dev.wait(2.0).unwrap();
+    let status = dev.ask("status");
+    let field = |k: &str| -> f64 {
+        status
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    ((field("pos") - x0) / rpc, field("error_counts"), status)
 }
 
 /// The friction identified on the coarse encoder: the sliding curve (Fs, Fc, Vs, sigma)
