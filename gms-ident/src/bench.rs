@@ -105,10 +105,22 @@ pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
         .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
 }
 
+/// The encoder of a firmware older than `enc.counts_per_rev` \[rad/count\]: the paper's
+/// 3.8 µrad, then a constant of the device.
+pub const PAPER_RAD_PER_COUNT: f64 = 3.8e-6;
+
 /// The device's encoder resolution \[rad/count\]: 2π / `enc.counts_per_rev`, for figures in
-/// counts (the device's own, never an assumed encoder).
+/// counts (the device's own, never an assumed encoder; [`PAPER_RAD_PER_COUNT`] on a firmware
+/// that predates the parameter).
 pub fn rad_per_count(b: &mut impl Bench) -> Result<f64, Error> {
-    let counts = get_param(b, "enc.counts_per_rev")?;
+    let counts = match get_param(b, "enc.counts_per_rev") {
+        Ok(c) => c,
+        // A firmware from before the resolution was a parameter ran the paper's encoder.
+        Err(Error::Device(e)) if e.contains("unknown parameter") => {
+            return Ok(PAPER_RAD_PER_COUNT);
+        }
+        Err(e) => return Err(e),
+    };
     if !(counts.is_finite() && counts > 0.0) {
         return Err(Error::Device(format!(
             "enc.counts_per_rev: {counts} is not a resolution"
@@ -133,6 +145,8 @@ pub struct DeviceInfo {
     pub fs: f64,
     /// The compensator's Stribeck velocity [rad/s].
     pub vs: f64,
+    /// The encoder's resolution \\[rad/count\\].
+    pub rad_per_count: f64,
 }
 
 impl DeviceInfo {
@@ -144,6 +158,7 @@ impl DeviceInfo {
             i_max: get_param(b, "lim.i_max")?,
             fs: get_param(b, "gms.fs")?,
             vs: get_param(b, "gms.vs")?,
+            rad_per_count: rad_per_count(b)?,
         };
         let ok = |v: f64| v.is_finite() && v > 0.0;
         if !(ok(info.k_m) && ok(info.pos_hz) && ok(info.i_max) && ok(info.fs) && ok(info.vs)) {
@@ -283,6 +298,15 @@ impl SlidingPlan {
             samples: 200,
             window_stroke: 5e-3,
         }
+    }
+
+    /// The plan for an encoder of `rad_per_count` \\[rad\\]: the averaging window covers at
+    /// least 50 counts (on the paper's encoder the 5 mrad of [`SlidingPlan::log_spaced`] are
+    /// 1300; on a gear motor's 2000 counts/rev 5 mrad would be under two counts, and the
+    /// speed read over it a count's worth off).
+    pub fn for_encoder(mut self, rad_per_count: f64) -> SlidingPlan {
+        self.window_stroke = self.window_stroke.max(200.0 * rad_per_count);
+        self
     }
 
     /// The settling time at speed `v` \\[s\\].
@@ -462,6 +486,18 @@ impl PreslidingPlan {
             erase: true,
             erase_min: 4e-6,
         }
+    }
+
+    /// The plan for an encoder of `rad_per_count` \\[rad\\] sampled every `dt` \\[s\\]: on a
+    /// coarse one the window holds at least 40 counts, the creep that counts as breakaway is
+    /// above 2.5 counts between the halves of the averaged samples (a count's flicker is not a
+    /// slide) and the erase ends at two counts. On the paper's encoder nothing changes.
+    pub fn for_encoder(mut self, rad_per_count: f64, dt: f64) -> PreslidingPlan {
+        let half = (self.samples / 2).max(1) as f64 * dt;
+        self.window = self.window.max(40.0 * rad_per_count);
+        self.creep = self.creep.max(2.5 * rad_per_count / half);
+        self.erase_min = self.erase_min.max(2.0 * rad_per_count);
+        self
     }
 
     /// The device time of `steps` steps and of the erase before them (for a compensator's
@@ -704,7 +740,18 @@ pub struct LagPlan {
     pub every: u32,
 }
 
+/// The fewest counts the lag run's position swing must span at its top frequency for the
+/// record to show the lag (it shows where the swing is smallest).
+pub const LAG_MIN_SWING_COUNTS: f64 = 20.0;
+
 impl LagPlan {
+    /// The position swing at the sweep's top frequency, in counts of an encoder of
+    /// `rad_per_count` \\[rad\\]: amp / (2π f1) (the paper's encoder: 2500 counts for Vs
+    /// 0.2 rad/s; a 2000 counts/rev gear motor: 3 for Vs 1 rad/s).
+    pub fn swing_counts(&self, rad_per_count: f64) -> f64 {
+        self.amp / (2.0 * std::f64::consts::PI * self.f1) / rad_per_count
+    }
+
     /// The paper's run for a Stribeck velocity `vs` [rad/s]: around 1.5 Vs, ± 1.2 Vs, 0.2 to
     /// 20 Hz over 4 s, recorded at 1 kHz for a position loop at `pos_hz` \\[Hz\\].
     pub fn for_vs(vs: f64, pos_hz: f64) -> LagPlan {
@@ -869,12 +916,13 @@ impl Plans {
             return Err(Error::Params(format!("{n} speeds: 4 to 50")));
         }
         let window = pos("stroke window", ranges.window.unwrap_or(5.0))?;
-        let mut presliding = PreslidingPlan::new(step_t / dev.k_m, 0);
+        let mut presliding =
+            PreslidingPlan::new(step_t / dev.k_m, 0).for_encoder(dev.rad_per_count, dev.dt());
         // Up to three times the expected breakaway: an axis that holds more is blocked.
         presliding.max_steps = (3.0 * steps_to_fs).ceil() as u32;
         presliding.erase = !ranges.no_erase;
         presliding.window = presliding.window.min(window);
-        let sliding = SlidingPlan::log_spaced(v_min, v_max, n);
+        let sliding = SlidingPlan::log_spaced(v_min, v_max, n).for_encoder(dev.rad_per_count);
         let need = sliding.stroke(dev.dt());
         if need > window {
             return Err(Error::Params(format!(
@@ -973,6 +1021,7 @@ pub fn identify_on<B: Bench>(
     let dev = DeviceInfo::read(b)?;
     let dt = dev.dt();
     let limits = narrow_limits(b, plans.window);
+    let mut lag_skipped: Option<f64> = None;
     let result = limits.clone().map(|_| ()).and_then(|_| {
         let steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
         stage(
@@ -993,6 +1042,12 @@ pub fn identify_on<B: Bench>(
             .map_err(|e| Error::Data(format!("the sliding data do not fit: {e}")))?
             .vs;
         let plan = LagPlan::for_vs(vs, dev.pos_hz);
+        let swing = plan.swing_counts(dev.rad_per_count);
+        if swing < LAG_MIN_SWING_COUNTS {
+            // The lag shows at the sweep's top, where the encoder cannot see it: no run.
+            lag_skipped = Some(swing);
+            return Ok(());
+        }
         if plan.stroke() > plans.window {
             return Err(Error::Params(format!(
                 "the lag run needs {:.2} rad of stroke, more than the window {} rad: widen it",
@@ -1045,13 +1100,20 @@ pub fn identify_on<B: Bench>(
         });
     }
     let (pre, slide, lag) = written.map_err(Error::Io)?;
-    let id = crate::identify::identify_from(&crate::identify::Inputs {
+    let mut id = crate::identify::identify_from(&crate::identify::Inputs {
         presliding: Some(&pre),
         sliding: Some(&slide),
         lag: lag.as_deref(),
         blocks,
         asymmetric,
     })?;
+    if let Some(swing) = lag_skipped {
+        id.report.push(format!(
+            "frictional lag: not measured: the sweep's swing at its top frequency would be \
+             {swing:.1} counts of this encoder (fewer than {LAG_MIN_SWING_COUNTS}), too few to \
+             show the lag; C by the paper's rule"
+        ));
+    }
     Ok((g, id))
 }
 
@@ -1462,6 +1524,11 @@ pub struct Commissioned {
     /// The current of the pulse that first slid the axis \\[A\\] (an upper bound of the
     /// breakaway current within a quarter of it; × k_M: the breakaway torque).
     pub breakaway_a: f64,
+    /// The device's friction model scaled to the measured breakaway, when the axis broke away
+    /// at more than 1.5 × (or less than 1/1.5 of) what the model expects: `gms.fs`, `gms.fc`,
+    /// `gms.sigma`, `gms.c` and the block stiffnesses times one factor (the shape stays the
+    /// model's until `identify`; the experiments that plan from the model then fit the axis).
+    pub friction_scaled: Vec<(&'static str, f64)>,
     /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
     pub cur_pi: (f64, f64),
     /// The position loop's gains and their bounds (once that step has run).
@@ -1489,6 +1556,7 @@ impl Commissioned {
                 .iter()
                 .flat_map(|g| [("pos.kp", g.kp), ("pos.ki", g.ki), ("pos.kd", g.kd)]),
         )
+        .chain(self.friction_scaled.iter().copied())
         .collect()
     }
 }
@@ -1525,7 +1593,8 @@ pub fn slide_threshold(rad_per_count: f64) -> f64 {
 /// slow link cannot hold the current on a sliding axis), from half the expected breakaway
 /// (the device's `gms.fs`) up by a quarter of it each to three times it, then on by a
 /// quarter of the last each (an axis whose friction the device's model underestimates),
-/// within 80 % of the current limit, until the axis has slid ([`slide_threshold`]). Fails when
+/// within 60 % of the current limit (a step to it overshoots in the current loop, and the
+/// trip is at 1.5 × the limit or below), until the axis has slid ([`slide_threshold`]). Fails when
 /// no current flows (a current friction holds, measured) or the axis does not slide.
 pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Error> {
     let i_fs = dev.fs / dev.k_m;
@@ -1537,7 +1606,7 @@ pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Err
     let mut moved = 0.0;
     let mut amps = 0.5 * i_fs;
     let mut last = 0.0;
-    while amps <= 0.8 * dev.i_max {
+    while amps <= 0.6 * dev.i_max {
         primitive(b, &format!("current {amps} 0.01"))?;
         b.wait(0.05)?;
         moved = position(b)? - x0;
@@ -1562,7 +1631,7 @@ pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Err
             )));
         }
         return Err(Error::Device(format!(
-            "the axis did not move with current pulses up to {} ({} N·m, 80 % of lim.i_max): \
+            "the axis did not move with current pulses up to {} ({} N·m, 60 % of lim.i_max): \
              blocked?",
             si(last, "A"),
             num4(last * dev.k_m)
@@ -1719,6 +1788,7 @@ fn commission_steps(
     // pulse that moved it (a user's motor whose friction the model, Table 1 by default, is far
     // from).
     let expected = i_fs;
+    let off = sl.amps > 1.5 * expected || sl.amps < expected / 1.5;
     let i_fs = if sl.amps > 1.5 * expected {
         c.lines.push(format!(
             "breakaway: the axis slid under a pulse of {}, {:.1} times what the device's \
@@ -1838,24 +1908,43 @@ fn commission_steps(
         num4(c.cur_pi.0),
         num4(c.cur_pi.1)
     ));
-    // 9. The position loop's gains for this motor and loop, kd between the device's
+    // 9. A friction model far from the axis scaled to its breakaway (the level measured, the
+    //    shape the model's), for the gains below and for the caller to apply.
+    let ratio = if off { sl.amps * c.k_e / dev.fs } else { 1.0 };
+    if off {
+        let mut paths = vec!["gms.fs", "gms.fc", "gms.sigma", "gms.c"];
+        paths.extend(["gms.k1", "gms.k2", "gms.k3", "gms.k4", "gms.k5", "gms.k6"]);
+        for p in paths {
+            let v = get_param(b, p)?;
+            c.friction_scaled.push((p, v * ratio));
+        }
+        c.lines.push(format!(
+            "friction level: the device's model scaled ×{ratio:.3} to the measured breakaway \
+             ({} N·m: the pulse's current × k_M; its shape stays the model's until \
+             `gms-tune identify`)",
+            num4(sl.amps * c.k_e)
+        ));
+    }
+    // 10. The position loop's gains for this motor and loop, kd between the device's
     //    friction model's Stribeck slope and the loops' stability limit.
-    c.pos = Some(position_gains_for(b, &mut c, cur_hz)?);
+    c.pos = Some(position_gains_for(b, &mut c, cur_hz, ratio)?);
     b.request("disable")?;
     Ok(c)
 }
 
 /// The position loop's gains for the motor `c` measured, the current loop at `cur_hz` with
-/// its new PI, the device's position rate, derivative filter, supply and friction model.
+/// its new PI, the device's position rate, derivative filter, supply and friction model (its
+/// level times `scale`).
 fn position_gains_for(
     b: &mut impl Bench,
     c: &mut Commissioned,
     cur_hz: f64,
+    scale: f64,
 ) -> Result<crate::gains::PositionGains, Error> {
     use crate::gains::{Axis, Stribeck, position_gains};
     let mut k0 = 0.0;
     for i in 1..=6 {
-        k0 += get_param(b, &format!("gms.k{i}"))?;
+        k0 += scale * get_param(b, &format!("gms.k{i}"))?;
     }
     let axis = Axis {
         r: c.r,
@@ -1872,11 +1961,11 @@ fn position_gains_for(
         i_max: get_param(b, "lim.i_max")?,
     };
     let s = Stribeck {
-        fs: get_param(b, "gms.fs")?,
-        fc: get_param(b, "gms.fc")?,
+        fs: scale * get_param(b, "gms.fs")?,
+        fc: scale * get_param(b, "gms.fc")?,
         vs: get_param(b, "gms.vs")?,
         delta: get_param(b, "gms.delta")?,
-        sigma: get_param(b, "gms.sigma")?,
+        sigma: scale * get_param(b, "gms.sigma")?,
     };
     let g = position_gains(&axis, &s).ok_or_else(|| {
         Error::Device(format!(

@@ -663,7 +663,7 @@ fn identify_keeps_the_data_when_the_link_is_lost() {
 
 /// An axis that does not move: the motor not connected (no current flows), or blocked
 /// (it never breaks away): a clear error, exit 1, the bridge off; the current stops at
-/// three times the expected breakaway.
+/// 60 % of the current limit.
 fn identify_says_when_the_axis_does_not_move() {
     for (extra, says) in [
         // An open winding: the device still believes its 10 Ω motor is there.
@@ -674,7 +674,7 @@ fn identify_says_when_the_axis_does_not_move() {
         (
             // Blocked: 100 times the friction the device's compensator (Table 1) expects.
             "[plant.actuator]\nfs = 2.2e-2\nfc = 1.25e-2\n[controller.gms]\nfs = 220e-6\nfc = 125e-6",
-            "did not move with current pulses up to 3 × the expected breakaway",
+            "did not move with current pulses up to 264.5 mA (0.001746 N·m, 60 % of lim.i_max)",
         ),
     ] {
         let dir = tempfile::tempdir().unwrap();

@@ -143,16 +143,30 @@ fn move_counts(dev: &mut LocalDevice, counts: f64) -> (f64, f64, String) {
     ((field("pos") - x0) / rpc, field("error_counts"), status)
 }
 
-/// The friction identified on the coarse encoder: the sliding curve (Fs, Fc, Vs, sigma)
-/// within bounds of the hidden truth; what a 3.14 mrad count can say of the pre-sliding.
+/// The friction identified on the coarse encoder after commissioning (which scales the
+/// device's Table 1 model to the measured breakaway, so that the experiments plan from the
+/// axis's level): the sliding curve (Fs, Fc) within bounds of the hidden truth; what a
+/// 3.14 mrad count can say of the pre-sliding.
 #[test]
-#[ignore = "issue 25, not reached yet: the staircase stops at 3 × the device's gms.fs \
-            (Table 1), below this motor's breakaway"]
 fn identification_on_a_coarse_encoder() {
     let sc = scenario("");
     let mut dev = LocalDevice::new(&sc).unwrap();
+    let c = commission(&mut dev, 5.0).unwrap();
+    for (k, v) in c.settings() {
+        assert!(
+            dev.ask(&format!("set {k} {v}")).starts_with("ok"),
+            "{k} {v}"
+        );
+    }
     let info = DeviceInfo::read(&mut dev).unwrap();
-    let plans = Plans::new(&info, &Ranges::default()).unwrap();
+    let plans = Plans::new(
+        &info,
+        &Ranges {
+            window: Some(15.0),
+            ..Ranges::default()
+        },
+    )
+    .unwrap();
     let dir = tempfile::tempdir().unwrap();
     let (g, id) = identify_on(&mut dev, &plans, dir.path(), 4, false, &mut |_, _, _| {}).unwrap();
     let e = identification_errors(&sc.plant.actuator, &g, &id.spec);
@@ -168,7 +182,23 @@ fn identification_on_a_coarse_encoder() {
         e[6] * 100.0,
         g.presliding.len()
     );
-    assert!(e[0] < 0.10 && e[1] < 0.10, "{e:?}");
+    for l in &id.report {
+        eprintln!("  {l}");
+    }
+    // What 3.14 mrad counts resolve: the Coulomb level within 5 %, the breakaway within 20 %
+    // (the slowest runs stick and slip between counts), the virgin curve within 20 % of Fs
+    // (pre-sliding spans ten counts). Vs, delta and sigma are not resolved (the loop's count
+    // steps roughen the sliding at every speed), nor the lag (skipped, the paper's rule).
+    assert!(e[1] < 0.05, "fc {e:?}");
+    assert!(e[0] < 0.20, "fs {e:?}");
+    assert!(e[6] < 0.20, "virgin {e:?}");
+    assert!(
+        id.report
+            .iter()
+            .any(|l| l.starts_with("frictional lag: not measured")),
+        "{:?}",
+        id.report
+    );
 }
 
 #[test]
