@@ -1,8 +1,16 @@
-//! Writes the linker's `memory.x` for the board being built (cortex-m-rt's `link.x` includes
-//! it) from the board's `src/boards/<board>/memory.rs`, and adds defmt's linker script for this
-//! binary only (the workspace's other thumb binaries do not use defmt). The workspace's
-//! top-level `memory.x` is the default board's (the F405): it must say the same, and the build
-//! fails if it does not.
+//! Writes the linker's memory map for the board being built, `board-memory.x` in this build's
+//! output directory, from the board's `src/boards/<board>/memory.rs`, and adds defmt's linker
+//! script for this binary only (the workspace's other thumb binaries do not use defmt).
+//!
+//! cortex-m-rt's `link.x` does `INCLUDE memory.x`, and the linker looks in its working
+//! directory — cargo runs it in the workspace root — before its search path: a `memory.x`
+//! with a `MEMORY` block at the root would be the one every board links with. The root's
+//! `memory.x` therefore holds no map, only `INCLUDE board-memory.x`, which each thumb binary's
+//! build script writes into its own output directory (this one; `target-bench`'s for QEMU).
+//! The build fails if the root file ever holds a `MEMORY` block again. The map defines
+//! `__gms_app_end`, `__gms_ram_end` and `__gms_store_start`, which `cargo xtask check-elf`
+//! reads back from the linked image against the board's numbers, and asserts at link time that
+//! the firmware's flash ends at or before the parameter store.
 use std::{env, fs, path::PathBuf};
 
 #[path = "src/boards/f405/memory.rs"]
@@ -18,10 +26,6 @@ fn memory_lines(app_len: u32, ram_len: u32) -> [String; 2] {
         format!("FLASH : ORIGIN = 0x08000000, LENGTH = {}K", app_len / 1024),
         format!("RAM : ORIGIN = 0x20000000, LENGTH = {}K", ram_len / 1024),
     ]
-}
-
-fn squash(line: &str) -> String {
-    line.split_whitespace().collect::<Vec<_>>().join(" ")
 }
 
 fn main() {
@@ -45,27 +49,32 @@ fn main() {
         )
     };
     let lines = memory_lines(app, ram);
-    if name == "f405" {
-        let top = dir.join("../memory.x");
-        let text = fs::read_to_string(&top).expect("read the top-level memory.x");
-        let have: Vec<String> = text.lines().map(squash).collect();
-        for l in &lines {
-            assert!(
-                have.iter().any(|h| h == l),
-                "memory.x (top level) does not say `{l}` as src/boards/f405/memory.rs does"
-            );
-        }
-        println!("cargo:rerun-if-changed={}", top.display());
-    }
+    let top = dir.join("../memory.x");
+    let root = fs::read_to_string(&top).expect("read the top-level memory.x");
+    let code: String = root
+        .split("*/")
+        .map(|part| part.split("/*").next().unwrap_or(""))
+        .collect();
+    assert!(
+        !code.contains("MEMORY") && code.contains("INCLUDE board-memory.x"),
+        "the top-level memory.x must hold no MEMORY block, only `INCLUDE board-memory.x`: a map \
+         there would be found before every board's own (see firmware/build.rs)"
+    );
+    println!("cargo:rerun-if-changed={}", top.display());
     let text = format!(
         "/* Board {name}: written by firmware/build.rs from src/boards/{name}/memory.rs. The \
-         parameter store\n * (0x{:08X}..0x{:08X}) lies beyond FLASH. */\nMEMORY\n{{\n  {}\n  {}\n}}\n",
-        0x0800_0000 + store.0,
-        0x0800_0000 + store.1,
+         parameter store\n * (0x{store0:08X}..0x{store1:08X}) lies beyond FLASH. */\nMEMORY\n{{\n  {}\n  {}\n}}\n\
+         /* Read back from the image by `cargo xtask check-elf`. */\n\
+         __gms_app_end = ORIGIN(FLASH) + LENGTH(FLASH);\n\
+         __gms_ram_end = ORIGIN(RAM) + LENGTH(RAM);\n\
+         __gms_store_start = 0x{store0:08X};\n\
+         ASSERT(__gms_app_end <= __gms_store_start, \"board {name}: the firmware's flash reaches the parameter store\");\n",
         lines[0],
-        lines[1]
+        lines[1],
+        store0 = 0x0800_0000 + store.0,
+        store1 = 0x0800_0000 + store.1,
     );
-    fs::write(out.join("memory.x"), text).expect("write memory.x");
+    fs::write(out.join("board-memory.x"), text).expect("write board-memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=src/boards/f405/memory.rs");
     println!("cargo:rerun-if-changed=src/boards/nucleo_f446/memory.rs");

@@ -16,6 +16,7 @@
 
 use core::cell::UnsafeCell;
 
+use cortex_m::peripheral::DWT;
 use embassy_stm32::adc::Adc;
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
@@ -29,7 +30,7 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
-use gms_core::drive::{self, BridgeOff};
+use gms_core::drive::{self, BridgeOff, Deadman, Stall};
 
 bind_interrupts!(struct Irqs {
     OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
@@ -98,8 +99,51 @@ pub fn config() -> embassy_stm32::Config {
     // The DMA interrupts embassy enables (none used but the loop's, set apart in
     // `start_control`) below the loop.
     c.dma_interrupt_priority = crate::irq::DRIVERS;
+    // DBGMCU_CR.DBG_SLEEP (RM0090 §38.16.3), said here rather than left to embassy's default
+    // (embassy-stm32 0.6 `lib.rs` writes DBG_SLEEP/STOP/STANDBY from this field, default true):
+    // the executor sleeps in WFI between events, and with DBG_SLEEP off HCLK stops there, so a
+    // probe could no longer read the RTT log while the firmware idles. It keeps the core's
+    // clock on in sleep (some mA); nothing here uses stop or standby.
+    c.enable_debug_during_sleep = true;
     c
 }
+
+/// HSI's frequency \[Hz\] (RM0090 §6.2.2): the core's clock until embassy's RCC set-up.
+const HSI_HZ: u32 = 16_000_000;
+
+/// How long the HSE may take to become ready \[ms\]: a crystal's start-up is 2 ms typical
+/// (DS8626 "HSE 4-26 MHz oscillator characteristics", t_SU(HSE)); an external clock in
+/// bypass is ready at once.
+pub const HSE_WAIT_MS: u32 = 100;
+
+/// Starts the HSE as the board describes it (bypass or crystal) and waits at most
+/// [`HSE_WAIT_MS`] for HSERDY, timed by the DWT cycle counter at HSI (call with it enabled,
+/// before embassy's RCC set-up, which waits for HSERDY without a bound: embassy-stm32 0.6
+/// `rcc/f247.rs`, `while !RCC.cr().read().hserdy() {}`; with HSE already ready it goes on
+/// at once, writing the same HSEBYP and HSEON). False, with the HSE switched off again, if it
+/// did not come.
+pub fn start_hse() -> bool {
+    let rcc = pac::RCC;
+    // HSEBYP is written while the HSE is off (RM0090 §7.3.1).
+    rcc.cr().modify(|w| w.set_hseon(false));
+    rcc.cr().modify(|w| w.set_hsebyp(CLOCKS.hse_bypass));
+    rcc.cr().modify(|w| w.set_hseon(true));
+    let t0 = DWT::cycle_count();
+    let limit = HSI_HZ / 1000 * HSE_WAIT_MS;
+    while !rcc.cr().read().hserdy() {
+        if DWT::cycle_count().wrapping_sub(t0) > limit {
+            rcc.cr().modify(|w| w.set_hseon(false));
+            return false;
+        }
+    }
+    true
+}
+
+/// How long the start-up calibration waits for one sequence of current samples \[µs\]:
+/// 20 PWM periods at the 20 kHz the timer runs at then. A dead chain costs one such wait
+/// (gms-core's `calibrate_sense` stops at the first missing reading), well inside the
+/// watchdog.
+pub const SENSE_WAIT_US: u32 = 1000;
 
 /// The DMA's destination: the last sequence of current-sense conversions. Written only by
 /// DMA2 stream 0, read only with volatile reads after its transfer-complete flag.
@@ -139,18 +183,23 @@ impl ControlHw {
         sum
     }
 
-    /// Waits for the next sequence (at most about 40 ms) and returns its sum, for the
-    /// start-up calibration while the control interrupt is off. 0 if none came: the ADC is
-    /// not running, which the calibration reports as a `current_sense` fault.
-    pub fn next_current_codes(&mut self) -> u32 {
+    /// Waits for the next sequence (at most [`SENSE_WAIT_US`], timed by the DWT cycle
+    /// counter) and returns its sum, for the start-up calibration while the control
+    /// interrupt is off. `None` if none came: the ADC is not triggered or its DMA stopped,
+    /// which the calibration reports as a `current_sense` fault.
+    pub fn next_current_codes(&mut self) -> Option<u32> {
         ack_sample();
-        for _ in 0..1_000_000u32 {
+        let t0 = DWT::cycle_count();
+        let limit = CLOCKS.hclk_hz() / 1_000_000 * SENSE_WAIT_US;
+        loop {
             if pac::DMA2.isr(0).read().tcif(0) {
                 ack_sample();
-                return self.current_codes();
+                return Some(self.current_codes());
+            }
+            if DWT::cycle_count().wrapping_sub(t0) > limit {
+                return None;
             }
         }
-        0
     }
 
     /// Writes the two bridge inputs' compare values (take effect at the next PWM period).
@@ -190,14 +239,16 @@ fn ack_sample() {
     });
 }
 
+/// TIMx_SR written to clear UIF alone: rc_w0 flags, 1 leaves a flag, 0 clears it; reserved
+/// bits stay 0 (TIMx_SR's flags: bits 0-7 and 9-12, RM0090 §17.4.5).
+const SR_CLEAR_UIF: u32 = 0x1EFE;
+
 /// Waits (at most about 40 ms, hundreds of periods) for TIM8's next update event; the
 /// counter's direction just after it: `Some(true)` counting up (the update was at the bottom),
 /// `Some(false)` down (at the top), `None` if none came.
 fn next_update_counting_up() -> Option<bool> {
     let t = pac::TIM8;
-    // rc_w0 flags: 1 leaves a flag, 0 clears it; only UIF is cleared, reserved bits stay 0
-    // (TIMx_SR's flags: bits 0-7 and 9-12, RM0090 §17.4.5).
-    t.sr().write(|w| w.0 = 0x1EFE);
+    t.sr().write(|w| w.0 = SR_CLEAR_UIF);
     for _ in 0..1_000_000u32 {
         if t.sr().read().uif() {
             return Some(t.cr1().read().dir() == pac::timer::vals::Dir::UP);
@@ -266,6 +317,11 @@ fn sense_init() {
         w.set_minc(true);
         w.set_circ(true);
         w.set_tcie(true);
+        // A transfer error (a bus error: the stream stops, EN cleared) and a direct-mode error
+        // (RM0090 §10.3.18) interrupt too, on the same vector: the handler switches the bridge
+        // off before anything else.
+        w.set_teie(true);
+        w.set_dmeie(true);
         w.set_en(true);
     });
     // ADC1 (RM0090 §13.13): 12 bits, scan of 16 ranks of channel 10, each sampled 15 cycles;
@@ -277,7 +333,9 @@ fn sense_init() {
         w.set_res(Res::BITS12);
         w.set_scan(true);
         w.set_eocie(false);
-        w.set_ovrie(false);
+        // An overrun (a conversion lost: the ADC stops its DMA requests until OVR is cleared,
+        // RM0090 §13.8.1) interrupts on the ADC vector, at the deadman's priority.
+        w.set_ovrie(true);
     });
     adc.smpr1()
         .modify(|w| w.set_smp((SENSE_CHANNEL - 10) as usize, SampleTime::CYCLES15));
@@ -391,8 +449,14 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     // afterwards: embassy's flash driver (flash/f4.rs) only touches DCEN on dual-bank parts
     // (erratum 2.2.12), so `storage.rs` flushes the data cache after each erase and write, as
     // ST's HAL does after an erase (`FLASH_FlushCaches`).
+    //
+    // The prefetch buffer only where the part supports it: not on an STM32F405/407 of
+    // revision A, nor where DBGMCU_IDCODE cannot be read as this part (gms-core's
+    // `hw::f4_prefetch_allowed`).
+    let idcode = pac::DBGMCU.idcode().read().0;
+    let prefetch = (idcode & 0xFFF) == PART.dev_id && gms_core::hw::f4_prefetch_allowed(idcode);
     pac::FLASH.acr().modify(|w| {
-        w.set_prften(true);
+        w.set_prften(prefetch);
         w.set_icen(true);
         w.set_dcen(true);
     });
@@ -416,6 +480,14 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     pwm.ch2().set_duty_cycle(0);
     pwm.ch1().enable();
     pwm.ch2().enable();
+    // The bridge inputs' edges at low speed (OSPEEDR = 00, RM0090 §8.4.3; embassy's AF pins
+    // come up at very high speed): at 20 kHz nothing needs nanosecond edges, and slower ones
+    // ring less on the wires to the DRV8871 (its inputs deglitch anyway).
+    pac::GPIOC.ospeedr().modify(|w| {
+        for pin in BRIDGE_PINS {
+            w.set_ospeedr(pin, pac::gpio::vals::Ospeedr::LOW_SPEED);
+        }
+    });
     // Off-state when idle: outputs forced to their idle level (OIS1 = OIS2 = 0: low) whenever
     // MOE is cleared, by software, a debug halt or a panic (RM0090 §17.4.18).
     pac::TIM8.bdtr().modify(|w| {
@@ -475,7 +547,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
     // the reset priority 0, level with the loop (time_driver/gp16.rs); USB lowest.
     interrupt::TIM4.set_priority(crate::irq::DRIVERS);
-    interrupt::OTG_FS.set_priority(crate::irq::USB);
+    interrupt::OTG_FS.set_priority(crate::irq::LINK);
 
     let (run_pin, fault_pin) = crate::boards::led_pins!(p);
     let hw = ControlHw {
@@ -497,23 +569,65 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
 }
 
 /// Enables the control interrupt (the sense DMA's transfer complete, once per PWM period) at
-/// the top priority (`irq.rs`).
+/// [`crate::irq::CONTROL`], and above it the deadman (TIM8's update, once per period at the
+/// counter's bottom) and the ADC's overrun at [`crate::irq::DEADMAN`].
 pub fn start_control() {
     ack_sample();
     // The NVIC kept the interrupt pending while it was masked: without this the handler
     // would run once at once, mid-sequence.
     interrupt::DMA2_STREAM0.unpend();
     interrupt::DMA2_STREAM0.set_priority(crate::irq::CONTROL);
-    // SAFETY: the handler below only touches state it owns or takes through a critical
-    // section; enabling it cannot break another critical section.
-    unsafe { interrupt::DMA2_STREAM0.enable() };
+    pac::TIM8.sr().write(|w| w.0 = SR_CLEAR_UIF);
+    interrupt::TIM8_UP_TIM13.unpend();
+    interrupt::TIM8_UP_TIM13.set_priority(crate::irq::DEADMAN);
+    pac::TIM8.dier().modify(|w| w.set_uie(true));
+    interrupt::ADC.set_priority(crate::irq::DEADMAN);
+    // SAFETY: the handlers below only touch state they own, atomics, or data behind a
+    // critical section; enabling them cannot break another critical section.
+    unsafe {
+        interrupt::TIM8_UP_TIM13.enable();
+        interrupt::ADC.enable();
+        interrupt::DMA2_STREAM0.enable();
+    }
 }
 
-/// The control interrupt: the current samples of this PWM period are in.
+/// The control interrupt: the current samples of this PWM period are in — or the sense DMA
+/// failed, which switches the bridge off for good.
 #[interrupt]
 fn DMA2_STREAM0() {
     static mut LOOP: Option<crate::control::Loop> = None;
+    let isr = pac::DMA2.isr(0).read();
+    let error = Stall::from_sense_flags(isr.teif(0), isr.dmeif(0), false);
+    if error != Stall::None {
+        ack_sample();
+        crate::control::trip(error);
+        return;
+    }
     crate::control::on_sample(LOOP);
+}
+
+/// The deadman, once per PWM period at TIM8's update (the counter's bottom, before the
+/// period's step): two periods without a step switch the bridge off (gms-core's
+/// `drive::Deadman`); after a trip the update interrupt is switched off.
+#[interrupt]
+fn TIM8_UP_TIM13() {
+    static mut DEADMAN: Deadman = Deadman::new();
+    pac::TIM8.sr().write(|w| w.0 = SR_CLEAR_UIF);
+    if DEADMAN.tick(crate::control::steps()) {
+        crate::control::trip(Stall::NoStep);
+        pac::TIM8.dier().modify(|w| w.set_uie(false));
+    }
+}
+
+/// The sense ADC overran: the bridge off for good, the interrupt off (its flag cleared).
+#[interrupt]
+fn ADC() {
+    let adc = pac::ADC1;
+    if Stall::from_sense_flags(false, false, adc.sr().read().ovr()) != Stall::None {
+        crate::control::trip(Stall::AdcOverrun);
+    }
+    adc.cr1().modify(|w| w.set_ovrie(false));
+    adc.sr().modify(|w| w.set_ovr(false));
 }
 
 /// The control interrupt before the loop is handed over: bridge off, flags cleared.

@@ -12,12 +12,20 @@
 //! the previous step's start goes in with the inputs: a step more than 1.5 periods after the
 //! last means a period was missed (another interrupt or a critical section held the loop
 //! off), which the core counts and latches as an overrun while the bridge drives.
+//!
+//! Each step counts itself in [`STEPS`] first thing, for the deadman above it (`board.rs`,
+//! gms-core's `drive::Deadman`), which switches the bridge off through [`trip`] when two PWM
+//! periods pass without a step or the sense chain reports an error. A trip is terminal: the
+//! cause stays in [`STALL`], the status says `control_stall`, a step that still runs halts its
+//! core, and the supervisor stops feeding the watchdog.
 
 use core::cell::RefCell;
+use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
+use gms_core::drive::{Faults, Stall};
 
 use crate::board::ControlHw;
 use crate::irq::IrqOffRawMutex;
@@ -28,6 +36,42 @@ pub static MAILBOX: Mutex<IrqOffRawMutex, RefCell<Mailbox>> =
 
 /// Telemetry samples to the comms task (dropped when it falls behind).
 pub static TELEMETRY: Channel<IrqOffRawMutex, Sample, 64> = Channel::new();
+
+/// Control steps started so far (wrapping): written by the control interrupt only, read by
+/// the deadman.
+static STEPS: AtomicU32 = AtomicU32::new(0);
+
+/// Why the deadman switched the bridge off ([`Stall`] as a byte; 0 while it has not).
+static STALL: AtomicU8 = AtomicU8::new(Stall::None as u8);
+
+/// Control steps started so far (wrapping), for the deadman.
+#[inline(always)]
+pub fn steps() -> u32 {
+    STEPS.load(Ordering::Relaxed)
+}
+
+/// What the deadman found ([`Stall::None`] while the loop runs).
+pub fn stall() -> Stall {
+    Stall::from_u8(STALL.load(Ordering::Relaxed))
+}
+
+/// Switches the bridge off for good from the deadman, an error interrupt or the supervisor:
+/// the pins low as GPIO outputs (registers only), the first cause kept, and `control_stall`
+/// put in the status the host reads (the loop may never run again to say it).
+pub fn trip(cause: Stall) {
+    crate::board::bridge_off_now();
+    let _ = STALL.compare_exchange(
+        Stall::None as u8,
+        cause as u8,
+        Ordering::Relaxed,
+        Ordering::Relaxed,
+    );
+    MAILBOX.lock(|m| {
+        let mut m = m.borrow_mut();
+        m.status.faults.latch(Faults::CONTROL_STALL);
+        m.status.enabled = false;
+    });
+}
 
 /// The loop's state, handed to the interrupt once at start.
 static HANDOFF: Mutex<IrqOffRawMutex, RefCell<Option<Loop>>> = Mutex::new(RefCell::new(None));
@@ -63,7 +107,16 @@ impl Loop {
     /// One PWM period.
     fn step(&mut self) {
         let t0 = cortex_m::peripheral::DWT::cycle_count();
+        // Only this interrupt writes it: a load and a store, no read-modify-write needed.
+        STEPS.store(
+            STEPS.load(Ordering::Relaxed).wrapping_add(1),
+            Ordering::Relaxed,
+        );
         self.hw.ack_sample();
+        if STALL.load(Ordering::Relaxed) != Stall::None as u8 {
+            // The deadman tripped while this loop was held off: it stays off and says so.
+            self.core.halt(Faults::CONTROL_STALL);
+        }
         // The DWT counter wraps every 25.6 s at 168 MHz: a difference of one period is exact
         // across the wrap. The first step has nothing to compare with.
         let since_last = if self.last_start == 0 {

@@ -6,11 +6,16 @@
 //! - `comms`: USB CDC-ACM and the bench protocol in the thread executor.
 //! - `storage`: the parameter record in flash (sequential-storage).
 //!
-//! Start-up: clocks, the watchdog, peripherals (the bridge off); the stored parameters
-//! (defaults and a latched `invalid_params` fault when missing or invalid); the current-sense
-//! zero measured with the bridge off (a latched `current_sense` fault when out of the board's window); the control
-//! interrupt; USB. A panic, a HardFault or an unhandled interrupt switches the bridge off
-//! before anything else (`board::bridge_off_now`), and so does a debug halt (TIM8 stops).
+//! Start-up: a first log line on the reset clock (HSI); the HSE started and waited for within
+//! a bound (a clear log line and a halt, bridge pins untouched at reset, if it does not come);
+//! clocks, the watchdog, peripherals (the bridge off); the stored parameters (defaults and a
+//! latched `invalid_params` fault when missing or invalid); the current-sense zero measured
+//! with the bridge off, each reading waited for within a bound (a latched `current_sense`
+//! fault and a log line saying why, when the chain is dead or its zero out of the board's
+//! window); the control interrupt and the deadman above it; USB. A panic, a HardFault or an
+//! unhandled interrupt switches the bridge off before anything else
+//! (`board::bridge_off_now`), and so does a debug halt (TIM8 stops); so does the deadman when
+//! the control step has not run for two PWM periods, or the sense chain's DMA or ADC fails.
 #![no_std]
 #![no_main]
 
@@ -31,29 +36,49 @@ use embassy_stm32::{gpio::Output, peripherals::IWDG};
 use embassy_time::Timer;
 use embassy_usb::UsbDevice;
 use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
-use gms_core::device::{self, ControlLoop, ParamStore as _};
-use gms_core::drive::Faults;
+use gms_core::device::{self, ControlLoop, ParamStore as _, SenseTrouble};
+use gms_core::drive::{Faults, Stall};
 use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::control::Loop;
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
-    static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
-    let (mut hw, rest) = board::init(EP_OUT.init([0; 256]));
+    // The first line, on the reset clock, before anything that could hang.
     info!(
-        "gms firmware {} on board {} ({})",
+        "gms firmware {} on board {} ({}): starting on HSI",
         env!("CARGO_PKG_VERSION"),
         board::NAME,
         board::memory::PROBE_RS_CHIP
     );
-
-    // The DWT cycle counter times the control step.
-    // SAFETY: only the DCB and DWT are touched, here, before the control interrupt starts;
-    // nothing else in the firmware uses them.
+    // The DWT cycle counter times the HSE's start, the calibration's waits and the control
+    // step.
+    // SAFETY: only the DCB and DWT are touched, here, before any interrupt starts; nothing
+    // else in the firmware writes them.
     let mut cp = unsafe { cortex_m::Peripherals::steal() };
     cp.DCB.enable_trace();
     cp.DWT.enable_cycle_counter();
+    if !board::start_hse() {
+        // Before embassy's RCC set-up, which would wait for it forever; the watchdog is not
+        // started and the bridge pins are still inputs (the DRV8871's pull-downs: coast).
+        error!(
+            "no HSE ({} Hz{}) within {} ms: {}. Stopped here.",
+            board::CLOCKS.hse_hz,
+            if board::CLOCKS.hse_bypass {
+                ", external clock in bypass"
+            } else {
+                ", crystal"
+            },
+            board::HSE_WAIT_MS,
+            board::HSE_HINT
+        );
+        loop {
+            cortex_m::asm::wfi();
+        }
+    }
+    static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
+    let (mut hw, rest) = board::init(EP_OUT.init([0; 256]));
+    info!("clocks up: {} Hz", board::CLOCKS.sysclk_hz());
 
     let mut faults = Faults::NONE;
     if rest.update_at_bottom {
@@ -100,10 +125,22 @@ async fn main(spawner: Spawner) {
     let zero = device::calibrate_sense(&board::BOARD, start.settings.sense_v_per_a, || {
         hw.next_current_codes()
     });
-    if zero.faults.is_empty() {
-        info!("current-sense zero at {} codes", zero.sense.offset);
-    } else {
-        warn!("current-sense zero out of the board's window: check the amplifier");
+    match zero.trouble {
+        SenseTrouble::None => info!("current-sense zero at {} codes", zero.sense.offset),
+        SenseTrouble::NoSamples { taken } => error!(
+            "current_sense: no ADC samples within {} us after {} of {} readings: the ADC is \
+             not triggered by TIM8 or its DMA stopped; the bridge stays off",
+            board::SENSE_WAIT_US,
+            taken,
+            device::ZERO_SAMPLES
+        ),
+        SenseTrouble::OutOfWindow { mean_code } => warn!(
+            "current_sense: zero at {} codes, outside {} +- {}: check the amplifier's supply \
+             and reference; the bridge stays off until `clear`",
+            mean_code,
+            board::BOARD.sense.zero_code,
+            board::BOARD.sense.zero_tolerance
+        ),
     }
     faults.latch(zero.faults);
     let sense = zero.sense;
@@ -209,7 +246,8 @@ async fn comms_task(
 }
 
 /// Watchdog, LEDs and fault logs, every 250 ms. The watchdog is fed only while the control
-/// interrupt keeps running (its step counter advances): a stuck loop resets the MCU.
+/// interrupt keeps running (its step counter advances) and the deadman has not tripped: a
+/// stall is terminal, the watchdog resets the MCU.
 #[embassy_executor::task]
 async fn supervisor(
     mut wdg: IndependentWatchdog<'static, IWDG>,
@@ -219,17 +257,27 @@ async fn supervisor(
     let mut last_steps = 0u64;
     let mut last_faults = Faults::NONE;
     let mut tick = 0u32;
+    let mut told = false;
     loop {
         Timer::after_millis(250).await;
         tick = tick.wrapping_add(1);
         let st = comms::status();
-        if st.steps != last_steps {
-            wdg.pet();
-            last_steps = st.steps;
-        } else {
-            // The loop (and its fault checks) no longer runs: nothing may drive the bridge.
-            board::bridge_off_now();
-            error!("control loop stalled: bridge off, the watchdog will reset");
+        if st.steps == last_steps {
+            // Slower than the deadman, but the last word: the loop no longer runs.
+            control::trip(Stall::NoStep);
+        }
+        last_steps = st.steps;
+        match control::stall() {
+            Stall::None => wdg.pet(),
+            cause => {
+                if !told {
+                    error!(
+                        "control_stall: {}: bridge off; the watchdog resets the board",
+                        cause.meaning()
+                    );
+                    told = true;
+                }
+            }
         }
         if st.faults != last_faults {
             if !st.faults.is_empty() {

@@ -39,6 +39,8 @@ pub struct F4Limits {
     pub pclk1_max: u32,
     /// Highest APB2 clock \[Hz\].
     pub pclk2_max: u32,
+    /// The part's DEV_ID in DBGMCU_IDCODE (RM0090 §38.6.1, RM0390 §33.6.1).
+    pub dev_id: u32,
 }
 
 /// STM32F405/407 (DS8626): 168 MHz, APB1 42 MHz, APB2 84 MHz.
@@ -46,6 +48,7 @@ pub const F405_LIMITS: F4Limits = F4Limits {
     sysclk_max: 168_000_000,
     pclk1_max: 42_000_000,
     pclk2_max: 84_000_000,
+    dev_id: 0x413,
 };
 
 /// STM32F446 (DS10693): 180 MHz, APB1 45 MHz, APB2 90 MHz.
@@ -53,6 +56,7 @@ pub const F446_LIMITS: F4Limits = F4Limits {
     sysclk_max: 180_000_000,
     pclk1_max: 45_000_000,
     pclk2_max: 90_000_000,
+    dev_id: 0x421,
 };
 
 impl F4Clocks {
@@ -208,5 +212,31 @@ impl MemoryMap {
             return Err("no flash or no RAM for the firmware");
         }
         Ok(())
+    }
+}
+
+/// Whether the flash prefetch buffer may be switched on, from the part's `DBGMCU_IDCODE`
+/// (RM0090 §38.6.1: DEV_ID in bits 11:0, REV_ID in bits 31:16). The STM32F405/407/415/417
+/// (DEV_ID 0x413) of revision A (REV_ID 0x1000) do not support it: ST's own clock set-up
+/// (STM32CubeF4's examples, `SystemClock_Config`) enables it only from revision Z (0x1001)
+/// up. Every other part and revision may.
+pub const fn f4_prefetch_allowed(idcode: u32) -> bool {
+    let dev_id = idcode & 0xFFF;
+    let rev_id = idcode >> 16;
+    !(dev_id == 0x413 && rev_id == 0x1000)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn prefetch_only_where_the_part_supports_it() {
+        // STM32F405 revision A: no; Z (0x1001), 1 (0x1007) and later: yes.
+        assert!(!f4_prefetch_allowed(0x1000_6413));
+        assert!(f4_prefetch_allowed(0x1001_6413));
+        assert!(f4_prefetch_allowed(0x1007_6413));
+        // The F446 (DEV_ID 0x421) of revision A: yes.
+        assert!(f4_prefetch_allowed(0x1000_6421));
     }
 }

@@ -40,7 +40,7 @@ fn buffer() -> &'static mut [f32] {
 fn rest() -> ControlLoop {
     let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, 3.4, || 16 * 2048);
+    let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
     ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer())
 }
 
@@ -82,12 +82,40 @@ fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
     assert!(!lp.enabled());
 }
 
+/// The board's deadman halts the loop from outside the step: the bridge off, `control_stall`
+/// latched and in the status, and an `enable` refused while it stays latched.
+#[test]
+fn a_halt_from_the_deadman_switches_off_and_says_so() {
+    let period = 168_000_000 / 20_000;
+    let mut lp = rest();
+    let enable = Requests {
+        enable: true,
+        ..Requests::default()
+    };
+    step(&mut lp, period, Some(enable.clone()));
+    for _ in 0..40 {
+        step(&mut lp, period, None);
+    }
+    assert!(lp.enabled());
+    lp.halt(Faults::CONTROL_STALL);
+    assert!(!lp.enabled());
+    for _ in 0..40 {
+        step(&mut lp, period, None);
+    }
+    assert!(lp.status().faults.contains(Faults::CONTROL_STALL));
+    step(&mut lp, period, Some(enable));
+    assert!(!lp.enabled(), "a latched stall keeps the bridge off");
+    let mut names = String::new();
+    lp.faults().write_names(&mut names).unwrap();
+    assert_eq!(names, "control_stall");
+}
+
 #[test]
 fn after_enable_the_bridge_wakes_in_brake_before_control() {
     let mut b = board();
     b.bridge_wake_s = 1e-3;
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, 3.4, || 16 * 2048);
+    let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
     let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer());
     let period = 168_000_000 / 20_000;
     let mut req = Some(Requests {
@@ -405,7 +433,7 @@ fn board_device(
     let mut store = MemStore(stored);
     let defaults = default_settings();
     let start = startup(store.load(), &defaults, &b).unwrap();
-    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || 16 * 2048);
+    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(16 * 2048));
     let lp = ControlLoop::new(b, start.applied, zero.sense, zero.faults, 0, buffer());
     let link = InlineLink {
         lp,

@@ -290,7 +290,7 @@ fn faults_latch_until_cleared() {
     assert_eq!(names, "encoder_jump,overrun");
     let mut names = String::new();
     Faults(0x8101).write_names(&mut names).unwrap();
-    assert_eq!(names, "over_current,unknown");
+    assert_eq!(names, "over_current,control_stall,unknown");
 }
 
 #[test]
@@ -317,9 +317,41 @@ fn bridge_outputs() {
     assert_eq!(bridge_compare(1.5, 4200, true), (4201, 0));
     assert_eq!(bridge_compare(-1.0, 4200, true), (0, 4201));
     // Zero and NaN: both high (brake); disabled: both low (coast).
-    assert_eq!(bridge_compare(0.0, 4200, true), (4201, 4200));
-    assert_eq!(bridge_compare(f32::NAN, 4200, true), (4201, 4200));
+    assert_eq!(bridge_compare(0.0, 4200, true), (4201, 4201));
+    assert_eq!(bridge_compare(f32::NAN, 4200, true), (4201, 4201));
     assert_eq!(bridge_compare(0.5, 4200, false), (0, 0));
+}
+
+/// The ticks of one centre-aligned period (RM0090 §17.3.3: the counter counts 0 up to ARR,
+/// then ARR down to 1) in which PWM mode 1's output is low (CNT >= CCR, §17.3.10).
+fn low_ticks(ccr: u32, arr: u32) -> u32 {
+    (0..arr)
+        .chain((1..=arr).rev())
+        .filter(|&cnt| cnt >= ccr)
+        .count() as u32
+}
+
+/// Through a model of the timer: the PWM side is low (driving) for |duty| of the period to a
+/// tick, the other side never; at no duty neither input is ever low, not even the one tick at
+/// the top that a compare value equal to the period leaves (a 6 ns drive pulse per period).
+#[test]
+fn bridge_outputs_through_the_timer() {
+    let arr = 4200u32;
+    for k in 0..=200u32 {
+        let duty = k as f32 / 200.0;
+        for sign in [1.0f32, -1.0] {
+            let (c1, c2) = bridge_compare(sign * duty, arr, true);
+            let (drive, hold) = if sign > 0.0 { (c2, c1) } else { (c1, c2) };
+            let want = (2.0 * duty * arr as f32).round() as u32;
+            assert!(
+                low_ticks(drive, arr).abs_diff(want) <= 1,
+                "duty {duty}: {} ticks low, want {want}",
+                low_ticks(drive, arr)
+            );
+            assert_eq!(low_ticks(hold, arr), 0, "the holding side at duty {duty}");
+        }
+    }
+    assert_eq!(low_ticks(4200, arr), 1, "the glitch the old zero had");
 }
 
 #[test]
@@ -362,10 +394,10 @@ fn limits_from_settings_and_board() {
     assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.75).abs() < 1e-6);
 }
 
-#[test]
-fn sense_zero_at_start() {
-    use gms_core::device::{Board, SenseChain, ZERO_SAMPLES, calibrate_sense};
-    let board = Board {
+/// A board with a two-conversion sense chain around code 2048 ± 150.
+fn sense_board() -> gms_core::device::Board {
+    use gms_core::device::{Board, SenseChain};
+    Board {
         pwm_timer_hz: 168_000_000,
         pwm_max_arr: 65_534,
         encoder_bits: 32,
@@ -387,31 +419,75 @@ fn sense_zero_at_start() {
         has_truth: false,
         bridge_wake_s: 0.0,
         capture_values: 8192,
-    };
+    }
+}
+
+#[test]
+fn sense_zero_at_start() {
+    use gms_core::device::{SenseTrouble, ZERO_SAMPLES, calibrate_sense};
+    let board = sense_board();
     // Sums of two conversions alternating 2100+2101 and 2100+2100: the zero is 2100.25 codes.
     let mut i = 0u32;
     let z = calibrate_sense(&board, 3.4, || {
         i += 1;
-        if i % 2 == 0 { 4201 } else { 4200 }
+        Some(if i % 2 == 0 { 4201 } else { 4200 })
     });
     assert_eq!(i, ZERO_SAMPLES);
     assert_eq!(z.faults, Faults::NONE);
+    assert_eq!(z.trouble, SenseTrouble::None);
     assert_eq!(z.sense.offset, 2100.25);
     assert_eq!(z.sense.amps_per_code, 3.3f32 / 4095.0 / 3.4);
     // 151 codes off (per conversion): the amplifier is not what the board says.
-    let z = calibrate_sense(&board, 3.4, || 2 * (2048 + 151));
+    let z = calibrate_sense(&board, 3.4, || Some(2 * (2048 + 151)));
     assert_eq!(z.faults, Faults::CURRENT_SENSE);
+    assert_eq!(z.trouble, SenseTrouble::OutOfWindow { mean_code: 2199.0 });
     assert_eq!(z.sense.offset, 2048.0);
     // 150 off is still inside; a dead amplifier (0) is not.
     assert!(
-        calibrate_sense(&board, 3.4, || 2 * (2048 - 150))
+        calibrate_sense(&board, 3.4, || Some(2 * (2048 - 150)))
             .faults
             .is_empty()
     );
     assert_eq!(
-        calibrate_sense(&board, 3.4, || 0).faults,
+        calibrate_sense(&board, 3.4, || Some(0)).faults,
         Faults::CURRENT_SENSE
     );
+}
+
+/// A dead sense chain (the ADC never triggered, its DMA stopped): the calibration asks for one
+/// reading more after the last that came, not [`ZERO_SAMPLES`] of them, so that its time is
+/// one of the shell's bounded waits (the firmware's: 1 ms) and not 256 of them, which once
+/// outlasted the watchdog; the fault says why.
+#[test]
+fn a_dead_sense_chain_ends_the_calibration_at_once() {
+    use gms_core::device::{SenseTrouble, ZERO_SAMPLES, calibrate_sense};
+    let board = sense_board();
+    // A model of the DMA: `alive` sequences complete, then none; each wait polls its flag up
+    // to `bound` times.
+    for alive in [0u32, 1, 17, ZERO_SAMPLES - 1] {
+        let bound = 1_000u32;
+        let (mut done, mut polls, mut calls) = (0u32, 0u64, 0u32);
+        let z = calibrate_sense(&board, 3.4, || {
+            calls += 1;
+            for _ in 0..bound {
+                polls += 1;
+                if done < alive {
+                    done += 1;
+                    return Some(2 * 2048);
+                }
+            }
+            None
+        });
+        assert_eq!(z.faults, Faults::CURRENT_SENSE, "{alive}");
+        assert_eq!(z.trouble, SenseTrouble::NoSamples { taken: alive });
+        assert_eq!(calls, alive + 1);
+        assert_eq!(
+            polls,
+            alive as u64 + bound as u64,
+            "one bound spent, {alive}"
+        );
+        assert_eq!(z.sense.offset, board.sense.zero_code);
+    }
 }
 
 /// A model of a bridge input pin: the timer drives it while it is its alternate function,

@@ -179,7 +179,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let adc = Adc::new(sc);
     let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
     let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
-        adc.code(plant.adc())
+        Some(adc.code(plant.adc()))
     });
     let mut faults = start.faults;
     faults.latch(zero.faults);

@@ -132,7 +132,7 @@ fn device_period(out: &mut hio::HostStream) {
     let Ok(a) = device::prepare(&settings, &board) else {
         return;
     };
-    let zero = device::calibrate_sense(&board, 3.4, || 2 * 2048);
+    let zero = device::calibrate_sense(&board, 3.4, || Some(2 * 2048));
     let rpc = settings.rad_per_count();
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the benchmark's only reference to the buffer, taken once.

@@ -13,6 +13,8 @@
 use std::process::{Command, ExitCode};
 use std::time::Duration;
 
+mod elf;
+
 // The boards' memory maps and probe-rs chip names, from the firmware's own files.
 #[path = "../../firmware/src/boards/f405/memory.rs"]
 #[allow(dead_code)]
@@ -29,6 +31,35 @@ const BOARDS: [(&str, &str, &str); 2] = [
         "board-nucleo-f446",
         nucleo_f446::PROBE_RS_CHIP,
     ),
+];
+
+/// The interrupts both boards' firmware handles (stm32-metapac 21 `Interrupt`, the same
+/// numbers on the F405 and the F446): the deadman's and the sense ADC's overrun, the control
+/// interrupt, embassy's time driver, USB.
+const IRQS_COMMON: [(&str, u32); 5] = [
+    ("ADC", 18),
+    ("TIM4", 30),
+    ("TIM8_UP_TIM13", 44),
+    ("DMA2_STREAM0", 56),
+    ("OTG_FS", 67),
+];
+
+/// The boards' maps for `check-elf`.
+const MAPS: [elf::BoardMap; 2] = [
+    elf::BoardMap {
+        name: "f405",
+        app_len: f405::APP_LEN,
+        ram_len: f405::RAM_LEN,
+        store_start: f405::STORE_START,
+        irqs: &IRQS_COMMON,
+    },
+    elf::BoardMap {
+        name: "nucleo-f446",
+        app_len: nucleo_f446::APP_LEN,
+        ram_len: nucleo_f446::RAM_LEN,
+        store_start: nucleo_f446::STORE_START,
+        irqs: &IRQS_COMMON,
+    },
 ];
 
 /// The budgets (instructions).
@@ -52,6 +83,13 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Some("check-elf") => match check_elf(&args[1..]) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: {e}");
+                ExitCode::from(1)
+            }
+        },
         Some("flash") => match flash(&args[1..]) {
             Ok(code) => ExitCode::from(code),
             Err(e) => {
@@ -61,11 +99,31 @@ fn main() -> ExitCode {
         },
         _ => {
             eprintln!(
-                "usage: cargo xtask target-bench [--report-only]\n       cargo xtask flash [--board f405|nucleo-f446]"
+                "usage: cargo xtask target-bench [--report-only]\n       cargo xtask flash [--board f405|nucleo-f446]\n       cargo xtask check-elf --board f405|nucleo-f446 ELF"
             );
             ExitCode::from(2)
         }
     }
+}
+
+/// `cargo xtask check-elf --board NAME ELF`: the static checks of `elf.rs` on a linked image.
+fn check_elf(args: &[String]) -> Result<(), String> {
+    let [flag, name, path] = args else {
+        return Err("usage: cargo xtask check-elf --board f405|nucleo-f446 ELF".into());
+    };
+    if flag != "--board" {
+        return Err("usage: cargo xtask check-elf --board f405|nucleo-f446 ELF".into());
+    }
+    let board = MAPS.iter().find(|m| m.name == name).ok_or_else(|| {
+        let names: Vec<&str> = MAPS.iter().map(|m| m.name).collect();
+        format!("unknown board {name:?} (boards: {})", names.join(", "))
+    })?;
+    let bytes = std::fs::read(path).map_err(|e| format!("cannot read {path}: {e}"))?;
+    let lines = elf::check(board, &bytes).map_err(|e| format!("{path} (board {name}):\n{e}"))?;
+    for l in lines {
+        println!("{name}: {l}");
+    }
+    Ok(())
 }
 
 /// `cargo xtask flash [--board NAME]`: builds the firmware for the board (default f405) and

@@ -13,27 +13,74 @@ use super::{
 /// [`Board::sense_oversample`] conversions).
 pub const ZERO_SAMPLES: u32 = 256;
 
+/// Why the start-up calibration could not use the current sense.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SenseTrouble {
+    /// None: the zero was measured and lies in the board's window.
+    None,
+    /// A reading did not come within the shell's bound (the ADC is not triggered, its DMA
+    /// does not run): `taken` readings had come before it. The calibration stops at the
+    /// first missing reading, so a dead chain costs one bound, not [`ZERO_SAMPLES`] of them.
+    NoSamples {
+        /// Readings that came before the missing one.
+        taken: u32,
+    },
+    /// The mean lies outside the board's window (amplifier missing or unpowered, wrong
+    /// reference): the mean \[code per conversion\].
+    OutOfWindow {
+        /// The measured mean \[code per conversion\].
+        mean_code: f32,
+    },
+}
+
 /// What the start-up calibration found about the current sense.
 #[derive(Debug, Clone, Copy)]
 pub struct SenseStart {
     /// The sense to run with: the measured zero, or the board's nominal one if that was out of
     /// its window.
     pub sense: CurrentSense,
-    /// `current_sense` when the measured zero was out of the board's window.
+    /// `current_sense` when the measured zero was out of the board's window or no reading
+    /// came.
     pub faults: Faults,
+    /// What was wrong, for the start-up's log line.
+    pub trouble: SenseTrouble,
 }
 
 /// The current-sense zero at start-up: the mean of [`ZERO_SAMPLES`] readings taken by `read`
-/// (a sum of [`Board::sense_oversample`] codes, bridge off). A zero outside the board's
-/// window (amplifier missing, wrong reference) latches `current_sense` and runs on the nominal
-/// zero. The scale is the amplifier's `v_per_a` \[V/A\] (the settings' `sense.v_per_a`).
-pub fn calibrate_sense(board: &Board, v_per_a: f32, mut read: impl FnMut() -> u32) -> SenseStart {
+/// (a sum of [`Board::sense_oversample`] codes, bridge off; `None` when the shell's bounded
+/// wait for one ran out). A missing reading ends the calibration at once; a zero outside the
+/// board's window (amplifier missing, wrong reference) or no reading latches `current_sense`
+/// and runs on the nominal zero. The scale is the amplifier's `v_per_a` \[V/A\] (the
+/// settings' `sense.v_per_a`).
+pub fn calibrate_sense(
+    board: &Board,
+    v_per_a: f32,
+    mut read: impl FnMut() -> Option<u32>,
+) -> SenseStart {
     let n = board.sense_oversample.max(1) as f32;
     let chain = board.sense;
     let amps_per_code = chain.amps_per_code(v_per_a);
+    let nominal = SenseStart {
+        sense: CurrentSense {
+            amps_per_code,
+            offset: chain.zero_code,
+        },
+        faults: Faults::CURRENT_SENSE,
+        trouble: SenseTrouble::None,
+    };
     let mut cal = drive::OffsetCalibration::default();
     for _ in 0..ZERO_SAMPLES {
-        cal.push(read());
+        match read() {
+            Some(codes) => cal.push(codes),
+            None => {
+                return SenseStart {
+                    trouble: SenseTrouble::NoSamples {
+                        taken: cal.samples(),
+                    },
+                    ..nominal
+                };
+            }
+        }
     }
     match cal.finish(chain.zero_code * n, chain.zero_tolerance * n) {
         Some(sum) => SenseStart {
@@ -42,13 +89,13 @@ pub fn calibrate_sense(board: &Board, v_per_a: f32, mut read: impl FnMut() -> u3
                 offset: sum / n,
             },
             faults: Faults::NONE,
+            trouble: SenseTrouble::None,
         },
         None => SenseStart {
-            sense: CurrentSense {
-                amps_per_code,
-                offset: chain.zero_code,
+            trouble: SenseTrouble::OutOfWindow {
+                mean_code: cal.mean().unwrap_or(0.0) / n,
             },
-            faults: Faults::CURRENT_SENSE,
+            ..nominal
         },
     }
 }
@@ -195,6 +242,13 @@ impl ControlLoop {
     /// The latched faults.
     pub fn faults(&self) -> Faults {
         self.faults
+    }
+
+    /// Latches `faults` found outside the step (the board's deadman) and switches the bridge
+    /// off; the status says so from the next position step.
+    pub fn halt(&mut self, faults: Faults) {
+        self.faults.latch(faults);
+        self.switch_off();
     }
 
     fn switch_off(&mut self) {

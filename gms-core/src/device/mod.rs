@@ -26,7 +26,9 @@ pub use capture::{
     StepValues, capture_field, capture_fields,
 };
 
-pub use control::{ControlLoop, Inputs, Outputs, SenseStart, ZERO_SAMPLES, calibrate_sense};
+pub use control::{
+    ControlLoop, Inputs, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
+};
 pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
 
 use crate::controller::Controller;

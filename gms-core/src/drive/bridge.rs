@@ -38,9 +38,17 @@ pub fn bridge_compare(duty: f32, period: u32, enabled: bool) -> (u32, u32) {
     let mag = abs(d).min(1.0);
     // The PWM side is high for (1 - |duty|) of the period, low (driving) for |duty|.
     let low = (mag * period as f32 + 0.5) as u32;
-    let pwm = period.saturating_sub(low.min(period));
     // Above the period the output stays high for the whole period.
     let high = period.saturating_add(1);
+    // No drive at all: high for the whole period too. A compare value equal to the period
+    // would take the output low for the one tick the counter spends at the top (PWM mode 1,
+    // centre-aligned: high while CNT < CCR; RM0090 §17.3.10), a 6 ns drive pulse at 168 MHz
+    // in every period of a brake.
+    let pwm = if low == 0 {
+        high
+    } else {
+        period.saturating_sub(low.min(period))
+    };
     if d >= 0.0 { (high, pwm) } else { (pwm, high) }
 }
 

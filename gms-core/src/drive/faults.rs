@@ -31,9 +31,12 @@ impl Faults {
     pub const CURRENT_SENSE: Faults = Faults(1 << 6);
     /// The last reset was by the watchdog.
     pub const WATCHDOG_RESET: Faults = Faults(1 << 7);
+    /// The deadman above the control interrupt switched the bridge off (the step stopped
+    /// running, or the sense chain's DMA or ADC failed): terminal, the watchdog resets.
+    pub const CONTROL_STALL: Faults = Faults(1 << 8);
 
     /// Names of the bits, lowest first.
-    pub const NAMES: [&'static str; 8] = [
+    pub const NAMES: [&'static str; 9] = [
         "over_current",
         "following_error",
         "encoder_jump",
@@ -42,10 +45,11 @@ impl Faults {
         "invalid_params",
         "current_sense",
         "watchdog_reset",
+        "control_stall",
     ];
 
     /// What each bit means to the user, in [`Self::NAMES`]' order.
-    pub const MEANINGS: [&'static str; 8] = [
+    pub const MEANINGS: [&'static str; 9] = [
         "the measured current exceeded the trip level (lim.i_max with margin): a runaway, a \
          short, a reversed current sense",
         "the position error exceeded its limit: the axis cannot follow (blocked, too little \
@@ -57,6 +61,8 @@ impl Faults {
          defaults run)",
         "the current-sense zero at start-up was outside the board's window",
         "the last reset was by the watchdog",
+        "the control step stopped running or its current sampling failed: the bridge was \
+         switched off at once and the board resets",
     ];
 
     /// The meaning of the fault named `name` (one of [`Self::NAMES`]).

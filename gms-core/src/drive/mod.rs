@@ -11,10 +11,13 @@
 //! - `stats`: [`StepStats`], [`missed_periods`] (the control step's duration, missed periods).
 //! - `bridge`: [`bridge_compare`], [`pwm_timing`], [`bridge_off`] (duty to compare values,
 //!   the timer setting for a PWM rate, switching off from any context).
+//! - `deadman`: [`Deadman`], [`Stall`] (the check above the control interrupt that switches
+//!   the bridge off when the step stops running or the sense chain fails).
 //! - `record`: [`encode_settings`], [`decode_settings`] (the parameter record kept in flash,
 //!   with a version, a layout id and a checksum).
 
 mod bridge;
+mod deadman;
 mod encoder;
 mod faults;
 mod record;
@@ -22,6 +25,7 @@ mod sense;
 mod stats;
 
 pub use bridge::*;
+pub use deadman::*;
 pub use encoder::*;
 pub use faults::*;
 pub use record::*;

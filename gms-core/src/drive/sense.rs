@@ -70,6 +70,11 @@ impl OffsetCalibration {
         self.n
     }
 
+    /// The mean of the readings so far \[code\] (`None` before the first).
+    pub fn mean(&self) -> Option<f32> {
+        (self.n > 0).then(|| self.sum as f32 / self.n as f32)
+    }
+
     /// The mean code \[code\] if at least one sample was taken and it lies within
     /// `expected ± tolerance` \[code\]; `None` means the sense chain is not what the board says
     /// (not connected, wrong reference): a fault.

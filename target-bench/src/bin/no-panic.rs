@@ -168,7 +168,7 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    let zero = device::calibrate_sense(black_box(&board), black_box(3.4), || black_box(4096));
+    let zero = device::calibrate_sense(black_box(&board), black_box(3.4), || Some(black_box(4096)));
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the check's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };

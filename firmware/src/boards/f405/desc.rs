@@ -25,6 +25,10 @@ pub const CLOCKS: F4Clocks = F4Clocks {
     apb2_div: 2,
 };
 
+/// What to check when the HSE does not start (the first log lines say it).
+pub const HSE_HINT: &str = "check the 8 MHz crystal and its two load capacitors on OSC_IN/OSC_OUT \
+                            (PH0/PH1)";
+
 /// The part's limits.
 pub const PART: F4Limits = F405_LIMITS;
 
