@@ -27,14 +27,30 @@ use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::qei::{Qei, QeiMode};
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
-use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{Peri, bind_interrupts, pac, peripherals, usb};
+use embassy_stm32::{Peri, bind_interrupts, pac, peripherals};
 use gms_core::drive::{self, BridgeOff, Deadman, Stall};
 
+#[cfg(feature = "board-f405")]
 bind_interrupts!(struct Irqs {
-    OTG_FS => usb::InterruptHandler<peripherals::USB_OTG_FS>;
+    OTG_FS => embassy_stm32::usb::InterruptHandler<peripherals::USB_OTG_FS>;
 });
+
+#[cfg(feature = "board-nucleo-f446")]
+bind_interrupts!(struct Irqs {
+    USART2 => embassy_stm32::usart::InterruptHandler<peripherals::USART2>;
+    DMA1_STREAM5 => embassy_stm32::dma::InterruptHandler<peripherals::DMA1_CH5>;
+    DMA1_STREAM6 => embassy_stm32::dma::InterruptHandler<peripherals::DMA1_CH6>;
+});
+
+/// The link to the host as the board brings it up: the USB OTG FS driver on the F405 board
+/// (`main.rs` puts the CDC-ACM class on it).
+#[cfg(feature = "board-f405")]
+pub type HostLink = embassy_stm32::usb::Driver<'static, peripherals::USB_OTG_FS>;
+
+/// The link to the host as the board brings it up: USART2 to the ST-LINK's virtual COM port.
+#[cfg(feature = "board-nucleo-f446")]
+pub type HostLink = crate::port::HostPort;
 
 pub use crate::boards::power_stage::*;
 pub use crate::boards::*;
@@ -403,8 +419,8 @@ pub fn bridge_off_now() {
 
 /// Everything else the firmware uses.
 pub struct Rest {
-    /// USB OTG FS driver.
-    pub usb: Driver<'static, peripherals::USB_OTG_FS>,
+    /// The link to the host ([`HostLink`]).
+    pub link: HostLink,
     /// Internal flash (blocking; parameters).
     pub flash: Flash<'static, Blocking>,
     /// Independent watchdog (started: feed it).
@@ -422,7 +438,7 @@ pub struct Rest {
 
 /// Sets up the board. The bridge starts off (both inputs low) and the PWM timer's update
 /// interrupt is configured but not enabled: [`start_control`] does that.
-pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
+pub fn init() -> (ControlHw, Rest) {
     // Reset cause, then clear the flags for the next time.
     let csr = pac::RCC.csr().read();
     let watchdog_reset = csr.wdgrstf() || csr.wwdgrstf();
@@ -541,13 +557,47 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
     interrupt::DMA2_STREAM0.disable();
     sense_init();
 
-    let mut usb_cfg = usb::Config::default();
-    usb_cfg.vbus_detection = false;
-    let usb = Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, ep_out_buffer, usb_cfg);
     // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
-    // the reset priority 0, level with the loop (time_driver/gp16.rs); USB lowest.
+    // the reset priority 0, above the loop (time_driver/gp16.rs); the host link lowest.
     interrupt::TIM4.set_priority(crate::irq::DRIVERS);
-    interrupt::OTG_FS.set_priority(crate::irq::LINK);
+    #[cfg(feature = "board-f405")]
+    let link = {
+        static EP_OUT: static_cell::ConstStaticCell<[u8; 256]> =
+            static_cell::ConstStaticCell::new([0; 256]);
+        let mut usb_cfg = embassy_stm32::usb::Config::default();
+        usb_cfg.vbus_detection = false;
+        let usb = HostLink::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, EP_OUT.take(), usb_cfg);
+        interrupt::OTG_FS.set_priority(crate::irq::LINK);
+        usb
+    };
+    #[cfg(feature = "board-nucleo-f446")]
+    let link = {
+        // USART2: TX on PA2, RX on PA3 (AF7), wired to the ST-LINK's virtual COM port by the
+        // board's default solder bridges SB13/SB14 (UM1724 §6.8).
+        static RX_RING: static_cell::ConstStaticCell<[u8; 1024]> =
+            static_cell::ConstStaticCell::new([0; 1024]);
+        let uart = defmt::unwrap!(embassy_stm32::usart::Uart::new(
+            p.USART2,
+            p.PA3,
+            p.PA2,
+            p.DMA1_CH6,
+            p.DMA1_CH5,
+            Irqs,
+            crate::port::uart_config(),
+        ));
+        // embassy-stm32 0.6 `usart/mod.rs` enables USART2's interrupt at the reset priority
+        // 0, above the loop and outside the critical section's mask: moved down with its
+        // DMA streams.
+        interrupt::USART2.set_priority(crate::irq::LINK);
+        interrupt::DMA1_STREAM5.set_priority(crate::irq::LINK);
+        interrupt::DMA1_STREAM6.set_priority(crate::irq::LINK);
+        let (tx, rx) = uart.split();
+        crate::port::HostPort {
+            tx,
+            rx: rx.into_ring_buffered(RX_RING.take()),
+            started: false,
+        }
+    };
 
     let (run_pin, fault_pin) = crate::boards::led_pins!(p);
     let hw = ControlHw {
@@ -557,7 +607,7 @@ pub fn init(ep_out_buffer: &'static mut [u8; 256]) -> (ControlHw, Rest) {
         _qei: qei,
     };
     let rest = Rest {
-        usb,
+        link,
         flash: Flash::new_blocking(p.FLASH),
         watchdog,
         led_run: Output::new(run_pin, Level::Low, Speed::Low),

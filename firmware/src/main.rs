@@ -24,21 +24,18 @@ mod boards;
 mod comms;
 mod control;
 mod irq;
+mod port;
 mod storage;
 
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Spawner;
-use embassy_stm32::peripherals::USB_OTG_FS;
-use embassy_stm32::usb::Driver;
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{gpio::Output, peripherals::IWDG};
 use embassy_time::Timer;
-use embassy_usb::UsbDevice;
-use embassy_usb::class::cdc_acm::{CdcAcmClass, State};
 use gms_core::device::{self, ControlLoop, ParamStore as _, SenseTrouble};
 use gms_core::drive::{Faults, Stall};
-use static_cell::{ConstStaticCell, StaticCell};
+use static_cell::ConstStaticCell;
 
 use crate::control::Loop;
 
@@ -76,8 +73,7 @@ async fn main(spawner: Spawner) {
             cortex_m::asm::wfi();
         }
     }
-    static EP_OUT: StaticCell<[u8; 256]> = StaticCell::new();
-    let (mut hw, rest) = board::init(EP_OUT.init([0; 256]));
+    let (mut hw, rest) = board::init();
     info!("clocks up: {} Hz", board::CLOCKS.sysclk_hz());
 
     let mut faults = Faults::NONE;
@@ -156,30 +152,6 @@ async fn main(spawner: Spawner) {
     board::start_control();
     info!("control loop running");
 
-    // USB CDC-ACM.
-    let mut usb_cfg = embassy_usb::Config::new(0x1209, 0x0001);
-    usb_cfg.manufacturer = Some("gms");
-    usb_cfg.product = Some("gms motor driver");
-    // The chip's 96-bit unique ID (RM0090 §39.1) as 24 hex digits: two boards on one PC are
-    // two ports with their own serial numbers (udev names them by it).
-    usb_cfg.serial_number = Some(embassy_stm32::uid::uid_hex());
-    usb_cfg.max_power = 100;
-    usb_cfg.max_packet_size_0 = 64;
-    static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
-    static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
-    static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
-    static STATE: StaticCell<State> = StaticCell::new();
-    let mut builder = embassy_usb::Builder::new(
-        rest.usb,
-        usb_cfg,
-        CONFIG_DESC.init([0; 256]),
-        BOS_DESC.init([0; 256]),
-        &mut [],
-        CONTROL_BUF.init([0; 64]),
-    );
-    let class = CdcAcmClass::new(&mut builder, STATE.init(State::new()), 64);
-    let usb = builder.build();
-
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     let dev = comms::Dev::new(
         comms::IrqLink,
@@ -189,8 +161,45 @@ async fn main(spawner: Spawner) {
         defaults,
     )
     .with_configured(start.configured, false);
-    spawner.spawn(unwrap!(usb_task(usb)));
-    spawner.spawn(unwrap!(comms_task(class, dev)));
+    #[cfg(feature = "board-f405")]
+    let port = {
+        // USB CDC-ACM.
+        let mut usb_cfg = embassy_usb::Config::new(0x1209, 0x0001);
+        usb_cfg.manufacturer = Some("gms");
+        usb_cfg.product = Some("gms motor driver");
+        // The chip's 96-bit unique ID (RM0090 §39.1) as 24 hex digits: two boards on one PC are
+        // two ports with their own serial numbers (udev names them by it).
+        usb_cfg.serial_number = Some(embassy_stm32::uid::uid_hex());
+        usb_cfg.max_power = 100;
+        usb_cfg.max_packet_size_0 = 64;
+        use static_cell::StaticCell;
+        static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+        static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
+        static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
+        static STATE: StaticCell<embassy_usb::class::cdc_acm::State> = StaticCell::new();
+        let mut builder = embassy_usb::Builder::new(
+            rest.link,
+            usb_cfg,
+            CONFIG_DESC.init([0; 256]),
+            BOS_DESC.init([0; 256]),
+            &mut [],
+            CONTROL_BUF.init([0; 64]),
+        );
+        let class = embassy_usb::class::cdc_acm::CdcAcmClass::new(
+            &mut builder,
+            STATE.init(embassy_usb::class::cdc_acm::State::new()),
+            64,
+        );
+        let usb = builder.build();
+        spawner.spawn(unwrap!(usb_task(usb)));
+        port::HostPort {
+            class,
+            dtr_seen: false,
+        }
+    };
+    #[cfg(feature = "board-nucleo-f446")]
+    let port = rest.link;
+    spawner.spawn(unwrap!(comms_task(port, dev)));
     spawner.spawn(unwrap!(supervisor(
         rest.watchdog,
         rest.led_run,
@@ -232,17 +241,20 @@ unsafe fn DefaultHandler(_irqn: i16) {
     }
 }
 
+#[cfg(feature = "board-f405")]
 #[embassy_executor::task]
-async fn usb_task(mut usb: UsbDevice<'static, Driver<'static, USB_OTG_FS>>) -> ! {
+async fn usb_task(
+    mut usb: embassy_usb::UsbDevice<
+        'static,
+        embassy_stm32::usb::Driver<'static, embassy_stm32::peripherals::USB_OTG_FS>,
+    >,
+) -> ! {
     usb.run().await
 }
 
 #[embassy_executor::task]
-async fn comms_task(
-    class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
-    dev: comms::Dev,
-) -> ! {
-    comms::serve(class, dev).await
+async fn comms_task(port: port::HostPort, dev: comms::Dev) -> ! {
+    comms::serve(port, dev).await
 }
 
 /// Watchdog, LEDs and fault logs, every 250 ms. The watchdog is fed only while the control

@@ -56,9 +56,11 @@ impl Link {
         Ok(Self::new(Box::new(s), timeout))
     }
 
-    /// Opens a serial port (USB CDC-ACM or a PTY) at 115200 baud.
+    /// Opens a serial port: a board's USB CDC-ACM port (which ignores the baud rate), the
+    /// NUCLEO's ST-LINK virtual COM port (a UART at gms-core's `protocol::UART_BAUD`, 8N1), or
+    /// a PTY.
     pub fn serial(path: &str, timeout: Duration) -> Result<Link, String> {
-        let p = serialport::new(path, 115_200)
+        let p = serialport::new(path, gms_core::protocol::UART_BAUD)
             .timeout(Duration::from_millis(10))
             .open()
             .map_err(|e| format!("--port {path}: cannot open: {e}"))?;

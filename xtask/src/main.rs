@@ -33,15 +33,27 @@ const BOARDS: [(&str, &str, &str); 2] = [
     ),
 ];
 
-/// The interrupts both boards' firmware handles (stm32-metapac 21 `Interrupt`, the same
-/// numbers on the F405 and the F446): the deadman's and the sense ADC's overrun, the control
-/// interrupt, embassy's time driver, USB.
-const IRQS_COMMON: [(&str, u32); 5] = [
+/// The interrupts the F405 board's firmware handles (stm32-metapac 21 `Interrupt`: RM0090
+/// table 61): the sense ADC's overrun, embassy's time driver, the deadman (TIM8's update),
+/// the control interrupt (the sense DMA), USB.
+const IRQS_F405: [(&str, u32); 5] = [
     ("ADC", 18),
     ("TIM4", 30),
     ("TIM8_UP_TIM13", 44),
     ("DMA2_STREAM0", 56),
     ("OTG_FS", 67),
+];
+
+/// The interrupts the NUCLEO-F446RE's firmware handles (the same numbers on the F446, RM0390
+/// table 38): the F405's but USB, and the UART to the ST-LINK with its two DMA streams.
+const IRQS_NUCLEO_F446: [(&str, u32); 7] = [
+    ("DMA1_STREAM5", 16),
+    ("DMA1_STREAM6", 17),
+    ("ADC", 18),
+    ("TIM4", 30),
+    ("USART2", 38),
+    ("TIM8_UP_TIM13", 44),
+    ("DMA2_STREAM0", 56),
 ];
 
 /// The boards' maps for `check-elf`.
@@ -51,14 +63,14 @@ const MAPS: [elf::BoardMap; 2] = [
         app_len: f405::APP_LEN,
         ram_len: f405::RAM_LEN,
         store_start: f405::STORE_START,
-        irqs: &IRQS_COMMON,
+        irqs: &IRQS_F405,
     },
     elf::BoardMap {
         name: "nucleo-f446",
         app_len: nucleo_f446::APP_LEN,
         ram_len: nucleo_f446::RAM_LEN,
         store_start: nucleo_f446::STORE_START,
-        irqs: &IRQS_COMMON,
+        irqs: &IRQS_NUCLEO_F446,
     },
 ];
 

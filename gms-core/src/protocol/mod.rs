@@ -42,3 +42,9 @@ pub use reader::*;
 /// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing
 /// meanwhile. Other requests are answered within a position period or two.
 pub const SAVE_REPLY_MS: u32 = 5000;
+
+/// The baud rate of a board whose link is a UART (the NUCLEO-F446RE's USART2 to the ST-LINK's
+/// virtual COM port), 8N1; the host opens every serial port at it (a USB CDC-ACM port ignores
+/// it). 921600 baud carries about 92 kB/s: telemetry lines the link cannot carry are dropped
+/// on the device, never queued.
+pub const UART_BAUD: u32 = 921_600;

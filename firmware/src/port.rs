@@ -1,0 +1,172 @@
+//! The byte link to the bench PC, one per board: USB CDC-ACM on the F405 board (its own USB
+//! connector on PA11/PA12), the ST-LINK's virtual COM port on the NUCLEO-F446RE (USART2 on
+//! PA2/PA3, UM1724 §6.8 "USART communication": the ST-LINK/V2-1 carries it to the PC over the
+//! cable that also powers and flashes the board). The protocol above it is the same
+//! (`comms.rs`); `gms-tune --port` opens either (the baud rate, gms-core's `protocol::UART_BAUD`, is what the
+//! UART needs and what a CDC-ACM port ignores).
+
+/// The host is gone (see `comms.rs`).
+pub struct Gone;
+
+/// What a read brought.
+pub enum Read {
+    /// So many bytes, at the start of the buffer.
+    Bytes(usize),
+    /// Bytes were lost (a UART overrun, framing or noise error): the partial line is dropped.
+    /// (USB's own error checks and retries never lose bytes silently.)
+    #[cfg_attr(not(feature = "board-nucleo-f446"), allow(dead_code))]
+    Broken,
+}
+
+/// A byte link to the host.
+pub(crate) trait Port {
+    /// The link's name, for the log.
+    const NAME: &'static str;
+    /// Waits until a host may be there (USB: the host configured the device; a UART: at
+    /// once).
+    async fn connected(&mut self);
+    /// Waits for bytes from the host.
+    async fn read(&mut self, buf: &mut [u8]) -> Result<Read, Gone>;
+    /// Sends every byte of `bytes`.
+    async fn send(&mut self, bytes: &[u8]) -> Result<(), Gone>;
+    /// Looked at every [`crate::comms::DTR_POLL_MS`]: false once the host has closed the
+    /// port (USB: DTR dropped after it was raised; a UART cannot tell: always true).
+    fn host_here(&mut self) -> bool;
+}
+
+#[cfg(feature = "board-f405")]
+mod usb {
+    use embassy_stm32::peripherals::USB_OTG_FS;
+    use embassy_stm32::usb::Driver;
+    use embassy_time::{Duration, with_timeout};
+    use embassy_usb::class::cdc_acm::CdcAcmClass;
+
+    use super::{Gone, Port, Read};
+
+    /// How long a packet may wait for the host to take it \[ms\] before the session is taken
+    /// as over (a reading host takes one every 1 ms USB frame).
+    pub const WRITE_TIMEOUT_MS: u64 = 200;
+
+    /// USB CDC-ACM (see `comms.rs` for how a session ends).
+    pub struct UsbPort {
+        /// The CDC-ACM class on the OTG FS driver.
+        pub class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
+        /// The host raised DTR in this session.
+        pub dtr_seen: bool,
+    }
+
+    impl UsbPort {
+        /// Writes one packet, or gives up after [`WRITE_TIMEOUT_MS`].
+        async fn write(&mut self, chunk: &[u8]) -> Result<(), Gone> {
+            match with_timeout(
+                Duration::from_millis(WRITE_TIMEOUT_MS),
+                self.class.write_packet(chunk),
+            )
+            .await
+            {
+                Ok(Ok(())) => Ok(()),
+                _ => Err(Gone),
+            }
+        }
+    }
+
+    impl Port for UsbPort {
+        const NAME: &'static str = "USB";
+
+        async fn connected(&mut self) {
+            self.class.wait_connection().await;
+            self.dtr_seen = false;
+        }
+
+        async fn read(&mut self, buf: &mut [u8]) -> Result<Read, Gone> {
+            self.class
+                .read_packet(buf)
+                .await
+                .map(Read::Bytes)
+                .map_err(|_| Gone)
+        }
+
+        /// In packets; a final full packet is followed by an empty one, so that the host sees
+        /// the end of the transfer.
+        async fn send(&mut self, bytes: &[u8]) -> Result<(), Gone> {
+            let max = self.class.max_packet_size() as usize;
+            for chunk in bytes.chunks(max) {
+                self.write(chunk).await?;
+            }
+            if !bytes.is_empty() && bytes.len().is_multiple_of(max) {
+                self.write(&[]).await?;
+            }
+            Ok(())
+        }
+
+        fn host_here(&mut self) -> bool {
+            if self.class.dtr() {
+                self.dtr_seen = true;
+                true
+            } else {
+                !self.dtr_seen
+            }
+        }
+    }
+}
+
+#[cfg(feature = "board-f405")]
+pub use usb::UsbPort as HostPort;
+
+#[cfg(feature = "board-nucleo-f446")]
+mod uart {
+    use embassy_stm32::mode::Async;
+    use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+
+    use super::{Gone, Port, Read};
+
+    /// The UART's settings: gms-core's `protocol::UART_BAUD`, 8 data bits, no parity, one stop
+    /// bit.
+    pub fn config() -> embassy_stm32::usart::Config {
+        let mut c = embassy_stm32::usart::Config::default();
+        c.baudrate = gms_core::protocol::UART_BAUD;
+        c
+    }
+
+    /// USART2 to the ST-LINK's virtual COM port, both ways by DMA (RM0390 table 28: DMA1
+    /// stream 5 channel 4 receives, stream 6 channel 4 sends); reception into a ring buffer
+    /// that runs on its own.
+    pub struct UartPort {
+        /// Sending side.
+        pub tx: UartTx<'static, Async>,
+        /// Receiving side.
+        pub rx: RingBufferedUartRx<'static>,
+        /// A session has begun (a UART has no connection: the first `connected` returns at
+        /// once, so does every later one).
+        pub started: bool,
+    }
+
+    impl Port for UartPort {
+        const NAME: &'static str = "ST-LINK virtual COM port (USART2)";
+
+        async fn connected(&mut self) {
+            self.started = true;
+        }
+
+        async fn read(&mut self, buf: &mut [u8]) -> Result<Read, Gone> {
+            // An error stops the reception; the next read starts it again (embassy-stm32 0.6
+            // `usart/ringbuffered.rs`).
+            Ok(match self.rx.read(buf).await {
+                Ok(n) => Read::Bytes(n),
+                Err(_) => Read::Broken,
+            })
+        }
+
+        async fn send(&mut self, bytes: &[u8]) -> Result<(), Gone> {
+            // A UART always sends, at its baud rate, whether or not anyone listens.
+            self.tx.write(bytes).await.map_err(|_| Gone)
+        }
+
+        fn host_here(&mut self) -> bool {
+            true
+        }
+    }
+}
+
+#[cfg(feature = "board-nucleo-f446")]
+pub use uart::{UartPort as HostPort, config as uart_config};
