@@ -111,7 +111,7 @@ fn main() -> ExitCode {
         },
         _ => {
             eprintln!(
-                "usage: cargo xtask target-bench [--report-only]\n       cargo xtask flash [--board f405|nucleo-f446]\n       cargo xtask check-elf --board f405|nucleo-f446 ELF"
+                "usage: cargo xtask target-bench [--report-only]\n       cargo xtask flash [--board f405|nucleo-f446] [--watchdog-check]\n       cargo xtask check-elf --board f405|nucleo-f446 ELF"
             );
             ExitCode::from(2)
         }
@@ -138,13 +138,17 @@ fn check_elf(args: &[String]) -> Result<(), String> {
     Ok(())
 }
 
-/// `cargo xtask flash [--board NAME]`: builds the firmware for the board (default f405) and
+/// `cargo xtask flash [--board NAME] [--watchdog-check]`: builds the firmware for the board
+/// (default f405; with the bench's watchdog check, the firmware feature `watchdog-check`) and
 /// runs it with probe-rs (`probe-rs run --chip CHIP`: flashes, resets, prints the defmt log).
 fn flash(args: &[String]) -> Result<u8, String> {
-    let name = match args {
+    let usage = "usage: cargo xtask flash [--board f405|nucleo-f446] [--watchdog-check]";
+    let check = args.iter().any(|a| a == "--watchdog-check");
+    let rest: Vec<&String> = args.iter().filter(|a| *a != "--watchdog-check").collect();
+    let name = match rest.as_slice() {
         [] => "f405",
-        [flag, name] if flag == "--board" => name.as_str(),
-        _ => return Err("usage: cargo xtask flash [--board f405|nucleo-f446]".into()),
+        [flag, name] if *flag == "--board" => name.as_str(),
+        _ => return Err(usage.into()),
     };
     let (_, feature, chip) = BOARDS.iter().find(|b| b.0 == name).ok_or_else(|| {
         let names: Vec<&str> = BOARDS.iter().map(|b| b.0).collect();
@@ -161,7 +165,11 @@ fn flash(args: &[String]) -> Result<u8, String> {
             "thumbv7em-none-eabihf",
             "--no-default-features",
             "--features",
-            feature,
+            &if check {
+                format!("{feature},watchdog-check")
+            } else {
+                feature.to_string()
+            },
         ])
         .status()
         .map_err(|e| format!("cannot run cargo: {e}"))?;

@@ -28,10 +28,10 @@ pub const CLOCKS: F4Clocks = F4Clocks {
 };
 
 /// What to check when the HSE does not start (the first log lines say it).
-pub const HSE_HINT: &str = "the ST-LINK's 8 MHz MCO does not reach PH0: on a NUCLEO-64 of revision \
-                            MB1136 C-01 it is not connected as delivered; UM1724 section 6.7.1 \
-                            (OSC clock supply, 'MCO from ST-LINK') lists the solder bridges \
-                            to close (SB50 among them), or fit an 8 MHz crystal at X3";
+pub const HSE_HINT: &str = "the ST-LINK's 8 MHz MCO does not reach PH0: a NUCLEO-64 of revision \
+                            MB1136 C-01 ships with HSE not used (UM1724 section 6.7.1 and 7.2); \
+                            for 'MCO from ST-LINK' close SB16 and SB50 and SB54, open SB55, R35 \
+                            and R37 removed (or fit an 8 MHz crystal at X3)";
 
 /// The part's limits.
 pub const PART: F4Limits = F446_LIMITS;
