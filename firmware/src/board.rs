@@ -13,8 +13,10 @@
 //! drive phase centred on the top), where the current's triangular PWM ripple is
 //! point-symmetric about its mean, so the centred window's mean is the period's mean. Timers: TIM2 encoder, TIM8 PWM and
 //! sense trigger, TIM4 embassy's time driver (none shared).
-
-use core::cell::UnsafeCell;
+//!
+//! Every raw register access is `f4-regs`' (its functions take the register blocks, and its
+//! host tests run them over blocks laid on plain memory); this file passes the chip's blocks
+//! and the board's numbers.
 
 use cortex_m::peripheral::DWT;
 use embassy_stm32::adc::Adc;
@@ -29,7 +31,8 @@ use embassy_stm32::timer::qei::{Qei, QeiMode};
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals};
-use gms_core::drive::{self, BridgeOff, Deadman, Stall};
+use f4_regs::{clock, pwm, sense};
+use gms_core::drive::{self, Deadman, Stall};
 
 #[cfg(feature = "board-f405")]
 bind_interrupts!(struct Irqs {
@@ -139,20 +142,12 @@ pub const HSE_WAIT_MS: u32 = 100;
 /// at once, writing the same HSEBYP and HSEON). False, with the HSE switched off again, if it
 /// did not come.
 pub fn start_hse() -> bool {
-    let rcc = pac::RCC;
-    // HSEBYP is written while the HSE is off (RM0090 §7.3.1).
-    rcc.cr().modify(|w| w.set_hseon(false));
-    rcc.cr().modify(|w| w.set_hsebyp(CLOCKS.hse_bypass));
-    rcc.cr().modify(|w| w.set_hseon(true));
-    let t0 = DWT::cycle_count();
-    let limit = HSI_HZ / 1000 * HSE_WAIT_MS;
-    while !rcc.cr().read().hserdy() {
-        if DWT::cycle_count().wrapping_sub(t0) > limit {
-            rcc.cr().modify(|w| w.set_hseon(false));
-            return false;
-        }
-    }
-    true
+    clock::start_hse(
+        pac::RCC,
+        CLOCKS.hse_bypass,
+        DWT::cycle_count,
+        HSI_HZ / 1000 * HSE_WAIT_MS,
+    )
 }
 
 /// How long the start-up calibration waits for one sequence of current samples \[µs\]:
@@ -161,14 +156,8 @@ pub fn start_hse() -> bool {
 /// watchdog.
 pub const SENSE_WAIT_US: u32 = 1000;
 
-/// The DMA's destination: the last sequence of current-sense conversions. Written only by
-/// DMA2 stream 0, read only with volatile reads after its transfer-complete flag.
-struct SenseBuf(UnsafeCell<[u16; SENSE_OVERSAMPLE as usize]>);
-
-// SAFETY: the CPU only reads it (volatile), the DMA only writes it.
-unsafe impl Sync for SenseBuf {}
-
-static SENSE_BUF: SenseBuf = SenseBuf(UnsafeCell::new([0; SENSE_OVERSAMPLE as usize]));
+/// The DMA's destination: the last sequence of current-sense conversions.
+static SENSE_BUF: sense::SenseBuf<{ SENSE_OVERSAMPLE as usize }> = sense::SenseBuf::new();
 
 /// The control loop's hardware: owned by the control interrupt.
 pub struct ControlHw {
@@ -190,13 +179,7 @@ impl ControlHw {
     /// (in the control interrupt: the sequence that just completed).
     #[inline(always)]
     pub fn current_codes(&self) -> u32 {
-        let base = SENSE_BUF.0.get() as *const u16;
-        let mut sum = 0u32;
-        for i in 0..SENSE_OVERSAMPLE as usize {
-            // SAFETY: in bounds of the buffer; volatile, as the DMA writes it.
-            sum += unsafe { core::ptr::read_volatile(base.add(i)) } as u32;
-        }
-        sum
+        SENSE_BUF.sum()
     }
 
     /// Waits for the next sequence (at most [`SENSE_WAIT_US`], timed by the DWT cycle
@@ -204,208 +187,27 @@ impl ControlHw {
     /// interrupt is off. `None` if none came: the ADC is not triggered or its DMA stopped,
     /// which the calibration reports as a `current_sense` fault.
     pub fn next_current_codes(&mut self) -> Option<u32> {
-        ack_sample();
-        let t0 = DWT::cycle_count();
         let limit = CLOCKS.hclk_hz() / 1_000_000 * SENSE_WAIT_US;
-        loop {
-            if pac::DMA2.isr(0).read().tcif(0) {
-                ack_sample();
-                return Some(self.current_codes());
-            }
-            if DWT::cycle_count().wrapping_sub(t0) > limit {
-                return None;
-            }
-        }
+        sense::next_sum(pac::DMA2, &SENSE_BUF, DWT::cycle_count, limit)
     }
 
     /// Writes the two bridge inputs' compare values (take effect at the next PWM period).
     #[inline(always)]
     pub fn set_bridge(&mut self, in1: u32, in2: u32) {
-        let clamp = |v: u32| v.min(u16::MAX as u32) as u16;
-        pac::TIM8.ccr(0).write(|w| w.set_ccr(clamp(in1)));
-        pac::TIM8.ccr(1).write(|w| w.set_ccr(clamp(in2)));
+        pwm::set_bridge(pac::TIM8, in1, in2);
     }
 
     /// Sets the PWM timer's prescaler and period (register values; preloaded, so they take
     /// effect at the next update) and the sense trigger's lead for them.
     pub fn set_pwm_timing(&mut self, psc: u32, arr: u32) {
-        let arr = arr.min(PWM_MAX_ARR);
-        pac::TIM8.psc().write_value(psc.min(u16::MAX as u32) as u16);
-        pac::TIM8.arr().write(|w| w.set_arr(arr as u16));
-        let lead = SENSE_TIMING.lead_counts(PWM_TIMER_HZ, psc).min(arr - 1);
-        pac::TIM8.ccr(3).write(|w| w.set_ccr(lead as u16));
+        let lead = SENSE_TIMING.lead_counts(PWM_TIMER_HZ, psc);
+        pwm::set_timing(pac::TIM8, psc, arr, PWM_MAX_ARR, lead);
     }
 
     /// Clears the sense DMA's flags (first thing in the interrupt).
     #[inline(always)]
     pub fn ack_sample(&mut self) {
-        ack_sample();
-    }
-}
-
-/// Clears DMA2 stream 0's flags (LIFCR, RM0090 §10.5.3).
-#[inline(always)]
-fn ack_sample() {
-    pac::DMA2.ifcr(0).write(|w| {
-        w.set_tcif(0, true);
-        w.set_htif(0, true);
-        w.set_teif(0, true);
-        w.set_dmeif(0, true);
-        w.set_feif(0, true);
-    });
-}
-
-/// TIMx_SR written to clear UIF alone: rc_w0 flags, 1 leaves a flag, 0 clears it; reserved
-/// bits stay 0 (TIMx_SR's flags: bits 0-7 and 9-12, RM0090 §17.4.5).
-const SR_CLEAR_UIF: u32 = 0x1EFE;
-
-/// Waits (at most about 40 ms, hundreds of periods) for TIM8's next update event; the
-/// counter's direction just after it: `Some(true)` counting up (the update was at the bottom),
-/// `Some(false)` down (at the top), `None` if none came.
-fn next_update_counting_up() -> Option<bool> {
-    let t = pac::TIM8;
-    t.sr().write(|w| w.0 = SR_CLEAR_UIF);
-    for _ in 0..1_000_000u32 {
-        if t.sr().read().uif() {
-            return Some(t.cr1().read().dir() == pac::timer::vals::Dir::UP);
-        }
-    }
-    None
-}
-
-/// Puts TIM8's update event at the counter's bottom, once per period, and checks it; true if
-/// it is there. The repetition counter reloads from RCR at each update and an update comes at
-/// a turning point that finds it at 0 (RM0090 §17.3.3, figure "Update rate examples"): with
-/// RCR = 0 every turning point updates; RCR = 1 written just after an update at the top is
-/// loaded at the next update, the bottom, and from then on every other turning point — every
-/// bottom — updates (RM0090's "RCR written after the counter started: the update on the
-/// underflow"). Checked on two updates. Run before the control interrupt, with the bridge
-/// off.
-fn align_update_to_bottom() -> bool {
-    let t = pac::TIM8;
-    t.rcr().write(|w| w.set_rep(0));
-    // Two updates: the repetition counter now reloads from 0 at every turning point.
-    let _ = next_update_counting_up();
-    let _ = next_update_counting_up();
-    // RCR = 1 right after an update at the top (the counter then counts down).
-    let mut written = false;
-    for _ in 0..4 {
-        if next_update_counting_up() == Some(false) {
-            t.rcr().write(|w| w.set_rep(1));
-            written = true;
-            break;
-        }
-    }
-    if !written {
-        return false;
-    }
-    // One update to load it, then two that must both be at the bottom.
-    let _ = next_update_counting_up();
-    next_update_counting_up() == Some(true) && next_update_counting_up() == Some(true)
-}
-
-/// Sets up the hardware sampling of the motor current (see the module's notes): ADC1's regular
-/// sequence of [`SENSE_OVERSAMPLE`] conversions of PC0 on TIM8's TRGO, moved by DMA2 stream 0
-/// (channel 0 = ADC1, RM0090 table 43) into [`SENSE_BUF`], circularly, with its
-/// transfer-complete interrupt (left disabled in the NVIC until [`start_control`]). ADC1 is
-/// already clocked, prescaled and on (`Adc::new`).
-fn sense_init() {
-    use pac::adc::vals::{Dds, Eocs, Exten, Res, SampleTime};
-    use pac::dma::vals::{Dir, Size};
-    // PC0 analog (RM0090 §8.4.1: MODER = 11).
-    pac::GPIOC
-        .moder()
-        .modify(|w| w.set_moder(SENSE_PIN, pac::gpio::vals::Moder::ANALOG));
-    // DMA2 stream 0, disabled while configured (RM0090 §10.3.17).
-    pac::RCC.ahb1enr().modify(|w| w.set_dma2en(true));
-    let st = pac::DMA2.st(0);
-    st.cr().modify(|w| w.set_en(false));
-    while st.cr().read().en() {}
-    ack_sample();
-    st.par().write_value(pac::ADC1.dr().as_ptr() as u32);
-    st.m0ar().write_value(SENSE_BUF.0.get() as u32);
-    st.ndtr().write(|w| w.set_ndt(SENSE_OVERSAMPLE as u16));
-    st.cr().write(|w| {
-        w.set_chsel(0);
-        w.set_dir(Dir::PERIPHERAL_TO_MEMORY);
-        w.set_psize(Size::BITS16);
-        w.set_msize(Size::BITS16);
-        w.set_minc(true);
-        w.set_circ(true);
-        w.set_tcie(true);
-        // A transfer error (a bus error: the stream stops, EN cleared) and a direct-mode error
-        // (RM0090 §10.3.18) interrupt too, on the same vector: the handler switches the bridge
-        // off before anything else.
-        w.set_teie(true);
-        w.set_dmeie(true);
-        w.set_en(true);
-    });
-    // ADC1 (RM0090 §13.13): 12 bits, scan of 16 ranks of channel 10, each sampled 15 cycles;
-    // DMA requests continuing after each sequence (DDS); EOC per sequence; started by the
-    // rising edge of TIM8_TRGO (EXTSEL = 1110, §13.13.3 table "External trigger for regular
-    // channels").
-    let adc = pac::ADC1;
-    adc.cr1().modify(|w| {
-        w.set_res(Res::BITS12);
-        w.set_scan(true);
-        w.set_eocie(false);
-        // An overrun (a conversion lost: the ADC stops its DMA requests until OVR is cleared,
-        // RM0090 §13.8.1) interrupts on the ADC vector, at the deadman's priority.
-        w.set_ovrie(true);
-    });
-    adc.smpr1()
-        .modify(|w| w.set_smp((SENSE_CHANNEL - 10) as usize, SampleTime::CYCLES15));
-    adc.sqr1().modify(|w| w.set_l(SENSE_OVERSAMPLE as u8 - 1));
-    // Ranks 1-6 in SQR3, 7-12 in SQR2, 13-16 in SQR1.
-    adc.sqr3().write(|w| {
-        for i in 0..6 {
-            w.set_sq(i, SENSE_CHANNEL);
-        }
-    });
-    adc.sqr2().write(|w| {
-        for i in 0..6 {
-            w.set_sq(i, SENSE_CHANNEL);
-        }
-    });
-    adc.sqr1().modify(|w| {
-        for i in 0..4 {
-            w.set_sq(i, SENSE_CHANNEL);
-        }
-    });
-    adc.cr2().modify(|w| {
-        w.set_cont(false);
-        w.set_dma(true);
-        w.set_dds(Dds::CONTINUOUS);
-        w.set_eocs(Eocs::EACH_SEQUENCE);
-        w.set_extsel(0b1110);
-        w.set_exten(Exten::RISING_EDGE);
-        w.set_adon(true);
-    });
-}
-
-/// The bridge inputs PC6/PC7 (TIM8_CH1/CH2) as registers, for [`bridge_off_now`].
-struct Bridge;
-
-impl BridgeOff for Bridge {
-    fn disable_timer_outputs(&mut self) {
-        // MOE cleared: with OSSI set at init and OIS1/OIS2 at 0, both outputs go to their idle
-        // level, low (RM0090 §17.4.18 TIMx_BDTR, table 95 "Output control bits").
-        pac::TIM8.bdtr().modify(|w| w.set_moe(false));
-    }
-    fn latch_pins_low(&mut self) {
-        pac::GPIOC.bsrr().write(|w| {
-            for pin in BRIDGE_PINS {
-                w.set_br(pin, true);
-            }
-        });
-    }
-    fn pins_to_gpio_outputs(&mut self) {
-        use embassy_stm32::pac::gpio::vals::Moder;
-        pac::GPIOC.moder().modify(|w| {
-            for pin in BRIDGE_PINS {
-                w.set_moder(pin, Moder::OUTPUT);
-            }
-        });
+        sense::ack(pac::DMA2);
     }
 }
 
@@ -414,7 +216,11 @@ impl BridgeOff for Bridge {
 /// interrupts off. Both DRV8871 inputs end low (coast) as GPIO outputs, whatever TIM8 does
 /// afterwards; only a reset gives the pins back to the timer.
 pub fn bridge_off_now() {
-    drive::bridge_off(&mut Bridge);
+    drive::bridge_off(&mut pwm::BridgeRegs {
+        tim: pac::TIM8,
+        gpio: pac::GPIOC,
+        pins: BRIDGE_PINS,
+    });
 }
 
 /// Everything else the firmware uses.
@@ -440,22 +246,16 @@ pub struct Rest {
 /// interrupt is configured but not enabled: [`start_control`] does that.
 pub fn init() -> (ControlHw, Rest) {
     // Reset cause, then clear the flags for the next time.
-    let csr = pac::RCC.csr().read();
-    let watchdog_reset = csr.wdgrstf() || csr.wwdgrstf();
-    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    let watchdog_reset = clock::watchdog_reset(pac::RCC);
 
     let p = embassy_stm32::init(config());
     // The watchdog first: from here on a hang resets the MCU (the supervisor feeds it; until
     // it runs, the start-up below takes well under a second).
     let mut watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
     watchdog.unleash();
-    // A debug halt stops TIM8, and a stopped advanced timer's outputs are disabled, forced to
-    // their idle level with OSSI set (RM0090 §17.3.21 "Debug mode", §38.16.5 DBGMCU_APB2_FZ
-    // DBG_TIM8_STOP): the bridge coasts while the core is halted.
-    pac::DBGMCU.apb2fzr().modify(|w| w.set_tim8(true));
-    // And the watchdog stops too (DBGMCU_APB1_FZ DBG_IWDG_STOP, RM0090 §38.16.4): a breakpoint
-    // does not reset the MCU under the debugger.
-    pac::DBGMCU.apb1fzr().modify(|w| w.set_iwdg(true));
+    // A debug halt stops TIM8 (its outputs to their idle level: the bridge coasts) and the
+    // watchdog (a breakpoint does not reset the MCU).
+    clock::freeze_in_debug(pac::DBGMCU);
     // Flash accelerator on: embassy-stm32 0.6's RCC set-up (rcc/f247.rs) writes FLASH_ACR's
     // LATENCY only (`FLASH.acr().write(|w| w.set_latency(..))`), so the prefetch buffer and the
     // instruction and data caches stay at their reset value, off (RM0090 §3.5.2, §3.9.1):
@@ -469,13 +269,7 @@ pub fn init() -> (ControlHw, Rest) {
     // The prefetch buffer only where the part supports it: not on an STM32F405/407 of
     // revision A, nor where DBGMCU_IDCODE cannot be read as this part (gms-core's
     // `hw::f4_prefetch_allowed`).
-    let idcode = pac::DBGMCU.idcode().read().0;
-    let prefetch = (idcode & 0xFFF) == PART.dev_id && gms_core::hw::f4_prefetch_allowed(idcode);
-    pac::FLASH.acr().modify(|w| {
-        w.set_prften(prefetch);
-        w.set_icen(true);
-        w.set_dcen(true);
-    });
+    clock::flash_accelerator(pac::FLASH, pac::DBGMCU.idcode().read().0, PART.dev_id);
 
     // PWM: TIM8 CH1/CH2, center-aligned. The update event (where the preloaded compare values
     // take effect) comes at every other turning point through the repetition counter (RCR =
@@ -496,38 +290,15 @@ pub fn init() -> (ControlHw, Rest) {
     pwm.ch2().set_duty_cycle(0);
     pwm.ch1().enable();
     pwm.ch2().enable();
-    // The bridge inputs' edges at low speed (OSPEEDR = 00, RM0090 §8.4.3; embassy's AF pins
-    // come up at very high speed): at 20 kHz nothing needs nanosecond edges, and slower ones
-    // ring less on the wires to the DRV8871 (its inputs deglitch anyway).
-    pac::GPIOC.ospeedr().modify(|w| {
-        for pin in BRIDGE_PINS {
-            w.set_ospeedr(pin, pac::gpio::vals::Ospeedr::LOW_SPEED);
-        }
-    });
-    // Off-state when idle: outputs forced to their idle level (OIS1 = OIS2 = 0: low) whenever
-    // MOE is cleared, by software, a debug halt or a panic (RM0090 §17.4.18).
-    pac::TIM8.bdtr().modify(|w| {
-        w.set_ossi(pac::timer::vals::Ossi::IDLE_LEVEL);
-    });
-    pac::TIM8.cr2().modify(|w| {
-        w.set_ois(0, false);
-        w.set_ois(1, false);
-    });
-    let update_at_bottom = align_update_to_bottom();
+    // The bridge inputs' edges at low speed (embassy's AF pins come up at very high speed).
+    pwm::low_speed(pac::GPIOC, BRIDGE_PINS);
+    // Off-state when idle: outputs low whenever MOE is cleared.
+    pwm::idle_low(pac::TIM8);
+    let mut tim8 = pac::TIM8;
+    let update_at_bottom = pwm::align_update_to_bottom(&mut tim8, pwm::UPDATE_POLLS);
     pac::TIM8.sr().write(|w| w.0 = 0);
-    // The sense trigger: channel 4 (no pin) in PWM mode 1, so OC4REF is high while the
-    // counter is below CCR4; rising on the way down, CCR4 counts before the bottom; OC4REF
-    // as TRGO (CR2.MMS = 111, RM0090 §17.4.2) is the ADC's trigger, once per period.
-    pac::TIM8.ccmr_output(1).modify(|w| {
-        w.set_ocm(1, pac::timer::vals::Ocm::PWM_MODE1);
-        w.set_ocpe(1, true);
-    });
-    pac::TIM8
-        .ccr(3)
-        .write(|w| w.set_ccr(SENSE_TIMING.lead_counts(PWM_TIMER_HZ, 0) as u16));
-    pac::TIM8
-        .cr2()
-        .modify(|w| w.set_mms(pac::timer::vals::Mms::COMPARE_OC4));
+    // The sense trigger: channel 4's OC4REF as TRGO, rising `lead` before the bottom.
+    pwm::sense_trigger(pac::TIM8, SENSE_TIMING.lead_counts(PWM_TIMER_HZ, 0) as u16);
 
     // Encoder: TIM2 in encoder mode on both edges of both channels, 32-bit. Pull-ups so that
     // an open-collector encoder or a loose wire reads a steady level rather than noise (a
@@ -539,23 +310,28 @@ pub fn init() -> (ControlHw, Rest) {
         ..Default::default()
     };
     let qei = Qei::new(p.TIM2, p.PA0, p.PA1, qcfg);
-    pac::TIM2.arr().write_value(u32::MAX);
-    // Digital filter on TI1/TI2 (TIMx_CCMR1 IC1F/IC2F, RM0090 §18.4.7; embassy's Qei leaves
-    // them at 0, no filter): a glitch that the filter does not reject is a count lost for
-    // good in nanometre positioning. Written with the counter running: the filter only
-    // delays edges by its window.
+    // The full 32-bit range and the input filter for the encoder's highest count rate.
     let (filter, _window) = drive::encoder_filter(ENCODER_TIMER_HZ, ENCODER_MAX_RATE);
-    pac::TIM2.ccmr_input(0).modify(|w| {
-        let f = pac::timer::vals::FilterValue::from_bits(filter);
-        w.set_icf(0, f);
-        w.set_icf(1, f);
-    });
+    f4_regs::encoder::range_and_filter(pac::TIM2, filter);
 
     let adc = Adc::new(p.ADC1);
     // The control interrupt stays off in the NVIC (embassy's init enabled every DMA stream's)
     // until the loop is handed over; the start-up calibration polls the flag meanwhile.
     interrupt::DMA2_STREAM0.disable();
-    sense_init();
+    sense::init(
+        sense::SenseRegs {
+            rcc: pac::RCC,
+            gpio: pac::GPIOC,
+            dma: pac::DMA2,
+            adc: pac::ADC1,
+        },
+        sense::SenseLayout {
+            pin: SENSE_PIN,
+            channel: SENSE_CHANNEL,
+            conversions: SENSE_OVERSAMPLE as u8,
+        },
+        SENSE_BUF.addr(),
+    );
 
     // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
     // the reset priority 0, above the loop (time_driver/gp16.rs); the host link lowest.
@@ -622,15 +398,14 @@ pub fn init() -> (ControlHw, Rest) {
 /// [`crate::irq::CONTROL`], and above it the deadman (TIM8's update, once per period at the
 /// counter's bottom) and the ADC's overrun at [`crate::irq::DEADMAN`].
 pub fn start_control() {
-    ack_sample();
+    sense::ack(pac::DMA2);
     // The NVIC kept the interrupt pending while it was masked: without this the handler
     // would run once at once, mid-sequence.
     interrupt::DMA2_STREAM0.unpend();
     interrupt::DMA2_STREAM0.set_priority(crate::irq::CONTROL);
-    pac::TIM8.sr().write(|w| w.0 = SR_CLEAR_UIF);
+    pwm::deadman_arm(pac::TIM8);
     interrupt::TIM8_UP_TIM13.unpend();
     interrupt::TIM8_UP_TIM13.set_priority(crate::irq::DEADMAN);
-    pac::TIM8.dier().modify(|w| w.set_uie(true));
     interrupt::ADC.set_priority(crate::irq::DEADMAN);
     // SAFETY: the handlers below only touch state they own, atomics, or data behind a
     // critical section; enabling them cannot break another critical section.
@@ -646,10 +421,9 @@ pub fn start_control() {
 #[interrupt]
 fn DMA2_STREAM0() {
     static mut LOOP: Option<crate::control::Loop> = None;
-    let isr = pac::DMA2.isr(0).read();
-    let error = Stall::from_sense_flags(isr.teif(0), isr.dmeif(0), false);
+    let error = sense::dma_error(pac::DMA2);
     if error != Stall::None {
-        ack_sample();
+        sense::ack(pac::DMA2);
         crate::control::trip(error);
         return;
     }
@@ -662,27 +436,21 @@ fn DMA2_STREAM0() {
 #[interrupt]
 fn TIM8_UP_TIM13() {
     static mut DEADMAN: Deadman = Deadman::new();
-    pac::TIM8.sr().write(|w| w.0 = SR_CLEAR_UIF);
-    if DEADMAN.tick(crate::control::steps()) {
+    if pwm::deadman_tick(pac::TIM8, DEADMAN, crate::control::steps()) {
         crate::control::trip(Stall::NoStep);
-        pac::TIM8.dier().modify(|w| w.set_uie(false));
     }
 }
 
 /// The sense ADC overran: the bridge off for good, the interrupt off (its flag cleared).
 #[interrupt]
 fn ADC() {
-    let adc = pac::ADC1;
-    if Stall::from_sense_flags(false, false, adc.sr().read().ovr()) != Stall::None {
+    if sense::adc_overrun(pac::ADC1) != Stall::None {
         crate::control::trip(Stall::AdcOverrun);
     }
-    adc.cr1().modify(|w| w.set_ovrie(false));
-    adc.sr().modify(|w| w.set_ovr(false));
 }
 
 /// The control interrupt before the loop is handed over: bridge off, flags cleared.
 pub fn idle_sample() {
-    ack_sample();
-    pac::TIM8.ccr(0).write(|w| w.set_ccr(0));
-    pac::TIM8.ccr(1).write(|w| w.set_ccr(0));
+    sense::ack(pac::DMA2);
+    pwm::set_bridge(pac::TIM8, 0, 0);
 }

@@ -24,7 +24,7 @@ use embassy_time::{Duration, Instant, Ticker};
 use gms_core::device::{Front, Link, Mailbox, Status};
 use gms_core::protocol::{self, LineReader};
 
-use crate::control::{MAILBOX, TELEMETRY};
+use crate::control::{MAILBOX, TelemetryRx};
 use crate::port::{Port, Read};
 use crate::storage::Store;
 
@@ -93,7 +93,7 @@ pub const DTR_POLL_MS: u64 = 50;
 const REPLY: usize = 4096;
 
 /// Serves the protocol to one host after another, forever.
-pub async fn serve<P: Port>(mut port: P, mut dev: Dev) -> ! {
+pub async fn serve<P: Port>(mut port: P, mut dev: Dev, mut telemetry: TelemetryRx) -> ! {
     let mut reply = Buf::<REPLY>::new();
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];
@@ -106,8 +106,23 @@ pub async fn serve<P: Port>(mut port: P, mut dev: Dev) -> ! {
         // One ticker for the session: a timer made anew in each select would never fire
         // while telemetry arrives faster than it.
         let mut dtr_poll = Ticker::every(Duration::from_millis(DTR_POLL_MS));
+        let mut stream_poll = Ticker::every(Duration::from_millis(1));
         loop {
-            let event = select3(port.read(&mut packet), TELEMETRY.receive(), dtr_poll.next()).await;
+            // The telemetry queue is polled every millisecond while streaming (the loop never
+            // wakes this task: `control.rs`); it holds 64 samples, 64 ms of the 1 kHz stream.
+            let streaming = dev.streaming();
+            if !streaming {
+                // Samples from before a `stream off` are not sent later.
+                while telemetry.dequeue().is_some() {}
+            }
+            let poll = async {
+                if streaming {
+                    stream_poll.next().await
+                } else {
+                    core::future::pending::<()>().await
+                }
+            };
+            let event = select3(port.read(&mut packet), poll, dtr_poll.next()).await;
             match event {
                 Either3::First(Ok(Read::Bytes(n))) => {
                     let mut link_ok = true;
@@ -139,26 +154,30 @@ pub async fn serve<P: Port>(mut port: P, mut dev: Dev) -> ! {
                         break;
                     }
                 }
-                Either3::Second(sample) => {
-                    if !dev.streaming() {
-                        continue;
-                    }
-                    lines.clear();
-                    let mut next = Some(sample);
+                Either3::Second(()) => {
                     // Batch what is queued, a few lines per transfer.
-                    while let Some(s) = next {
-                        let mark = lines.len;
-                        if dev.telemetry_line(&mut lines, &s).is_err() {
-                            lines.len = mark;
+                    let mut link_ok = true;
+                    loop {
+                        lines.clear();
+                        while lines.len < 384 {
+                            let Some(s) = telemetry.dequeue() else {
+                                break;
+                            };
+                            let mark = lines.len;
+                            if dev.telemetry_line(&mut lines, &s).is_err() {
+                                lines.len = mark;
+                                break;
+                            }
+                        }
+                        if lines.len == 0 {
                             break;
                         }
-                        next = if lines.len < 384 {
-                            TELEMETRY.try_receive().ok()
-                        } else {
-                            None
-                        };
+                        if port.send(lines.as_bytes()).await.is_err() {
+                            link_ok = false;
+                            break;
+                        }
                     }
-                    if port.send(lines.as_bytes()).await.is_err() {
+                    if !link_ok {
                         break;
                     }
                 }

@@ -23,9 +23,9 @@ use core::cell::RefCell;
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::channel::Channel;
 use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
 use gms_core::drive::{Faults, Stall};
+use static_cell::ConstStaticCell;
 
 use crate::board::ControlHw;
 use crate::irq::IrqOffRawMutex;
@@ -34,8 +34,21 @@ use crate::irq::IrqOffRawMutex;
 pub static MAILBOX: Mutex<IrqOffRawMutex, RefCell<Mailbox>> =
     Mutex::new(RefCell::new(Mailbox::new()));
 
-/// Telemetry samples to the comms task (dropped when it falls behind).
-pub static TELEMETRY: Channel<IrqOffRawMutex, Sample, 64> = Channel::new();
+/// Telemetry samples from the loop to the comms task: a lock-free single-producer,
+/// single-consumer queue (heapless), so that the loop never wakes a task — an executor's
+/// waker takes the global critical section, which does not exclude an interrupt above its
+/// mask (`irq.rs`); the comms task polls the queue instead. A full queue drops the sample.
+pub type TelemetryQueue = heapless::spsc::Queue<Sample, 65>;
+/// The loop's end of the telemetry queue.
+pub type TelemetryTx = heapless::spsc::Producer<'static, Sample>;
+/// The comms task's end of the telemetry queue.
+pub type TelemetryRx = heapless::spsc::Consumer<'static, Sample>;
+
+/// The telemetry queue's two ends (once: a second call panics at start-up).
+pub fn telemetry() -> (TelemetryTx, TelemetryRx) {
+    static QUEUE: ConstStaticCell<TelemetryQueue> = ConstStaticCell::new(TelemetryQueue::new());
+    QUEUE.take().split()
+}
 
 /// Control steps started so far (wrapping): written by the control interrupt only, read by
 /// the deadman.
@@ -80,13 +93,14 @@ static HANDOFF: Mutex<IrqOffRawMutex, RefCell<Option<Loop>>> = Mutex::new(RefCel
 pub struct Loop {
     hw: ControlHw,
     core: ControlLoop,
+    telemetry: TelemetryTx,
     /// DWT cycle count at the start of the last step (0: none yet).
     last_start: u32,
 }
 
 impl Loop {
     /// The loop `core` on the hardware `hw`, bridge off, timer set for the core's rates.
-    pub fn new(mut hw: ControlHw, core: ControlLoop) -> Loop {
+    pub fn new(mut hw: ControlHw, core: ControlLoop, telemetry: TelemetryTx) -> Loop {
         let (psc, arr) = core.timing();
         hw.set_pwm_timing(psc, arr);
         hw.set_bridge(0, 0);
@@ -95,6 +109,7 @@ impl Loop {
         Loop {
             hw,
             core,
+            telemetry,
             last_start: 0,
         }
     }
@@ -140,7 +155,7 @@ impl Loop {
         self.hw.set_bridge(out.compare.0, out.compare.1);
         if let Some(s) = out.sample {
             // A full queue drops the sample: the loop never waits for the comms side.
-            let _ = TELEMETRY.try_send(s);
+            let _ = self.telemetry.enqueue(s);
         }
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0);
         if self.core.finish(cycles) {
@@ -154,8 +169,13 @@ impl Loop {
 /// hand-off on the first call, then owned there.
 #[inline(always)]
 pub fn on_sample(slot: &mut Option<Loop>) {
-    if slot.is_none() {
-        *slot = HANDOFF.lock(|h| h.borrow_mut().take());
+    if slot.is_none()
+        && let Some(l) = HANDOFF.lock(|h| h.borrow_mut().take())
+    {
+        // The old value is `None`: forgotten rather than dropped, so that no drop glue of
+        // the loop's drivers (which take the global critical section) is reachable from
+        // this interrupt (`cargo xtask check-elf` looks).
+        core::mem::forget(slot.replace(l));
     }
     match slot {
         Some(l) => l.step(),

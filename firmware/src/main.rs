@@ -148,7 +148,8 @@ async fn main(spawner: Spawner) {
         ConstStaticCell::new([0.0; board::CAPTURE_VALUES as usize]);
     let capture = CAPTURE.take();
     let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture);
-    Loop::new(hw, core).hand_over();
+    let (telemetry_tx, telemetry_rx) = control::telemetry();
+    Loop::new(hw, core, telemetry_tx).hand_over();
     board::start_control();
     info!("control loop running");
 
@@ -199,7 +200,7 @@ async fn main(spawner: Spawner) {
     };
     #[cfg(feature = "board-nucleo-f446")]
     let port = rest.link;
-    spawner.spawn(unwrap!(comms_task(port, dev)));
+    spawner.spawn(unwrap!(comms_task(port, dev, telemetry_rx)));
     spawner.spawn(unwrap!(supervisor(
         rest.watchdog,
         rest.led_run,
@@ -253,8 +254,8 @@ async fn usb_task(
 }
 
 #[embassy_executor::task]
-async fn comms_task(port: port::HostPort, dev: comms::Dev) -> ! {
-    comms::serve(port, dev).await
+async fn comms_task(port: port::HostPort, dev: comms::Dev, telemetry: control::TelemetryRx) -> ! {
+    comms::serve(port, dev, telemetry).await
 }
 
 /// Watchdog, LEDs and fault logs, every 250 ms. The watchdog is fed only while the control

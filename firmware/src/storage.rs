@@ -49,28 +49,16 @@ fn reload_watchdog() {
         .write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
 }
 
-/// Flushes the flash data cache (DCEN off, DCRST pulse, DCEN on; RM0090 §3.5.2: the cache
-/// is reset only while disabled).
+/// Flushes the flash data cache (`f4_regs::clock::flush_data_cache`).
 fn flush_data_cache() {
-    let on = pac::FLASH.acr().read().dcen();
-    pac::FLASH.acr().modify(|w| w.set_dcen(false));
-    pac::FLASH.acr().modify(|w| w.set_dcrst(true));
-    pac::FLASH.acr().modify(|w| w.set_dcrst(false));
-    pac::FLASH.acr().modify(|w| w.set_dcen(on));
+    f4_regs::clock::flush_data_cache(pac::FLASH);
 }
 
-/// Sets FLASH_CR.PSIZE to ×32 for the next erase. CR can only be written unlocked: the key
-/// sequence (RM0090 §3.5.1) is written only while LOCK is set (a key written to an unlocked
-/// CR is a wrong sequence and locks CR until reset), as embassy's `unlock` does; embassy's
-/// erase then finds CR unlocked, keeps PSIZE and locks CR again when done.
+/// Sets FLASH_CR.PSIZE to ×32 for the next erase, unlocking CR first if it is locked
+/// (`f4_regs::clock::erase_at_x32`: embassy's erase then finds CR unlocked, keeps PSIZE and
+/// locks CR again when done).
 fn psize_x32() {
-    if pac::FLASH.cr().read().lock() {
-        pac::FLASH.keyr().write_value(0x4567_0123);
-        pac::FLASH.keyr().write_value(0xCDEF_89AB);
-    }
-    pac::FLASH
-        .cr()
-        .modify(|w| w.set_psize(pac::flash::vals::Psize::PSIZE32));
+    f4_regs::clock::erase_at_x32(pac::FLASH);
 }
 
 impl ErrorType for StoreFlash {

@@ -14,6 +14,7 @@ use std::process::{Command, ExitCode};
 use std::time::Duration;
 
 mod elf;
+mod stack;
 
 // The boards' memory maps and probe-rs chip names, from the firmware's own files.
 #[path = "../../firmware/src/boards/f405/memory.rs"]
@@ -135,7 +136,91 @@ fn check_elf(args: &[String]) -> Result<(), String> {
     for l in lines {
         println!("{name}: {l}");
     }
-    Ok(())
+    let listing = disassemble(path)?;
+    let funcs = stack::parse(&listing);
+    let mut bad = Vec::new();
+    for (root, limit) in HANDLER_STACK_LIMITS {
+        if !funcs.contains_key(root) {
+            bad.push(format!("{root}: not in the image"));
+            continue;
+        }
+        let c = stack::chain(&funcs, root);
+        println!(
+            "{name}: {root}: worst stack {} B (limit {limit}) over {} functions, deepest {}; \
+             {} indirect calls; BASEPRI accesses: {}{}",
+            c.stack,
+            c.reached,
+            c.path.join(" > "),
+            c.indirect,
+            c.basepri.len(),
+            if c.unknown.is_empty() {
+                String::new()
+            } else {
+                format!("; not followed: {}", c.unknown.join(", "))
+            }
+        );
+        if c.stack > limit {
+            bad.push(format!("{root}: worst stack {} B above {limit}", c.stack));
+        }
+        for (f, insn) in &c.basepri {
+            bad.push(format!("{root}: BASEPRI access in {f}: {insn}"));
+        }
+        if c.indirect > 0 || !c.unknown.is_empty() {
+            bad.push(format!(
+                "{root}: {} indirect calls, not followed {:?}: the stack figure is a lower \
+                 bound",
+                c.indirect, c.unknown
+            ));
+        }
+    }
+    if bad.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("{path} (board {name}):\n{}", bad.join("\n")))
+    }
+}
+
+/// The handlers that run above the global critical section's mask, and the most stack each
+/// may use with everything it calls \[bytes\]: they preempt whatever runs, so their stack
+/// comes on top of the deepest of the rest.
+const HANDLER_STACK_LIMITS: [(&str, u64); 3] = [
+    ("DMA2_STREAM0", 8192),
+    ("TIM8_UP_TIM13", 1024),
+    ("ADC", 1024),
+];
+
+/// The image's disassembly by rustup's `llvm-objdump` (`rustup component add llvm-tools`),
+/// or the one `LLVM_OBJDUMP` names.
+fn disassemble(path: &str) -> Result<String, String> {
+    let tool = match std::env::var_os("LLVM_OBJDUMP") {
+        Some(t) => std::path::PathBuf::from(t),
+        None => {
+            let out = Command::new("rustc")
+                .args(["--print", "sysroot"])
+                .output()
+                .map_err(|e| format!("cannot run rustc: {e}"))?;
+            let sysroot = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            let lib = std::path::Path::new(&sysroot).join("lib/rustlib");
+            std::fs::read_dir(&lib)
+                .map_err(|e| format!("{}: {e}", lib.display()))?
+                .filter_map(|d| d.ok())
+                .map(|d| d.path().join("bin/llvm-objdump"))
+                .find(|p| p.exists())
+                .ok_or("no llvm-objdump: rustup component add llvm-tools")?
+        }
+    };
+    let out = Command::new(&tool)
+        .args(["-d", "--no-show-raw-insn", path])
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", tool.display()))?;
+    if !out.status.success() {
+        return Err(format!(
+            "{} failed: {}",
+            tool.display(),
+            String::from_utf8_lossy(&out.stderr)
+        ));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
 /// `cargo xtask flash [--board NAME] [--watchdog-check]`: builds the firmware for the board

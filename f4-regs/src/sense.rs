@@ -1,0 +1,220 @@
+//! The current-sense chain: ADC1's regular sequence of conversions of one channel started by
+//! TIM8's trigger output, moved by DMA2 stream 0 into a buffer, circularly, its
+//! transfer-complete interrupt the control interrupt.
+
+use core::cell::UnsafeCell;
+
+use gms_core::drive::Stall;
+
+use crate::pac;
+
+/// The DMA's destination: the last sequence of conversions. Written only by the DMA, read only
+/// with volatile reads after its transfer-complete flag.
+pub struct SenseBuf<const N: usize>(UnsafeCell<[u16; N]>);
+
+// SAFETY: the CPU only reads it (volatile), the DMA only writes it.
+unsafe impl<const N: usize> Sync for SenseBuf<N> {}
+
+impl<const N: usize> SenseBuf<N> {
+    /// Zeroed.
+    pub const fn new() -> Self {
+        SenseBuf(UnsafeCell::new([0; N]))
+    }
+
+    /// Its address, for the DMA.
+    pub fn addr(&self) -> u32 {
+        self.0.get() as usize as u32
+    }
+
+    /// The sum of its codes (volatile reads: the DMA writes them).
+    #[inline(always)]
+    pub fn sum(&self) -> u32 {
+        let base = self.0.get() as *const u16;
+        let mut sum = 0u32;
+        for i in 0..N {
+            // SAFETY: in bounds of the buffer; volatile, as the DMA writes it.
+            sum += unsafe { core::ptr::read_volatile(base.add(i)) } as u32;
+        }
+        sum
+    }
+
+    /// Writes the codes as the DMA would (for a model of it).
+    pub fn fill(&self, codes: &[u16; N]) {
+        let base = self.0.get() as *mut u16;
+        for (i, c) in codes.iter().enumerate() {
+            // SAFETY: in bounds; nothing else writes while a model fills it.
+            unsafe { core::ptr::write_volatile(base.add(i), *c) };
+        }
+    }
+}
+
+impl<const N: usize> Default for SenseBuf<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The registers of the chain.
+#[derive(Clone, Copy)]
+pub struct SenseRegs {
+    /// RCC (DMA2's clock).
+    pub rcc: pac::rcc::Rcc,
+    /// The sense pin's port (GPIOC).
+    pub gpio: pac::gpio::Gpio,
+    /// DMA2.
+    pub dma: pac::dma::Dma,
+    /// ADC1.
+    pub adc: pac::adc::Adc,
+}
+
+/// The chain's layout.
+#[derive(Clone, Copy, Debug)]
+pub struct SenseLayout {
+    /// The pin of the sense input on its port (PC0: 0).
+    pub pin: usize,
+    /// Its ADC channel (PC0 = ADC123_IN10: 10; 10 to 18 are sampled through SMPR1).
+    pub channel: u8,
+    /// Conversions per sequence (1 to 16).
+    pub conversions: u8,
+}
+
+/// DMA2's stream the ADC1 requests go to (stream 0 channel 0, RM0090 table 43).
+pub const STREAM: usize = 0;
+
+/// Sets up the chain (the module's notes), the DMA moving into `buf` (its address, room for
+/// `layout.conversions` codes), with its transfer-complete, transfer-error and direct-mode
+/// error interrupts enabled in the stream (the NVIC decides when they run), and the ADC's
+/// overrun interrupt. ADC1 is already clocked, prescaled and on (embassy's `Adc::new`).
+pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
+    use pac::adc::vals::{Dds, Eocs, Exten, Res, SampleTime};
+    use pac::dma::vals::{Dir, Size};
+    let n = layout.conversions.clamp(1, 16);
+    // The pin analog (RM0090 §8.4.1: MODER = 11).
+    r.gpio
+        .moder()
+        .modify(|w| w.set_moder(layout.pin, pac::gpio::vals::Moder::ANALOG));
+    // The stream, disabled while configured (RM0090 §10.3.17).
+    r.rcc.ahb1enr().modify(|w| w.set_dma2en(true));
+    let st = r.dma.st(STREAM);
+    st.cr().modify(|w| w.set_en(false));
+    while st.cr().read().en() {}
+    ack(r.dma);
+    st.par().write_value(r.adc.dr().as_ptr() as usize as u32);
+    st.m0ar().write_value(buf);
+    st.ndtr().write(|w| w.set_ndt(n as u16));
+    st.cr().write(|w| {
+        w.set_chsel(0);
+        w.set_dir(Dir::PERIPHERAL_TO_MEMORY);
+        w.set_psize(Size::BITS16);
+        w.set_msize(Size::BITS16);
+        w.set_minc(true);
+        w.set_circ(true);
+        w.set_tcie(true);
+        // A transfer error (a bus error: the stream stops, EN cleared) and a direct-mode
+        // error (RM0090 §10.3.18) interrupt too, on the same vector, checked first.
+        w.set_teie(true);
+        w.set_dmeie(true);
+        w.set_en(true);
+    });
+    // ADC1 (RM0090 §13.13): 12 bits, a scan of `n` ranks of the channel, each sampled 15
+    // cycles; DMA requests continuing after each sequence (DDS); EOC per sequence; started by
+    // the rising edge of TIM8_TRGO (EXTSEL = 1110, §13.13.3 table "External trigger for
+    // regular channels"). An overrun (a conversion lost: the ADC stops its DMA requests until
+    // OVR is cleared, §13.8.1) interrupts on the ADC vector.
+    let adc = r.adc;
+    adc.cr1().modify(|w| {
+        w.set_res(Res::BITS12);
+        w.set_scan(true);
+        w.set_eocie(false);
+        w.set_ovrie(true);
+    });
+    if layout.channel >= 10 {
+        adc.smpr1()
+            .modify(|w| w.set_smp((layout.channel - 10) as usize, SampleTime::CYCLES15));
+    } else {
+        adc.smpr2()
+            .modify(|w| w.set_smp(layout.channel as usize, SampleTime::CYCLES15));
+    }
+    // Ranks 1-6 in SQR3, 7-12 in SQR2, 13-16 in SQR1; L = ranks - 1.
+    adc.sqr3().write(|w| {
+        for i in 0..6 {
+            w.set_sq(i, layout.channel);
+        }
+    });
+    adc.sqr2().write(|w| {
+        for i in 0..6 {
+            w.set_sq(i, layout.channel);
+        }
+    });
+    adc.sqr1().write(|w| {
+        for i in 0..4 {
+            w.set_sq(i, layout.channel);
+        }
+        w.set_l(n - 1);
+    });
+    adc.cr2().modify(|w| {
+        w.set_cont(false);
+        w.set_dma(true);
+        w.set_dds(Dds::CONTINUOUS);
+        w.set_eocs(Eocs::EACH_SEQUENCE);
+        w.set_extsel(0b1110);
+        w.set_exten(Exten::RISING_EDGE);
+        w.set_adon(true);
+    });
+}
+
+/// Clears the stream's flags (LIFCR, RM0090 §10.5.3).
+#[inline(always)]
+pub fn ack(dma: pac::dma::Dma) {
+    dma.ifcr(STREAM / 4).write(|w| {
+        w.set_tcif(STREAM % 4, true);
+        w.set_htif(STREAM % 4, true);
+        w.set_teif(STREAM % 4, true);
+        w.set_dmeif(STREAM % 4, true);
+        w.set_feif(STREAM % 4, true);
+    });
+}
+
+/// True when a sequence has completed (TCIF).
+#[inline(always)]
+pub fn complete(dma: pac::dma::Dma) -> bool {
+    dma.isr(STREAM / 4).read().tcif(STREAM % 4)
+}
+
+/// What the stream's error flags say (TEIF, DMEIF): [`Stall::DmaError`] or none.
+#[inline(always)]
+pub fn dma_error(dma: pac::dma::Dma) -> Stall {
+    let isr = dma.isr(STREAM / 4).read();
+    Stall::from_sense_flags(isr.teif(STREAM % 4), isr.dmeif(STREAM % 4), false)
+}
+
+/// The ADC's overrun: [`Stall::AdcOverrun`] if OVR is set; the overrun interrupt off and the
+/// flag cleared either way (the caller switches the bridge off for good).
+pub fn adc_overrun(adc: pac::adc::Adc) -> Stall {
+    let stall = Stall::from_sense_flags(false, false, adc.sr().read().ovr());
+    adc.cr1().modify(|w| w.set_ovrie(false));
+    adc.sr().modify(|w| w.set_ovr(false));
+    stall
+}
+
+/// Waits for the next sequence, at most `limit_cycles` of `now` (a free-running cycle
+/// counter), for the start-up calibration while the control interrupt is off; its sum, or
+/// `None` if none came (the ADC is not triggered or its DMA stopped).
+pub fn next_sum<const N: usize>(
+    dma: pac::dma::Dma,
+    buf: &SenseBuf<N>,
+    mut now: impl FnMut() -> u32,
+    limit_cycles: u32,
+) -> Option<u32> {
+    ack(dma);
+    let t0 = now();
+    loop {
+        if complete(dma) {
+            ack(dma);
+            return Some(buf.sum());
+        }
+        if now().wrapping_sub(t0) > limit_cycles {
+            return None;
+        }
+    }
+}

@@ -1,0 +1,466 @@
+//! The register-level shell run over stm32-metapac register blocks laid on plain memory: the
+//! fields each function leaves are read back against RM0090; the functions that wait on the
+//! hardware run against models of it (a centre-aligned TIM8, a dead DMA, an HSE that never
+//! comes).
+
+use f4_regs::pac;
+use f4_regs::{clock, pwm, sense};
+use gms_core::drive::{Deadman, Stall, bridge_off};
+
+/// A register block on zeroed memory (1 KiB: more than any block used here spans).
+fn block<T>(make: unsafe fn(*mut ()) -> T) -> T {
+    let mem: &'static mut [u32; 256] = Box::leak(Box::new([0u32; 256]));
+    // SAFETY: the memory lives for the program, is word-aligned and large enough; nothing
+    // else reaches it.
+    unsafe { make(mem.as_mut_ptr() as *mut ()) }
+}
+
+/// The raw word at byte offset `off` of a block.
+fn word(ptr: *mut (), off: usize) -> u32 {
+    // SAFETY: within the block's memory (see `block`).
+    unsafe { core::ptr::read_volatile((ptr as *const u8).add(off) as *const u32) }
+}
+
+fn set_word(ptr: *mut (), off: usize, v: u32) {
+    // SAFETY: within the block's memory (see `block`).
+    unsafe { core::ptr::write_volatile((ptr as *mut u8).add(off) as *mut u32, v) }
+}
+
+fn sense_regs() -> sense::SenseRegs {
+    sense::SenseRegs {
+        rcc: block(pac::rcc::Rcc::from_ptr),
+        gpio: block(pac::gpio::Gpio::from_ptr),
+        dma: block(pac::dma::Dma::from_ptr),
+        adc: block(pac::adc::Adc::from_ptr),
+    }
+}
+
+const LAYOUT: sense::SenseLayout = sense::SenseLayout {
+    pin: 0,
+    channel: 10,
+    conversions: 16,
+};
+
+#[test]
+fn the_sense_chain_is_set_up_as_rm0090_says() {
+    use pac::adc::vals::{Dds, Eocs, Exten, Res, SampleTime};
+    use pac::dma::vals::{Dir, Size};
+    let r = sense_regs();
+    let buf: sense::SenseBuf<16> = sense::SenseBuf::new();
+    sense::init(r, LAYOUT, buf.addr());
+    // PC0 analog, DMA2 clocked.
+    assert_eq!(
+        r.gpio.moder().read().moder(0),
+        pac::gpio::vals::Moder::ANALOG
+    );
+    assert!(r.rcc.ahb1enr().read().dma2en());
+    // DMA2 stream 0: channel 0 (ADC1, RM0090 table 43), peripheral to memory, 16-bit both
+    // sides, memory increment, circular, 16 transfers, from ADC1_DR (offset 0x4C) into the
+    // buffer, every interrupt that matters enabled, on.
+    let st = r.dma.st(0);
+    let cr = st.cr().read();
+    assert_eq!(cr.chsel(), 0);
+    assert_eq!(cr.dir(), Dir::PERIPHERAL_TO_MEMORY);
+    assert_eq!((cr.psize(), cr.msize()), (Size::BITS16, Size::BITS16));
+    assert!(cr.minc() && cr.circ() && cr.en());
+    assert!(cr.tcie() && cr.teie() && cr.dmeie());
+    assert!(!cr.htie());
+    assert_eq!(st.ndtr().read().ndt(), 16);
+    assert_eq!(st.par().read(), r.adc.as_ptr() as usize as u32 + 0x4C);
+    assert_eq!(st.m0ar().read(), buf.addr());
+    // The stream's flags cleared (LIFCR written with stream 0's five bits: 0x3D).
+    assert_eq!(word(r.dma.as_ptr(), 0x08) & 0x3D, 0x3D);
+    // ADC1: 12 bits, scan, overrun interrupt on; 16 ranks of channel 10 sampled 15 cycles;
+    // single sequences started by TIM8_TRGO's rising edge (EXTSEL 1110), DMA with DDS, EOC
+    // per sequence, on.
+    let cr1 = r.adc.cr1().read();
+    assert_eq!(cr1.res(), Res::BITS12);
+    assert!(cr1.scan() && cr1.ovrie() && !cr1.eocie());
+    assert_eq!(r.adc.smpr1().read().smp(0), SampleTime::CYCLES15);
+    assert_eq!(r.adc.sqr1().read().l(), 15);
+    let mut ranks = Vec::new();
+    for i in 0..6 {
+        ranks.push(r.adc.sqr3().read().sq(i));
+    }
+    for i in 0..6 {
+        ranks.push(r.adc.sqr2().read().sq(i));
+    }
+    for i in 0..4 {
+        ranks.push(r.adc.sqr1().read().sq(i));
+    }
+    assert_eq!(ranks, vec![10u8; 16]);
+    let cr2 = r.adc.cr2().read();
+    assert_eq!(cr2.extsel(), 0b1110);
+    assert_eq!(cr2.exten(), Exten::RISING_EDGE);
+    assert_eq!(cr2.dds(), Dds::CONTINUOUS);
+    assert_eq!(cr2.eocs(), Eocs::EACH_SEQUENCE);
+    assert!(cr2.dma() && cr2.adon() && !cr2.cont());
+}
+
+/// A dead DMA (TCIF never set): each wait ends after its bound of the cycle counter, and the
+/// whole calibration after one wait; a live one returns the buffer's sum and clears the flags.
+#[test]
+fn a_dead_dma_costs_one_bounded_wait() {
+    use gms_core::device::{SenseTrouble, calibrate_sense};
+    let r = sense_regs();
+    let buf: sense::SenseBuf<16> = sense::SenseBuf::new();
+    buf.fill(&[2048; 16]);
+    let limit = 168_000u32; // 1 ms at 168 MHz
+    // The cycle counter: 40 cycles per read (a poll of the flag in between).
+    let mut clock = 0u32;
+    let mut reads = 0u64;
+    let board = hil_board();
+    let z = calibrate_sense(&board, 3.4, || {
+        sense::next_sum(
+            r.dma,
+            &buf,
+            || {
+                reads += 1;
+                clock = clock.wrapping_add(40);
+                clock
+            },
+            limit,
+        )
+    });
+    assert_eq!(z.trouble, SenseTrouble::NoSamples { taken: 0 });
+    // One wait: the first read, then reads until 1 ms has passed.
+    assert_eq!(reads, 1 + (limit as u64 / 40) + 1);
+    // Alive: TCIF (LISR bit 5) set by the "DMA".
+    set_word(r.dma.as_ptr(), 0x00, 1 << 5);
+    let got = sense::next_sum(r.dma, &buf, || 0, limit);
+    assert_eq!(got, Some(16 * 2048));
+    assert_eq!(word(r.dma.as_ptr(), 0x08) & 0x3D, 0x3D, "flags cleared");
+}
+
+/// The chain's errors: TEIF or DMEIF of stream 0 (LISR bits 3 and 2), the ADC's OVR (SR bit 5).
+#[test]
+fn the_sense_chain_reports_its_errors() {
+    let r = sense_regs();
+    assert_eq!(sense::dma_error(r.dma), Stall::None);
+    set_word(r.dma.as_ptr(), 0x00, 1 << 3);
+    assert_eq!(sense::dma_error(r.dma), Stall::DmaError);
+    set_word(r.dma.as_ptr(), 0x00, 1 << 2);
+    assert_eq!(sense::dma_error(r.dma), Stall::DmaError);
+    set_word(r.dma.as_ptr(), 0x00, 1 << 5);
+    assert_eq!(sense::dma_error(r.dma), Stall::None, "TCIF is not an error");
+    r.adc.cr1().modify(|w| w.set_ovrie(true));
+    assert_eq!(sense::adc_overrun(r.adc), Stall::None);
+    r.adc.cr1().modify(|w| w.set_ovrie(true));
+    set_word(r.adc.as_ptr(), 0x00, 1 << 5);
+    assert_eq!(sense::adc_overrun(r.adc), Stall::AdcOverrun);
+    assert!(!r.adc.cr1().read().ovrie(), "the interrupt off");
+    assert!(!r.adc.sr().read().ovr(), "the flag cleared");
+}
+
+fn hil_board() -> gms_core::device::Board {
+    use gms_core::device::{Board, SenseChain};
+    Board {
+        pwm_timer_hz: 168_000_000,
+        pwm_max_arr: 65_534,
+        encoder_bits: 32,
+        sense_oversample: 16,
+        sense: SenseChain {
+            vref: 3.3,
+            full_scale: 4095.0,
+            zero_code: 2048.0,
+            zero_tolerance: 150.0,
+            window_s: 0.0,
+        },
+        limits: gms_core::drive::BoardLimits {
+            trip_factor: 1.5,
+            max_error: 0.01,
+            max_speed: 100.0,
+            clock_hz: 168_000_000,
+            budget_fraction: 0.6,
+        },
+        has_truth: false,
+        bridge_wake_s: 0.0,
+        capture_values: 8192,
+    }
+}
+
+#[test]
+fn tim8_idle_levels_trigger_compares_and_timing() {
+    let tim = block(pac::timer::TimAdv::from_ptr);
+    // Idle levels low whenever MOE is cleared.
+    tim.cr2().modify(|w| {
+        w.set_ois(0, true);
+        w.set_ois(1, true);
+    });
+    pwm::idle_low(tim);
+    assert_eq!(tim.bdtr().read().ossi(), pac::timer::vals::Ossi::IDLE_LEVEL);
+    assert!(!tim.cr2().read().ois(0) && !tim.cr2().read().ois(1));
+    // The sense trigger: OC4 in PWM mode 1, preloaded, CCR4 the lead, TRGO = OC4REF.
+    pwm::sense_trigger(tim, 877);
+    assert_eq!(
+        tim.ccmr_output(1).read().ocm(1),
+        pac::timer::vals::Ocm::PWM_MODE1
+    );
+    assert!(tim.ccmr_output(1).read().ocpe(1));
+    assert_eq!(tim.ccr(3).read().ccr(), 877);
+    assert_eq!(tim.cr2().read().mms(), pac::timer::vals::Mms::COMPARE_OC4);
+    // Compare values clamped to 16 bits.
+    pwm::set_bridge(tim, 4201, 70_000);
+    assert_eq!(
+        (tim.ccr(0).read().ccr(), tim.ccr(1).read().ccr()),
+        (4201, 65535)
+    );
+    // Timing: the period clamped to the board's largest, the lead below it.
+    pwm::set_timing(tim, 3, 70_000, 65_534, 100_000);
+    assert_eq!(tim.psc().read(), 3);
+    assert_eq!(tim.arr().read().arr(), 65_534);
+    assert_eq!(tim.ccr(3).read().ccr(), 65_533);
+    pwm::set_timing(tim, 0, 4200, 65_534, 877);
+    assert_eq!(
+        (tim.arr().read().arr(), tim.ccr(3).read().ccr()),
+        (4200, 877)
+    );
+}
+
+#[test]
+fn the_bridge_goes_off_on_its_registers() {
+    let tim = block(pac::timer::TimAdv::from_ptr);
+    let gpio = block(pac::gpio::Gpio::from_ptr);
+    tim.bdtr().modify(|w| w.set_moe(true));
+    // PC6/PC7 as alternate functions (MODER = 10), PC0 analog (11): only 6 and 7 change.
+    gpio.moder().write(|w| {
+        w.set_moder(6, pac::gpio::vals::Moder::ALTERNATE);
+        w.set_moder(7, pac::gpio::vals::Moder::ALTERNATE);
+        w.set_moder(0, pac::gpio::vals::Moder::ANALOG);
+    });
+    pwm::low_speed(gpio, [6, 7]);
+    assert_eq!(
+        gpio.ospeedr().read().ospeedr(6),
+        pac::gpio::vals::Ospeedr::LOW_SPEED
+    );
+    let mut b = pwm::BridgeRegs {
+        tim,
+        gpio,
+        pins: [6, 7],
+    };
+    bridge_off(&mut b);
+    assert!(!tim.bdtr().read().moe());
+    // BSRR: BR6 and BR7 (bits 22 and 23), nothing set.
+    assert_eq!(word(gpio.as_ptr(), 0x18), (1 << 22) | (1 << 23));
+    assert_eq!(gpio.moder().read().moder(6), pac::gpio::vals::Moder::OUTPUT);
+    assert_eq!(gpio.moder().read().moder(7), pac::gpio::vals::Moder::OUTPUT);
+    assert_eq!(gpio.moder().read().moder(0), pac::gpio::vals::Moder::ANALOG);
+}
+
+#[test]
+fn the_deadman_tick_clears_its_flag_and_stops_after_a_trip() {
+    let tim = block(pac::timer::TimAdv::from_ptr);
+    pwm::deadman_arm(tim);
+    assert!(tim.dier().read().uie());
+    let mut d = Deadman::new();
+    let mut steps = 0;
+    for _ in 0..10 {
+        set_word(tim.as_ptr(), 0x10, 1); // UIF
+        assert!(!pwm::deadman_tick(tim, &mut d, steps));
+        assert_eq!(
+            word(tim.as_ptr(), 0x10),
+            pwm::SR_CLEAR_UIF,
+            "UIF cleared alone"
+        );
+        steps += 1;
+    }
+    assert!(!pwm::deadman_tick(tim, &mut d, steps));
+    assert!(!pwm::deadman_tick(tim, &mut d, steps));
+    assert!(pwm::deadman_tick(tim, &mut d, steps));
+    assert!(
+        !tim.dier().read().uie(),
+        "the update interrupt off after the trip"
+    );
+}
+
+/// A model of TIM8 counting centre-aligned (RM0090 §17.3.3): up from 0 to ARR (an overflow,
+/// then down), down to 0 (an underflow, then up); at each turning point the repetition
+/// counter, if at 0, makes an update and reloads from RCR, else counts down. The CPU's polls
+/// advance it by `per_poll` timer clocks.
+struct CentreAligned {
+    cnt: u32,
+    up: bool,
+    arr: u32,
+    rep_cnt: u8,
+    rcr: u8,
+    uif: bool,
+    per_poll: u32,
+    /// Where each update came: true at the bottom.
+    updates: Vec<bool>,
+}
+
+impl CentreAligned {
+    fn tick(&mut self) {
+        let turned = if self.up {
+            self.cnt += 1;
+            self.cnt >= self.arr
+        } else {
+            self.cnt -= 1;
+            self.cnt == 0
+        };
+        if turned {
+            let at_bottom = !self.up;
+            self.up = !self.up;
+            if self.rep_cnt == 0 {
+                self.uif = true;
+                self.rep_cnt = self.rcr;
+                self.updates.push(at_bottom);
+            } else {
+                self.rep_cnt -= 1;
+            }
+        }
+    }
+}
+
+impl pwm::UpdateTimer for CentreAligned {
+    fn clear_update(&mut self) {
+        self.uif = false;
+    }
+    fn update_pending(&mut self) -> bool {
+        for _ in 0..self.per_poll {
+            self.tick();
+        }
+        self.uif
+    }
+    fn counting_up(&mut self) -> bool {
+        self.tick();
+        self.up
+    }
+    fn set_repetition(&mut self, rep: u8) {
+        self.rcr = rep;
+    }
+}
+
+/// From every starting phase (counter value, direction, repetition counter and its reload)
+/// and several poll speeds, the alignment ends with exactly one update per period, at the
+/// bottom, and says so.
+#[test]
+fn the_update_is_put_at_the_bottom_from_every_phase() {
+    let arr = 60u32;
+    let mut runs = 0;
+    for per_poll in [1u32, 3, 7] {
+        for start in 1..arr {
+            for up in [true, false] {
+                for (rep_cnt, rcr) in [(0u8, 0u8), (1, 1), (0, 1), (1, 0)] {
+                    let mut t = CentreAligned {
+                        cnt: start,
+                        up,
+                        arr,
+                        rep_cnt,
+                        rcr,
+                        uif: false,
+                        per_poll,
+                        updates: Vec::new(),
+                    };
+                    assert!(
+                        pwm::align_update_to_bottom(&mut t, 10_000),
+                        "start {start} up {up} rep {rep_cnt}/{rcr} per poll {per_poll}"
+                    );
+                    // Ten more periods: ten updates, all at the bottom.
+                    let before = t.updates.len();
+                    for _ in 0..10 * 2 * arr {
+                        t.tick();
+                    }
+                    let after = &t.updates[before..];
+                    assert_eq!(after.len(), 10, "one update per period");
+                    assert!(after.iter().all(|&b| b), "at the bottom: {after:?}");
+                    runs += 1;
+                }
+            }
+        }
+    }
+    assert_eq!(runs, 3 * 59 * 2 * 4);
+}
+
+/// With no update at all (the timer not running) the alignment says it failed, within its
+/// polls.
+#[test]
+fn a_stopped_timer_fails_the_alignment() {
+    let mut t = CentreAligned {
+        cnt: 5,
+        up: true,
+        arr: 60,
+        rep_cnt: 0,
+        rcr: 0,
+        uif: false,
+        per_poll: 0,
+        updates: Vec::new(),
+    };
+    assert!(!pwm::align_update_to_bottom(&mut t, 1000));
+}
+
+#[test]
+fn the_hse_is_waited_for_within_its_bound() {
+    let rcc = block(pac::rcc::Rcc::from_ptr);
+    let mut clock = 0u32;
+    let mut reads = 0u32;
+    let ok = clock::start_hse(
+        rcc,
+        true,
+        || {
+            reads += 1;
+            clock = clock.wrapping_add(10);
+            clock
+        },
+        1_600_000,
+    );
+    assert!(!ok);
+    assert_eq!(reads, 1 + 160_000 + 1);
+    assert!(rcc.cr().read().hsebyp(), "bypass as asked");
+    assert!(!rcc.cr().read().hseon(), "switched off again");
+    // Ready at once (HSERDY, bit 17, set by the "oscillator"): true, HSE on, a crystal.
+    rcc.cr().modify(|w| w.set_hserdy(true));
+    assert!(clock::start_hse(rcc, false, || 0, 1_600_000));
+    assert!(rcc.cr().read().hseon() && !rcc.cr().read().hsebyp());
+}
+
+#[test]
+fn the_flash_accelerator_and_erase_set_up() {
+    let flash = block(pac::flash::Flash::from_ptr);
+    // An F405 of revision Z: prefetch on; of revision A, or an unreadable IDCODE: off.
+    assert!(clock::flash_accelerator(flash, 0x1001_6413, 0x413));
+    let acr = flash.acr().read();
+    assert!(acr.prften() && acr.icen() && acr.dcen());
+    assert!(!clock::flash_accelerator(flash, 0x1000_6413, 0x413));
+    assert!(!flash.acr().read().prften());
+    assert!(!clock::flash_accelerator(flash, 0, 0x413));
+    assert!(clock::flash_accelerator(flash, 0x1000_6421, 0x421));
+    // The data cache flushed, left on.
+    clock::flush_data_cache(flash);
+    assert!(flash.acr().read().dcen() && !flash.acr().read().dcrst());
+    // ×32 before an erase: unlocked with the two keys only while LOCK is set; STRT untouched.
+    flash.cr().modify(|w| w.set_lock(true));
+    clock::erase_at_x32(flash);
+    assert_eq!(flash.cr().read().psize(), pac::flash::vals::Psize::PSIZE32);
+    assert_eq!(word(flash.as_ptr(), 0x04), clock::FLASH_KEYS[1]);
+    assert!(!flash.cr().read().strt());
+    set_word(flash.as_ptr(), 0x04, 0);
+    flash.cr().modify(|w| w.set_lock(false));
+    clock::erase_at_x32(flash);
+    assert_eq!(
+        word(flash.as_ptr(), 0x04),
+        0,
+        "no key written to an unlocked CR"
+    );
+}
+
+#[test]
+fn reset_cause_debug_freeze_and_encoder() {
+    let rcc = block(pac::rcc::Rcc::from_ptr);
+    assert!(!clock::watchdog_reset(rcc));
+    assert!(rcc.csr().read().rmvf(), "flags cleared for the next time");
+    rcc.csr().modify(|w| w.set_wdgrstf(true));
+    assert!(clock::watchdog_reset(rcc));
+    let dbg = block(pac::dbgmcu::Dbgmcu::from_ptr);
+    clock::freeze_in_debug(dbg);
+    assert!(dbg.apb2fzr().read().tim8() && dbg.apb1fzr().read().iwdg());
+    let tim2 = block(pac::timer::TimGp32::from_ptr);
+    // The filter code for a 1 MHz count rate on TIM2's 84 MHz: gms-core's choice.
+    let (filter, _) = gms_core::drive::encoder_filter(84_000_000, 1.0e6);
+    f4_regs::encoder::range_and_filter(tim2, filter);
+    assert_eq!(tim2.arr().read(), u32::MAX);
+    let ccmr = tim2.ccmr_input(0).read();
+    assert_eq!(ccmr.icf(0).to_bits(), filter);
+    assert_eq!(ccmr.icf(1).to_bits(), filter);
+    assert_ne!(filter, 0);
+}
