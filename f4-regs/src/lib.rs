@@ -12,6 +12,7 @@
 //! - [`clock`]: the HSE started within a bound, the reset cause, the debug freeze, the flash
 //!   accelerator, the flash's erase parallelism and data-cache flush.
 //! - [`encoder`]: TIM2's range and input filter.
+//! - [`stack`]: the stack's high-water mark from cortex-m-rt's paint.
 #![no_std]
 
 pub use stm32_metapac as pac;
@@ -20,3 +21,4 @@ pub mod clock;
 pub mod encoder;
 pub mod pwm;
 pub mod sense;
+pub mod stack;

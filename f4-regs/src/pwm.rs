@@ -45,11 +45,49 @@ pub fn low_speed(gpio: pac::gpio::Gpio, pins: [usize; 2]) {
     });
 }
 
-/// Writes the two bridge inputs' compare values (preloaded: they take effect together at the
-/// next update event), clamped to the 16-bit registers.
+/// Counts of the PWM timer before its update event (the bottom, reached counting down) within
+/// which the two compare values are not written: the read of the counter, the check and the
+/// two stores take about 15 CPU cycles, under 16 counts at any prescaler (TIM8's clock is the
+/// CPU's, 168 MHz).
+pub const UPDATE_GUARD: u16 = 16;
+
+/// How long [`wait_clear_of_update`] waits at most [reads of the counter]: 16 counts at the
+/// slowest prescaler the loop uses pass in far fewer; a stopped counter (a debug halt) ends
+/// the wait.
+pub const UPDATE_GUARD_SPINS: u32 = 4096;
+
+/// Whether a counter at `cnt`, counting down or not, is within `guard` counts of the update
+/// at the bottom.
+pub const fn near_update(cnt: u16, counting_down: bool, guard: u16) -> bool {
+    counting_down && cnt <= guard
+}
+
+/// Waits, at most `max_spins` reads, while the counter is within [`UPDATE_GUARD`] of the
+/// update (then it has passed, and the values written next take effect together at the next
+/// one). Returns the reads spent waiting.
+#[inline(always)]
+pub fn wait_clear_of_update(tim: pac::timer::TimAdv, max_spins: u32) -> u32 {
+    let mut spins = 0;
+    while spins < max_spins {
+        let down = tim.cr1().read().dir() == pac::timer::vals::Dir::DOWN;
+        let cnt = tim.cnt().read().cnt();
+        if !near_update(cnt, down, UPDATE_GUARD) {
+            break;
+        }
+        spins += 1;
+    }
+    spins
+}
+
+/// Writes the two bridge inputs' compare values (preloaded: they take effect at the next
+/// update event), clamped to the 16-bit registers — both at the same update: never within
+/// [`UPDATE_GUARD`] counts before it, so that no period runs with one new value and one old
+/// (the loop writes them early in the period; only a step late by most of a period could
+/// meet the update).
 #[inline(always)]
 pub fn set_bridge(tim: pac::timer::TimAdv, in1: u32, in2: u32) {
     let clamp = |v: u32| v.min(u16::MAX as u32) as u16;
+    let _ = wait_clear_of_update(tim, UPDATE_GUARD_SPINS);
     tim.ccr(0).write(|w| w.set_ccr(clamp(in1)));
     tim.ccr(1).write(|w| w.set_ccr(clamp(in2)));
 }

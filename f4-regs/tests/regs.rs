@@ -464,3 +464,51 @@ fn reset_cause_debug_freeze_and_encoder() {
     assert_eq!(ccmr.icf(1).to_bits(), filter);
     assert_ne!(filter, 0);
 }
+
+#[test]
+fn the_stack_high_water_mark_counts_the_paint_left() {
+    use f4_regs::stack::{PAINT, unused_bytes};
+    // 1 KiB of stack region, painted; the stack (growing down from the top) reached 300 bytes.
+    let mut region = vec![PAINT; 256];
+    for w in region.iter_mut().skip(256 - 75) {
+        *w = 0x2000_1234;
+    }
+    // One word of the used part happens to hold the paint: still counted as used.
+    region[200] = PAINT;
+    let r = region.as_ptr_range();
+    // SAFETY: the vector's own memory.
+    assert_eq!(unsafe { unused_bytes(r.start, r.end) }, 4 * (256 - 75));
+    region.fill(PAINT);
+    let r = region.as_ptr_range();
+    // SAFETY: as above.
+    assert_eq!(unsafe { unused_bytes(r.start, r.end) }, 1024);
+    region[0] = 0;
+    let r = region.as_ptr_range();
+    // SAFETY: as above.
+    assert_eq!(
+        unsafe { unused_bytes(r.start, r.end) },
+        0,
+        "reached the bottom"
+    );
+}
+
+/// The two compare values are not written within the guard before the update at the bottom:
+/// a counter counting down within 16 counts of it is waited out (on plain memory it never
+/// moves: the wait ends at its bound); anywhere else, at once.
+#[test]
+fn the_compare_values_are_written_clear_of_the_update() {
+    use pac::timer::vals::Dir;
+    let tim = block(pac::timer::TimAdv::from_ptr);
+    let at = |cnt: u16, dir: Dir| {
+        tim.cr1().modify(|w| w.set_dir(dir));
+        tim.cnt().write(|w| w.set_cnt(cnt));
+        pwm::wait_clear_of_update(tim, 100)
+    };
+    assert_eq!(at(5, Dir::DOWN), 100);
+    assert_eq!(at(16, Dir::DOWN), 100);
+    assert_eq!(at(17, Dir::DOWN), 0);
+    assert_eq!(at(5, Dir::UP), 0, "just after the update");
+    assert_eq!(at(4000, Dir::DOWN), 0);
+    assert!(pwm::near_update(0, true, pwm::UPDATE_GUARD));
+    assert!(!pwm::near_update(0, false, pwm::UPDATE_GUARD));
+}

@@ -34,7 +34,7 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{gpio::Output, peripherals::IWDG};
 use embassy_time::Timer;
 use gms_core::device::{self, ControlLoop, ParamStore as _, SenseTrouble};
-use gms_core::drive::{Faults, Stall};
+use gms_core::drive::{self, Faults, Stall};
 use static_cell::ConstStaticCell;
 
 use crate::control::Loop;
@@ -271,9 +271,19 @@ async fn supervisor(
     let mut last_faults = Faults::NONE;
     let mut tick = 0u32;
     let mut told = false;
+    let mut deepest = 0usize;
     loop {
         Timer::after_millis(250).await;
         tick = tick.wrapping_add(1);
+        // The stack's high-water mark (cortex-m-rt paints its region before main).
+        let (used, region) = stack_use();
+        if used >= deepest + 256 {
+            deepest = used;
+            info!("stack: {} B used at most, of {} B", used, region);
+        }
+        if drive::stack_low(region - used) {
+            control::trip(Stall::StackLow);
+        }
         let st = comms::status();
         if st.steps == last_steps {
             // Slower than the deadman, but the last word: the loop no longer runs.
@@ -309,4 +319,21 @@ async fn supervisor(
         let blink = (tick / 2).is_multiple_of(2);
         led_run.set_level((st.enabled || blink).into());
     }
+}
+
+/// The stack's deepest use so far and its region's size \[bytes\] (`f4_regs::stack`).
+fn stack_use() -> (usize, usize) {
+    unsafe extern "C" {
+        static _stack_end: u32;
+        static _stack_start: u32;
+    }
+    // cortex-m-rt's linker symbols: the stack's region, word-aligned RAM.
+    let (bottom, top) = (
+        core::ptr::addr_of!(_stack_end),
+        core::ptr::addr_of!(_stack_start),
+    );
+    let region = top as usize - bottom as usize;
+    // SAFETY: the region is readable RAM; words the stack holds are read, never written.
+    let unused = unsafe { f4_regs::stack::unused_bytes(bottom, top) };
+    (region - unused, region)
 }

@@ -32,7 +32,8 @@ impl Faults {
     /// The last reset was by the watchdog.
     pub const WATCHDOG_RESET: Faults = Faults(1 << 7);
     /// The deadman above the control interrupt switched the bridge off (the step stopped
-    /// running, or the sense chain's DMA or ADC failed): terminal, the watchdog resets.
+    /// running, or the sense chain's DMA or ADC failed), or the stack ran low: terminal, the
+    /// watchdog resets.
     pub const CONTROL_STALL: Faults = Faults(1 << 8);
 
     /// Names of the bits, lowest first.
@@ -61,8 +62,8 @@ impl Faults {
          defaults run)",
         "the current-sense zero at start-up was outside the board's window",
         "the last reset was by the watchdog",
-        "the control step stopped running or its current sampling failed: the bridge was \
-         switched off at once and the board resets",
+        "the control step stopped running, its current sampling failed or the stack ran low: \
+         the bridge was switched off at once and the board resets",
     ];
 
     /// The meaning of the fault named `name` (one of [`Self::NAMES`]).
