@@ -90,7 +90,7 @@ class Device:
     def record(self, fields: str = "t,pos,error,current", rate: float = 1000.0, seconds: float = 1.0) -> dict[str, npt.NDArray[np.float64]]:
         """The telemetry stream for `seconds` of wall time, as arrays by field."""
     def step_test(self, distance: float = 2e-4, seconds: float = 0.5) -> dict[str, Any]:
-        """`gms-tune step-test`: {"trace": {t, ref, pos, error, ff, friction}, "metrics"}."""
+        """`gms-tune step-test`: {"trace": {t, ref, pos, error, ff, friction}, "metrics", "rad_per_count"}."""
     def tune_ff(self, amplitude: float = 2e-3, freq: float = 1.0, seconds: float = 3.0, start: float = 0.5, stop: float = 1.3, steps: int = 9) -> dict[str, Any]:
         """`gms-tune tune-ff`: {"curve": [(gain, rms)], "chosen", "before"}; nothing applied."""
     def commission(self, speed: float = 1.0) -> dict[str, Any]:

@@ -13,12 +13,15 @@
 //!   accelerator, the flash's erase parallelism and data-cache flush.
 //! - [`encoder`]: TIM2's range and input filter.
 //! - [`stack`]: the stack's high-water mark from cortex-m-rt's paint.
+//! - [`mpu`]: the stack guard (an MPU region at the bottom of the stack) and the fault
+//!   handlers that run without the stack they overflowed ([`stack_guard_fault_handlers`]).
 #![no_std]
 
 pub use stm32_metapac as pac;
 
 pub mod clock;
 pub mod encoder;
+pub mod mpu;
 pub mod pwm;
 pub mod sense;
 pub mod stack;

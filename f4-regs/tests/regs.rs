@@ -512,3 +512,50 @@ fn the_compare_values_are_written_clear_of_the_update() {
     assert!(pwm::near_update(0, true, pwm::UPDATE_GUARD));
     assert!(!pwm::near_update(0, false, pwm::UPDATE_GUARD));
 }
+
+#[test]
+fn the_stack_guard_region_and_registers() {
+    use f4_regs::mpu::{self, CoreRegs};
+    // The F405 firmware's statics end at 0x2000DB0C, the stack's region at 0x20020000: an
+    // 8 KiB guard at 0x2000E000, 64 KiB of stack above it.
+    assert_eq!(
+        mpu::guard_region(0x2000_DB0C, 0x2002_0000, 8192, 16 * 1024),
+        Some((0x2000_E000, 0x1_0000))
+    );
+    assert_eq!(
+        mpu::guard_region(0x2000_E000, 0x2002_0000, 8192, 0),
+        Some((0x2000_E000, 0x1_0000)),
+        "already aligned"
+    );
+    assert_eq!(
+        mpu::guard_region(0x2001_A001, 0x2002_0000, 8192, 16 * 1024),
+        None
+    );
+    assert_eq!(mpu::guard_region(0x2000_0000, 0x2002_0000, 100, 0), None);
+    // RASR: 8 KiB is SIZE 12 (2^(12+1)), AP 000, XN, enabled.
+    assert_eq!(mpu::guard_rasr(8192), (1 << 28) | (12 << 1) | 1);
+    assert_eq!(mpu::guard_rasr(32), (1 << 28) | (4 << 1) | 1);
+    // On memory laid out as the MPU and the SCB.
+    let mpu_mem: &'static mut [u32; 16] = Box::leak(Box::new([0; 16]));
+    let scb_mem: &'static mut [u32; 64] = Box::leak(Box::new([0; 64]));
+    scb_mem[0x18 / 4] = 0xE0E0_E0E0; // SHPR1: every priority at 0xE0
+    let r = CoreRegs {
+        mpu: mpu_mem.as_mut_ptr(),
+        scb: scb_mem.as_mut_ptr(),
+    };
+    // SAFETY: the memory above, laid out as the registers.
+    unsafe { mpu::enable_stack_guard(r, 0x2000_E000, 8192) };
+    assert_eq!(
+        mpu_mem[1], 0b101,
+        "CTRL: ENABLE and PRIVDEFENA, HFNMIENA off"
+    );
+    assert_eq!(mpu_mem[2], 0, "RNR: region 0");
+    assert_eq!(mpu_mem[3], 0x2000_E000, "RBAR");
+    assert_eq!(mpu_mem[4], mpu::guard_rasr(8192), "RASR");
+    assert_eq!(
+        scb_mem[0x18 / 4],
+        0xE0E0_E000,
+        "MemManage at priority 0, the others kept"
+    );
+    assert_eq!(scb_mem[0x24 / 4], 1 << 16, "MEMFAULTENA");
+}

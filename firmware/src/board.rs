@@ -454,3 +454,44 @@ pub fn idle_sample() {
     sense::ack(pac::DMA2);
     pwm::set_bridge(pac::TIM8, 0, 0);
 }
+
+unsafe extern "C" {
+    /// cortex-m-rt's linker symbols: the bottom (just above the statics) and the top of the
+    /// stack's region.
+    static _stack_end: u32;
+    static _stack_start: u32;
+}
+
+/// The stack's region and its guard: (bottom, top) \[addresses\].
+fn stack_region() -> (u32, u32) {
+    (
+        core::ptr::addr_of!(_stack_end) as usize as u32,
+        core::ptr::addr_of!(_stack_start) as usize as u32,
+    )
+}
+
+/// The least stack the guard must leave above it \[bytes\].
+const STACK_MIN: u32 = 16 * 1024;
+
+/// Sets up the stack guard (`f4_regs::mpu`: gms-core's `hw::STACK_GUARD_BYTES` at the bottom
+/// of the stack's region, MemManage on at the top priority); its base and the stack left above
+/// it, or `None` if the statics leave no room.
+pub fn stack_guard() -> Option<(u32, u32)> {
+    let (end, start) = stack_region();
+    let size = gms_core::hw::STACK_GUARD_BYTES;
+    let (base, left) = f4_regs::mpu::guard_region(end, start, size, STACK_MIN)?;
+    // SAFETY: the core's own MPU and SCB; nothing uses the guard's memory (the stack is far
+    // above it, the statics below).
+    unsafe { f4_regs::mpu::enable_stack_guard(f4_regs::mpu::CoreRegs::CORE, base, size) };
+    Some((base, left))
+}
+
+/// The stack's usable region, above the guard (or all of it without one): (bottom, top).
+pub fn stack_usable() -> (*const u32, *const u32) {
+    let (end, start) = stack_region();
+    let size = gms_core::hw::STACK_GUARD_BYTES;
+    let bottom = f4_regs::mpu::guard_region(end, start, size, STACK_MIN)
+        .map(|(base, _)| base + size)
+        .unwrap_or(end);
+    (bottom as usize as *const u32, start as usize as *const u32)
+}

@@ -150,6 +150,17 @@ async fn main(spawner: Spawner) {
     let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture);
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     Loop::new(hw, core, telemetry_tx).hand_over();
+    // The stack guard: an MPU region with no access at the bottom of the stack, before
+    // anything runs above thread mode.
+    match board::stack_guard() {
+        Some((base, left)) => info!(
+            "stack guard at {=u32:#x}, {} B; {} B of stack above it",
+            base,
+            gms_core::hw::STACK_GUARD_BYTES,
+            left
+        ),
+        None => warn!("no room for the stack guard: running without it"),
+    }
     board::start_control();
     info!("control loop running");
 
@@ -223,10 +234,15 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::asm::udf()
 }
 
-/// A HardFault (a bus or usage fault escalated, a panic's `udf`): the bridge off, then wait
-/// for the watchdog.
-#[cortex_m_rt::exception]
-unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
+// HardFault and MemManage: MSP back to the top of the stack's region (the fault may have come
+// from the stack guard, with SP inside it), then `gms_fault_stop` (`f4_regs::mpu`).
+f4_regs::stack_guard_fault_handlers!();
+
+/// A HardFault (a bus or usage fault escalated, a panic's `udf`) or a MemManage fault (the
+/// stack ran into its guard), entered on a fresh stack: the bridge off, then wait for the
+/// watchdog.
+#[unsafe(no_mangle)]
+extern "C" fn gms_fault_stop() -> ! {
     board::bridge_off_now();
     loop {
         cortex_m::asm::nop();
@@ -321,19 +337,13 @@ async fn supervisor(
     }
 }
 
-/// The stack's deepest use so far and its region's size \[bytes\] (`f4_regs::stack`).
+/// The stack's deepest use so far and the size of its usable region, above the guard
+/// \[bytes\] (`f4_regs::stack`).
 fn stack_use() -> (usize, usize) {
-    unsafe extern "C" {
-        static _stack_end: u32;
-        static _stack_start: u32;
-    }
-    // cortex-m-rt's linker symbols: the stack's region, word-aligned RAM.
-    let (bottom, top) = (
-        core::ptr::addr_of!(_stack_end),
-        core::ptr::addr_of!(_stack_start),
-    );
+    let (bottom, top) = board::stack_usable();
     let region = top as usize - bottom as usize;
-    // SAFETY: the region is readable RAM; words the stack holds are read, never written.
+    // SAFETY: the region is readable RAM above the guard; words the stack holds are read,
+    // never written.
     let unused = unsafe { f4_regs::stack::unused_bytes(bottom, top) };
     (region - unused, region)
 }

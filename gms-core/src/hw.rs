@@ -215,6 +215,12 @@ impl MemoryMap {
     }
 }
 
+/// The stack guard's size \[bytes\]: an MPU region with no access at the bottom of the stack
+/// (the firmware's `f4_regs::mpu`). It must be larger than any single step of the stack
+/// pointer (a function's frame, `sub sp`), or an overflow could step over it: `cargo xtask
+/// check-elf` checks the image's largest against it.
+pub const STACK_GUARD_BYTES: u32 = 16384;
+
 /// Whether the flash prefetch buffer may be switched on, from the part's `DBGMCU_IDCODE`
 /// (RM0090 §38.6.1: DEV_ID in bits 11:0, REV_ID in bits 31:16). The STM32F405/407/415/417
 /// (DEV_ID 0x413) of revision A (REV_ID 0x1000) do not support it: ST's own clock set-up

@@ -2119,7 +2119,7 @@ fn inertia(
     Ok(j)
 }
 
-/// How [`inertia`] pulses the axis for an encoder.
+/// How `inertia` pulses the axis for an encoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InertiaPlan {
     /// The pulse's current in breakaway currents \\[-\\].

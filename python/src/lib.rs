@@ -604,7 +604,8 @@ impl Device {
 
     /// step_test(distance=2e-4, seconds=0.5) -> dict: `gms-tune step-test` — the bridge on,
     /// a move by `distance` [rad], `seconds` recorded: {"trace": {t, ref, pos, error, ff,
-    /// friction: arrays}, "metrics": the figures of hil-sim run}.
+    /// friction: arrays}, "metrics": the figures of hil-sim run, "rad_per_count": the
+    /// device's encoder resolution [rad/count] that the figures in counts use}.
     #[pyo3(signature = (distance = 2e-4, seconds = 0.5))]
     fn step_test<'py>(
         &mut self,
@@ -615,7 +616,7 @@ impl Device {
         if !(distance.is_finite() && seconds > 0.0 && seconds <= 60.0) {
             return Err(err("distance finite, seconds in (0, 60]"));
         }
-        let (rows, _, m) =
+        let (rows, _, m, rad_per_count) =
             gms_tune::run::step_test(&mut self.link, distance, seconds).map_err(link_err)?;
         let trace = PyDict::new(py);
         for (c, n) in gms_tune::run::STEP_FIELDS.split(',').enumerate() {
@@ -627,6 +628,7 @@ impl Device {
         let d = PyDict::new(py);
         d.set_item("trace", trace)?;
         d.set_item("metrics", debug_dict(py, &m)?)?;
+        d.set_item("rad_per_count", rad_per_count)?;
         Ok(d)
     }
 

@@ -249,6 +249,8 @@ def test_device_runs_the_bench_experiments(tmp_path):
         st = d.step_test(2e-4, 0.5)
         assert len(st["trace"]["t"]) > 100
         assert st["metrics"]["steady_state_error"] < 2 * 3.8e-6
+        # The device's resolution, the paper's encoder that the default plant has.
+        assert st["rad_per_count"] == pytest.approx(3.8e-6, rel=1e-9)
         ff = d.tune_ff(seconds=2.0, steps=5)
         # 5 coarse tests (more if widened), then 9 gains twice around the optimum.
         assert len(ff["curve"]) >= 5 + 18 and ff["optimum"] is not None

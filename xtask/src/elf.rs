@@ -108,8 +108,20 @@ pub fn check(board: &BoardMap, bytes: &[u8]) -> Result<Vec<String>, String> {
         .data()
         .map_err(|e| format!(".vector_table unreadable: {e}"))?;
     let default = sym("DefaultHandler").ok_or("no DefaultHandler symbol")? & !1;
-    for &(irq, n) in board.irqs {
-        let at = (16 + n as usize) * 4;
+    // The core's fault handlers (the stack guard's, `f4_regs::mpu`) at their vector positions
+    // (ARMv7-M ARM B1.5.3: HardFault 3, MemManage 4), then the interrupts after the 16 system
+    // exceptions.
+    let vectors = [("HardFault", 3usize), ("MemoryManagement", 4)]
+        .into_iter()
+        .map(|(name, i)| (name, i, format!("exception {i}")))
+        .chain(
+            board
+                .irqs
+                .iter()
+                .map(|&(irq, n)| (irq, 16 + n as usize, format!("irq {n}"))),
+        );
+    for (irq, index, n) in vectors {
+        let at = index * 4;
         let Some(word) = data.get(at..at + 4) else {
             bad.push(format!("vector {irq} ({n}) beyond the table"));
             continue;

@@ -9,6 +9,10 @@
 //! Exit status: 0 when everything holds; 1 when a budget is exceeded or the target's results
 //! differ from the host's; 2 when the benchmark cannot run (no QEMU, build failure).
 //! `--report-only` prints the budget check but does not fail on it (equivalence still does).
+//!
+//! Before the benchmark, `target-bench`'s `stack-guard` binary runs on the same emulated chip:
+//! `f4_regs::mpu`'s stack guard and fault handlers, then a recursion that overflows the stack;
+//! it must end in the guard's fault handler (`stack guard hit: CFSR …`), on a fresh stack.
 
 use std::process::{Command, ExitCode};
 use std::time::Duration;
@@ -139,6 +143,22 @@ fn check_elf(args: &[String]) -> Result<(), String> {
     let listing = disassemble(path)?;
     let funcs = stack::parse(&listing);
     let mut bad = Vec::new();
+    // No single step of the stack pointer may jump the stack guard (gms-core's
+    // `hw::STACK_GUARD_BYTES`, `f4_regs::mpu`).
+    let guard = gms_core::hw::STACK_GUARD_BYTES as u64;
+    if let Some((f, largest)) = funcs
+        .iter()
+        .map(|(n, f)| (n, f.largest_sub))
+        .max_by_key(|(_, b)| *b)
+    {
+        println!("{name}: largest single stack step {largest} B (in {f}), guard {guard} B");
+        if largest >= guard {
+            bad.push(format!(
+                "{f} steps the stack pointer by {largest} B at once, not less than the {guard} B \
+                 guard: an overflow could jump it"
+            ));
+        }
+    }
     for (root, limit) in HANDLER_STACK_LIMITS {
         if !funcs.contains_key(root) {
             bad.push(format!("{root}: not in the image"));
@@ -276,6 +296,63 @@ fn flash(args: &[String]) -> Result<u8, String> {
     Ok(if status.success() { 0 } else { 1 })
 }
 
+/// Runs `elf` on QEMU's `netduinoplus2` (Cortex-M4F) with semihosting, `-icount shift=0`
+/// when `icount` (every instruction 1 ns of virtual time), at most 120 s of host time; whether
+/// it exited with success, and what it printed (stdout, then stderr).
+fn qemu(elf: &std::path::Path, icount: bool) -> Result<(bool, String), String> {
+    let mut args = vec![
+        "-machine",
+        "netduinoplus2",
+        "-cpu",
+        "cortex-m4",
+        "-nographic",
+        "-monitor",
+        "none",
+        "-serial",
+        "none",
+        "-semihosting-config",
+        "enable=on,target=native",
+    ];
+    if icount {
+        args.extend(["-icount", "shift=0"]);
+    }
+    let mut child = Command::new("qemu-system-arm")
+        .args(&args)
+        .arg("-kernel")
+        .arg(elf)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .map_err(|e| {
+            format!("cannot run qemu-system-arm ({e}); install it: apt-get install qemu-system-arm")
+        })?;
+    // A watchdog: each run takes well under a second of host time.
+    let deadline = std::time::Instant::now() + Duration::from_secs(120);
+    loop {
+        match child.try_wait() {
+            Ok(Some(_)) => break,
+            Ok(None) if std::time::Instant::now() > deadline => {
+                let _ = child.kill();
+                return Err(format!(
+                    "qemu did not finish {} within 120 s",
+                    elf.display()
+                ));
+            }
+            Ok(None) => std::thread::sleep(Duration::from_millis(20)),
+            Err(e) => return Err(format!("waiting for qemu: {e}")),
+        }
+    }
+    let out = child
+        .wait_with_output()
+        .map_err(|e| format!("reading qemu's output: {e}"))?;
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Ok((out.status.success(), text))
+}
+
 fn target_bench(report_only: bool) -> Result<u8, String> {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(&cargo)
@@ -298,52 +375,24 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|_| root.join("target"));
     let elf = target_dir.join("thumbv7em-none-eabihf/release/target-bench");
-    let mut child = Command::new("qemu-system-arm")
-        .args([
-            "-machine",
-            "netduinoplus2",
-            "-cpu",
-            "cortex-m4",
-            "-nographic",
-            "-monitor",
-            "none",
-            "-serial",
-            "none",
-            "-semihosting-config",
-            "enable=on,target=native",
-            "-icount",
-            "shift=0",
-            "-kernel",
-        ])
-        .arg(&elf)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .map_err(|e| {
-            format!("cannot run qemu-system-arm ({e}); install it: apt-get install qemu-system-arm")
-        })?;
-    // A watchdog: the benchmark takes well under a second of host time.
-    let deadline = std::time::Instant::now() + Duration::from_secs(120);
-    loop {
-        match child.try_wait() {
-            Ok(Some(_)) => break,
-            Ok(None) if std::time::Instant::now() > deadline => {
-                let _ = child.kill();
-                return Err("qemu did not finish within 120 s".into());
-            }
-            Ok(None) => std::thread::sleep(Duration::from_millis(20)),
-            Err(e) => return Err(format!("waiting for qemu: {e}")),
+    // The stack guard first: its own binary, a recursion that must fault into it.
+    let guard = target_dir.join("thumbv7em-none-eabihf/release/stack-guard");
+    let (ok, text) = qemu(&guard, false)?;
+    let hit = text.lines().find(|l| l.starts_with("stack guard hit:"));
+    match (ok, hit) {
+        (true, Some(line)) => println!("{line}"),
+        _ => {
+            return Err(format!(
+                "the stack guard did not stop the overflow on the target: {}",
+                text.trim()
+            ));
         }
     }
-    let out = child
-        .wait_with_output()
-        .map_err(|e| format!("reading qemu's output: {e}"))?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    if !out.status.success() || !text.lines().any(|l| l == "done") {
+    let (ok, text) = qemu(&elf, true)?;
+    if !ok || !text.lines().any(|l| l == "done") {
         return Err(format!(
-            "the benchmark failed on the target (exit {:?}): {}",
-            out.status.code(),
-            String::from_utf8_lossy(&out.stderr).trim()
+            "the benchmark failed on the target: {}",
+            text.trim()
         ));
     }
     let mut per_instr = None;

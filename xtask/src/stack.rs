@@ -28,6 +28,9 @@ pub struct Function {
     pub indirect: u32,
     /// Instructions that read or write BASEPRI (or BASEPRI_MAX).
     pub basepri: Vec<String>,
+    /// Its largest single `sub sp` \[bytes\]: a step of the stack pointer with no access,
+    /// which a stack guard must be larger than.
+    pub largest_sub: u64,
 }
 
 /// The functions of an `llvm-objdump -d --no-show-raw-insn` listing, by name.
@@ -60,7 +63,11 @@ pub fn parse(listing: &str) -> BTreeMap<String, Function> {
         };
         let operands: String = parts.collect::<Vec<_>>().join(" ");
         let f = out.entry(name.clone()).or_default();
-        f.frame += frame_bytes(mnemonic, &operands);
+        let bytes = frame_bytes(mnemonic, &operands);
+        f.frame += bytes;
+        if mnemonic.starts_with("sub") {
+            f.largest_sub = f.largest_sub.max(bytes);
+        }
         let lower = operands.to_ascii_lowercase();
         if (mnemonic == "msr" || mnemonic == "mrs") && lower.contains("basepri") {
             f.basepri.push(format!("{mnemonic} {operands}"));
@@ -251,6 +258,8 @@ mod tests {
         );
         assert_eq!(f["ISR"].indirect, 1);
         assert_eq!(f["leaf"].frame, 8);
+        assert_eq!(f["ISR"].largest_sub, 256);
+        assert_eq!(f["tail"].largest_sub, 1024);
         assert_eq!(f["leaf"].basepri, vec!["mrs r0, basepri".to_string()]);
         let c = chain(&f, "ISR");
         // The deepest path: ISR then tail (1024) rather than leaf (8), then the panic

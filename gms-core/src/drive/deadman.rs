@@ -25,13 +25,13 @@ pub enum Stall {
     DmaError = 2,
     /// The current-sense ADC overran (its DMA requests stop until the flag is cleared).
     AdcOverrun = 3,
-    /// The stack came within [`STACK_MARGIN_BYTES`] of the statics below it.
+    /// The stack came within [`STACK_MARGIN_BYTES`] of its guard (or the statics).
     StackLow = 4,
 }
 
-/// The stack's high-water mark may come this close to the statics below it \[bytes\]
-/// before the board stops (the control interrupt alone takes about 6.7 KiB at its deepest,
-/// `cargo xtask check-elf`).
+/// The stack's high-water mark may come this close to the bottom of its usable region (the
+/// stack guard, or the statics without one) \[bytes\] before the board stops (the control
+/// interrupt alone takes about 6.7 KiB at its deepest, `cargo xtask check-elf`).
 pub const STACK_MARGIN_BYTES: usize = 2048;
 
 /// Whether `unused` bytes of never-reached stack \[bytes\] are too few: the stack is about
@@ -60,7 +60,7 @@ impl Stall {
             Stall::NoStep => "the control step did not run for two PWM periods",
             Stall::DmaError => "the current-sense DMA stream reported a transfer error",
             Stall::AdcOverrun => "the current-sense ADC overran (its DMA requests stopped)",
-            Stall::StackLow => "the stack came within 2 KiB of the statics",
+            Stall::StackLow => "the stack came within 2 KiB of its guard",
         }
     }
 
