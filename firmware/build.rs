@@ -1,5 +1,5 @@
 //! Writes the linker's memory map for the board being built, `board-memory.x` in this build's
-//! output directory, from the board's `src/boards/<board>/memory.rs`, and adds defmt's linker
+//! output directory, from the board's `gms-core/src/boards/<board>/memory.rs`, and adds defmt's linker
 //! script for this binary only (the workspace's other thumb binaries do not use defmt).
 //!
 //! cortex-m-rt's `link.x` does `INCLUDE memory.x`, and the linker looks in its working
@@ -13,10 +13,10 @@
 //! the firmware's flash ends at or before the parameter store.
 use std::{env, fs, path::PathBuf};
 
-#[path = "src/boards/f405/memory.rs"]
+#[path = "../gms-core/src/boards/f405/memory.rs"]
 #[allow(dead_code)]
 mod f405;
-#[path = "src/boards/nucleo_f446/memory.rs"]
+#[path = "../gms-core/src/boards/nucleo_f446/memory.rs"]
 #[allow(dead_code)]
 mod nucleo_f446;
 
@@ -62,7 +62,7 @@ fn main() {
     );
     println!("cargo:rerun-if-changed={}", top.display());
     let text = format!(
-        "/* Board {name}: written by firmware/build.rs from src/boards/{name}/memory.rs. The \
+        "/* Board {name}: written by firmware/build.rs from gms-core/src/boards/{name}/memory.rs. The \
          parameter store\n * (0x{store0:08X}..0x{store1:08X}) lies beyond FLASH. */\nMEMORY\n{{\n  {}\n  {}\n}}\n\
          /* Read back from the image by `cargo xtask check-elf`. */\n\
          __gms_app_end = ORIGIN(FLASH) + LENGTH(FLASH);\n\
@@ -76,7 +76,7 @@ fn main() {
     );
     fs::write(out.join("board-memory.x"), text).expect("write board-memory.x");
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=src/boards/f405/memory.rs");
-    println!("cargo:rerun-if-changed=src/boards/nucleo_f446/memory.rs");
+    println!("cargo:rerun-if-changed=../gms-core/src/boards/f405/memory.rs");
+    println!("cargo:rerun-if-changed=../gms-core/src/boards/nucleo_f446/memory.rs");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

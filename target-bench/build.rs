@@ -1,10 +1,10 @@
 //! Writes the linker's memory map for QEMU's `netduinoplus2` (an STM32F405RG): the F405
-//! board's numbers (`firmware/src/boards/f405/memory.rs`), as `board-memory.x` in this
+//! board's numbers (`gms-core/src/boards/f405/memory.rs`), as `board-memory.x` in this
 //! build's output directory, which the workspace root's `memory.x` includes (see
 //! `firmware/build.rs` for why the root holds no map of its own).
 use std::{env, fs, path::PathBuf};
 
-#[path = "../firmware/src/boards/f405/memory.rs"]
+#[path = "../gms-core/src/boards/f405/memory.rs"]
 #[allow(dead_code)]
 mod f405;
 
@@ -18,5 +18,5 @@ fn main() {
     );
     fs::write(out.join("board-memory.x"), text).expect("write board-memory.x");
     println!("cargo:rustc-link-search={}", out.display());
-    println!("cargo:rerun-if-changed=../firmware/src/boards/f405/memory.rs");
+    println!("cargo:rerun-if-changed=../gms-core/src/boards/f405/memory.rs");
 }

@@ -152,31 +152,9 @@ fn the_sense_chain_reports_its_errors() {
     assert!(!r.adc.sr().read().ovr(), "the flag cleared");
 }
 
+/// The F405 board as gms-core describes it (16 conversions around code 2048).
 fn hil_board() -> gms_core::device::Board {
-    use gms_core::device::{Board, SenseChain};
-    Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
-        sense_oversample: 16,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: 0.0,
-        },
-        limits: gms_core::drive::BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.6,
-        },
-        has_truth: false,
-        bridge_wake_s: 0.0,
-        capture_values: 8192,
-    }
+    gms_core::boards::f405::BOARD
 }
 
 #[test]

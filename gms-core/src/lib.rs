@@ -22,6 +22,7 @@
 #![deny(missing_docs)]
 
 pub mod adaptive;
+pub mod boards;
 pub mod controller;
 pub mod device;
 pub mod drive;

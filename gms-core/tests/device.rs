@@ -1,33 +1,15 @@
 //! The device core's control loop on its own: missed periods.
 
 use gms_core::device::{
-    Board, ControlLoop, Inputs, Requests, SenseChain, calibrate_sense, default_settings, prepare,
+    Board, ControlLoop, Inputs, Requests, calibrate_sense, default_settings, prepare,
 };
-use gms_core::drive::{BoardLimits, Faults};
+use gms_core::drive::Faults;
 
+/// The F405 board (gms-core's description), its bridge driving at once on `enable`.
 fn board() -> Board {
     Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
-        sense_oversample: 16,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: 0.0,
-        },
-        limits: BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.6,
-        },
-        has_truth: false,
         bridge_wake_s: 0.0,
-        capture_values: 8192,
+        ..gms_core::boards::f405::BOARD
     }
 }
 

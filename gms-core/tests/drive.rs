@@ -372,13 +372,7 @@ fn limits_from_settings_and_board() {
     let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
     s.pos_min = -38.0;
     s.pos_max = 19.0;
-    let b = drive::BoardLimits {
-        trip_factor: 1.5,
-        max_error: 0.01,
-        max_speed: 100.0,
-        clock_hz: 168_000_000,
-        budget_fraction: 0.8,
-    };
+    let b = gms_core::boards::f405::BOARD.limits; // 1.5 × i_max, 10 mrad, 100 rad/s, 168 MHz, 60 %
     let l = drive::limits_for(&s, &b, 0.48);
     // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
     assert!((l.i_trip - 0.456).abs() < 1e-6);
@@ -388,37 +382,18 @@ fn limits_from_settings_and_board() {
     // 38 rad / 3.8 urad = 1e7 counts, 19 rad 5e6 (f32 rounding of 3.8e-6 allows ±1).
     assert!((l.pos_min + 10_000_000).abs() <= 1, "{}", l.pos_min);
     assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);
-    // 168 MHz / 20 kHz = 8400 cycles, 80 % of it.
-    assert_eq!(l.budget_cycles, 6720);
+    // 168 MHz / 20 kHz = 8400 cycles, 60 % of it.
+    assert_eq!(l.budget_cycles, 5040);
     assert_eq!(l.period_cycles, 8400);
     assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.75).abs() < 1e-6);
 }
 
-/// A board with a two-conversion sense chain around code 2048 ± 150.
+/// The F405 board (gms-core's description) with a two-conversion sense chain (its zero at code
+/// 2048 ± 150), so that a sum of codes reads as two.
 fn sense_board() -> gms_core::device::Board {
-    use gms_core::device::{Board, SenseChain};
-    Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
+    gms_core::device::Board {
         sense_oversample: 2,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: 0.0,
-        },
-        limits: drive::BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.8,
-        },
-        has_truth: false,
-        bridge_wake_s: 0.0,
-        capture_values: 8192,
+        ..gms_core::boards::f405::BOARD
     }
 }
 
@@ -626,36 +601,10 @@ fn current_sense_trigger_timing() {
 
 #[test]
 fn rates_the_current_sense_cannot_sample_are_refused() {
-    use gms_core::device::{Board, SenseChain, default_settings, prepare};
-    let timing = drive::SenseTiming {
-        adc_hz: 21_000_000,
-        sample_cycles: 15,
-        conversions: 16,
-        latency_cycles: 2,
-    };
-    let board = Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
-        sense_oversample: 16,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: timing.window_s(),
-        },
-        limits: drive::BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.6,
-        },
-        has_truth: false,
-        bridge_wake_s: 0.0,
-        capture_values: 8192,
-    };
+    use gms_core::device::{default_settings, prepare};
+    // The F405 board: 16 conversions of 15 + 12 cycles and a 2-cycle latency at 21 MHz.
+    let board = gms_core::boards::f405::BOARD;
+    assert!((board.sense.window_s - (2.0 + 16.0 * 27.0) / 21e6).abs() < 1e-9);
     // 20.67 us of window against 2 × 0.4 × period: 20 kHz (40 us) and 30 kHz (26.7 us) run,
     // 40 kHz (20 us) does not.
     let mut s = default_settings();

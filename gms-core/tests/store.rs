@@ -18,8 +18,8 @@ use std::rc::Rc;
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
-use gms_core::device::{Board, ParamStore, SenseChain, default_settings, startup};
-use gms_core::drive::{BoardLimits, Faults, RECORD_LEN, encode_settings};
+use gms_core::device::{ParamStore, default_settings, startup};
+use gms_core::drive::{Faults, RECORD_LEN, encode_settings};
 use gms_core::protocol::Settings;
 use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
@@ -249,30 +249,7 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
         .expect("an uncut save succeeds");
     let ops = dry.ops();
     assert!(!ops.is_empty());
-    // The F405 board's figures (firmware/src/board.rs).
-    let board = Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
-        sense_oversample: 2,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: 0.0,
-        },
-        limits: BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.8,
-        },
-        has_truth: false,
-        bridge_wake_s: 0.0,
-        capture_values: 8192,
-    };
+    let board = gms_core::boards::f405::BOARD;
     let defaults = default_settings();
     let (mut tried, mut found_old, mut found_new) = (0, 0, 0);
     for (index, op) in ops.iter().enumerate() {

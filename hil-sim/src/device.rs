@@ -35,43 +35,40 @@ use crate::plant::Plant;
 use crate::scenario::Scenario;
 
 /// The virtual device's capture buffer (values), the board's.
-pub const CAPTURE_VALUES: u32 = 8192;
+pub const CAPTURE_VALUES: u32 = gms_core::boards::power_stage::CAPTURE_VALUES;
 
 /// Telemetry samples kept for the client (0.4 s at 10 kHz; older ones are dropped).
 pub const QUEUE: usize = 4000;
 
-/// The simulated board: the F405's PWM timer and encoder counter, the plant's ADC as the
-/// current sense (one conversion per sample, zero at mid-scale within the firmware board's
-/// ±150 codes; a 3.3 V ADC, so that the plant's range ±`adc_range` is the sense scale
-/// `sense.v_per_a` = 1.65 V / `adc_range` of [`Scenario::controller_params`]), the firmware
-/// board's limits. Step durations are host nanoseconds (`clock_hz` 1e9) with a budget of 1 s
-/// at 20 kHz: the host is shared, so only a stalled simulation counts as an overrun.
+/// The simulated board: the F405 board as gms-core describes it (`boards::f405::BOARD`: its
+/// PWM timer, encoder counter, sense zero tolerance, trip factor, following-error and speed
+/// limits, capture buffer), with what a simulation cannot share: the plant's ADC as the current
+/// sense (one conversion per sample, zero at mid-scale; a 3.3 V ADC, so that the plant's range
+/// ±`adc_range` is the sense scale `sense.v_per_a` = 1.65 V / `adc_range` of
+/// [`Scenario::controller_params`]), sampled at once (no window); step durations in host
+/// nanoseconds (`clock_hz` 1e9) with a budget of 1 s at 20 kHz (the host is shared, so only a
+/// stalled simulation counts as an overrun); the true friction in the telemetry; a bridge that
+/// needs no wake-up.
 pub fn board(sc: &Scenario) -> Board {
+    let real = gms_core::boards::f405::BOARD;
+    let adc = Adc::new(sc);
     Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
         sense_oversample: 1,
-        sense: {
-            let adc = Adc::new(sc);
-            SenseChain {
-                vref: SIM_ADC_VREF,
-                full_scale: (2.0 * adc.mid) as f32,
-                zero_code: adc.mid as f32,
-                zero_tolerance: 150.0,
-                window_s: 0.0,
-            }
+        sense: SenseChain {
+            vref: SIM_ADC_VREF,
+            full_scale: (2.0 * adc.mid) as f32,
+            zero_code: adc.mid as f32,
+            window_s: 0.0,
+            ..real.sense
         },
         limits: BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
             clock_hz: 1_000_000_000,
             budget_fraction: 20_000.0,
+            ..real.limits
         },
         has_truth: true,
         bridge_wake_s: 0.0,
-        capture_values: CAPTURE_VALUES,
+        ..real
     }
 }
 

@@ -1,15 +1,12 @@
-//! The nucleo_f446 board's description (`firmware/src/boards/nucleo_f446/`), compiled on the host from
-//! the firmware's own files and checked (`support/board_checks.rs`).
+//! The nucleo_f446 board's description (gms-core's `boards::nucleo_f446`, the one the firmware links) checked
+//! (`support/board_checks.rs`).
 #![allow(dead_code)]
 
 #[path = "support/board_checks.rs"]
 mod checks;
-#[path = "../../firmware/src/boards/nucleo_f446/desc.rs"]
-mod desc;
-#[path = "../../firmware/src/boards/nucleo_f446/memory.rs"]
-mod memory;
-#[path = "../../firmware/src/boards/power_stage.rs"]
-mod power_stage;
+use gms_core::boards::nucleo_f446 as desc;
+use gms_core::boards::nucleo_f446::memory;
+use gms_core::boards::power_stage;
 
 #[test]
 fn the_description_holds_together() {

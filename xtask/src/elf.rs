@@ -1,5 +1,5 @@
 //! `cargo xtask check-elf --board NAME ELF`: static checks of a linked firmware image against
-//! its board's own numbers (`firmware/src/boards/<board>/memory.rs`), read from the ELF, not
+//! its board's own numbers (`gms-core/src/boards/<board>/memory.rs`), read from the ELF, not
 //! from the linker script that made it:
 //!
 //! - the memory map it was linked with is the board's (`__gms_app_end`, `__gms_ram_end`,

@@ -21,10 +21,10 @@ mod elf;
 mod stack;
 
 // The boards' memory maps and probe-rs chip names, from the firmware's own files.
-#[path = "../../firmware/src/boards/f405/memory.rs"]
+#[path = "../../gms-core/src/boards/f405/memory.rs"]
 #[allow(dead_code)]
 mod f405;
-#[path = "../../firmware/src/boards/nucleo_f446/memory.rs"]
+#[path = "../../gms-core/src/boards/nucleo_f446/memory.rs"]
 #[allow(dead_code)]
 mod nucleo_f446;
 

@@ -1,11 +1,11 @@
-//! The boards the firmware builds for, one module each, chosen by one cargo feature of the
-//! firmware package: `board-f405` (the default) or `board-nucleo-f446`. A board module carries
-//! its chip's limits, clock tree, memory map and parameter sectors (`memory.rs`, which
-//! `build.rs` turns into the linker's `memory.x`), probe-rs chip name and LED pins; the power
-//! stage and its pins are common (`power_stage.rs`), driven by `board.rs`. The descriptions are
-//! plain numbers that `tests/tests/boards.rs` checks on the host.
+//! The boards the firmware builds for, chosen by one cargo feature of the firmware package:
+//! `board-f405` (the default) or `board-nucleo-f446`. Each board's description (chip limits,
+//! clock tree, memory map and parameter sectors, probe-rs chip name) and the power stage they
+//! share are gms-core's `boards` (one description for the firmware, the virtual device, the
+//! benchmarks and the tests; `build.rs` turns its `memory.rs` into the linker's `memory.x`);
+//! here only what embassy needs as code: the LED pins. `board.rs` drives the power stage.
 
-pub mod power_stage;
+pub use gms_core::boards::power_stage;
 
 #[cfg(all(feature = "board-f405", feature = "board-nucleo-f446"))]
 compile_error!("choose one board: `board-f405` or `board-nucleo-f446`, not both");

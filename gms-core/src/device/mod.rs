@@ -414,7 +414,7 @@ pub fn default_settings() -> Settings {
         // The paper's encoder: 2π / 3.8 µrad in single precision (1653469.75), whose radians
         // per count are 3.8e-6 exactly again (`ControllerParams::rad_per_count`).
         counts_per_rev: 1_653_469.8,
-        // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (firmware/src/boards).
+        // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (gms-core/src/boards/power_stage.rs).
         sense_v_per_a: 3.4,
         pid: PidParams {
             kp: 0.2,

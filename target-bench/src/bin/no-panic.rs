@@ -20,7 +20,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use gms_core::controller::Controller;
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, SenseChain, StoreError,
+    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, StoreError,
 };
 use gms_core::drive;
 use gms_core::protocol::{self, LineReader};
@@ -50,7 +50,7 @@ impl Link for CheckLink {
         self.t = self.t.wrapping_add(black_box(50));
         let inp = Inputs {
             encoder: black_box(7),
-            current_codes: black_box(4096),
+            current_codes: black_box(16 * 2048), // zero current: 16 conversions at mid-scale
             since_last: black_box(8400),
         };
         let mb = &mut self.mailbox;
@@ -134,27 +134,8 @@ fn main() -> ! {
         }
     };
     let board = Board {
-        pwm_timer_hz: 168_000_000,
-        pwm_max_arr: 65_534,
-        encoder_bits: 32,
-        sense_oversample: 2,
-        sense: SenseChain {
-            vref: 3.3,
-            full_scale: 4095.0,
-            zero_code: 2048.0,
-            zero_tolerance: 150.0,
-            window_s: 0.0,
-        },
-        limits: drive::BoardLimits {
-            trip_factor: 1.5,
-            max_error: 0.01,
-            max_speed: 100.0,
-            clock_hz: 168_000_000,
-            budget_fraction: 0.8,
-        },
-        has_truth: false,
         bridge_wake_s: 0.0,
-        capture_values: 8192,
+        ..gms_core::boards::f405::BOARD
     };
     let limits = black_box(&board).limits(&selftest::controller_params());
     let mut enc = drive::CountExtender::new(black_box(32), black_box(0));
@@ -168,7 +149,9 @@ fn main() -> ! {
             cortex_m::asm::wfi();
         }
     };
-    let zero = device::calibrate_sense(black_box(&board), black_box(3.4), || Some(black_box(4096)));
+    let zero = device::calibrate_sense(black_box(&board), black_box(3.4), || {
+        Some(black_box(board.sense_oversample * 2048))
+    });
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the check's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };

@@ -1,5 +1,5 @@
-//! The checks every board description passes (`firmware/src/boards/`), shared by the
-//! `board_*` test targets, each of which compiles one board's description files on the host.
+//! The checks every board description passes (gms-core's `boards`), shared by the `board_*`
+//! test targets, one per board.
 
 use gms_core::device::{Board, default_settings, prepare};
 use gms_core::drive::{self, SenseTiming};

@@ -1,14 +1,7 @@
 //! NUCLEO-F446RE (feature `board-nucleo-f446`): its description and the pins that differ
 //! between boards.
 
-pub mod desc;
-pub mod memory;
-
-// For `desc.rs`, which names its siblings through `super` (so that the host tests can compile
-// it with `memory.rs` and `power_stage.rs` as its siblings).
-use super::power_stage;
-
-pub use desc::*;
+pub use gms_core::boards::nucleo_f446::*;
 
 /// The board's LEDs (run, fault) from the peripherals `$p`: the green user LED LD2 on PA5 and
 /// an LED with 1 k to GND on PB1 (morpho CN10).

@@ -2,11 +2,13 @@
 //! Olimex STM32-H405) carrying the power stage (`power_stage.rs`). Plain numbers, checked on
 //! the host.
 
-use gms_core::device::Board;
-use gms_core::drive::SenseTiming;
-use gms_core::hw::{F4Clocks, F4Limits, F405_LIMITS, MemoryMap};
+use crate::device::Board;
+use crate::drive::SenseTiming;
+use crate::hw::{F4Clocks, F4Limits, F405_LIMITS, MemoryMap};
 
-use super::{memory, power_stage};
+use super::power_stage;
+
+pub mod memory;
 
 /// The board's name (its cargo feature is `board-f405`).
 pub const NAME: &str = "f405";

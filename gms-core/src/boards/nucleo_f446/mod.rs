@@ -2,11 +2,13 @@
 //! PC0, PA0/PA1 are on its morpho headers, PA11/PA12 to a USB breakout), flashed through its
 //! on-board ST-LINK. Plain numbers, checked on the host.
 
-use gms_core::device::Board;
-use gms_core::drive::SenseTiming;
-use gms_core::hw::{F4Clocks, F4Limits, F446_LIMITS, MemoryMap};
+use crate::device::Board;
+use crate::drive::SenseTiming;
+use crate::hw::{F4Clocks, F4Limits, F446_LIMITS, MemoryMap};
 
-use super::{memory, power_stage};
+use super::power_stage;
+
+pub mod memory;
 
 /// The board's name (its cargo feature is `board-nucleo-f446`).
 pub const NAME: &str = "nucleo-f446";
