@@ -457,3 +457,27 @@ fn a_board_on_its_built_in_defaults_says_it_was_never_configured() {
     assert!(ask(&mut dev, "set sense.v_per_a 0").starts_with("err"));
     assert_eq!(ask(&mut dev, "get enc.counts_per_rev").trim(), "ok 1320");
 }
+
+#[test]
+fn the_device_s_status_reads_back_as_its_state() {
+    use gms_core::device::{DriveKind, StatusReply};
+    let mut dev = board_device(None);
+    // A request the loop takes (its first step publishes the state).
+    assert!(ask(&mut dev, "clear").starts_with("ok"));
+    let reply = ask(&mut dev, "status");
+    let text = reply.trim().strip_prefix("ok ").unwrap();
+    let st = StatusReply::parse(text).unwrap();
+    let d = default_settings();
+    assert_eq!(st.mode, d.ff.mode);
+    assert!(!st.enabled && !st.moving && !st.configured, "{text}");
+    // A first start on no record: the defaults run, nothing latched.
+    assert_eq!(st.faults, Faults::NONE, "{text}");
+    assert_eq!(st.drive, DriveKind::Position);
+    // The sense's zero from 16 conversions at code 2048 each.
+    assert_eq!(st.sense_offset, 2048.0);
+    assert_eq!((st.pos, st.current), (0.0, 0.0));
+    assert!(ask(&mut dev, "set enc.counts_per_rev 1320").starts_with("ok"));
+    let reply = ask(&mut dev, "status");
+    let st = StatusReply::parse(reply.trim().strip_prefix("ok ").unwrap()).unwrap();
+    assert!(st.configured);
+}

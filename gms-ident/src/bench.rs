@@ -5,6 +5,7 @@
 
 use crate::Error;
 use crate::units::{num4, si};
+use gms_core::device::StatusReply;
 
 /// A device speaking the bench protocol.
 pub trait Bench {
@@ -177,14 +178,9 @@ impl DeviceInfo {
 
 /// The device's answer to a bench tool that is about to measure: an error when it runs on
 /// its built-in defaults (its status says `configured=0`: the encoder's resolution and the
-/// sense's scale are the paper's rig's, which no user's axis is), naming what to set. A device
-/// that does not report it passes.
+/// sense's scale are the paper's rig's, which no user's axis is), naming what to set.
 pub fn check_configured(b: &mut impl Bench) -> Result<(), Error> {
-    let (_, text) = b.request("status")?;
-    let configured = text
-        .split_whitespace()
-        .find_map(|w| w.strip_prefix("configured="));
-    if configured == Some("0") {
+    if !status(b)?.configured {
         return Err(Error::Device(
             "the device runs on its built-in defaults (never configured): set \
              enc.counts_per_rev and sense.v_per_a for this axis, then save (docs/bring-up.md)"
@@ -207,20 +203,23 @@ pub fn scales_line(b: &mut impl Bench) -> Result<String, Error> {
     ))
 }
 
+/// The device's `status`, read ([`StatusReply::parse`]: the device core's own format).
+pub fn status(b: &mut impl Bench) -> Result<StatusReply, Error> {
+    let (_, text) = b.request("status")?;
+    StatusReply::parse(&text).map_err(|e| Error::Device(format!("{e}: {text}")))
+}
+
 /// The device's latched faults, as an error naming them, if any.
 pub fn check_faults(b: &mut impl Bench) -> Result<(), Error> {
-    let (_, text) = b.request("status")?;
-    let get = |k: &str| {
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
-    };
-    match (get("faults"), get("fault_names")) {
-        (Some("0"), _) => Ok(()),
-        (Some(_), Some(names)) => Err(Error::Device(format!(
-            "the device latched a fault ({names})"
-        ))),
-        _ => Err(Error::Device(format!("unexpected status reply: {text}"))),
+    let faults = status(b)?.faults;
+    if faults.is_empty() {
+        return Ok(());
     }
+    let mut names = String::new();
+    let _ = faults.write_names(&mut names);
+    Err(Error::Device(format!(
+        "the device latched a fault ({names})"
+    )))
 }
 
 /// Runs `f`; if it fails, switches the bridge off (best effort: the link may be gone) and
@@ -710,8 +709,7 @@ pub fn move_to(b: &mut impl Bench, x: f64, vel: f64) -> Result<(), Error> {
         let t = 2.0 * (x - from).abs() / vel + 0.02;
         b.wait(t)?;
         for _ in 0..100 {
-            let (_, text) = b.request("status")?;
-            if text.split_whitespace().any(|w| w == "moving=0") {
+            if !status(b)?.moving {
                 return check_faults(b);
             }
             b.wait(t / 50.0)?;
@@ -840,11 +838,7 @@ pub fn lag_csv(t: &[f64], x: &[f64], f: &[f64]) -> String {
 /// The axis's position from `status` \\[rad\\] (from the power-up position, as the stroke
 /// limits `lim.pos_min`/`lim.pos_max` are).
 pub fn position(b: &mut impl Bench) -> Result<f64, Error> {
-    let (_, text) = b.request("status")?;
-    text.split_whitespace()
-        .find_map(|w| w.strip_prefix("pos="))
-        .and_then(|v| v.parse().ok())
-        .ok_or_else(|| Error::Device(format!("no position in the status: {text}")))
+    Ok(status(b)?.pos)
 }
 
 /// The experiments' ranges as a user gives them; `None`: derived from the device's

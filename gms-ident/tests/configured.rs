@@ -1,6 +1,9 @@
 //! Commissioning refuses a device that runs on its built-in defaults (`configured=0`): its
 //! encoder resolution and sense scale are the paper's rig's, which no user's axis is.
 
+use gms_core::controller::FfMode;
+use gms_core::device::{DriveKind, StatusReply};
+use gms_core::drive::Faults;
 use gms_ident::Error;
 use gms_ident::bench::{Bench, commission};
 
@@ -14,14 +17,34 @@ impl Bench for Fake {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
         self.asked.push(line.to_string());
         match line {
-            "status" => Ok((
-                vec![],
-                format!(
-                    "mode=gms enabled=0 faults=0 fault_names=none drive=position{}",
-                    self.configured
-                        .map_or(String::new(), |c| format!(" configured={c}"))
-                ),
-            )),
+            "status" => {
+                // The device core's own reply at rest, with `configured` as given (or left out).
+                let mut text = String::new();
+                StatusReply {
+                    mode: FfMode::Gms,
+                    enabled: false,
+                    faults: Faults::NONE,
+                    t: 1.0,
+                    pos: 0.0,
+                    error_counts: 0.0,
+                    moving: false,
+                    current: 0.0,
+                    ff: 0.0,
+                    duty: 0.0,
+                    step_us_worst: 0.0,
+                    step_us_mean: 0.0,
+                    sense_offset: 2048.0,
+                    missed: 0,
+                    drive: DriveKind::Position,
+                    configured: self.configured == Some(1),
+                }
+                .write(&mut text)
+                .unwrap();
+                if self.configured.is_none() {
+                    text = text.replace(" configured=0", "");
+                }
+                Ok((vec![], text))
+            }
             _ => Err(Error::Device(format!("err 9 not in this test: {line}"))),
         }
     }
@@ -43,15 +66,20 @@ fn commissioning_refuses_an_unconfigured_device_before_anything_moves() {
     );
     // Only the status was read: nothing set, nothing enabled.
     assert_eq!(dev.asked, ["status"]);
-    // A configured device, or one too old to say, goes on to read its parameters (which this
-    // fake does not have).
-    for configured in [Some(1), None] {
-        let mut dev = Fake {
-            configured,
-            asked: vec![],
-        };
-        let e = commission(&mut dev, 1.0).unwrap_err().to_string();
-        assert!(e.contains("not in this test"), "{e}");
-        assert!(dev.asked.len() > 1, "{:?}", dev.asked);
-    }
+    // A configured device goes on to read its parameters (which this fake does not have).
+    let mut dev = Fake {
+        configured: Some(1),
+        asked: vec![],
+    };
+    let e = commission(&mut dev, 1.0).unwrap_err().to_string();
+    assert!(e.contains("not in this test"), "{e}");
+    assert!(dev.asked.len() > 1, "{:?}", dev.asked);
+    // A device that does not say is refused too, saying what is missing.
+    let mut dev = Fake {
+        configured: None,
+        asked: vec![],
+    };
+    let e = commission(&mut dev, 1.0).unwrap_err().to_string();
+    assert!(e.contains("the status reply has no configured"), "{e}");
+    assert_eq!(dev.asked, ["status"]);
 }

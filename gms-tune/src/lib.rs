@@ -6,6 +6,7 @@ pub mod run;
 #[cfg(feature = "ui")]
 pub mod ui;
 
+use gms_core::device::StatusReply;
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
@@ -163,13 +164,15 @@ impl Link {
         Ok(out)
     }
 
+    /// The device's `status`, read (the device core's own format).
+    pub fn status(&mut self) -> Result<StatusReply, LinkError> {
+        let (_, text) = self.request("status")?;
+        StatusReply::parse(&text).map_err(|e| LinkError::Io(format!("{e}: {text}")))
+    }
+
     /// The device's clock (`status` key `t`) \[s\].
     pub fn device_time(&mut self) -> Result<f64, LinkError> {
-        let (_, text) = self.request("status")?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("t="))
-            .and_then(|v| v.parse().ok())
-            .ok_or_else(|| LinkError::Io(format!("no device time in the status: {text}")))
+        Ok(self.status()?.t)
     }
 
     /// Waits until `seconds` of device time have passed, reading the device's clock: on a

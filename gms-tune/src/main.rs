@@ -388,26 +388,11 @@ fn run(cli: Cli) -> Result<(), Fail> {
             eprintln!("{} samples to {}", rows.len(), out.display());
         }
         Cmd::Status { json } => {
-            let text = link.request("status")?.1;
-            let pairs = gms_tune::run::status_pairs(&text);
+            let st = link.status()?;
             if json {
-                let map: serde_json::Map<String, serde_json::Value> = pairs
-                    .iter()
-                    .map(|(k, v)| {
-                        let val = v
-                            .parse::<f64>()
-                            .ok()
-                            .and_then(serde_json::Number::from_f64)
-                            .map_or(
-                                serde_json::Value::String(v.clone()),
-                                serde_json::Value::Number,
-                            );
-                        (k.clone(), val)
-                    })
-                    .collect();
-                println!("{}", serde_json::Value::Object(map));
+                println!("{}", gms_tune::run::status_json(&st));
             } else {
-                for l in gms_tune::run::status_table(&pairs) {
+                for l in gms_tune::run::status_table(&st) {
                     println!("{l}");
                 }
             }

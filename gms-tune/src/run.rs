@@ -6,6 +6,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use gms_core::device::{StatusReply, StatusValue};
 use gms_ident::Error;
 use gms_ident::bench::Bench;
 
@@ -278,14 +279,6 @@ pub fn tune_ff_json(t: &gms_ident::bench::TuneFf) -> serde_json::Value {
     })
 }
 
-/// A `status` reply's `key=value` pairs, in order.
-pub fn status_pairs(text: &str) -> Vec<(String, String)> {
-    text.split_whitespace()
-        .filter_map(|kv| kv.split_once('='))
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect()
-}
-
 /// What a status key means and its unit, for the table.
 fn status_meaning(key: &str) -> (&'static str, &'static str) {
     match key {
@@ -313,25 +306,52 @@ fn status_meaning(key: &str) -> (&'static str, &'static str) {
     }
 }
 
+/// A status value as text: whole numbers as they are, others to four significant digits.
+fn status_text(v: StatusValue) -> String {
+    match v {
+        StatusValue::Number(x) if x.fract() == 0.0 && x.abs() < 1e15 => format!("{x}"),
+        StatusValue::Number(x) => gms_ident::units::num4(x),
+        StatusValue::Text(t) => t.to_string(),
+        StatusValue::Faults(f) => {
+            let mut names = String::new();
+            let _ = f.write_names(&mut names);
+            names
+        }
+    }
+}
+
 /// The status as aligned lines: key, value (numbers to a sensible precision, with the unit),
 /// and what it means.
-pub fn status_table(pairs: &[(String, String)]) -> Vec<String> {
-    let width = pairs.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
-    pairs
+pub fn status_table(st: &StatusReply) -> Vec<String> {
+    let entries = st.entries();
+    let width = entries.iter().map(|(k, _)| k.len()).max().unwrap_or(0);
+    entries
         .iter()
-        .map(|(k, v)| {
+        .map(|&(k, v)| {
             let (meaning, unit) = status_meaning(k);
-            let value = match v.parse::<f64>() {
-                Ok(x) if v.contains('.') || v.contains('e') => {
-                    format!("{} {unit}", gms_ident::units::num4(x))
-                }
-                _ => format!("{v} {unit}"),
-            };
+            let value = format!("{} {unit}", status_text(v));
             format!("{k:<width$}  {:<22}  {meaning}", value.trim_end())
                 .trim_end()
                 .to_string()
         })
         .collect()
+}
+
+/// The status as one JSON object: numbers as numbers, names as strings.
+pub fn status_json(st: &StatusReply) -> serde_json::Value {
+    let map: serde_json::Map<String, serde_json::Value> = st
+        .entries()
+        .iter()
+        .map(|&(k, v)| {
+            let val = match v {
+                StatusValue::Number(x) => serde_json::Number::from_f64(x)
+                    .map_or(serde_json::Value::Null, serde_json::Value::Number),
+                other => serde_json::Value::String(status_text(other)),
+            };
+            (k.to_string(), val)
+        })
+        .collect();
+    serde_json::Value::Object(map)
 }
 
 /// A step test's figures as readable lines: the step in mrad and counts, the settle time and

@@ -580,9 +580,11 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
                         "lim.pos_max" => "ok 50".into(),
                         _ => "err 5 unknown parameter (try list)".into(),
                     },
-                    ["status"] => {
-                        "ok mode=gms enabled=0 faults=0 t=1 pos=0 fault_names=none".into()
-                    }
+                    ["status"] => "ok mode=gms enabled=0 faults=0 t=1 pos=0 error_counts=0 \
+                                   moving=0 current=0 fault_names=none ff=0 duty=0 \
+                                   step_us_worst=0 step_us_mean=0 sense_offset=2048 \
+                                   missed=0 drive=position configured=1"
+                        .into(),
                     ["set", ..] | ["enable"] | ["disable"] => "ok".into(),
                     ["enable", _] => "err 2 too many arguments".into(),
                     _ => "err 1 unknown command".into(),
@@ -1063,11 +1065,11 @@ fn the_window_shows_the_device_and_sets_what_it_is_told() {
     assert!(h.query_by_label_contains("samples received").is_some());
     // Enable, then Disable: the status says so, and the window shows it.
     h.get_by_label("Enable").click();
-    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("1")));
+    assert!(step_until(&mut h, 5.0, |a| a.bridge_on()));
     h.step();
     assert!(h.query_by_label("bridge on").is_some());
     h.get_by_label("Disable").click();
-    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("0")));
+    assert!(step_until(&mut h, 5.0, |a| !a.bridge_on()));
     h.step();
     assert!(h.query_by_label("bridge off").is_some());
     // A set the device takes.
@@ -1195,7 +1197,7 @@ fn the_window_stops_a_run_with_the_bridge_off() {
     assert!(step_until(&mut h, 20.0, |a| a.outcome.is_some()));
     let out = h.state().outcome.clone().unwrap();
     assert!(matches!(&out, Err(e) if e.contains("stopped")), "{out:?}");
-    assert!(step_until(&mut h, 5.0, |a| a.status_value("enabled") == Some("0")));
+    assert!(step_until(&mut h, 5.0, |a| !a.bridge_on()));
     drop(h);
     assert_eq!(tune(&srv, &["get", "lim.pos_max"], d).1.trim(), "50");
     assert_eq!(tune(&srv, &["get", "lim.pos_min"], d).1.trim(), "-50");
@@ -1210,8 +1212,7 @@ fn the_window_exports_dumps_and_steps() {
     let d = dir.path();
     let srv = Server::start("tcp", &d.join("flash.img"));
     let mut h = window_on(&srv, vec!["set pos.kd 2.2e-4".into(), "enable".into()]);
-    assert!(step_until(&mut h, 10.0, |a| a.samples.len() > 2000
-        && a.status_value("enabled") == Some("1")));
+    assert!(step_until(&mut h, 10.0, |a| a.samples.len() > 2000 && a.bridge_on()));
     h.state_mut().csv = d.join("live.csv").display().to_string();
     h.state_mut().file = d.join("dump.toml").display().to_string();
     h.step();

@@ -567,12 +567,17 @@ impl Device {
 
     /// status() -> dict: the `status` reply's keys (numbers where they are).
     fn status<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let (_, text) = self.link.request("status").map_err(link_err)?;
+        let st = self.link.status().map_err(link_err)?;
         let d = PyDict::new(py);
-        for (k, v) in gms_tune::run::status_pairs(&text) {
-            match v.parse::<f64>() {
-                Ok(x) => d.set_item(k, x)?,
-                Err(_) => d.set_item(k, v)?,
+        for (k, v) in st.entries() {
+            match v {
+                gms_core::device::StatusValue::Number(x) => d.set_item(k, x)?,
+                gms_core::device::StatusValue::Text(t) => d.set_item(k, t)?,
+                gms_core::device::StatusValue::Faults(f) => {
+                    let mut names = String::new();
+                    let _ = f.write_names(&mut names);
+                    d.set_item(k, names)?
+                }
             }
         }
         Ok(d)

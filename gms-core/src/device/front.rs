@@ -10,7 +10,7 @@ use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile}
 
 use super::{
     Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, MAX_STREAM_HZ,
-    Mailbox, MoveRequest, Requests, Sample, Status, VelocityRequest, capture_fields,
+    Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest, capture_fields,
 };
 
 /// How the protocol side reaches the loop.
@@ -348,34 +348,25 @@ impl<L: Link, S: ParamStore> Device for Front<L, S> {
         let st = self.status_now();
         let rpc = self.settings.rad_per_count();
         let clock = self.board.limits.clock_hz;
-        let t = st.steps as f64 / st.pos_rate_hz.max(1.0) as f64;
-        write!(
-            out,
-            "mode={} enabled={} faults={} t={} pos={} error_counts={} moving={} current={} \
-             fault_names=",
-            self.settings.ff.mode.name(),
-            st.enabled as u8,
-            st.faults.0,
-            Num(t as f32),
-            Num((st.pos as f64 * rpc as f64) as f32),
-            Num(st.error / rpc),
-            st.moving as u8,
-            Num(st.current),
-        )?;
-        st.faults.write_names(out)?;
-        write!(
-            out,
-            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={} \
-             configured={}",
-            Num(st.ff),
-            Num(st.duty),
-            Num(drive::cycles_to_us(st.stats.worst() as f32, clock)),
-            Num(drive::cycles_to_us(st.stats.mean(), clock)),
-            Num(st.sense_offset),
-            st.stats.missed(),
-            st.drive.name(),
-            self.configured as u8,
-        )
+        StatusReply {
+            mode: self.settings.ff.mode,
+            enabled: st.enabled,
+            faults: st.faults,
+            t: st.steps as f64 / st.pos_rate_hz.max(1.0) as f64,
+            pos: st.pos as f64 * rpc as f64,
+            error_counts: st.error / rpc,
+            moving: st.moving,
+            current: st.current,
+            ff: st.ff,
+            duty: st.duty,
+            step_us_worst: drive::cycles_to_us(st.stats.worst() as f32, clock),
+            step_us_mean: drive::cycles_to_us(st.stats.mean(), clock),
+            sense_offset: st.sense_offset,
+            missed: st.stats.missed(),
+            drive: st.drive.kind(),
+            configured: self.configured,
+        }
+        .write(out)
     }
 
     fn clear(&mut self) -> Result<(), &'static str> {

@@ -20,6 +20,7 @@
 mod capture;
 mod control;
 mod front;
+mod status;
 
 pub use capture::{
     CAPTURE_FIELDS, CAPTURE_NAMES, CHUNK_VALUES, Capture, CaptureSpec, CaptureState, Chunk,
@@ -30,6 +31,7 @@ pub use control::{
     ControlLoop, Inputs, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
 };
 pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
+pub use status::{DriveKind, StatusError, StatusReply, StatusValue};
 
 use crate::controller::Controller;
 use crate::drive::{BoardLimits, Faults, Limits, StepStats};
@@ -264,13 +266,18 @@ pub enum Drive {
 }
 
 impl Drive {
+    /// What it drives, as `status` reports it (`drive=`).
+    pub fn kind(&self) -> DriveKind {
+        match self {
+            Drive::Position => DriveKind::Position,
+            Drive::Velocity => DriveKind::Velocity,
+            Drive::Current(_) => DriveKind::Current,
+        }
+    }
+
     /// The name in `status` `drive=`.
     pub fn name(&self) -> &'static str {
-        match self {
-            Drive::Position => "position",
-            Drive::Velocity => "velocity",
-            Drive::Current(_) => "current",
-        }
+        self.kind().name()
     }
 }
 

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
+use gms_core::device::StatusReply;
 use gms_core::model::FrictionModel;
 
 use super::worker::{Cmd, Endpoint, Event, Job, Outcome, Sample, Worker};
@@ -127,7 +128,7 @@ pub struct App {
     /// The parameter tree, in `list` order.
     pub rows: Vec<Row>,
     /// The last `status` text.
-    pub status: String,
+    pub status: Option<StatusReply>,
     /// Received samples (the newest last).
     pub samples: VecDeque<Sample>,
     /// Samples received since the window opened.
@@ -179,7 +180,7 @@ impl App {
             endpoint: label,
             link: LinkState::Connecting,
             rows: Vec::new(),
-            status: String::new(),
+            status: None,
             samples: VecDeque::new(),
             received: 0,
             paused: false,
@@ -299,7 +300,7 @@ impl App {
                     Ok(t) => self.note(format!("{line}: {t}")),
                     Err(e) => self.note(format!("{line}: {e}")),
                 },
-                Event::Status(s) => self.status = s,
+                Event::Status(s) => self.status = Some(s),
                 Event::Progress { stage, done, total } => {
                     if let Some(r) = &mut self.running {
                         (r.stage, r.done, r.total) = (stage, done, total);
@@ -333,11 +334,9 @@ impl App {
         }
     }
 
-    /// A `status` key's value.
-    pub fn status_value(&self, key: &str) -> Option<&str> {
-        self.status
-            .split_whitespace()
-            .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+    /// True while the last `status` says the bridge is on.
+    pub fn bridge_on(&self) -> bool {
+        self.status.is_some_and(|s| s.enabled)
     }
 
     /// The whole window.
@@ -404,21 +403,19 @@ impl App {
                 }
             }
             ui.separator();
-            let enabled = self.status_value("enabled") == Some("1");
-            ui.label(if enabled { "bridge on" } else { "bridge off" });
-            if let Some(d) = self.status_value("drive") {
-                ui.label(format!("drive {d}"));
+            ui.label(if self.bridge_on() {
+                "bridge on"
+            } else {
+                "bridge off"
+            });
+            let mut names = String::from("none");
+            if let Some(st) = self.status {
+                ui.label(format!("drive {}", st.drive.name()));
+                ui.label(format!("pos {:.6} rad", st.pos));
+                ui.label(format!("error {} counts", st.error_counts));
+                names.clear();
+                let _ = st.faults.write_names(&mut names);
             }
-            if let Some(p) = self.status_value("pos").and_then(|v| v.parse::<f64>().ok()) {
-                ui.label(format!("pos {p:.6} rad"));
-            }
-            if let Some(e) = self.status_value("error_counts") {
-                ui.label(format!("error {e} counts"));
-            }
-            let names = self
-                .status_value("fault_names")
-                .unwrap_or("none")
-                .to_string();
             if names == "none" {
                 ui.label("faults: none");
             } else {
@@ -707,7 +704,7 @@ impl App {
 
     fn motion(&mut self, ui: &mut egui::Ui) {
         let rpc = self.rad_per_count();
-        let pos = self.status_value("pos").and_then(|v| v.parse::<f64>().ok());
+        let pos = self.status.map(|s| s.pos);
         ui.horizontal(|ui| {
             let l = ui.label("jog [rad]");
             ui.add(egui::TextEdit::singleline(&mut self.jog).desired_width(70.0))

@@ -176,8 +176,8 @@ pub enum Event {
         /// The text after `ok`, or the error.
         result: Result<String, String>,
     },
-    /// The `status` reply's text.
-    Status(String),
+    /// The `status` reply, read.
+    Status(gms_core::device::StatusReply),
     /// Telemetry samples, in order.
     Samples(Vec<Sample>),
     /// A long run's progress: its stage, and the device time done of what the stage expects.
@@ -348,9 +348,9 @@ fn run(
         }
         if lost.is_none() && Instant::now() >= next_status {
             next_status = Instant::now() + STATUS_PERIOD;
-            match l.request("status") {
-                Ok((_, text)) => {
-                    send(Event::Status(text));
+            match l.status() {
+                Ok(st) => {
+                    send(Event::Status(st));
                     any = true;
                 }
                 Err(e) => lost = Some(e.to_string()),

@@ -1,0 +1,229 @@
+//! The `status` reply, typed: the device writes it from a [`StatusReply`] and a host reads it
+//! back into one ([`StatusReply::parse`]), so the reply's keys and formats live in one place.
+//!
+//! The reply is one line of `key=value` words (after `ok `), in this order: `mode enabled
+//! faults t pos error_counts moving current fault_names ff duty step_us_worst step_us_mean
+//! sense_offset missed drive configured`. A reader ignores keys it does not know (a newer
+//! device may add some) and refuses a reply that lacks one it needs.
+
+use core::fmt::{self, Write};
+
+use crate::controller::FfMode;
+use crate::drive::Faults;
+use crate::numtext::Num;
+
+/// What the loop drives while the bridge is on, as `status` names it (`drive=`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum DriveKind {
+    /// Position control: holding, or a `move`.
+    #[default]
+    Position,
+    /// A speed profile (`velocity`).
+    Velocity,
+    /// A held current (`current`), the position loop off.
+    Current,
+}
+
+impl DriveKind {
+    /// Every kind, in the order of the protocol's documentation.
+    pub const ALL: [DriveKind; 3] = [DriveKind::Position, DriveKind::Velocity, DriveKind::Current];
+
+    /// The name in `status` (`position`, `velocity`, `current`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DriveKind::Position => "position",
+            DriveKind::Velocity => "velocity",
+            DriveKind::Current => "current",
+        }
+    }
+
+    /// The kind called `name`, if any.
+    pub fn from_name(name: &str) -> Option<DriveKind> {
+        DriveKind::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// The device's state as `status` reports it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StatusReply {
+    /// The friction feedforward's mode (`ff.mode`).
+    pub mode: FfMode,
+    /// The bridge is on.
+    pub enabled: bool,
+    /// The latched faults (`faults=` the bit mask; `fault_names=` their names, written from it).
+    pub faults: Faults,
+    /// Device time since start \[s\] (written as an f32, read as the f64 of its decimal text).
+    pub t: f64,
+    /// Position from the power-up position \[rad\] (written as an f32, read as the f64 of its
+    /// decimal text).
+    pub pos: f64,
+    /// Position error \[counts\].
+    pub error_counts: f32,
+    /// A move is under way.
+    pub moving: bool,
+    /// Measured motor current \[A\].
+    pub current: f32,
+    /// Friction feedforward applied \[N·m\].
+    pub ff: f32,
+    /// PWM duty [-] (-1 … 1).
+    pub duty: f32,
+    /// Longest control step since start \[µs\].
+    pub step_us_worst: f32,
+    /// Mean control step \[µs\].
+    pub step_us_mean: f32,
+    /// The current sense's zero found at start-up \[ADC code\].
+    pub sense_offset: f32,
+    /// Control periods missed since start [-].
+    pub missed: u32,
+    /// What the loop drives.
+    pub drive: DriveKind,
+    /// False while the device runs on its built-in defaults (never configured for an axis:
+    /// the encoder's resolution and the sense's scale are the paper's rig's).
+    pub configured: bool,
+}
+
+/// Why a `status` reply could not be read: the key that is missing or whose value does not
+/// parse.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StatusError {
+    /// The key.
+    pub key: &'static str,
+    /// True when the key is there but its value does not parse.
+    pub bad_value: bool,
+}
+
+impl fmt::Display for StatusError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.bad_value {
+            write!(f, "the status reply's {} does not parse", self.key)
+        } else {
+            write!(f, "the status reply has no {}", self.key)
+        }
+    }
+}
+
+/// The value of `key` in a line of `key=value` words.
+fn value<'a>(text: &'a str, key: &'static str) -> Result<&'a str, StatusError> {
+    text.split_whitespace()
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+        .ok_or(StatusError {
+            key,
+            bad_value: false,
+        })
+}
+
+fn number<T: core::str::FromStr>(text: &str, key: &'static str) -> Result<T, StatusError> {
+    value(text, key)?.parse().map_err(|_| StatusError {
+        key,
+        bad_value: true,
+    })
+}
+
+fn flag(text: &str, key: &'static str) -> Result<bool, StatusError> {
+    match value(text, key)? {
+        "0" => Ok(false),
+        "1" => Ok(true),
+        _ => Err(StatusError {
+            key,
+            bad_value: true,
+        }),
+    }
+}
+
+impl StatusReply {
+    /// Writes the reply (without the leading `ok `) on one line.
+    pub fn write(&self, out: &mut dyn Write) -> fmt::Result {
+        write!(
+            out,
+            "mode={} enabled={} faults={} t={} pos={} error_counts={} moving={} current={} \
+             fault_names=",
+            self.mode.name(),
+            self.enabled as u8,
+            self.faults.0,
+            Num(self.t as f32),
+            Num(self.pos as f32),
+            Num(self.error_counts),
+            self.moving as u8,
+            Num(self.current),
+        )?;
+        self.faults.write_names(out)?;
+        write!(
+            out,
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={} \
+             configured={}",
+            Num(self.ff),
+            Num(self.duty),
+            Num(self.step_us_worst),
+            Num(self.step_us_mean),
+            Num(self.sense_offset),
+            self.missed,
+            self.drive.name(),
+            self.configured as u8,
+        )
+    }
+
+    /// Reads a reply (the text after `ok`). Keys it does not know are ignored; `fault_names`
+    /// is not read (it follows from `faults`).
+    pub fn parse(text: &str) -> Result<StatusReply, StatusError> {
+        let bad = |key| StatusError {
+            key,
+            bad_value: true,
+        };
+        Ok(StatusReply {
+            mode: FfMode::from_name(value(text, "mode")?).ok_or(bad("mode"))?,
+            enabled: flag(text, "enabled")?,
+            faults: Faults(number(text, "faults")?),
+            t: number(text, "t")?,
+            pos: number(text, "pos")?,
+            error_counts: number(text, "error_counts")?,
+            moving: flag(text, "moving")?,
+            current: number(text, "current")?,
+            ff: number(text, "ff")?,
+            duty: number(text, "duty")?,
+            step_us_worst: number(text, "step_us_worst")?,
+            step_us_mean: number(text, "step_us_mean")?,
+            sense_offset: number(text, "sense_offset")?,
+            missed: number(text, "missed")?,
+            drive: DriveKind::from_name(value(text, "drive")?).ok_or(bad("drive"))?,
+            configured: flag(text, "configured")?,
+        })
+    }
+}
+
+/// One value of the reply, for a table or a dictionary ([`StatusReply::entries`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StatusValue {
+    /// A number (flags as 0 and 1).
+    Number(f64),
+    /// A name (`mode`, `drive`).
+    Text(&'static str),
+    /// The latched faults' names (`fault_names`; written as [`Faults::write_names`]).
+    Faults(Faults),
+}
+
+impl StatusReply {
+    /// The reply's keys and values in the order the device writes them.
+    pub fn entries(&self) -> [(&'static str, StatusValue); 17] {
+        use StatusValue::{Number as N, Text};
+        let b = |x: bool| N(x as u8 as f64);
+        [
+            ("mode", Text(self.mode.name())),
+            ("enabled", b(self.enabled)),
+            ("faults", N(self.faults.0 as f64)),
+            ("t", N(self.t)),
+            ("pos", N(self.pos)),
+            ("error_counts", N(self.error_counts as f64)),
+            ("moving", b(self.moving)),
+            ("current", N(self.current as f64)),
+            ("fault_names", StatusValue::Faults(self.faults)),
+            ("ff", N(self.ff as f64)),
+            ("duty", N(self.duty as f64)),
+            ("step_us_worst", N(self.step_us_worst as f64)),
+            ("step_us_mean", N(self.step_us_mean as f64)),
+            ("sense_offset", N(self.sense_offset as f64)),
+            ("missed", N(self.missed as f64)),
+            ("drive", Text(self.drive.name())),
+            ("configured", b(self.configured)),
+        ]
+    }
+}
