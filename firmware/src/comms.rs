@@ -21,7 +21,7 @@ use core::fmt::{self, Write};
 use defmt::info;
 use embassy_futures::select::{Either3, select3};
 use embassy_time::{Duration, Instant, Ticker};
-use gms_core::device::{Front, Link, Mailbox, Status};
+use gms_core::device::{Front, LoopLink, Mailbox, Status};
 use gms_core::protocol::{self, LineReader};
 
 use crate::control::{MAILBOX, TelemetryRx};
@@ -32,7 +32,7 @@ use crate::storage::Store;
 /// interrupt that preempts the comms task, so waiting is a busy poll.
 pub struct IrqLink;
 
-impl Link for IrqLink {
+impl LoopLink for IrqLink {
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
         MAILBOX.lock(|m| f(&mut m.borrow_mut()))
     }

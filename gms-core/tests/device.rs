@@ -368,7 +368,7 @@ struct InlineLink {
     t_us: u64,
 }
 
-impl gms_core::device::Link for InlineLink {
+impl gms_core::device::LoopLink for InlineLink {
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut gms_core::device::Mailbox) -> R) -> R {
         f(&mut self.mb)
     }

@@ -502,3 +502,68 @@ fn block_count_is_staged_and_applied_with_the_blocks() {
     }
     assert_eq!(ask(&mut d, "get gms.blocks"), "ok 5\n");
 }
+
+/// A command a host may send, within what `parse` accepts.
+fn any_command() -> impl Strategy<Value = (u8, String, String, f32, f32, u32, u32, bool)> {
+    (
+        0u8..25,
+        "[a-z][a-z_.]{0,15}",
+        "[a-z0-9_,.-]{1,12}",
+        prop::num::f32::NORMAL | prop::num::f32::ZERO,
+        (1e-6f32..1e6),
+        1u32..100_000,
+        1u32..=64,
+        any::<bool>(),
+    )
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// Every command a host writes is read by the device as the same command: the request
+    /// syntax lives once, in `parse` and `Display` side by side.
+    #[test]
+    fn a_written_command_parses_back_the_same(
+        (which, path, value, x, pos, n, count, flag) in any_command()
+    ) {
+        use gms_core::protocol::{CaptureCmd, Command, parse};
+        use gms_core::reference::Sweep;
+        // A value word must not be one of the keywords that change a command's meaning.
+        prop_assume!(!matches!(value.as_str(), "off" | "read" | "next" | "current"));
+        let sweep = Sweep { amp: pos, f0: pos, f1: x.abs().max(1e-3), seconds: pos };
+        let c = match which {
+            0 => Command::Help,
+            1 => Command::List,
+            2 => Command::Get(&path),
+            3 => Command::Set(&path, &value),
+            4 => Command::Stage(&path, &value),
+            5 => Command::Commit,
+            6 => Command::Discard,
+            7 => Command::Save,
+            8 => Command::Load,
+            9 => Command::Defaults,
+            10 => Command::Enable { current: flag },
+            11 => Command::Disable,
+            12 => Command::Status,
+            13 => Command::Clear,
+            14 => Command::Move { pos: x, vel: flag.then_some(pos) },
+            15 => Command::Current { amps: x, seconds: flag.then_some(pos) },
+            16 => Command::Velocity { vel: x, sweep: flag.then_some(sweep) },
+            17 => Command::Hold,
+            18 => Command::Capture(CaptureCmd::Status),
+            19 => Command::Capture(CaptureCmd::Off),
+            20 => Command::Capture(CaptureCmd::Arm {
+                fields: &value,
+                every: n,
+                samples: n,
+                on_next: flag,
+            }),
+            21 => Command::Capture(CaptureCmd::Read { start: n, count }),
+            22 => Command::Stream { fields: &value, rate_hz: pos },
+            23 => Command::StreamOff,
+            _ => Command::Empty,
+        };
+        let line = c.to_string();
+        prop_assert_eq!(parse(&line), Ok(c), "{}", line);
+    }
+}

@@ -27,7 +27,7 @@ pub fn current_pi(r: f64, l: f64, cur_hz: f64) -> (f64, f64) {
 
 /// The friction's Stribeck curve as the compensator holds it (SI).
 #[derive(Debug, Clone, Copy)]
-pub struct Stribeck {
+pub struct SlidingCurve {
     /// Static friction [N·m].
     pub fs: f64,
     /// Coulomb friction [N·m].
@@ -40,10 +40,10 @@ pub struct Stribeck {
     pub sigma: f64,
 }
 
-impl Stribeck {
+impl SlidingCurve {
     /// The paper's Table 1 in SI (docs/design.md#reading-table-1): the device's default
     /// compensator.
-    pub const TABLE1: Stribeck = Stribeck {
+    pub const TABLE1: SlidingCurve = SlidingCurve {
         fs: 220e-6,
         fc: 125e-6,
         vs: 0.2,
@@ -171,7 +171,7 @@ impl PositionGains {
 
 /// The position loop's gains for `axis` under the friction `s`; `None` when the axis's
 /// figures cannot make a controller (not finite, not positive).
-pub fn position_gains(axis: &Axis, s: &Stribeck) -> Option<PositionGains> {
+pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
     let w_cur = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * axis.cur_hz;
     let wn_rule = POS_NATURAL_FRACTION * w_cur;
     let kp_rule = axis.inertia * wn_rule * wn_rule;
@@ -287,7 +287,7 @@ mod tests {
 
     #[test]
     fn the_default_motor_gets_the_default_tune() {
-        let g = position_gains(&Axis::default_motor(), &Stribeck::TABLE1).unwrap();
+        let g = position_gains(&Axis::default_motor(), &SlidingCurve::TABLE1).unwrap();
         eprintln!("{g:?}");
         // The defaults: kp 0.2, ki 100 (here 91: ki = kp ω_n / 4), kd 2.5e-4.
         assert!((g.kp / 0.2 - 1.0).abs() < 0.01, "kp {}", g.kp);
@@ -304,7 +304,7 @@ mod tests {
     /// pre-sliding spring takes less (it raises the frequency the loop must damp).
     #[test]
     fn the_stability_limit_moves_with_the_axis() {
-        let base = position_gains(&Axis::default_motor(), &Stribeck::TABLE1)
+        let base = position_gains(&Axis::default_motor(), &SlidingCurve::TABLE1)
             .unwrap()
             .kd_max;
         let heavy = Axis {
@@ -319,7 +319,7 @@ mod tests {
             k_presliding: 0.0,
             ..Axis::default_motor()
         };
-        let kd = |a: &Axis| position_gains(a, &Stribeck::TABLE1).unwrap().kd_max;
+        let kd = |a: &Axis| position_gains(a, &SlidingCurve::TABLE1).unwrap().kd_max;
         eprintln!(
             "kd_max {base:.3e}, J x2 {:.3e}, spring x2 {:.3e}, no spring {:.3e}",
             kd(&heavy),

@@ -10,7 +10,9 @@
 
 use core::fmt;
 
-pub mod bench;
+use gms_core::drive::Faults;
+use gms_core::protocol::ErrorCode;
+
 pub mod gains;
 pub mod identify;
 pub mod io;
@@ -20,8 +22,9 @@ pub mod plot;
 pub mod trace;
 pub mod units;
 
-/// What went wrong in an identification or analysis step. `Display` gives the one-line
-/// message the tools print; the variant says what kind of failure it is.
+/// What went wrong in an identification, an analysis or a bench step. `Display` gives the
+/// one-line message the tools print; the variant says what kind of failure it is, so callers
+/// decide on the variant, never on the text.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Error {
     /// The data cannot be fitted as given: too few points, non-finite values, a curve of the
@@ -31,15 +34,93 @@ pub enum Error {
     Params(String),
     /// A file could not be read or written.
     Io(String),
-    /// A device did not do what an experiment asked (its `err` reply, a lost link, an
-    /// unexpected reply).
+    /// The device refused a request: its `err` reply.
+    Refused(Refusal),
+    /// The device latched faults; `during`: what failed because of them, if anything did.
+    Faulted {
+        /// The latched faults.
+        faults: Faults,
+        /// The failure the faults explain (its message), if any.
+        during: Option<String>,
+    },
+    /// The link to the device failed (lost, timed out) or the run was stopped (Ctrl-C, the
+    /// window's Stop): the message says which.
+    Link(String),
+    /// A device did not do what an experiment asked (an unexpected reply, a motion that did
+    /// not end, a measurement out of its range).
     Device(String),
+}
+
+/// A device's `err CODE REASON` reply.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Refusal {
+    /// The protocol's error code (`gms_core::protocol::ErrorCode` as a number).
+    pub code: u8,
+    /// The reason the device gave.
+    pub reason: String,
+}
+
+impl Refusal {
+    /// Reads an `err CODE REASON` line; `None` when the line is not one.
+    pub fn parse(line: &str) -> Option<Refusal> {
+        let rest = line.trim().strip_prefix("err ")?;
+        let (code, reason) = rest.split_once(' ').unwrap_or((rest, ""));
+        Some(Refusal {
+            code: code.parse().ok()?,
+            reason: reason.to_string(),
+        })
+    }
+
+    /// True when the device refused with `code`.
+    pub fn is(&self, code: ErrorCode) -> bool {
+        self.code == code as u8
+    }
+}
+
+impl fmt::Display for Refusal {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "device answered: err {} {}", self.code, self.reason)
+    }
+}
+
+/// The names of `faults`, comma-separated (`none` when empty).
+pub fn fault_names(faults: Faults) -> String {
+    let mut names = String::new();
+    let _ = faults.write_names(&mut names);
+    names
 }
 
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Error::Data(m) | Error::Params(m) | Error::Io(m) | Error::Device(m) => f.write_str(m),
+            Error::Data(m)
+            | Error::Params(m)
+            | Error::Io(m)
+            | Error::Link(m)
+            | Error::Device(m) => f.write_str(m),
+            Error::Refused(r) => r.fmt(f),
+            Error::Faulted { faults, during } => {
+                write!(f, "the device latched a fault ({})", fault_names(*faults))?;
+                match during {
+                    Some(e) => write!(f, ": {e}"),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+}
+
+impl Error {
+    /// True when the device refused the request with `code`.
+    pub fn refused_with(&self, code: ErrorCode) -> bool {
+        matches!(self, Error::Refused(r) if r.is(code))
+    }
+
+    /// The latched faults this error reports, if it is about them.
+    pub fn faults(&self) -> Option<Faults> {
+        match self {
+            Error::Faulted { faults, .. } => Some(*faults),
+            _ => None,
         }
     }
 }

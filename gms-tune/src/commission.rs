@@ -1,10 +1,11 @@
-//! `gms-tune commission`: `gms_ident::bench::commission` on the link, its lines and summary,
+//! `gms-tune commission`: `gms_bench::commission` on the link, its lines and summary,
 //! the parameter file, and — only after every step succeeded — the settings loaded and saved.
 
+use gms_core::protocol::Command;
 use std::path::Path;
 
+use gms_bench::{commission, load_params};
 use gms_ident::Error;
-use gms_ident::bench::{commission, load_params};
 use gms_tune::Link;
 
 use crate::Fail;
@@ -66,7 +67,7 @@ pub fn run(
         let n = load_params(link, &pf).map_err(|e| Fail::Device(e.to_string()))?;
         eprintln!("loaded {n} parameters into the device");
         if save {
-            link.request("save")?;
+            link.ask(Command::Save)?;
             eprintln!("saved");
         }
     }

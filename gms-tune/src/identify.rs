@@ -1,13 +1,14 @@
-//! `gms-tune identify`: the bench identification of `gms_ident::bench` (the paper's three
+//! `gms-tune identify`: the bench identification of `gms_bench` (the paper's three
 //! experiments, shared with `hil-sim`; the same identification as `hil-sim identify`) on the
 //! link, with progress bars and Ctrl-C; the parameter file, the report and, asked for, the set
 //! loaded into the device and saved.
 
+use gms_core::protocol::Command;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use gms_bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
 use gms_ident::Error;
-use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
 use gms_tune::Link;
 
 use crate::Fail;
@@ -74,7 +75,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     let started = Instant::now();
     let mut bar = Bar::new();
     let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
-    let r = bench::identify_on(
+    let r = gms_bench::identify_on(
         &mut bench,
         &plans,
         &a.report,
@@ -119,7 +120,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         let n = crate::load(link, &a.out)?;
         eprintln!("loaded {n} parameters into the device");
         if a.save {
-            link.request("save")?;
+            link.ask(Command::Save)?;
             eprintln!("saved");
         }
     }

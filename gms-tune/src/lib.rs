@@ -7,6 +7,7 @@ pub mod run;
 pub mod ui;
 
 use gms_core::device::StatusReply;
+use gms_core::protocol::Command;
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
@@ -43,6 +44,20 @@ impl std::fmt::Display for LinkError {
             LinkError::Timeout(d) => write!(f, "timeout: no reply within {} ms", d.as_millis()),
             LinkError::Device(l) => write!(f, "device answered: {l}"),
             LinkError::Io(e) => write!(f, "link: {e}"),
+        }
+    }
+}
+
+impl LinkError {
+    /// As a bench error: the device's `err` reply typed ([`gms_ident::Error::Refused`]), a
+    /// timeout or a failed link as [`gms_ident::Error::Link`].
+    pub fn into_bench(self) -> gms_ident::Error {
+        match &self {
+            LinkError::Device(line) => match gms_ident::Refusal::parse(line) {
+                Some(r) => gms_ident::Error::Refused(r),
+                None => gms_ident::Error::Device(self.to_string()),
+            },
+            LinkError::Timeout(_) | LinkError::Io(_) => gms_ident::Error::Link(self.to_string()),
         }
     }
 }
@@ -150,6 +165,12 @@ impl Link {
         }
     }
 
+    /// Sends a typed request (its line is the one the device's parser reads back as the same
+    /// command) and waits for its reply, as [`Link::request`].
+    pub fn ask(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), LinkError> {
+        self.request(&c.to_string())
+    }
+
     /// [`Link::request`]'s reply as one text: the lines before `ok`, then the text after it,
     /// newline-separated (empty parts left out).
     pub fn request_text(&mut self, line: &str) -> Result<String, LinkError> {
@@ -166,7 +187,7 @@ impl Link {
 
     /// The device's `status`, read (the device core's own format).
     pub fn status(&mut self) -> Result<StatusReply, LinkError> {
-        let (_, text) = self.request("status")?;
+        let (_, text) = self.ask(Command::Status)?;
         StatusReply::parse(&text).map_err(|e| LinkError::Io(format!("{e}: {text}")))
     }
 
@@ -210,9 +231,12 @@ impl Link {
         seconds: f64,
     ) -> Result<Vec<Vec<f64>>, LinkError> {
         self.telemetry.clear();
-        self.request(&format!("stream {fields} {rate}"))?;
+        self.ask(Command::Stream {
+            fields,
+            rate_hz: rate as f32,
+        })?;
         let listened = self.listen(Duration::from_secs_f64(seconds));
-        let off = self.request("stream off");
+        let off = self.ask(Command::StreamOff);
         listened?;
         off?;
         // The samples that arrive until `stream off` is answered, or in a burst from a device
@@ -248,17 +272,16 @@ impl Link {
     }
 }
 
-/// The link as an abstract bench, for the experiments of `gms_ident::bench` (captures read
-/// back with `gms_ident::bench::capture_rows`, the sliding experiment, …). Waiting is in
+/// The link as an abstract bench, for the experiments of `gms_bench` (captures read
+/// back with `gms_bench::capture_rows`, the sliding experiment, …). Waiting is in
 /// device time ([`Link::wait_device`]).
-impl gms_ident::bench::Bench for Link {
+impl gms_bench::Bench for Link {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        Link::request(self, line).map_err(|e| gms_ident::Error::Device(e.to_string()))
+        Link::request(self, line).map_err(LinkError::into_bench)
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
-        self.wait_device(seconds)
-            .map_err(|e| gms_ident::Error::Device(e.to_string()))
+        self.wait_device(seconds).map_err(LinkError::into_bench)
     }
 }
 

@@ -1,6 +1,7 @@
 //! `gms-tune`: the bench tool. Talks the gms command protocol to the firmware over a serial
 //! port (USB CDC-ACM) or to `hil-sim serve` over TCP.
 
+use gms_core::protocol::Command;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
@@ -345,17 +346,17 @@ fn run(cli: Cli) -> Result<(), Fail> {
     }
     .map_err(Fail::Usage)?;
     match cli.cmd {
-        Cmd::Get { path } => println!("{}", link.request(&format!("get {path}"))?.1),
+        Cmd::Get { path } => println!("{}", link.ask(Command::Get(&path))?.1),
         Cmd::Set { path, value } => {
-            link.request(&format!("set {path} {value}"))?;
+            link.ask(Command::Set(&path, &value))?;
         }
         Cmd::List => {
-            for l in link.request("list")?.0 {
+            for l in link.ask(Command::List)?.0 {
                 println!("{l}");
             }
         }
         Cmd::Save => {
-            link.request("save")?;
+            link.ask(Command::Save)?;
         }
         Cmd::Send { words } => {
             let text = link.request_text(&words.join(" "))?;
@@ -460,7 +461,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
         } => tune_ff::run(
             &mut link,
             &tune_ff::Args {
-                plan: gms_ident::bench::TuneFfPlan {
+                plan: gms_bench::TuneFfPlan {
                     amp: amplitude,
                     freq,
                     seconds,
@@ -503,7 +504,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 apply,
                 save,
                 json,
-                ranges: gms_ident::bench::Ranges {
+                ranges: gms_bench::Ranges {
                     torque_step,
                     v_min,
                     v_max,
@@ -521,9 +522,12 @@ fn run(cli: Cli) -> Result<(), Fail> {
 /// its extremes, and the feedforward.
 fn watch(link: &mut Link, seconds: Option<f64>, refresh: Duration) -> Result<(), Fail> {
     use std::io::Write;
-    let rpc = gms_ident::bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
+    let rpc = gms_bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let end = seconds.map(|s| std::time::Instant::now() + Duration::from_secs_f64(s.max(0.0)));
-    link.request("stream t,error,ff 200")?;
+    link.ask(Command::Stream {
+        fields: "t,error,ff",
+        rate_hz: 200.0,
+    })?;
     println!("  t [s]   error [counts]: last   min    max   |-50 .. 0 .. +50|   ff [uN·m]");
     loop {
         link.telemetry.clear();
@@ -560,7 +564,7 @@ fn watch(link: &mut Link, seconds: Option<f64>, refresh: Duration) -> Result<(),
         }
         if end.is_some_and(|e| std::time::Instant::now() >= e) {
             println!();
-            link.request("stream off")?;
+            link.ask(Command::StreamOff)?;
             return Ok(());
         }
     }

@@ -1,6 +1,7 @@
 //! The device's parameters as a parameter file, and a file sent back as one set: shared by
 //! `gms-tune params dump/load`, `commission`, `identify` and the window.
 
+use gms_core::protocol::Command;
 use std::path::Path;
 
 use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
@@ -49,7 +50,7 @@ pub fn parse_list_line(line: &str) -> Option<Listed> {
 
 /// Every parameter `list` prints, read-only estimates included.
 pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
-    let (lines, _) = link.request("list")?;
+    let (lines, _) = link.ask(Command::List)?;
     Ok(lines.iter().filter_map(|l| parse_list_line(l)).collect())
 }
 
@@ -123,11 +124,11 @@ impl std::fmt::Display for LoadError {
     }
 }
 
-/// Sends the parameter file `file` as one set (`gms_ident::bench::load_params`); returns the
+/// Sends the parameter file `file` as one set (`gms_bench::load_params`); returns the
 /// number of parameters sent.
 pub fn load(link: &mut Link, file: &Path) -> Result<usize, LoadError> {
     let pf = ParamFile::load(file).map_err(|e| LoadError::File(e.to_string()))?;
-    gms_ident::bench::load_params(link, &pf).map_err(|e| match e {
+    gms_bench::load_params(link, &pf).map_err(|e| match e {
         gms_ident::Error::Params(m) => LoadError::File(format!("{}: {m}", file.display())),
         e => LoadError::Device(e.to_string()),
     })

@@ -3,12 +3,13 @@
 //! next request or wait while the requests that end a run safely still go out, and hooks told
 //! of each stage and each wait (a progress bar, or the window's progress and telemetry).
 
+use gms_core::protocol::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+use gms_bench::Bench;
 use gms_core::device::{StatusReply, StatusValue};
 use gms_ident::Error;
-use gms_ident::bench::Bench;
 
 use crate::Link;
 
@@ -29,18 +30,6 @@ pub struct RunBench<'a, 'h> {
     hooks: &'h mut dyn Hooks,
 }
 
-/// Whether a request is one that ends a run safely (it goes out even after a stop): the
-/// bridge off, a status, the stroke limits and the feedforward gain put back.
-pub fn ends_safely(line: &str) -> bool {
-    line == "disable"
-        || line == "status"
-        || line.starts_with("set lim.pos_")
-        || line.starts_with("set ff.gain ")
-        || line.starts_with("set pos.")
-        || line.starts_with("set sense.dir ")
-        || line.starts_with("set enc.dir ")
-}
-
 impl<'a, 'h> RunBench<'a, 'h> {
     /// The link; `stop` set ends the run (`why` says by what, e.g. "interrupted (Ctrl-C)").
     pub fn new(
@@ -59,7 +48,7 @@ impl<'a, 'h> RunBench<'a, 'h> {
 
     fn stopped(&self) -> Result<(), Error> {
         if self.stop.load(Ordering::SeqCst) {
-            Err(Error::Device(self.why.into()))
+            Err(Error::Link(self.why.into()))
         } else {
             Ok(())
         }
@@ -73,9 +62,11 @@ impl<'a, 'h> RunBench<'a, 'h> {
 
 impl Bench for RunBench<'_, '_> {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        if !ends_safely(line) {
-            self.stopped()?;
-        }
+        self.stopped()?;
+        Bench::request(&mut *self.link, line)
+    }
+
+    fn request_to_end(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
         Bench::request(&mut *self.link, line)
     }
 
@@ -131,7 +122,7 @@ pub fn write_identified(
 /// found in `[device]` — and its text (the steps' lines as comments), as `gms-tune commission`
 /// and the window write it.
 pub fn commissioned_file(
-    c: &gms_ident::bench::Commissioned,
+    c: &gms_bench::Commissioned,
     mut pf: gms_ident::paramfile::ParamFile,
 ) -> (gms_ident::paramfile::ParamFile, String) {
     let mut device = toml::Table::new();
@@ -211,19 +202,25 @@ pub fn step_test(
     ),
     crate::LinkError,
 > {
-    let rpc = gms_ident::bench::rad_per_count(link)
-        .map_err(|e| crate::LinkError::Device(e.to_string()))?;
-    link.request("enable")?;
+    let rpc =
+        gms_bench::rad_per_count(link).map_err(|e| crate::LinkError::Device(e.to_string()))?;
+    link.ask(Command::Enable { current: false })?;
     let pos0 = link
         .record("pos", 100.0, 0.05)?
         .last()
         .and_then(|r| r.first().copied())
         .unwrap_or(0.0);
     link.telemetry.clear();
-    link.request(&format!("stream {STEP_FIELDS} 1000"))?;
-    link.request(&format!("move {}", pos0 + distance))?;
+    link.ask(Command::Stream {
+        fields: STEP_FIELDS,
+        rate_hz: 1000.0,
+    })?;
+    link.ask(Command::Move {
+        pos: (pos0 + distance) as f32,
+        vel: None,
+    })?;
     let listened = link.listen(std::time::Duration::from_secs_f64(seconds));
-    let off = link.request("stream off");
+    let off = link.ask(Command::StreamOff);
     listened?;
     off?;
     let six: Vec<[f64; 6]> = link
@@ -236,7 +233,7 @@ pub fn step_test(
 }
 
 /// `tune-ff`'s result as summary lines, for the terminal (gains to 3 decimals, errors in counts).
-pub fn tune_ff_summary(t: &gms_ident::bench::TuneFf) -> Vec<String> {
+pub fn tune_ff_summary(t: &gms_bench::TuneFf) -> Vec<String> {
     let mut out = Vec::new();
     for n in &t.notes {
         out.push(format!("note: {n}"));
@@ -263,7 +260,7 @@ pub fn tune_ff_summary(t: &gms_ident::bench::TuneFf) -> Vec<String> {
 }
 
 /// `tune-ff`'s result as JSON: raw values in SI (gains, RMS errors in rad).
-pub fn tune_ff_json(t: &gms_ident::bench::TuneFf) -> serde_json::Value {
+pub fn tune_ff_json(t: &gms_bench::TuneFf) -> serde_json::Value {
     serde_json::json!({
         "before": t.before,
         "chosen": t.chosen,

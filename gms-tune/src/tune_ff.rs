@@ -1,11 +1,12 @@
-//! `gms-tune tune-ff`: the feedforward gain by experiment (`gms_ident::bench::tune_ff`: a
+//! `gms-tune tune-ff`: the feedforward gain by experiment (`gms_bench::tune_ff`: a
 //! coarse sweep of the sine test with reversals, widened at an edge, then a repeated
 //! refinement around the optimum, fitted with its uncertainty), printed, written (CSV and
 //! plot), and applied or saved on request.
 
+use gms_core::protocol::Command;
 use std::path::PathBuf;
 
-use gms_ident::bench::{TUNE_FF_FLAT_SE, TuneFfPlan, tune_ff};
+use gms_bench::{TUNE_FF_FLAT_SE, TuneFfPlan, tune_ff};
 use gms_tune::Link;
 use gms_tune::run::{tune_ff_json, tune_ff_summary};
 
@@ -52,7 +53,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     if !a.json {
         println!("test  ff.gain  RMS error [counts]");
     }
-    let rpc = gms_ident::bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
+    let rpc = gms_bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let mut bar = Bar::new();
     let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
     bench.stage("tune-ff", seconds);
@@ -117,13 +118,13 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
             Some(g) => {
                 // To the 3 decimals printed: the interval is a hundredth wide or more.
                 let g = (g * 1e3).round() / 1e3;
-                link.request(&format!("set ff.gain {g}"))?;
+                link.ask(Command::Set("ff.gain", &format!("{g}")))?;
                 if !a.json {
                     println!("set ff.gain {g:.3}");
                 }
                 if a.save {
-                    link.request("disable")?;
-                    link.request("save")?;
+                    link.ask(Command::Disable)?;
+                    link.ask(Command::Save)?;
                     if !a.json {
                         println!("saved");
                     }

@@ -149,6 +149,10 @@ fn main() {
             identify_refuses_an_older_firmware,
         ),
         (
+            "identify_asymmetric_apply_is_refused_before_anything_changes",
+            identify_asymmetric_apply_is_refused_before_anything_changes,
+        ),
+        (
             "identify_keeps_the_data_when_the_link_is_lost",
             identify_keeps_the_data_when_the_link_is_lost,
         ),
@@ -426,13 +430,13 @@ fn over_a_pty_set_save_restart_and_survive_a_dropped_client() {
     assert_eq!(tune(&srv, &["get", "pos.kp"]), (0, "0.27\n".into()));
 }
 
-/// The bench client (`gms_tune::Link` as a `gms_ident::bench::Bench`) arms a capture, starts a velocity run and
+/// The bench client (`gms_tune::Link` as a `gms_bench::Bench`) arms a capture, starts a velocity run and
 /// reads every sample back, on a virtual device four times faster than real time.
 fn the_library_captures_a_velocity_run() {
     use std::time::Duration;
     let dir = tempfile::tempdir().unwrap();
     let srv = Server::start_at("tcp", &dir.path().join("flash.img"), 4.0);
-    use gms_ident::bench::{capture_rows, capture_status, capture_wait};
+    use gms_bench::{capture_rows, capture_status, capture_wait};
     let mut link = gms_tune::Link::tcp(&srv.addr, Duration::from_secs(2)).unwrap();
     link.request("enable").unwrap();
     link.request("capture t,pos,current 1 2000 next").unwrap();
@@ -555,6 +559,18 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
     std::thread::spawn(move || {
         for conn in l.incoming() {
             let Ok(mut c) = conn else { return };
+            // Its parameters (no `enc.counts_per_rev`: it predates it), kept across requests.
+            let mut params: Vec<(String, String)> = [
+                ("motor.k_m", "0.0066"),
+                ("rate.pos_hz", "10000"),
+                ("lim.i_max", "0.5"),
+                ("gms.fs", "0.00022"),
+                ("gms.vs", "0.2"),
+                ("lim.pos_min", "-50"),
+                ("lim.pos_max", "50"),
+            ]
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .into();
             let mut buf = Vec::new();
             let mut byte = [0u8; 1];
             while let Ok(1) = c.read(&mut byte) {
@@ -570,22 +586,30 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
                 log.lock().unwrap().push(line.clone());
                 let w: Vec<&str> = line.split_whitespace().collect();
                 let reply = match w.as_slice() {
-                    ["get", p] => match *p {
-                        "motor.k_m" => "ok 0.0066".to_string(),
-                        "rate.pos_hz" => "ok 10000".into(),
-                        "lim.i_max" => "ok 0.5".into(),
-                        "gms.fs" => "ok 0.00022".into(),
-                        "gms.vs" => "ok 0.2".into(),
-                        "lim.pos_min" => "ok -50".into(),
-                        "lim.pos_max" => "ok 50".into(),
-                        _ => "err 5 unknown parameter (try list)".into(),
+                    ["get", p] => match params.iter().find(|(k, _)| k == p) {
+                        Some((_, v)) => format!("ok {v}"),
+                        None => "err 5 unknown parameter (try list)".into(),
+                    },
+                    ["list"] => {
+                        let mut out = String::new();
+                        for (k, v) in &params {
+                            out.push_str(&format!("{k} {v} - [-1000, 100000]\n"));
+                        }
+                        out + "ok"
+                    }
+                    ["set", p, v] => match params.iter_mut().find(|(k, _)| k == p) {
+                        Some((_, x)) => {
+                            *x = v.to_string();
+                            "ok".into()
+                        }
+                        None => "err 5 unknown parameter (try list)".into(),
                     },
                     ["status"] => "ok mode=gms enabled=0 faults=0 t=1 pos=0 error_counts=0 \
                                    moving=0 current=0 fault_names=none ff=0 duty=0 \
                                    step_us_worst=0 step_us_mean=0 sense_offset=2048 \
                                    missed=0 drive=position configured=1"
                         .into(),
-                    ["set", ..] | ["enable"] | ["disable"] => "ok".into(),
+                    ["enable"] | ["disable"] => "ok".into(),
                     ["enable", _] => "err 2 too many arguments".into(),
                     _ => "err 1 unknown command".into(),
                 };
@@ -596,6 +620,38 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
         }
     });
     (addr, seen)
+}
+
+/// `identify --asymmetric --apply` (or `--save`): the device holds one Stribeck curve for both
+/// directions, so the asymmetric fit could not be applied whole: refused as a usage error
+/// (exit 2) before anything is sent that changes or moves the device.
+fn identify_asymmetric_apply_is_refused_before_anything_changes() {
+    for flag in ["--apply", "--save"] {
+        let dir = tempfile::tempdir().unwrap();
+        let (addr, seen) = old_firmware();
+        let (code, out, err) = run(Command::new(TUNE)
+            .args([
+                "--tcp",
+                &addr,
+                "identify",
+                "--asymmetric",
+                flag,
+                "--report",
+                "rep",
+            ])
+            .current_dir(dir.path()));
+        assert_eq!(code, 2, "{out}\n{err}");
+        assert!(
+            err.contains("--asymmetric") && err.contains("[friction.negative]"),
+            "{err}"
+        );
+        let seen = seen.lock().unwrap().clone();
+        assert!(
+            seen.iter().all(|l| l == "status" || l.starts_with("get ")),
+            "{seen:?}"
+        );
+        assert!(!dir.path().join("rep").exists());
+    }
 }
 
 /// An older firmware without the bench primitives: a clear error, exit 1, the bridge off

@@ -268,7 +268,7 @@ fn lag_run(model: &mut AnyModel, vs: f64, s: &Setup, rng: &mut ChaCha8Rng) -> St
 pub enum Rig {
     /// On the device core driving the simulated axis (the default plant with the actuator
     /// friction of the parameter file, the guideway negligible), through the protocol: the
-    /// bench experiments of `gms_ident::bench`, exactly what `gms-tune identify` runs on a
+    /// bench experiments of `gms_bench`, exactly what `gms-tune identify` runs on a
     /// board.
     Device,
     /// On the friction model alone, the paper's idealised set-up (`run`): an imposed torque
@@ -289,7 +289,7 @@ pub fn run_on_device(
     variability: f64,
     seed: u64,
 ) -> Result<String, Error> {
-    use gms_ident::bench::{self, DeviceInfo, LagPlan, Plans, Ranges};
+    use gms_bench::{self, DeviceInfo, LagPlan, Plans, Ranges};
     if kind == Kind::Guideway {
         return Err(Error::Run(
             "the guideway experiment needs the slide's rig (--rig ideal)".into(),
@@ -331,18 +331,18 @@ pub fn run_on_device(
     Ok(match kind {
         Kind::Presliding => {
             let mut out = Vec::new();
-            bench::presliding(&mut dev, &plans.presliding, &mut out).map_err(run)?;
-            bench::presliding_csv(&out)
+            gms_bench::presliding(&mut dev, &plans.presliding, &mut out).map_err(run)?;
+            gms_bench::presliding_csv(&out)
         }
         Kind::Sliding => {
             let mut out = Vec::new();
-            bench::sliding(&mut dev, &plans.sliding, &mut out).map_err(run)?;
-            bench::sliding_csv(&out)
+            gms_bench::sliding(&mut dev, &plans.sliding, &mut out).map_err(run)?;
+            gms_bench::sliding_csv(&out)
         }
         _ => {
             let (t, x, f) =
-                bench::lag(&mut dev, &LagPlan::for_vs(info.vs, info.pos_hz)).map_err(run)?;
-            bench::lag_csv(&t, &x, &f)
+                gms_bench::lag(&mut dev, &LagPlan::for_vs(info.vs, info.pos_hz)).map_err(run)?;
+            gms_bench::lag_csv(&t, &x, &f)
         }
     })
 }

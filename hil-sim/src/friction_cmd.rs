@@ -14,7 +14,7 @@ use gms_ident::paramfile::{AnyModel, FileError, ParamFile};
 
 /// One sample of a trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Sample {
+pub struct TrajectoryPoint {
     /// Time \[s\].
     pub t: f64,
     /// Position [m or rad].
@@ -35,7 +35,7 @@ pub struct FrictionRow {
 }
 
 /// Reads a trajectory CSV (see the module docs); errors name the file, line and column.
-pub fn read_trajectory(path: &Path) -> Result<Vec<Sample>, FileError> {
+pub fn read_trajectory(path: &Path) -> Result<Vec<TrajectoryPoint>, FileError> {
     let file = path.display().to_string();
     let err = |line: Option<u64>, reason: String| FileError {
         file: file.clone(),
@@ -58,7 +58,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Sample>, FileError> {
             .ok_or_else(|| err(Some(1), format!("the header has no `{name}` column")))
     };
     let (ti, xi) = (col("t")?, col("x")?);
-    let mut out: Vec<Sample> = Vec::new();
+    let mut out: Vec<TrajectoryPoint> = Vec::new();
     let mut rec = csv::StringRecord::new();
     loop {
         match rdr.read_record(&mut rec) {
@@ -90,7 +90,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Sample>, FileError> {
             }
             Ok(v)
         };
-        let s = Sample {
+        let s = TrajectoryPoint {
             t: num(ti, "t")?,
             x: num(xi, "x")?,
         };
@@ -118,9 +118,9 @@ fn io_reason(e: &csv::Error) -> String {
 }
 
 /// Drives `model` (from its current state) through `traj`.
-pub fn simulate(model: &mut AnyModel, traj: &[Sample]) -> Vec<FrictionRow> {
+pub fn simulate(model: &mut AnyModel, traj: &[TrajectoryPoint]) -> Vec<FrictionRow> {
     let mut out = Vec::with_capacity(traj.len());
-    let mut prev: Option<Sample> = None;
+    let mut prev: Option<TrajectoryPoint> = None;
     for &s in traj {
         let (v, f) = match prev {
             None => (0.0, model.force()),

@@ -1,11 +1,11 @@
 //! The paper's experiments run through the protocol on the device core (the bench abstraction
-//! of `gms_ident::bench`, here on `LocalDevice`: the simulated plant in simulated time) and
+//! of `gms_bench`, here on `LocalDevice`: the simulated plant in simulated time) and
 //! identified with the same fits as the simulated experiments: the bench sees the plant's
 //! hidden friction.
 
 mod common;
 use common::{QUIET, identification_errors};
-use gms_ident::bench::{SlidingPlan, sliding};
+use gms_bench::{SlidingPlan, sliding};
 use gms_ident::identify::fit_stribeck;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
@@ -64,7 +64,7 @@ const TABLE1_BLOCKS: [(f64, f64); 6] = [
 /// curve (its blocks with its Fs) against the hidden one (Table 1's blocks, Fs 220 µN·m) over
 /// the measured range, uniformly in x as the simulated round trip measures it, in % of Fs.
 fn staircase(scenario: &str, with_sliding: bool) -> (f64, f64) {
-    use gms_ident::bench::{PreslidingPlan, presliding};
+    use gms_bench::{PreslidingPlan, presliding};
     use gms_ident::identify::{Inputs, identify_from};
     let sc = Scenario::parse(scenario, "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
@@ -76,7 +76,7 @@ fn staircase(scenario: &str, with_sliding: bool) -> (f64, f64) {
     assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());
     let dir = tempfile::tempdir().unwrap();
     let (pp, sp) = (dir.path().join("pre.csv"), dir.path().join("slide.csv"));
-    std::fs::write(&pp, gms_ident::bench::presliding_csv(&pre)).unwrap();
+    std::fs::write(&pp, gms_bench::presliding_csv(&pre)).unwrap();
     if with_sliding {
         let mut slide = Vec::new();
         sliding(
@@ -85,7 +85,7 @@ fn staircase(scenario: &str, with_sliding: bool) -> (f64, f64) {
             &mut slide,
         )
         .unwrap();
-        std::fs::write(&sp, gms_ident::bench::sliding_csv(&slide)).unwrap();
+        std::fs::write(&sp, gms_bench::sliding_csv(&slide)).unwrap();
     }
     let id = identify_from(&Inputs {
         presliding: Some(&pp),
@@ -157,7 +157,7 @@ fn without_a_stribeck_drop_the_staircase_meets_the_2_percent_aim() {
 
 #[test]
 fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
-    use gms_ident::bench::{LagPlan, lag};
+    use gms_bench::{LagPlan, lag};
     use gms_ident::identify::fit_lag;
     use gms_ident::paramfile::ParamFile;
     let sc = Scenario::parse(QUIET, "test").unwrap();
@@ -191,7 +191,7 @@ fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
 /// compensation: without the feedforward the error is several times larger.
 #[test]
 fn the_sine_test_repeats_and_sees_the_compensation() {
-    use gms_ident::bench::{Bench, sine_test};
+    use gms_bench::{Bench, sine_test};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     let a = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
@@ -260,10 +260,10 @@ impl Hidden {
     }
 }
 
-/// A whole bench identification (`gms_ident::bench::identify_on`, what `gms-tune identify`
+/// A whole bench identification (`gms_bench::identify_on`, what `gms-tune identify`
 /// runs) on a device with hidden friction `h`; returns the accuracy and the device.
 fn identify_hidden(h: &Hidden) -> ([f64; 7], LocalDevice, gms_ident::paramfile::FrictionSpec) {
-    use gms_ident::bench::{DeviceInfo, Plans, Ranges, identify_on};
+    use gms_bench::{DeviceInfo, Plans, Ranges, identify_on};
     let sc = Scenario::parse(&h.scenario(), "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     let info = DeviceInfo::read(&mut dev).unwrap();
@@ -304,7 +304,7 @@ fn within(acc: &[f64; 7], fs_fc: f64, delta: f64, c: f64, virgin: f64) -> bool {
 
 #[test]
 fn a_bench_identification_compensates_as_well_as_the_true_set() {
-    use gms_ident::bench::{load_params, sine_test};
+    use gms_bench::{load_params, sine_test};
     let (acc, mut dev, spec) = identify_hidden(&Hidden::TABLE1);
     // The bounds (Fs, Fc 3 %; Vs, delta, sigma 10 %; C 15 %) but the virgin curve's:
     // measured 2.24 % of Fs against the 2 % aimed at (see the staircase test above).
@@ -386,7 +386,7 @@ proptest! {
 /// with the true sets, 0.882 with the identified one and the guideway compensated again.
 #[test]
 fn on_the_default_plant_the_bench_sees_both_sources() {
-    use gms_ident::bench::{DeviceInfo, Plans, Ranges, identify_on, load_params, sine_test};
+    use gms_bench::{DeviceInfo, Plans, Ranges, identify_on, load_params, sine_test};
     let sc = Scenario::parse("[plant]\nvariability = 0.0\n", "test").unwrap();
     // The guideway's Fs and Fc (0.9 N, 0.75 N at the slide) at the motor: × lead / (2π gear).
     let r = sc.plant.lead / (2.0 * std::f64::consts::PI * sc.plant.gear_ratio);
@@ -426,7 +426,7 @@ fn on_the_default_plant_the_bench_sees_both_sources() {
 
 /// The device's clock (`status` key `t`) \[s\].
 fn device_time(dev: &mut LocalDevice) -> f64 {
-    use gms_ident::bench::Bench;
+    use gms_bench::Bench;
     let (_, st) = dev.request("status").unwrap();
     st.split_whitespace()
         .find_map(|w| w.strip_prefix("t="))
@@ -442,7 +442,7 @@ struct Tracking<'a> {
     hi: f64,
 }
 
-impl gms_ident::bench::Bench for Tracking<'_> {
+impl gms_bench::Bench for Tracking<'_> {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
         self.dev.request(line)
     }
@@ -453,7 +453,7 @@ impl gms_ident::bench::Bench for Tracking<'_> {
             let s = left.min(0.01);
             self.dev.wait(s)?;
             left -= s;
-            let x = gms_ident::bench::position(&mut *self.dev)?;
+            let x = gms_bench::position(&mut *self.dev)?;
             self.lo = self.lo.min(x);
             self.hi = self.hi.max(x);
         }
@@ -465,7 +465,7 @@ impl gms_ident::bench::Bench for Tracking<'_> {
 /// the window the device's limits are narrowed to); the figure for the docs.
 #[test]
 fn a_bench_identification_stays_within_its_planned_stroke() {
-    use gms_ident::bench::{DeviceInfo, LagPlan, Plans, Ranges, identify_on};
+    use gms_bench::{DeviceInfo, LagPlan, Plans, Ranges, identify_on};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     let info = DeviceInfo::read(&mut dev).unwrap();
@@ -500,7 +500,7 @@ struct Stalling {
     stall: f64,
 }
 
-impl gms_ident::bench::Bench for Stalling {
+impl gms_bench::Bench for Stalling {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
         if line == "status" {
             self.dev.wait(self.stall)?;
@@ -518,7 +518,7 @@ impl gms_ident::bench::Bench for Stalling {
 /// limits put back. Without the guard the same stall runs the axis far beyond it.
 #[test]
 fn a_stalling_host_cannot_run_the_staircase_away() {
-    use gms_ident::bench::{Bench, PreslidingPlan, position, presliding};
+    use gms_bench::{Bench, PreslidingPlan, position, presliding};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let run = |guard: f64| {
         let mut b = Stalling {

@@ -1,11 +1,11 @@
-//! The bench identification (`gms_ident::bench::identify_on`, what `gms-tune identify` runs)
+//! The bench identification (`gms_bench::identify_on`, what `gms-tune identify` runs)
 //! against plants that are not the compensator's model: a 4-block friction, applied to the
 //! device as 4 blocks, and a compliant stage (`[plant.compliance]` 700 Hz, zeta 0.03). The
 //! device starts from its defaults (Table 1): the tool is told nothing of the truth.
 
 mod common;
 use common::{QUIET, identification_errors};
-use gms_ident::bench::{DeviceInfo, Plans, Ranges, get_param, identify_on, load_params, sine_test};
+use gms_bench::{DeviceInfo, Plans, Ranges, get_param, identify_on, load_params, sine_test};
 use gms_ident::paramfile::{FrictionSpec, ParamFile};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;

@@ -6,7 +6,7 @@
 
 mod common;
 use common::identification_errors;
-use gms_ident::bench::{DeviceInfo, Plans, Ranges, commission, get_param, identify_on};
+use gms_bench::{DeviceInfo, Plans, Ranges, commission, get_param, identify_on};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -25,12 +25,12 @@ fn the_device_runs_in_the_plants_encoder_counts_and_sense_scale() {
     assert_eq!(get_param(&mut dev, "enc.counts_per_rev").unwrap(), 2000.0);
     // 1.65 V over ±2 A.
     assert!((get_param(&mut dev, "sense.v_per_a").unwrap() - 0.825).abs() < 1e-6);
-    let (_, status) = gms_ident::bench::Bench::request(&mut dev, "status").unwrap();
+    let (_, status) = gms_bench::Bench::request(&mut dev, "status").unwrap();
     assert!(status.contains(" configured=1"), "{status}");
     // A move of 100 counts ends within a count of 100 × 2π/2000 rad.
     let rpc = std::f64::consts::TAU / 2000.0;
     let bench = &mut dev;
-    use gms_ident::bench::Bench;
+    use gms_bench::Bench;
     bench.request("enable").unwrap();
     bench.request(&format!("move {}", 100.0 * rpc)).unwrap();
     bench.wait(2.0).unwrap();
@@ -125,10 +125,10 @@ fn commissioning_measures_the_gear_motor() {
 /// Enables, moves by `counts` of the gear motor's encoder, waits 2 s; the position and the
 /// error \[counts\] and the status.
 fn move_counts(dev: &mut LocalDevice, counts: f64) -> (f64, f64, String) {
-    use gms_ident::bench::Bench;
+    use gms_bench::Bench;
     let rpc = std::f64::consts::TAU / 2000.0;
     dev.request("enable").unwrap();
-    let x0 = gms_ident::bench::position(dev).unwrap();
+    let x0 = gms_bench::position(dev).unwrap();
     dev.request(&format!("move {}", x0 + counts * rpc)).unwrap();
     dev.wait(2.0).unwrap();
     let status = dev.ask("status");

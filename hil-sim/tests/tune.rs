@@ -1,9 +1,9 @@
-//! Tuning on the device (`gms_ident::bench`, what `gms-tune tune-ff` runs), in-process on the
+//! Tuning on the device (`gms_bench`, what `gms-tune tune-ff` runs), in-process on the
 //! device core and the simulated plant.
 
 mod common;
 use common::QUIET;
-use gms_ident::bench::{Bench, TuneFfPlan, get_param, tune_ff};
+use gms_bench::{Bench, TuneFfPlan, get_param, tune_ff};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -23,7 +23,7 @@ fn averaged_curve(dev: &mut LocalDevice, gains: &[f64], repeats: usize) -> Vec<(
         .map(|&g| {
             dev.request(&format!("set ff.gain {g}")).unwrap();
             let sum: f64 = (0..repeats)
-                .map(|_| gms_ident::bench::sine_test(dev, 2e-3, 1.0, 3.0).unwrap())
+                .map(|_| gms_bench::sine_test(dev, 2e-3, 1.0, 3.0).unwrap())
                 .sum();
             (g, sum / repeats as f64 / 3.8e-6)
         })
@@ -190,7 +190,7 @@ fn hidden_motor(r: f64, k: f64, j: f64, l: f64, enc_rev: bool, sense_rev: bool) 
 
 #[test]
 fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
-    use gms_ident::bench::commission;
+    use gms_bench::commission;
     for (r, k, j, l, enc_rev, sense_rev) in [
         (10.0, 6.6e-3, 6e-8, 0.25e-3, false, false),
         (7.5, 8.0e-3, 9e-8, 0.4e-3, true, false),
@@ -252,9 +252,7 @@ fn hidden_axis(controller: &str) -> LocalDevice {
 /// inertia, and the current PI the same rule gives for the true R and L).
 #[test]
 fn commission_then_identify_tracks_like_the_true_parameters() {
-    use gms_ident::bench::{
-        DeviceInfo, Plans, Ranges, commission, identify_on, load_params, sine_test,
-    };
+    use gms_bench::{DeviceInfo, Plans, Ranges, commission, identify_on, load_params, sine_test};
     use gms_ident::paramfile::ParamFile;
     let w = 2.0 * std::f64::consts::PI * 1000.0;
     let mut truth = hidden_axis(&format!(
@@ -326,7 +324,7 @@ fn commission_then_identify_tracks_like_the_true_parameters() {
 /// None), or following `speed` [rad/s]; infinite when a fault latched (an unstable loop trips
 /// `over_current`).
 fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
-    use gms_ident::bench::{capture_rows, capture_wait};
+    use gms_bench::{capture_rows, capture_wait};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut d = LocalDevice::new(&sc).unwrap();
     d.request("set ff.mode none").unwrap();
@@ -340,7 +338,7 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
     };
     d.wait(seconds).unwrap();
     // An unstable loop trips over_current: the bridge off, the error frozen.
-    if gms_ident::bench::check_faults(&mut d).is_err() {
+    if gms_bench::check_faults(&mut d).is_err() {
         return f64::INFINITY;
     }
     capture_wait(&mut d, 0.01, 100).unwrap();
@@ -361,8 +359,8 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
 /// 0.71-0.83 × the limit; the chosen kd, 2.49e-4, is 0.59 × it.)
 #[test]
 fn the_position_gains_bounds_hold_on_the_simulated_axis() {
-    use gms_ident::gains::{Axis, Stribeck, position_gains};
-    let (axis, s) = (Axis::default_motor(), Stribeck::TABLE1);
+    use gms_ident::gains::{Axis, SlidingCurve, position_gains};
+    let (axis, s) = (Axis::default_motor(), SlidingCurve::TABLE1);
     let g = position_gains(&axis, &s).unwrap();
     let (low, ok) = (
         error_swing(0.7 * g.kd_min, Some(0.05), 1.0),

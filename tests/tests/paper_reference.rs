@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use gms_ident::paramfile::{FrictionSpec, ParamFile};
-use hil_sim::friction_cmd::{Sample, read_trajectory, simulate};
+use hil_sim::friction_cmd::{TrajectoryPoint, read_trajectory, simulate};
 use proptest::prelude::*;
 
 /// The paper's GMS in f64, straight from the equations.
@@ -75,7 +75,7 @@ impl Reference {
 }
 
 /// Largest |hil-sim - reference| over the trajectory, relative to Fs.
-fn worst_deviation(spec: &FrictionSpec, traj: &[Sample]) -> f64 {
+fn worst_deviation(spec: &FrictionSpec, traj: &[TrajectoryPoint]) -> f64 {
     let mut model = spec.build().unwrap();
     let ours = simulate(&mut model, traj);
     let mut reference = Reference::new(spec);
@@ -112,19 +112,19 @@ fn shipped_example_agrees_with_the_paper_equations() {
 /// A random trajectory: segments of constant velocity, log-uniform speeds from 1e-4 to 10 Vs,
 /// durations such that each segment moves up to a few largest breakpoints (so both pre-sliding
 /// loops and sliding occur), at a random sampling interval.
-fn trajectory(vs: f64, dmax: f64) -> impl Strategy<Value = Vec<Sample>> {
+fn trajectory(vs: f64, dmax: f64) -> impl Strategy<Value = Vec<TrajectoryPoint>> {
     prop::collection::vec(
         (-4.0f64..1.0, any::<bool>(), 0.05f64..4.0, 1usize..20),
         2..25,
     )
     .prop_map(move |segs| {
-        let mut out = vec![Sample { t: 0.0, x: 0.0 }];
+        let mut out = vec![TrajectoryPoint { t: 0.0, x: 0.0 }];
         for (lv, neg, dist, n) in segs {
             let v = vs * 10f64.powf(lv) * if neg { -1.0 } else { 1.0 };
             let dt = dist * dmax / v.abs() / n as f64;
             for _ in 0..n {
                 let last = *out.last().unwrap();
-                out.push(Sample {
+                out.push(TrajectoryPoint {
                     t: last.t + dt,
                     x: last.x + v * dt,
                 });

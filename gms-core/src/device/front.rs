@@ -14,7 +14,7 @@ use super::{
 };
 
 /// How the protocol side reaches the loop.
-pub trait Link {
+pub trait LoopLink {
     /// Runs `f` on the mailbox, atomically with respect to the loop (a critical section on a
     /// board, a mutex on a host); `f` only copies.
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R;
@@ -127,9 +127,9 @@ pub fn startup(
     }
 }
 
-/// The protocol side of a device: implements [`Device`] over a [`Link`] to the loop and a
+/// The protocol side of a device: implements [`Device`] over a [`LoopLink`] to the loop and a
 /// [`ParamStore`].
-pub struct Front<L: Link, S: ParamStore> {
+pub struct Front<L: LoopLink, S: ParamStore> {
     link: L,
     store: S,
     board: Board,
@@ -144,7 +144,7 @@ pub struct Front<L: Link, S: ParamStore> {
     defaults_configured: bool,
 }
 
-impl<L: Link, S: ParamStore> Front<L, S> {
+impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// The protocol side of a device running `settings` (what [`startup`] chose), with
     /// `defaults` for `defaults` and `load`.
     pub fn new(link: L, store: S, board: Board, settings: Settings, defaults: Settings) -> Self {
@@ -263,7 +263,7 @@ impl<L: Link, S: ParamStore> Front<L, S> {
     }
 }
 
-impl<L: Link, S: ParamStore> Device for Front<L, S> {
+impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
     fn settings(&self) -> &Settings {
         &self.settings
     }

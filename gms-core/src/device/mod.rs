@@ -14,7 +14,7 @@
 //!
 //! The shells only move numbers: the firmware reads TIM2, the ADC and the DWT and writes TIM8;
 //! the virtual device runs the simulated plant between the steps. Hardware and time enter
-//! through [`Inputs`], the [`Link`] (how the front reaches the mailbox and waits) and the
+//! through [`Inputs`], the [`LoopLink`] (how the front reaches the mailbox and waits) and the
 //! [`ParamStore`] (where the parameter record lives); what a board is comes as a [`Board`].
 
 mod capture;
@@ -30,7 +30,7 @@ pub use capture::{
 pub use control::{
     ControlLoop, Inputs, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
 };
-pub use front::{Front, Link, ParamStore, Startup, StoreError, prepare, startup};
+pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, startup};
 pub use status::{DriveKind, StatusError, StatusReply, StatusValue};
 
 use crate::controller::Controller;

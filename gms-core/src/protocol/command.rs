@@ -144,6 +144,82 @@ pub enum Command<'a> {
     StreamOff,
 }
 
+/// The request line of a command (without the line end): what a host sends, read back by
+/// [`parse`] as the same command (numbers in the shortest decimal that reads back exactly).
+/// `Empty` writes nothing.
+impl core::fmt::Display for Command<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::numtext::Num;
+        match *self {
+            Command::Empty => Ok(()),
+            Command::Help => f.write_str("help"),
+            Command::List => f.write_str("list"),
+            Command::Get(path) => write!(f, "get {path}"),
+            Command::Set(path, value) => write!(f, "set {path} {value}"),
+            Command::Stage(path, value) => write!(f, "stage {path} {value}"),
+            Command::Commit => f.write_str("commit"),
+            Command::Discard => f.write_str("discard"),
+            Command::Save => f.write_str("save"),
+            Command::Load => f.write_str("load"),
+            Command::Defaults => f.write_str("defaults"),
+            Command::Enable { current: false } => f.write_str("enable"),
+            Command::Enable { current: true } => f.write_str("enable current"),
+            Command::Disable => f.write_str("disable"),
+            Command::Status => f.write_str("status"),
+            Command::Clear => f.write_str("clear"),
+            Command::Move { pos, vel } => {
+                write!(f, "move {}", Num(pos))?;
+                match vel {
+                    Some(v) => write!(f, " {}", Num(v)),
+                    None => Ok(()),
+                }
+            }
+            Command::Current { amps, seconds } => {
+                write!(f, "current {}", Num(amps))?;
+                match seconds {
+                    Some(s) => write!(f, " {}", Num(s)),
+                    None => Ok(()),
+                }
+            }
+            Command::Velocity { vel, sweep } => {
+                write!(f, "velocity {}", Num(vel))?;
+                match sweep {
+                    Some(s) => write!(
+                        f,
+                        " {} {} {} {}",
+                        Num(s.amp),
+                        Num(s.f0),
+                        Num(s.f1),
+                        Num(s.seconds)
+                    ),
+                    None => Ok(()),
+                }
+            }
+            Command::Hold => f.write_str("hold"),
+            Command::Capture(CaptureCmd::Status) => f.write_str("capture"),
+            Command::Capture(CaptureCmd::Off) => f.write_str("capture off"),
+            Command::Capture(CaptureCmd::Arm {
+                fields,
+                every,
+                samples,
+                on_next,
+            }) => {
+                write!(f, "capture {fields} {every} {samples}")?;
+                if on_next {
+                    f.write_str(" next")
+                } else {
+                    Ok(())
+                }
+            }
+            Command::Capture(CaptureCmd::Read { start, count }) => {
+                write!(f, "capture read {start} {count}")
+            }
+            Command::Stream { fields, rate_hz } => write!(f, "stream {fields} {}", Num(rate_hz)),
+            Command::StreamOff => f.write_str("stream off"),
+        }
+    }
+}
+
 /// Why a request line is not a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ParseError {

@@ -2,6 +2,7 @@
 //! the window asks ([`Cmd`]) one request at a time, polls `status`, streams the telemetry, and
 //! reports back ([`Event`]); a lost link is reported and the link reopened every second.
 
+use gms_core::protocol::Command;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -76,7 +77,7 @@ pub enum Job {
         out: PathBuf,
     },
     /// `gms-tune tune-ff`.
-    TuneFf(gms_ident::bench::TuneFfPlan),
+    TuneFf(gms_bench::TuneFfPlan),
     /// `gms-tune identify --report REPORT --out OUT`.
     Identify {
         /// The experiments' CSVs, report and plots.
@@ -97,7 +98,7 @@ pub enum Outcome {
         file: Box<gms_ident::paramfile::ParamFile>,
     },
     /// The feedforward sweep (not applied).
-    TunedFf(gms_ident::bench::TuneFf),
+    TunedFf(gms_bench::TuneFf),
     /// The identification (not applied).
     Identified {
         /// The fits' report.
@@ -113,7 +114,7 @@ pub enum Outcome {
 
 /// A telemetry sample (SI: s, rad, N·m, A).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Sample {
+pub struct TelemetrySample {
     /// Device time \[s\].
     pub t: f64,
     /// Position \[rad\].
@@ -130,15 +131,15 @@ pub struct Sample {
     pub friction: f64,
 }
 
-/// The telemetry fields the window streams, in [`Sample`]'s order.
+/// The telemetry fields the window streams, in [`TelemetrySample`]'s order.
 pub const FIELDS: &str = "t,pos,ref,error,ff,current,friction";
 
-impl Sample {
+impl TelemetrySample {
     /// From a telemetry line's `name=value` pairs; `None` without a time.
-    pub fn parse(line: &str) -> Option<Sample> {
+    pub fn parse(line: &str) -> Option<TelemetrySample> {
         let kv = parse_telemetry(line);
         let get = |k: &str| kv.iter().find(|(n, _)| n == k).map(|(_, v)| *v);
-        Some(Sample {
+        Some(TelemetrySample {
             t: get("t")?,
             pos: get("pos").unwrap_or(f64::NAN),
             reference: get("ref").unwrap_or(f64::NAN),
@@ -179,7 +180,7 @@ pub enum Event {
     /// The `status` reply, read.
     Status(gms_core::device::StatusReply),
     /// Telemetry samples, in order.
-    Samples(Vec<Sample>),
+    Samples(Vec<TelemetrySample>),
     /// A long run's progress: its stage, and the device time done of what the stage expects.
     Progress {
         /// The stage.
@@ -312,14 +313,14 @@ fn run(
         loop {
             match cmds.try_recv() {
                 Ok(Cmd::Quit) | Err(TryRecvError::Disconnected) => {
-                    let _ = l.request("stream off");
+                    let _ = l.ask(Command::StreamOff);
                     return;
                 }
                 Ok(Cmd::Run(job)) => {
                     stop.store(false, Ordering::SeqCst);
                     // The stream off during the run: its captures and waits need the link
                     // (on a virtual device faster than real time the stream alone can fill it).
-                    let _ = l.request("stream off");
+                    let _ = l.ask(Command::StreamOff);
                     l.telemetry.clear();
                     let done = run_job(l, job, &stop, &events, &wake);
                     send(Event::Done(done));
@@ -361,10 +362,10 @@ fn run(
         {
             lost = Some(e.to_string());
         }
-        let samples: Vec<Sample> = l
+        let samples: Vec<TelemetrySample> = l
             .telemetry
             .drain(..)
-            .filter_map(|(_, line)| Sample::parse(&line))
+            .filter_map(|(_, line)| TelemetrySample::parse(&line))
             .collect();
         if !samples.is_empty() {
             send(Event::Samples(samples));
@@ -384,7 +385,10 @@ fn run(
 
 /// A new session: the telemetry stream at 1 kHz.
 fn start_session(l: &mut Link) -> Result<(), LinkError> {
-    l.request(&format!("stream {FIELDS} 1000"))?;
+    l.ask(Command::Stream {
+        fields: FIELDS,
+        rate_hz: 1000.0,
+    })?;
     Ok(())
 }
 
@@ -413,13 +417,13 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
     let mut out = Vec::new();
     match c {
         Cmd::Set { path, value } => {
-            let result = match l.request(&format!("set {path} {value}")) {
+            let result = match l.ask(Command::Set(&path, &value)) {
                 Ok(_) => Ok(()),
                 Err(e) if gone(&e) => return Err(e.to_string()),
                 Err(e) => Err(e.to_string()),
             };
             // The device's value, whatever happened: nothing is assumed changed.
-            let value = match l.request(&format!("get {path}")) {
+            let value = match l.ask(Command::Get(&path)) {
                 Ok((_, v)) => Some(v.trim().to_string()),
                 Err(e) if gone(&e) => return Err(e.to_string()),
                 Err(_) => None,
@@ -473,7 +477,7 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
         }
         Cmd::Apply(pf) => {
-            let result = gms_ident::bench::load_params(l, &pf)
+            let result = gms_bench::load_params(l, &pf)
                 .map(|n| format!("{n} parameters loaded"))
                 .map_err(|e| e.to_string());
             out.push(Event::Reply {
@@ -532,7 +536,6 @@ fn run_job(
     wake: &dyn Fn(),
 ) -> Result<Outcome, String> {
     use crate::run::RunBench;
-    use gms_ident::bench;
     let mut rep = Reporter {
         events,
         wake,
@@ -547,7 +550,7 @@ fn run_job(
             let pf = params::read(l).map_err(|e| e.to_string())?;
             let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
             b.stage("commission", 5.0);
-            let c = bench::commission(&mut b, speed)
+            let c = gms_bench::commission(&mut b, speed)
                 .map_err(|e| format!("{e}; the bridge is off, nothing changed"))?;
             let (file, text) = crate::run::commissioned_file(&c, pf);
             gms_ident::io::write_atomic(&out, text.as_bytes()).map_err(|e| e.to_string())?;
@@ -562,18 +565,18 @@ fn run_job(
             plan.check().map_err(|e| e.to_string())?;
             let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
             b.stage("tune-ff", plan.steps as f64 * plan.seconds);
-            let t = bench::tune_ff(&mut b, &plan, |_, g, rms| {
+            let t = gms_bench::tune_ff(&mut b, &plan, |_, g, rms| {
                 let _ = events.send(Event::FfPoint(g, rms));
             })
             .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
             Ok(Outcome::TunedFf(t))
         }
         Job::Identify { report, out } => {
-            let dev = bench::DeviceInfo::read(l).map_err(|e| e.to_string())?;
-            let plans =
-                bench::Plans::new(&dev, &bench::Ranges::default()).map_err(|e| e.to_string())?;
+            let dev = gms_bench::DeviceInfo::read(l).map_err(|e| e.to_string())?;
+            let plans = gms_bench::Plans::new(&dev, &gms_bench::Ranges::default())
+                .map_err(|e| e.to_string())?;
             let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
-            let (g, id) = bench::identify_on(
+            let (g, id) = gms_bench::identify_on(
                 &mut b,
                 &plans,
                 &report,

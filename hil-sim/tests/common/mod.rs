@@ -25,7 +25,7 @@ guideway = false
 /// the pre-sliding range `g` measured) as a fraction of the true Fs.
 pub fn identification_errors(
     truth: &gms_ident::paramfile::FrictionSpec,
-    g: &gms_ident::bench::Gathered,
+    g: &gms_bench::Gathered,
     found: &gms_ident::paramfile::FrictionSpec,
 ) -> [f64; 7] {
     let rel = |got: Option<f64>, want: Option<f64>| {

@@ -20,7 +20,7 @@ use core::hint::black_box;
 use cortex_m_rt::entry;
 use gms_core::controller::Controller;
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, Link, Mailbox, ParamStore, StoreError,
+    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, StoreError,
 };
 use gms_core::drive;
 use gms_core::protocol::{self, LineReader};
@@ -39,7 +39,7 @@ struct CheckLink {
     t: u64,
 }
 
-impl Link for CheckLink {
+impl LoopLink for CheckLink {
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
         f(&mut self.mailbox)
     }

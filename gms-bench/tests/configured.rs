@@ -1,11 +1,11 @@
 //! Commissioning refuses a device that runs on its built-in defaults (`configured=0`): its
 //! encoder resolution and sense scale are the paper's rig's, which no user's axis is.
 
+use gms_bench::{Bench, commission};
 use gms_core::controller::FfMode;
 use gms_core::device::{DriveKind, StatusReply};
 use gms_core::drive::Faults;
 use gms_ident::Error;
-use gms_ident::bench::{Bench, commission};
 
 /// A device that answers `status` with `configured` as given and records every request.
 struct Fake {

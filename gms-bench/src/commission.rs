@@ -1,0 +1,670 @@
+//! Commissioning: the motor's R, k_e, J, L, the current sense's and the encoder's directions,
+//! the breakaway, then the current and position loops' gains chosen from them.
+
+use gms_core::drive::Faults;
+use gms_core::protocol::Command;
+use gms_ident::Error;
+use gms_ident::units::{num4, si};
+
+use crate::client::{
+    Bench, DeviceInfo, VELOCITY_ACC, capture_now, capture_rows, capture_wait, check_configured,
+    check_faults, get_param, guarded, hold_current, means, narrow_limits, position, primitive,
+    rad_per_count, scales_line, timed_run,
+};
+use crate::estimate::{inductance_from_step, inertia_from_pulse, local_parabolas};
+use crate::settings::restoring;
+
+/// What commissioning measured and decided.
+#[derive(Debug, Clone, Default)]
+pub struct Commissioned {
+    /// The current sense's residual offset at rest, bridge off \\[A\\] (after the start-up zero).
+    pub sense_offset: f64,
+    /// Its noise at rest, one standard deviation per position step \\[A\\].
+    pub sense_noise: f64,
+    /// The current-sense polarity found (`sense.dir`) \\[-\\].
+    pub sense_dir: f64,
+    /// The encoder direction found (`enc.dir`) \\[-\\].
+    pub enc_dir: f64,
+    /// Winding resistance \\[ohm\\].
+    pub r: f64,
+    /// Back-EMF constant [V·s/rad] (= k_M in SI).
+    pub k_e: f64,
+    /// Reflected inertia [kg·m²].
+    pub inertia: f64,
+    /// Winding inductance \\[H\\].
+    pub inductance: f64,
+    /// The current of the pulse that first slid the axis \\[A\\] (an upper bound of the
+    /// breakaway current within a quarter of it; × k_M: the breakaway torque).
+    pub breakaway_a: f64,
+    /// The device's friction model scaled to the measured breakaway, when the axis broke away
+    /// at more than 1.5 × (or less than 1/1.5 of) what the model expects: `gms.fs`, `gms.fc`,
+    /// `gms.sigma`, `gms.c` and the block stiffnesses times one factor (the shape stays the
+    /// model's until `identify`; the experiments that plan from the model then fit the axis).
+    pub friction_scaled: Vec<(&'static str, f64)>,
+    /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
+    pub cur_pi: (f64, f64),
+    /// The position loop's gains and their bounds (once that step has run).
+    pub pos: Option<gms_ident::gains::PositionGains>,
+    /// What was done, a line per step.
+    pub lines: Vec<String>,
+}
+
+impl Commissioned {
+    /// The `[device]` settings by protocol path.
+    pub fn settings(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("sense.dir", self.sense_dir),
+            ("enc.dir", self.enc_dir),
+            ("motor.r", self.r),
+            ("motor.k_e", self.k_e),
+            ("motor.k_m", self.k_e),
+            ("ff.inertia", self.inertia),
+            ("cur.kp", self.cur_pi.0),
+            ("cur.ki", self.cur_pi.1),
+        ]
+        .into_iter()
+        .chain(
+            self.pos
+                .iter()
+                .flat_map(|g| [("pos.kp", g.kp), ("pos.ki", g.ki), ("pos.kd", g.kd)]),
+        )
+        .chain(self.friction_scaled.iter().copied())
+        .collect()
+    }
+}
+
+/// What [`slide`] found: which way the encoder counts when the motor pushes, and the pulse
+/// that broke the axis away.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Slide {
+    /// The signed slide \\[rad\\] (negative: the encoder counts against the motor).
+    pub moved: f64,
+    /// The current of the pulse that moved the axis \\[A\\] (the one before it held): an
+    /// upper bound of the breakaway current, within a quarter of it.
+    pub amps: f64,
+}
+
+/// How far a pulse must move the axis to count as a slide \\[rad\\]: 2 mrad (beyond the
+/// pre-sliding range, which a stiff or blocked axis travels too) or eight counts of the
+/// encoder, whichever is more.
+pub fn slide_threshold(rad_per_count: f64) -> f64 {
+    (8.0 * rad_per_count).max(2e-3)
+}
+
+/// Which way the encoder counts when the motor pushes, and at what current the axis breaks
+/// away: in current mode, pulses of current that the device ends by itself after 10 ms (so a
+/// slow link cannot hold the current on a sliding axis), from half the expected breakaway
+/// (the device's `gms.fs`) up by a quarter of it each to three times it, then on by a
+/// quarter of the last each (an axis whose friction the device's model underestimates),
+/// within 60 % of the current limit (a step to it overshoots in the current loop, and the
+/// trip is at 1.5 × the limit or below), until the axis has slid ([`slide_threshold`]). Fails when
+/// no current flows (a current friction holds, measured) or the axis does not slide.
+pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Error> {
+    let i_fs = dev.fs / dev.k_m;
+    let threshold = slide_threshold(rad_per_count(b)?);
+    primitive(b, Command::Enable { current: true })?;
+    b.current(0.0)?;
+    b.wait(0.05)?;
+    let x0 = position(b)?;
+    let mut moved = 0.0;
+    let mut amps = 0.5 * i_fs;
+    let mut last = 0.0;
+    while amps <= 0.6 * dev.i_max {
+        primitive(
+            b,
+            Command::Current {
+                amps: amps as f32,
+                seconds: Some(0.01),
+            },
+        )?;
+        b.wait(0.05)?;
+        moved = position(b)? - x0;
+        last = amps;
+        if moved.abs() > threshold {
+            break;
+        }
+        amps += 0.25 * if amps < 3.0 * i_fs { i_fs } else { amps };
+    }
+    b.current(0.0)?;
+    b.wait(0.2)?;
+    check_faults(b)?;
+    if moved.abs() <= threshold {
+        // Which of the two: a current friction holds (40 % of the expected breakaway).
+        let (i, _, _) = hold_current(b, 0.4 * i_fs, 0.1, dt)?;
+        b.current(0.0)?;
+        if i < 0.2 * i_fs {
+            return Err(Error::Device(format!(
+                "commanded {:.4e} A, measured {i:.4e} A: no current flows (the motor not \
+                 connected?)",
+                0.4 * i_fs
+            )));
+        }
+        return Err(Error::Device(format!(
+            "the axis did not move with current pulses up to {} ({} N·m, 60 % of lim.i_max): \
+             blocked?",
+            si(last, "A"),
+            num4(last * dev.k_m)
+        )));
+    }
+    Ok(Slide { moved, amps: last })
+}
+
+/// Commissioning a motor on the bench: the current sense at rest (offset, noise); its
+/// polarity (a reversed sense makes the current loop run away at once: `over_current`, then
+/// `sense.dir` flipped and tried again); the encoder's direction (current steps of a quarter
+/// of the expected Fs until the axis slides 2 mrad, which way the counts say; flipped by
+/// `enc.dir`; each step a pulse of 10 ms the device ends by itself); the winding resistance (current mode at ±40 % of the expected breakaway, the
+/// axis held by friction: R from the voltage and current differences, offsets cancelled); the
+/// back-EMF constant (timed velocity runs at 1, 2 and 3 × `speed` each way: the voltage less
+/// R × current against the speed, the slope); the reflected inertia (timed current pulses and
+/// the coasts after them); the inductance (the current loop's step response). The device's
+/// stroke limits are narrowed around the start for the run (the farthest speed run each way
+/// and 0.5 rad more). The direction settings it changes to go on, and the limits, are put back
+/// at the end (and on failure, with the bridge off): the caller applies the result.
+pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error> {
+    if !(speed > 0.0 && speed * 3.0 <= VELOCITY_MAX_BENCH) {
+        return Err(Error::Params(format!(
+            "speed {speed} rad/s: positive, three times it at most {VELOCITY_MAX_BENCH} rad/s"
+        )));
+    }
+    check_configured(b)?;
+    let scales = scales_line(b)?;
+    let dev = DeviceInfo::read(b)?;
+    let dt = dev.dt();
+    check_faults(b)?;
+    let dirs0 = (get_param(b, "sense.dir")?, get_param(b, "enc.dir")?);
+    // The device's own stroke guard around the start: the farthest speed run each way, and
+    // half a radian for the rest; an axis that runs away stops there with the bridge off.
+    let v = 3.0 * speed;
+    let window = 1.2 * (v * KE_RUN + v * v / VELOCITY_ACC) + 0.5;
+    let gains0 = (
+        get_param(b, "pos.kp")?,
+        get_param(b, "pos.ki")?,
+        get_param(b, "pos.kd")?,
+    );
+    // The limits, the position gains (the back-EMF runs soften them) and the directions as
+    // they were after, whatever happens: the caller applies what was found.
+    restoring(b, |b| {
+        narrow_limits(b, window)?;
+        guarded(b, |b| commission_steps(b, &dev, dt, dirs0, gains0, speed))
+    })
+    .map(|mut c| {
+        c.lines.insert(0, scales);
+        c
+    })
+}
+
+/// The length of each back-EMF run at constant speed \\[s\\] (0.1 s settling, 0.1 s averaged).
+pub(crate) const KE_RUN: f64 = 0.2;
+
+pub use gms_ident::gains::CURRENT_BW_FRACTION;
+
+/// The fastest speed commissioning uses [rad/s] (the velocity mode allows 20).
+pub(crate) const VELOCITY_MAX_BENCH: f64 = 20.0;
+
+pub(crate) fn commission_steps(
+    b: &mut impl Bench,
+    dev: &DeviceInfo,
+    dt: f64,
+    (sense0, enc0): (f64, f64),
+    (kp, ki, kd): (f64, f64, f64),
+    speed: f64,
+) -> Result<Commissioned, Error> {
+    let mut c = Commissioned {
+        sense_dir: sense0,
+        enc_dir: enc0,
+        ..Commissioned::default()
+    };
+    let i_fs = dev.fs / dev.k_m;
+    // 1. The sense at rest, bridge off.
+    b.disable()?;
+    let rows = capture_now(b, "current", 2000, dt)?;
+    let m = means(&rows)[0];
+    let var = rows.iter().map(|r| (r[0] - m).powi(2)).sum::<f64>() / rows.len().max(1) as f64;
+    (c.sense_offset, c.sense_noise) = (m, var.sqrt());
+    c.lines.push(format!(
+        "current sense at rest: offset {}, noise {} rms",
+        si(c.sense_offset, "A"),
+        si(c.sense_noise, "A")
+    ));
+    // 2. Its polarity: a small current in current mode.
+    let mut polarity_ok = false;
+    for attempt in 0..2 {
+        let tried = (|| {
+            primitive(b, Command::Enable { current: true })?;
+            b.current(0.4 * i_fs)?;
+            b.wait(0.02)
+        })();
+        // The runaway may trip while `enable current` is still being answered: the latched
+        // fault says what happened either way.
+        let faults = check_faults(b);
+        match (tried, faults) {
+            (Ok(()), Ok(())) => {
+                polarity_ok = true;
+                break;
+            }
+            (_, Err(e))
+                if attempt == 0 && e.faults().is_some_and(|f| f.contains(Faults::OVER_CURRENT)) =>
+            {
+                c.sense_dir = -c.sense_dir;
+                b.clear()?;
+                b.set("sense.dir", c.sense_dir)?;
+                c.lines.push(
+                    "current sense: reversed (the current loop ran away: over_current); sense.dir flipped"
+                        .into(),
+                );
+            }
+            (Err(e), _) | (_, Err(e)) => return Err(e),
+        }
+    }
+    if !polarity_ok {
+        return Err(Error::Device(
+            "the current loop runs away either way".into(),
+        ));
+    }
+    if c.sense_dir == sense0 {
+        c.lines.push(format!(
+            "current sense: polarity right (sense.dir {})",
+            c.sense_dir
+        ));
+    }
+    // 3. The encoder's direction.
+    let sl = slide(b, dev, dt)?;
+    let moved = sl.moved;
+    // The experiments below need the breakaway current (the sense's polarity above only a
+    // small current): the device's friction model's when the axis agrees with it, else the
+    // pulse that moved it (a user's motor whose friction the model, Table 1 by default, is far
+    // from).
+    let expected = i_fs;
+    let off = sl.amps > 1.5 * expected || sl.amps < expected / 1.5;
+    let i_fs = if sl.amps > 1.5 * expected {
+        c.lines.push(format!(
+            "breakaway: the axis slid under a pulse of {}, {:.1} times what the device's \
+             friction model expects (gms.fs {} N·m over motor.k_m {} N·m/A): the experiments \
+             use the pulse's current",
+            si(sl.amps, "A"),
+            sl.amps / expected,
+            num4(dev.fs),
+            num4(dev.k_m)
+        ));
+        sl.amps
+    } else {
+        expected
+    };
+    c.breakaway_a = sl.amps;
+    if moved < 0.0 {
+        c.enc_dir = -c.enc_dir;
+        // The bridge goes off with the change; back into current mode.
+        b.set("enc.dir", c.enc_dir)?;
+        primitive(b, Command::Enable { current: true })?;
+        c.lines.push(format!(
+            "encoder: counted {} under a positive current: reversed; enc.dir flipped",
+            si(moved, "rad")
+        ));
+    } else {
+        c.lines.push(format!(
+            "encoder: direction right ({} under a positive current)",
+            si(moved, "rad")
+        ));
+    }
+    // 4. R at standstill: ±40 % of the expected breakaway, friction holds the axis.
+    let (ip, vp, _) = hold_current(b, 0.4 * i_fs, 0.2, dt)?;
+    let (in_, vn, _) = hold_current(b, -0.4 * i_fs, 0.2, dt)?;
+    b.current(0.0)?;
+    if (ip - in_).abs() < 0.2 * i_fs {
+        return Err(Error::Device(format!(
+            "commanded ±{:.3e} A, measured {ip:.3e} and {in_:.3e} A: no current flows (the motor \
+             not connected?)",
+            0.4 * i_fs
+        )));
+    }
+    c.r = (vp - vn) / (ip - in_);
+    c.lines.push(format!(
+        "winding resistance: {} ({} at {}, {} at {})",
+        si(c.r, "Ω"),
+        si(vp, "V"),
+        si(ip, "A"),
+        si(vn, "V"),
+        si(in_, "A")
+    ));
+    // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
+    //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
+    //    use a softer position loop (kp / 4, ki / 8, kd / 2; `commission` puts the gains
+    //    back), which tracks a constant speed well enough.
+    b.set("pos.kd", kd / 2.0)?;
+    b.set("pos.kp", kp / 4.0)?;
+    b.set("pos.ki", ki / 8.0)?;
+    b.hold()?;
+    let mut pts = Vec::new();
+    for k in 1..=3 {
+        for dir in [1.0, -1.0] {
+            let v = dir * speed * k as f64;
+            let t_acc = v.abs() / VELOCITY_ACC;
+            let run = KE_RUN;
+            timed_run(b, v, run, "t,pos,current,volts", dt)?;
+            let rows: Vec<Vec<f64>> = capture_rows(b)?
+                .into_iter()
+                .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
+                .collect();
+            if rows.len() < 2 {
+                return Err(Error::Device("an empty capture".into()));
+            }
+            // The speed: the least-squares slope of the position (every sample, so that a
+            // coarse encoder's counts average out rather than only the two ends').
+            let m = means(&rows);
+            let (mut stt, mut stx) = (0.0, 0.0);
+            for r in &rows {
+                stt += (r[0] - m[0]).powi(2);
+                stx += (r[0] - m[0]) * (r[1] - m[1]);
+            }
+            let w = stx / stt.max(dt * dt);
+            pts.push((w, m[3] - c.r * m[2]));
+        }
+    }
+    let n = pts.len() as f64;
+    let (mw, me) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sww = pts.iter().map(|p| (p.0 - mw).powi(2)).sum::<f64>();
+    let swe = pts.iter().map(|p| (p.0 - mw) * (p.1 - me)).sum::<f64>();
+    if sww <= 0.0 {
+        return Err(Error::Device("the speed runs did not move the axis".into()));
+    }
+    c.k_e = swe / sww;
+    c.lines.push(format!(
+        "back-EMF constant: {} from {} runs up to {} rad/s (k_M = k_e in SI)",
+        si(c.k_e, "V·s/rad"),
+        pts.len(),
+        3.0 * speed
+    ));
+    // 6. The inertia: current pulses that the device ends by itself, and the coast after.
+    c.inertia = inertia(b, &mut c, dev, dt, i_fs)?;
+    // 7. The inductance: the current loop's step response at standstill.
+    c.inductance = inductance(b, &mut c, dt, i_fs)?;
+    // 8. The current loop's PI for a bandwidth of CURRENT_BW_FRACTION of its rate: kp = ω L,
+    //    ki = ω R (the PI's zero on the winding's pole: a first-order loop of bandwidth ω).
+    let cur_hz = get_param(b, "rate.cur_hz")?;
+    c.cur_pi = gms_ident::gains::current_pi(c.r, c.inductance, cur_hz);
+    // The loop's delay: the sample, the computation and the update, about 1.5 periods.
+    let margin = 90.0 - 360.0 * CURRENT_BW_FRACTION * 1.5;
+    c.lines.push(format!(
+        "current loop: bandwidth {:.0} Hz ({} of its rate): cur.kp {} V/A, cur.ki {} V/(A·s); \
+         phase margin about {margin:.0}° (1.5 periods of delay)",
+        CURRENT_BW_FRACTION * cur_hz,
+        CURRENT_BW_FRACTION,
+        num4(c.cur_pi.0),
+        num4(c.cur_pi.1)
+    ));
+    // 9. A friction model far from the axis scaled to its breakaway (the level measured, the
+    //    shape the model's), for the gains below and for the caller to apply.
+    let ratio = if off { sl.amps * c.k_e / dev.fs } else { 1.0 };
+    if off {
+        let mut paths = vec!["gms.fs", "gms.fc", "gms.sigma", "gms.c"];
+        paths.extend(["gms.k1", "gms.k2", "gms.k3", "gms.k4", "gms.k5", "gms.k6"]);
+        for p in paths {
+            let v = get_param(b, p)?;
+            c.friction_scaled.push((p, v * ratio));
+        }
+        c.lines.push(format!(
+            "friction level: the device's model scaled ×{ratio:.3} to the measured breakaway \
+             ({} N·m: the pulse's current × k_M; its shape stays the model's until \
+             `gms-tune identify`)",
+            num4(sl.amps * c.k_e)
+        ));
+    }
+    // 10. The position loop's gains for this motor and loop, kd between the device's
+    //    friction model's Stribeck slope and the loops' stability limit.
+    c.pos = Some(position_gains_for(b, &mut c, cur_hz, ratio)?);
+    b.disable()?;
+    Ok(c)
+}
+
+/// The position loop's gains for the motor `c` measured, the current loop at `cur_hz` with
+/// its new PI, the device's position rate, derivative filter, supply and friction model (its
+/// level times `scale`).
+pub(crate) fn position_gains_for(
+    b: &mut impl Bench,
+    c: &mut Commissioned,
+    cur_hz: f64,
+    scale: f64,
+) -> Result<gms_ident::gains::PositionGains, Error> {
+    use gms_ident::gains::{Axis, SlidingCurve, position_gains};
+    let mut k0 = 0.0;
+    for i in 1..=6 {
+        k0 += scale * get_param(b, &format!("gms.k{i}"))?;
+    }
+    let axis = Axis {
+        r: c.r,
+        l: c.inductance,
+        k_m: c.k_e,
+        inertia: c.inertia,
+        cur_pi: c.cur_pi,
+        cur_hz,
+        pos_hz: get_param(b, "rate.pos_hz")?,
+        d_filter_hz: get_param(b, "pos.d_filter_hz")?,
+        v_supply: get_param(b, "lim.v_supply")?,
+        k_presliding: k0,
+        rad_per_count: rad_per_count(b)?,
+        i_max: get_param(b, "lim.i_max")?,
+    };
+    let s = SlidingCurve {
+        fs: scale * get_param(b, "gms.fs")?,
+        fc: scale * get_param(b, "gms.fc")?,
+        vs: get_param(b, "gms.vs")?,
+        delta: get_param(b, "gms.delta")?,
+        sigma: scale * get_param(b, "gms.sigma")?,
+    };
+    let g = position_gains(&axis, &s).ok_or_else(|| {
+        Error::Device(format!(
+            "no position-loop gains for the measured motor ({axis:?}): the loop model does not \
+             settle"
+        ))
+    })?;
+    c.lines.push(format!(
+        "position loop: pos.kp {} N·m/rad, pos.ki {} N·m/(rad·s), pos.kd {} N·m·s/rad \
+         (natural frequency {:.0} Hz)",
+        num4(g.kp),
+        num4(g.ki),
+        num4(g.kd),
+        (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
+    ));
+    if g.count_limited {
+        c.lines.push(format!(
+            "  limited by the encoder's count ({}): one count of error asks at most {:.0} % \
+             of lim.i_max through kp, a one-count step {:.0} % through kd",
+            si(axis.rad_per_count, "rad"),
+            100.0 * gms_ident::gains::COUNT_SHARE.0,
+            100.0 * gms_ident::gains::COUNT_SHARE.1
+        ));
+    }
+    c.lines.push(format!(
+        "  kd above the friction's negative damping {} (the device's Stribeck curve at Vs: \
+         Fs {}, Fc {}, Vs {}) by ×{:.2}; below the stability limit {} by ×{:.2}",
+        num4(g.kd_min),
+        si(s.fs, "N·m"),
+        si(s.fc, "N·m"),
+        si(s.vs, "rad/s"),
+        g.margin_low(),
+        num4(g.kd_max),
+        g.margin_high()
+    ));
+    if g.kd_max <= g.kd_min {
+        c.lines.push(
+            "  warning: no kd is both above the friction's negative damping and stable: kd is \
+             set for stability, the axis may hunt at low speed (a faster current loop or more \
+             inertia widens the window)"
+                .into(),
+        );
+    }
+    Ok(g)
+}
+
+/// The reflected inertia from current pulses, timed on the device, each way twice, and the
+/// coast that follows: at the same speed the friction is the same in both, so
+/// J = k_M × i / (a_pulse − a_coast), the accelerations from local parabolas through the
+/// captured positions, compared at 30-80 % of the top speed. The pulses and the parabolas are
+/// sized for the encoder ([`InertiaPlan::for_encoder`]): 3 × the breakaway current for 2 ms and
+/// 7-sample parabolas on a fine one; on a coarse one (a count above 20 µrad) 1.5 × for 20 ms,
+/// parabolas over 6 ms, so that quantisation averages out.
+pub(crate) fn inertia(
+    b: &mut impl Bench,
+    c: &mut Commissioned,
+    dev: &DeviceInfo,
+    dt: f64,
+    i_fs: f64,
+) -> Result<f64, Error> {
+    let k_m = c.k_e;
+    let plan = InertiaPlan::for_encoder(rad_per_count(b)?, dt);
+    let amps = (plan.breakaways * i_fs).min(0.8 * dev.i_max);
+    let pulse = plan.pulse;
+    let mut js = Vec::new();
+    primitive(b, Command::Enable { current: true })?;
+    b.wait(0.05)?;
+    for dir in [1.0, -1.0, 1.0, -1.0] {
+        let n = (plan.record / dt).ceil() as u32;
+        b.capture("t,pos,current", 1, n, true)?;
+        primitive(
+            b,
+            Command::Current {
+                amps: (dir * amps) as f32,
+                seconds: Some(pulse as f32),
+            },
+        )?;
+        b.wait(n as f64 * dt)?;
+        capture_wait(b, 0.01, 200)?;
+        check_faults(b)?;
+        let rows = capture_rows(b)?;
+        b.wait(0.05)?;
+        // Speed and acceleration at each sample (local parabolas), then J from the pulse and
+        // the coast.
+        let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+        let x: Vec<f64> = rows.iter().map(|r| dir * r[1]).collect();
+        let va: Vec<(f64, f64, f64, f64)> = local_parabolas(&t, &x, plan.half_window)
+            .into_iter()
+            .map(|(t, v, a, k)| (t, v, a, dir * rows[k][2]))
+            .collect();
+        js.push(
+            inertia_from_pulse(&va, pulse, plan.edge, k_m).map_err(|e| Error::Device(e.into()))?,
+        );
+    }
+    b.current(0.0)?;
+    let j = js.iter().sum::<f64>() / js.len() as f64;
+    c.lines.push(format!(
+        "reflected inertia: {} kg·m² from four current pulses of {} for {} ms and the coasts \
+         after (each {} … {})",
+        num4(j),
+        si(amps, "A"),
+        pulse * 1e3,
+        num4(js.iter().cloned().fold(f64::INFINITY, f64::min)),
+        num4(js.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
+    ));
+    Ok(j)
+}
+
+/// How `inertia` pulses the axis for an encoder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InertiaPlan {
+    /// The pulse's current in breakaway currents \\[-\\].
+    pub breakaways: f64,
+    /// The pulse's length \\[s\\].
+    pub pulse: f64,
+    /// The record from the pulse's start \\[s\\] (the pulse and the coast).
+    pub record: f64,
+    /// The local parabolas' half width \\[samples\\].
+    pub half_window: usize,
+    /// How far from the pulse's ends a parabola's centre keeps \\[s\\] (its half width on a
+    /// coarse encoder, so that none straddles the switch; 0 on a fine one).
+    pub edge: f64,
+}
+
+impl InertiaPlan {
+    /// The plan for an encoder of `rad_per_count` \\[rad\\] sampled every `dt` \\[s\\]: on the
+    /// paper's (3.8 µrad) or any finer than 20 µrad, 3 × the breakaway for 2 ms, recorded 30
+    /// ms, 7-sample parabolas; on a coarser one, 1.5 × for 20 ms (about 50 counts of a 3 mrad
+    /// count on a motor that its breakaway accelerates at 1500 rad/s²), recorded 60 ms,
+    /// parabolas over 6 ms.
+    pub fn for_encoder(rad_per_count: f64, dt: f64) -> InertiaPlan {
+        if rad_per_count <= 20e-6 {
+            InertiaPlan {
+                breakaways: 3.0,
+                pulse: 0.002,
+                record: 0.03,
+                half_window: 3,
+                edge: 0.0,
+            }
+        } else {
+            let h = ((0.003 / dt).round() as usize).max(3);
+            InertiaPlan {
+                breakaways: 1.5,
+                pulse: 0.02,
+                record: 0.06,
+                half_window: h,
+                edge: h as f64 * dt,
+            }
+        }
+    }
+}
+
+/// The winding inductance from the current loop's response to current steps at standstill
+/// (between −40 % and +40 % of the expected breakaway current: friction holds the axis, no
+/// back-EMF), sixteen steps each way in turn, averaged (the loop is linear, so a step of 2A
+/// from −A is twice the response to A from rest), against the device's own current loop
+/// (`gms_core`'s controller with the device's gains, rates, supply and feedforward R) driving
+/// an R-L winding whose voltage is applied one current period late, as the bridge does: the L
+/// whose simulated response is closest (least squares over the first 2 ms, golden-section
+/// search over ln L). A winding much faster than the current period settles within it and
+/// shows little of its L: below L/R = a sixth of the period the result is flagged.
+pub(crate) fn inductance(
+    b: &mut impl Bench,
+    c: &mut Commissioned,
+    dt: f64,
+    i_fs: f64,
+) -> Result<f64, Error> {
+    let amps = 0.4 * i_fs;
+    let n = 20u32;
+    let steps = 16;
+    let mut avg = vec![0.0f64; n as usize];
+    primitive(b, Command::Enable { current: true })?;
+    b.current(-amps)?;
+    b.wait(0.01)?;
+    for k in 0..steps {
+        let dir = if k % 2 == 0 { 1.0 } else { -1.0 };
+        b.capture("current", 1, n, true)?;
+        b.current(dir * amps)?;
+        b.wait(n as f64 * dt)?;
+        capture_wait(b, 0.01, 200)?;
+        check_faults(b)?;
+        for (a, r) in avg.iter_mut().zip(capture_rows(b)?) {
+            *a += (dir * r[0] + amps) / 2.0 / steps as f64;
+        }
+        b.wait(0.002)?;
+    }
+    b.current(0.0)?;
+    // The device's current loop, as it runs.
+    let mut p = gms_core::device::default_settings();
+    p.current.kp = get_param(b, "cur.kp")? as f32;
+    p.current.ki = get_param(b, "cur.ki")? as f32;
+    p.cur_rate_hz = get_param(b, "rate.cur_hz")? as f32;
+    p.pos_rate_hz = get_param(b, "rate.pos_hz")? as f32;
+    p.v_supply = get_param(b, "lim.v_supply")? as f32;
+    p.motor.r = get_param(b, "motor.r")? as f32;
+    let r = c.r;
+    let h = 1.0 / p.cur_rate_hz as f64;
+    let l = inductance_from_step(&avg, amps, r, &p).map_err(|e| Error::Device(e.into()))?;
+    c.lines.push(format!(
+        "winding inductance: {} from the current loop's response to {steps} steps of {} \
+         (L/R {:.1} µs)",
+        si(l, "H"),
+        si(2.0 * amps, "A"),
+        l / r * 1e6
+    ));
+    if l / r < h / 6.0 {
+        c.lines.push(format!(
+            "  warning: L/R is below a sixth of the current period ({:.1} µs): the winding \
+             settles within a period, so L is poorly resolved (cur.kp = ωL matters little there)",
+            h / 6.0 * 1e6
+        ));
+    }
+    Ok(l)
+}

@@ -1,0 +1,35 @@
+//! # gms-bench
+//!
+//! The bench workflows, written once against an abstract bench ([`Bench`]): anything that
+//! answers the bench protocol — a board over USB or UART, the virtual device over TCP
+//! (`gms-tune`'s link), the device core in-process on the simulated plant (`hil-sim`'s
+//! `LocalDevice`). A workflow only sends protocol requests and lets device time pass, so it
+//! runs alike on all of them; the fits it ends with are `gms-ident`'s, on arrays.
+//!
+//! - [`client`]: the bench and its primitives (parameters, `status`, capture, moves, the
+//!   bridge off on failure).
+//! - [`experiments`]: the paper's sliding, pre-sliding and frictional-lag runs, their plans.
+//! - [`identify`]: the whole identification on a device, loading a parameter file.
+//! - [`settings`]: the device's settings as one typed value, and the snapshot that puts them
+//!   back around every run ([`settings::restoring`]).
+//! - [`tune_ff`]: the feedforward gain from repeated sine tests.
+//! - [`commission`]: the motor's constants, the directions, the loops' gains; its estimators
+//!   as pure functions of the recorded data in [`estimate`].
+//!
+//! Everything is also re-exported at the crate's root.
+#![forbid(unsafe_code)]
+#![deny(missing_docs)]
+
+pub mod client;
+pub mod commission;
+pub mod estimate;
+pub mod experiments;
+pub mod identify;
+pub mod settings;
+pub mod tune_ff;
+
+pub use client::*;
+pub use commission::*;
+pub use experiments::*;
+pub use identify::*;
+pub use tune_ff::*;

@@ -1,0 +1,152 @@
+//! The virtual device in-process: the loop and the front stepped by the caller, for tests and
+//! the bench workflows run without a link.
+
+use super::*;
+
+/// The virtual device in-process and in simulated time: the same core, plant and store as
+/// [`serve`], with the protocol's waits driving the simulation instead of a real-time thread
+/// (deterministic: every run of the same requests gives the same numbers). For tests and
+/// scripted experiments.
+pub struct LocalDevice {
+    dev: Front<LocalLink, FlashStore<HostFlash>>,
+}
+
+/// The in-process link: waiting on the loop runs it one position period.
+struct LocalLink {
+    sim: Sim,
+    mailbox: Mailbox,
+    queue: Mutex<VecDeque<Sample>>,
+}
+
+impl LoopLink for LocalLink {
+    fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
+        f(&mut self.mailbox)
+    }
+    fn now_us(&self) -> u64 {
+        (self.sim.t * 1e6) as u64
+    }
+    fn pause(&mut self) {
+        self.tick();
+    }
+}
+
+impl LocalLink {
+    fn tick(&mut self) {
+        let mb = &mut self.mailbox;
+        self.sim
+            .tick(|st, c| mb.exchange(st, c), &self.queue, false);
+    }
+}
+
+impl LocalDevice {
+    /// The plant as it is now: the truth a test holds the device's readings against.
+    pub fn plant(&mut self) -> &Plant {
+        &self.dev.link_mut().sim.plant
+    }
+
+    /// A device on the scenario `sc`, its store in memory (erased).
+    pub fn new(sc: &Scenario) -> Result<LocalDevice, Error> {
+        Self::new_inner(sc).map_err(Error::Device)
+    }
+
+    fn new_inner(sc: &Scenario) -> Result<LocalDevice, String> {
+        Self::with_flash_inner(sc, HostFlash::in_memory())
+    }
+
+    /// A device on the scenario `sc` starting on the store flash `flash` (what a board finds
+    /// at power-up).
+    pub fn with_flash(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, Error> {
+        Self::with_flash_inner(sc, flash).map_err(Error::Device)
+    }
+
+    fn with_flash_inner(sc: &Scenario, flash: HostFlash) -> Result<LocalDevice, String> {
+        let p = power_up(sc, flash)?;
+        let mailbox = Mailbox {
+            status: p.sim.core.status(),
+            ..Mailbox::new()
+        };
+        let link = LocalLink {
+            sim: p.sim,
+            mailbox,
+            queue: Mutex::new(VecDeque::with_capacity(QUEUE)),
+        };
+        Ok(LocalDevice {
+            dev: Front::new(link, p.store, p.board, p.settings, p.defaults)
+                .with_configured(true, true),
+        })
+    }
+
+    /// Sends one request line; returns the reply (its lines, the last `ok …` or `err …`).
+    pub fn ask(&mut self, line: &str) -> String {
+        let mut out = String::new();
+        let mut reader = LineReader::default();
+        for b in line.bytes().chain(std::iter::once(b'\n')) {
+            if let Some(l) = reader.push(b) {
+                let _ = protocol::execute(&mut self.dev, l, &mut out);
+            }
+        }
+        out
+    }
+
+    /// The store flash as it is now (the device is gone: to power up again on it, with
+    /// [`LocalDevice::with_flash`]).
+    pub fn into_flash(self) -> HostFlash {
+        let (_, store) = self.dev.into_parts();
+        // `FlashStore::new` accepted this flash's geometry, so the map is there.
+        store.into_flash().unwrap_or_else(HostFlash::in_memory)
+    }
+
+    /// The client went away (as a closed TCP connection or USB port): the stream ends, an
+    /// experiment (current or speed) ends with the bridge off.
+    pub fn disconnect(&mut self) {
+        self.dev.disconnected();
+    }
+
+    /// Runs the device for `seconds` of simulated time.
+    pub fn run(&mut self, seconds: f64) {
+        let link = self.dev.link_mut();
+        let end = link.sim.t + seconds;
+        while link.sim.t < end {
+            link.tick();
+        }
+    }
+
+    /// The telemetry lines produced since the last call (while a stream is on).
+    pub fn telemetry(&mut self) -> Vec<String> {
+        let samples: Vec<Sample> = relock(&self.dev.link_mut().queue).drain(..).collect();
+        if !self.dev.streaming() {
+            return Vec::new();
+        }
+        let mut text = String::new();
+        for s in &samples {
+            let _ = self.dev.telemetry_line(&mut text, s);
+        }
+        text.lines().map(String::from).collect()
+    }
+}
+
+/// The device as an abstract bench (`gms_bench`): experiments run on it in simulated
+/// time, through the same protocol as on a board.
+impl gms_bench::Bench for LocalDevice {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        let reply = self.ask(line);
+        let mut lines: Vec<String> = reply.lines().map(String::from).collect();
+        match lines.pop() {
+            Some(l) if l == "ok" || l.starts_with("ok ") => {
+                Ok((lines, l.get(3..).unwrap_or("").to_string()))
+            }
+            Some(l) => Err(match gms_ident::Refusal::parse(&l) {
+                Some(r) => gms_ident::Error::Refused(r),
+                None => gms_ident::Error::Device(format!("device answered: {l}")),
+            }),
+            None => Err(gms_ident::Error::Device("no reply".into())),
+        }
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+        if seconds.is_finite() && seconds > 0.0 {
+            self.run(seconds);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,226 @@
+//! The virtual device: the simulated axis in real time behind gms-core's device core, the same
+//! core the firmware runs (`gms_core::device`): the control loop steps at the PWM rate against
+//! the simulated plant, the protocol front answers clients over TCP or a pseudo-terminal. This
+//! file only moves numbers: encoder counts and current-sense codes in, the duty out, the
+//! mailbox behind a mutex, the store on a file.
+//!
+//! Clients are served one after another; a client that drops does not stop the device. With
+//! `--store FILE` the parameter store is a file holding the image of the board's store flash
+//! (gms-core's [`FlashStore`]: same record, same sequential-storage map, same word and sector
+//! sizes), written through at every flash write, so a crash leaves what a power cut leaves on a
+//! board, and a store written by one is read by the other. Without `--store` the store is in
+//! memory (lost at exit).
+
+use crate::Error;
+use std::collections::VecDeque;
+use std::fs::{File, OpenOptions};
+use std::io::{ErrorKind, Read, Seek, SeekFrom, Write};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use embedded_storage_async::nor_flash::{
+    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
+};
+use gms_core::device::{
+    self, Board, Chunk, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests,
+    Sample, SenseChain, Status,
+};
+use gms_core::drive::BoardLimits;
+use gms_core::protocol::{self, LineReader, Settings};
+use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
+
+use crate::plant::Plant;
+use crate::scenario::Scenario;
+
+/// The virtual device's capture buffer (values), the board's.
+pub const CAPTURE_VALUES: u32 = gms_core::boards::power_stage::CAPTURE_VALUES;
+
+/// Telemetry samples kept for the client (0.4 s at 10 kHz; older ones are dropped).
+pub const QUEUE: usize = 4000;
+
+/// The simulated board: the F405 board as gms-core describes it (`boards::f405::BOARD`: its
+/// PWM timer, encoder counter, sense zero tolerance, trip factor, following-error and speed
+/// limits, capture buffer), with what a simulation cannot share: the plant's ADC as the current
+/// sense (one conversion per sample, zero at mid-scale; a 3.3 V ADC, so that the plant's range
+/// ±`adc_range` is the sense scale `sense.v_per_a` = 1.65 V / `adc_range` of
+/// [`Scenario::controller_params`]), sampled at once (no window); step durations in host
+/// nanoseconds (`clock_hz` 1e9) with a budget of 1 s at 20 kHz (the host is shared, so only a
+/// stalled simulation counts as an overrun); the true friction in the telemetry; a bridge that
+/// needs no wake-up.
+pub fn board(sc: &Scenario) -> Board {
+    let real = gms_core::boards::f405::BOARD;
+    let adc = Adc::new(sc);
+    Board {
+        sense_oversample: 1,
+        sense: SenseChain {
+            vref: SIM_ADC_VREF,
+            full_scale: (2.0 * adc.mid) as f32,
+            zero_code: adc.mid as f32,
+            window_s: 0.0,
+            ..real.sense
+        },
+        limits: BoardLimits {
+            clock_hz: 1_000_000_000,
+            budget_fraction: 20_000.0,
+            ..real.limits
+        },
+        has_truth: true,
+        bridge_wake_s: 0.0,
+        ..real
+    }
+}
+
+/// The simulated ADC's reference \[V\]: the plant's ±`adc_range` spans it.
+pub const SIM_ADC_VREF: f32 = 3.3;
+
+/// The plant's current sense as ADC codes: one code per LSB, zero current mid-scale.
+struct Adc {
+    lsb: f64,
+    mid: f64,
+    top: f64,
+}
+
+impl Adc {
+    fn new(sc: &Scenario) -> Adc {
+        let full = (1u64 << sc.plant.adc_bits) as f64;
+        Adc {
+            lsb: 2.0 * sc.plant.adc_range / full,
+            mid: full / 2.0,
+            top: full - 1.0,
+        }
+    }
+
+    /// The code of a current the plant's ADC measured \[A\].
+    fn code(&self, amps: f32) -> u32 {
+        (amps as f64 / self.lsb + self.mid)
+            .round()
+            .clamp(0.0, self.top) as u32
+    }
+}
+
+/// The loop side: the device core's control loop and the plant, owned by the real-time thread.
+struct Sim {
+    core: ControlLoop,
+    plant: Plant,
+    adc: Adc,
+    substeps: u32,
+    /// Simulated time \[s\].
+    t: f64,
+}
+
+impl Sim {
+    /// One position period: `ratio` PWM periods of the core, the plant between them.
+    /// `exchange` is the mailbox's (behind a mutex or local); step durations are timed on the
+    /// host when `timed` (real time), else counted as 0 (simulated time).
+    fn tick(
+        &mut self,
+        mut exchange: impl FnMut(Status, Option<&Chunk>) -> Option<Requests>,
+        queue: &Mutex<VecDeque<Sample>>,
+        timed: bool,
+    ) {
+        let n = self.core.ratio();
+        let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
+        for _ in 0..n {
+            let inp = Inputs {
+                encoder: self.plant.encoder() as u32,
+                current_codes: self.adc.code(self.plant.adc()),
+                // Simulated time: the steps are exactly one period apart (in the board's
+                // step clock, ns), so none is ever missed.
+                since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
+            };
+            let t0 = timed.then(Instant::now);
+            let out = self.core.step(inp, &mut exchange);
+            let ns = t0.map_or(0, |t| t.elapsed().as_nanos().min(u32::MAX as u128) as u32);
+            self.core.finish(ns);
+            let duty = if self.core.enabled() { out.duty } else { 0.0 };
+            if let Some(mut s) = out.sample {
+                s.friction_true = self.plant.friction as f32;
+                let mut q = relock(queue);
+                if q.len() == QUEUE {
+                    q.pop_front();
+                }
+                q.push_back(s);
+            }
+            self.plant.set_duty(duty);
+            for _ in 0..self.substeps {
+                self.plant.step(dt_plant);
+            }
+            self.t += dt_plant * self.substeps as f64;
+        }
+    }
+}
+
+/// A virtual device just powered up: the loop on the plant, the store, and what the start-up
+/// decided.
+struct PowerUp {
+    sim: Sim,
+    store: FlashStore<HostFlash>,
+    board: Board,
+    settings: Settings,
+    defaults: Settings,
+    /// Why the start-up latched faults, if it did.
+    why: Option<&'static str>,
+}
+
+/// The start-up of the board, on the plant: the parameter set from the store (gms-core's
+/// decision), the current-sense zero measured with the bridge off (gms-core's), the loop at
+/// rest at the encoder's reading.
+fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
+    let defaults = sc.controller_params()?;
+    let board = board(sc);
+    let mut store = FlashStore::new(flash);
+    let start = device::startup(store.load(), &defaults, &board)
+        .map_err(|e| format!("the scenario's controller: {e}"))?;
+    let adc = Adc::new(sc);
+    let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
+    let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
+        Some(adc.code(plant.adc()))
+    });
+    let mut faults = start.faults;
+    faults.latch(zero.faults);
+    let why = if !start.faults.is_empty() {
+        Some(start.note)
+    } else if !zero.faults.is_empty() {
+        Some("current-sense zero out of the board's window")
+    } else {
+        None
+    };
+    let encoder = plant.encoder() as u32;
+    Ok(PowerUp {
+        sim: Sim {
+            core: ControlLoop::new(
+                board,
+                start.applied,
+                zero.sense,
+                faults,
+                encoder,
+                // One buffer per power-up of a virtual device (a board's is a static).
+                Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
+            ),
+            plant,
+            adc,
+            substeps: sc.plant.substeps,
+            t: 0.0,
+        },
+        store,
+        board,
+        settings: start.settings,
+        defaults,
+        why,
+    })
+}
+
+/// The mutex's value, also after a thread panicked holding it (the data is plain numbers).
+fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+mod flash;
+mod local;
+mod server;
+
+pub use flash::{HostFlash, HostFlashError, IMAGE_LEN};
+pub use local::LocalDevice;
+pub use server::{BUSY, Endpoint, serve};

@@ -1,0 +1,151 @@
+//! The device's settings as one value on the host (`gms_bench::settings`), on the virtual
+//! device in-process: read whole, written as one staged set (all or nothing), and put back
+//! around a run whatever ends it.
+
+use gms_bench::settings::{self, Snapshot, changes, restoring};
+use gms_bench::{Bench, get_param};
+use gms_ident::Error;
+use hil_sim::device::LocalDevice;
+use hil_sim::scenario::Scenario;
+
+fn device() -> LocalDevice {
+    LocalDevice::new(&Scenario::default()).unwrap()
+}
+
+/// `get` of parameters as the device answers them (f32 values written in decimal).
+fn got(dev: &mut LocalDevice, paths: &[&str]) -> Vec<f32> {
+    paths
+        .iter()
+        .map(|p| get_param(dev, p).unwrap() as f32)
+        .collect()
+}
+
+const PATHS: [&str; 6] = [
+    "pos.kp",
+    "lim.pos_min",
+    "lim.pos_max",
+    "ff.gain",
+    "gms.fs",
+    "enc.counts_per_rev",
+];
+
+#[test]
+fn the_settings_read_whole_are_the_device_s() {
+    let mut dev = device();
+    for (p, v) in [
+        ("pos.kp", "0.25"),
+        ("ff.gain", "0.875"),
+        ("lim.pos_max", "3.5"),
+    ] {
+        dev.request(&format!("set {p} {v}")).unwrap();
+    }
+    let s = settings::read(&mut dev).unwrap();
+    assert_eq!((s.pid.kp, s.ff.gain, s.pos_max), (0.25, 0.875, 3.5));
+    // Every number read back as `get` gives it.
+    let mut text = String::new();
+    for p in gms_core::protocol::PARAMS {
+        if let gms_core::protocol::Access::Number { get, .. } = p.access {
+            let on_device = get_param(&mut dev, p.path).unwrap() as f32;
+            assert_eq!(get(&s), on_device, "{}", p.path);
+            text.push_str(p.path);
+        }
+    }
+    assert!(text.contains("enc.counts_per_rev"));
+    // Read twice: nothing differs.
+    assert!(changes(&s, &settings::read(&mut dev).unwrap()).is_empty());
+}
+
+#[test]
+fn a_written_set_is_all_or_nothing() {
+    let mut dev = device();
+    let before = settings::read(&mut dev).unwrap();
+    let mut to = before;
+    to.pid.kp *= 2.0;
+    to.pos_min = -2.0;
+    to.pos_max = 2.0;
+    to.ff.gain = 0.5;
+    let n = settings::write(&mut dev, &to).unwrap();
+    assert_eq!(n, 4);
+    assert_eq!(
+        got(
+            &mut dev,
+            &["pos.kp", "lim.pos_min", "lim.pos_max", "ff.gain"]
+        ),
+        [before.pid.kp * 2.0, -2.0, 2.0, 0.5]
+    );
+    // A set the device refuses as a whole (Fs below Fc) changes nothing, not even the
+    // parameters that were fine on their own.
+    let now = got(&mut dev, &PATHS);
+    let mut bad = to;
+    bad.pid.kp = 0.125;
+    bad.ff.actuator.stribeck.fc = bad.ff.actuator.stribeck.fs * 2.0;
+    let e = settings::write(&mut dev, &bad).unwrap_err();
+    assert!(e.to_string().contains("nothing changed"), "{e}");
+    assert_eq!(got(&mut dev, &PATHS), now);
+}
+
+/// A bench that stops taking ordinary requests after `left` of them, as a stopped run does
+/// (Ctrl-C), while the requests that end a run still go out.
+struct Stopping<'a> {
+    dev: &'a mut LocalDevice,
+    left: usize,
+}
+
+impl Bench for Stopping<'_> {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
+        if self.left == 0 {
+            return Err(Error::Link("interrupted".into()));
+        }
+        self.left -= 1;
+        self.dev.request(line)
+    }
+    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
+        self.dev.wait(seconds)
+    }
+    fn request_to_end(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
+        self.dev.request(line)
+    }
+}
+
+#[test]
+fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
+    let mut dev = device();
+    let before = got(&mut dev, &PATHS);
+    let snap = Snapshot::take(&mut dev).unwrap();
+    // Done: what the run set is undone, the bridge off.
+    let r = restoring(&mut dev, |b| {
+        b.request("set lim.pos_min -0.1")?;
+        b.request("set pos.kp 0.125")?;
+        b.request("set ff.gain 0.3")?;
+        b.request("enable")?;
+        b.wait(0.05)?;
+        Ok(7)
+    });
+    assert_eq!(r, Ok(7));
+    assert_eq!(got(&mut dev, &PATHS), before);
+    assert!(!gms_bench::status(&mut dev).unwrap().enabled);
+    // Failed half-way: the run's error, the settings back.
+    let r: Result<(), Error> = restoring(&mut dev, |b| {
+        b.request("set lim.pos_max 0.1")?;
+        b.request("set pos.nonsense 1")?;
+        Ok(())
+    });
+    assert!(r.unwrap_err().to_string().contains("unknown parameter"));
+    assert_eq!(got(&mut dev, &PATHS), before);
+    // Stopped (every ordinary request refused after the third): still put back.
+    let mut stopping = Stopping {
+        dev: &mut dev,
+        left: 3,
+    };
+    let r: Result<(), Error> = restoring(&mut stopping, |b| {
+        b.request("set ff.gain 0.2")?;
+        b.request("set enc.dir -1")?;
+        b.request("set ff.gain 0.1")?;
+        b.request("set pos.kp 9")?;
+        Ok(())
+    });
+    assert_eq!(r, Err(Error::Link("interrupted".into())));
+    assert_eq!(got(&mut dev, &PATHS), before);
+    assert_eq!(got(&mut dev, &["enc.dir"]), [1.0]);
+    assert!(changes(snap.settings(), &settings::read(&mut dev).unwrap()).is_empty());
+}

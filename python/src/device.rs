@@ -1,0 +1,256 @@
+//! The bench client: a device over a serial port or TCP, and the bench workflows on it.
+
+use super::*;
+
+/// A device over a serial port or TCP, speaking the protocol as `gms-tune` does.
+#[pyclass(module = "gms", unsendable)]
+pub(crate) struct Device {
+    link: gms_tune::Link,
+}
+
+pub(crate) fn link_err(e: gms_tune::LinkError) -> PyErr {
+    err(e)
+}
+
+#[pymethods]
+impl Device {
+    /// Device(port=None, tcp=None, timeout=1.0): a board's serial port, or a TCP address
+    /// (`hil-sim serve --tcp`); `timeout` is the reply timeout [s].
+    #[new]
+    #[pyo3(signature = (port = None, tcp = None, timeout = 1.0))]
+    fn new(port: Option<String>, tcp: Option<String>, timeout: f64) -> PyResult<Device> {
+        if !(timeout.is_finite() && timeout > 0.0) {
+            return Err(err(format!("timeout {timeout}: seconds, above 0")));
+        }
+        let d = Duration::from_secs_f64(timeout);
+        let link = match (port, tcp) {
+            (Some(p), None) => gms_tune::Link::serial(&p, d),
+            (None, Some(a)) => gms_tune::Link::tcp(&a, d),
+            _ => Err("give port or tcp (one of them)".into()),
+        }
+        .map_err(err)?;
+        Ok(Device { link })
+    }
+
+    /// request(line) -> str: one protocol line; the text after `ok` (with the lines before it,
+    /// newline-separated); an `err` reply raises GmsError with the device's line.
+    fn request(&mut self, line: &str) -> PyResult<String> {
+        self.link.request_text(line).map_err(link_err)
+    }
+
+    /// get(path) -> float | str: a parameter's value (a number where it is one).
+    fn get<'py>(&mut self, py: Python<'py>, path: &str) -> PyResult<Bound<'py, PyAny>> {
+        let (_, v) = self
+            .link
+            .ask(gms_core::protocol::Command::Get(path))
+            .map_err(link_err)?;
+        let v = v.trim().to_string();
+        Ok(match v.parse::<f64>() {
+            Ok(x) => x.into_pyobject(py)?.into_any(),
+            Err(_) => v.into_pyobject(py)?.into_any(),
+        })
+    }
+
+    /// set(path, value): sets a parameter; a refusal raises GmsError and changes nothing.
+    fn set(&mut self, path: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let v: String = match value.extract::<f64>() {
+            Ok(x) if value.is_instance_of::<PyBool>() => {
+                return Err(err(format!("{path}: {x}: not a number or a name")));
+            }
+            Ok(x) => format!("{x}"),
+            Err(_) => value.extract::<String>()?,
+        };
+        self.link
+            .ask(gms_core::protocol::Command::Set(path, &v))
+            .map_err(link_err)?;
+        Ok(())
+    }
+
+    /// list() -> list[dict]: every parameter as {"path", "value", "unit", "range"}.
+    fn list<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        let rows = gms_tune::params::list(&mut self.link).map_err(link_err)?;
+        let l = PyList::empty(py);
+        for r in rows {
+            let d = PyDict::new(py);
+            d.set_item("path", r.path)?;
+            d.set_item("value", r.value)?;
+            d.set_item("unit", r.unit)?;
+            d.set_item("range", r.range)?;
+            l.append(d)?;
+        }
+        Ok(l)
+    }
+
+    /// status() -> dict: the `status` reply's keys (numbers where they are).
+    fn status<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let st = self.link.status().map_err(link_err)?;
+        let d = PyDict::new(py);
+        for (k, v) in st.entries() {
+            match v {
+                gms_core::device::StatusValue::Number(x) => d.set_item(k, x)?,
+                gms_core::device::StatusValue::Text(t) => d.set_item(k, t)?,
+                gms_core::device::StatusValue::Faults(f) => {
+                    let mut names = String::new();
+                    let _ = f.write_names(&mut names);
+                    d.set_item(k, names)?
+                }
+            }
+        }
+        Ok(d)
+    }
+
+    /// record(fields="t,pos,error,current", rate=1000.0, seconds=1.0) -> dict: the telemetry
+    /// stream for `seconds` (wall time) as {field: numpy array}, as `gms-tune record`.
+    #[pyo3(signature = (fields = "t,pos,error,current", rate = 1000.0, seconds = 1.0))]
+    fn record<'py>(
+        &mut self,
+        py: Python<'py>,
+        fields: &str,
+        rate: f64,
+        seconds: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(seconds > 0.0 && seconds <= 3600.0 && rate > 0.0 && rate <= 1000.0) {
+            return Err(err("seconds in (0, 3600], rate in (0, 1000]"));
+        }
+        let rows = self.link.record(fields, rate, seconds).map_err(link_err)?;
+        let d = PyDict::new(py);
+        for (c, n) in fields.split(',').map(str::trim).enumerate() {
+            d.set_item(
+                n,
+                PyArray1::from_vec(py, rows.iter().map(|r| r[c]).collect()),
+            )?;
+        }
+        Ok(d)
+    }
+
+    /// step_test(distance=2e-4, seconds=0.5) -> dict: `gms-tune step-test` — the bridge on,
+    /// a move by `distance` [rad], `seconds` recorded: {"trace": {t, ref, pos, error, ff,
+    /// friction: arrays}, "metrics": the figures of hil-sim run, "rad_per_count": the
+    /// device's encoder resolution [rad/count] that the figures in counts use}.
+    #[pyo3(signature = (distance = 2e-4, seconds = 0.5))]
+    fn step_test<'py>(
+        &mut self,
+        py: Python<'py>,
+        distance: f64,
+        seconds: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        if !(distance.is_finite() && seconds > 0.0 && seconds <= 60.0) {
+            return Err(err("distance finite, seconds in (0, 60]"));
+        }
+        let (rows, _, m, rad_per_count) =
+            gms_tune::run::step_test(&mut self.link, distance, seconds).map_err(link_err)?;
+        let trace = PyDict::new(py);
+        for (c, n) in gms_tune::run::STEP_FIELDS.split(',').enumerate() {
+            trace.set_item(
+                n,
+                PyArray1::from_vec(py, rows.iter().map(|r| r[c]).collect()),
+            )?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("trace", trace)?;
+        d.set_item("metrics", debug_dict(py, &m)?)?;
+        d.set_item("rad_per_count", rad_per_count)?;
+        Ok(d)
+    }
+
+    /// tune_ff(amplitude=2e-3, freq=1.0, seconds=3.0, start=0.5, stop=1.3, steps=9) -> dict:
+    /// `gms-tune tune-ff` — the sine test at each ff.gain of a coarse sweep (widened at an
+    /// edge), then twice at 9 gains around its optimum: {"curve": [(gain, RMS [rad])],
+    /// "optimum", "standard_error" (None without a minimum), "decided", "chosen" (the optimum
+    /// when decided, else "before"), "before", "notes"}; the device keeps `before` (set
+    /// ff.gain to apply).
+    #[pyo3(signature = (amplitude = 2e-3, freq = 1.0, seconds = 3.0, start = 0.5, stop = 1.3, steps = 9))]
+    #[allow(clippy::too_many_arguments)]
+    fn tune_ff<'py>(
+        &mut self,
+        py: Python<'py>,
+        amplitude: f64,
+        freq: f64,
+        seconds: f64,
+        start: f64,
+        stop: f64,
+        steps: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let plan = gms_bench::TuneFfPlan {
+            amp: amplitude,
+            freq,
+            seconds,
+            from: start,
+            to: stop,
+            steps,
+            ..Default::default()
+        };
+        plan.check().map_err(err)?;
+        let t = self.run_bench(|b| gms_bench::tune_ff(b, &plan, |_, _, _| {}))?;
+        let d = PyDict::new(py);
+        d.set_item("curve", t.curve.clone())?;
+        d.set_item("chosen", t.chosen)?;
+        d.set_item("before", t.before)?;
+        d.set_item("decided", t.decided)?;
+        d.set_item("optimum", t.optimum.map(|o| o.at))?;
+        d.set_item("standard_error", t.optimum.map(|o| o.se))?;
+        d.set_item("notes", t.notes.clone())?;
+        Ok(d)
+    }
+
+    /// commission(speed=1.0) -> dict: `gms-tune commission` — {"lines": a line per step,
+    /// "settings": {protocol path: value}}; nothing applied (send the settings to apply).
+    #[pyo3(signature = (speed = 1.0))]
+    fn commission<'py>(&mut self, py: Python<'py>, speed: f64) -> PyResult<Bound<'py, PyDict>> {
+        let c = self.run_bench(|b| gms_bench::commission(b, speed))?;
+        let d = PyDict::new(py);
+        d.set_item("lines", c.lines.clone())?;
+        let s = PyDict::new(py);
+        for (k, v) in c.settings() {
+            s.set_item(k, v)?;
+        }
+        d.set_item("settings", s)?;
+        Ok(d)
+    }
+
+    /// identify(report="identify-report", blocks=6) -> dict: `gms-tune identify` — the
+    /// experiments on the device (CSVs in `report`), the fits: {"params": the parameter
+    /// file's text, "report": lines, "presliding": [(x, f)], "sliding": [(v, f)]}; nothing
+    /// applied.
+    #[pyo3(signature = (report = PathBuf::from("identify-report"), blocks = 6))]
+    fn identify<'py>(
+        &mut self,
+        py: Python<'py>,
+        report: PathBuf,
+        blocks: usize,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let dev = gms_bench::DeviceInfo::read(&mut self.link).map_err(err)?;
+        let plans = gms_bench::Plans::new(&dev, &gms_bench::Ranges::default()).map_err(err)?;
+        let (g, id) = self.run_bench(|b| {
+            gms_bench::identify_on(b, &plans, &report, blocks, false, &mut |_, _, _| {})
+        })?;
+        let (_, text) = gms_tune::run::write_identified(&id, &report, None).map_err(err)?;
+        let d = PyDict::new(py);
+        d.set_item("params", text)?;
+        d.set_item("report", id.report.clone())?;
+        d.set_item("presliding", g.presliding)?;
+        d.set_item("sliding", g.sliding)?;
+        Ok(d)
+    }
+}
+
+/// Hooks that report nothing (Python's caller waits for the result).
+pub(crate) struct Quiet;
+
+impl gms_tune::run::Hooks for Quiet {
+    fn stage(&mut self, _: &str, _: f64) {}
+    fn waited(&mut self, _: f64) {}
+}
+
+impl Device {
+    /// Runs `f` on the link as the command line's run bench.
+    fn run_bench<T>(
+        &mut self,
+        f: impl FnOnce(&mut gms_tune::run::RunBench<'_, '_>) -> Result<T, gms_ident::Error>,
+    ) -> PyResult<T> {
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let mut quiet = Quiet;
+        let mut b = gms_tune::run::RunBench::new(&mut self.link, stop, "stopped", &mut quiet);
+        f(&mut b).map_err(|e| err(format!("{e}; the bridge is off")))
+    }
+}

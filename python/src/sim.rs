@@ -1,0 +1,88 @@
+//! The closed-loop simulator: one run, and the comparison of the compensators.
+
+use super::*;
+
+/// A scenario from None (the default), a path or a dict with the file's keys.
+pub(crate) fn scenario(sc: Option<&Bound<'_, PyAny>>) -> PyResult<hil_sim::scenario::Scenario> {
+    match sc {
+        None => Ok(hil_sim::scenario::Scenario::default()),
+        Some(s) if s.is_none() => Ok(hil_sim::scenario::Scenario::default()),
+        Some(s) if s.is_instance_of::<PyDict>() => {
+            let text = match to_toml(s, "")? {
+                toml::Value::Table(t) => toml::to_string(&t).map_err(err)?,
+                _ => unreachable!("a dict is a table"),
+            };
+            hil_sim::scenario::Scenario::parse(&text, "<dict>").map_err(err)
+        }
+        Some(s) => {
+            let path: PathBuf = s
+                .extract()
+                .map_err(|_| err("scenario: None, a path to a scenario file, or a dict"))?;
+            hil_sim::scenario::Scenario::load(&path).map_err(err)
+        }
+    }
+}
+
+/// run(scenario=None) -> dict
+///
+/// One closed-loop run, as `hil-sim run` does it (the scenario's mode and seed): {"trace":
+/// {column: numpy array}, "metrics": {...}} — the trace's columns t, reference, position,
+/// error, current, current_cmd, voltage, friction, feedforward, ff_scale, drift,
+/// ref_velocity (SI), the metrics of metrics.json (SI).
+#[pyfunction]
+#[pyo3(signature = (scenario = None))]
+pub(crate) fn run<'py>(
+    py: Python<'py>,
+    scenario: Option<&Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let sc = self::scenario(scenario)?;
+    let res = hil_sim::sim::run(&sc, sc.mode(), sc.plant.seed).map_err(err)?;
+    let out = PyDict::new(py);
+    let trace = PyDict::new(py);
+    macro_rules! col {
+        ($name:literal, $f:ident) => {
+            trace.set_item(
+                $name,
+                PyArray1::from_vec(py, res.trace.iter().map(|r| r.$f).collect()),
+            )?;
+        };
+    }
+    col!("t", t);
+    col!("reference", reference);
+    col!("position", position);
+    col!("error", error);
+    col!("current", current);
+    col!("current_cmd", current_cmd);
+    col!("voltage", voltage);
+    col!("friction", friction);
+    col!("feedforward", feedforward);
+    col!("ff_scale", ff_scale);
+    col!("drift", drift);
+    col!("ref_velocity", ref_velocity);
+    out.set_item("trace", trace)?;
+    out.set_item("metrics", debug_dict(py, &res.metrics)?)?;
+    out.set_item("mode", sc.mode().name())?;
+    out.set_item("seed", sc.plant.seed)?;
+    Ok(out)
+}
+
+/// compare(scenario=None, runs=20, seed=1) -> dict
+///
+/// Every feedforward mode over `runs` friction draws (seeds seed … seed + runs − 1), as
+/// `hil-sim compare` writes its JSON.
+#[pyfunction]
+#[pyo3(signature = (scenario = None, runs = 20, seed = 1))]
+pub(crate) fn compare<'py>(
+    py: Python<'py>,
+    scenario: Option<&Bound<'py, PyAny>>,
+    runs: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyDict>> {
+    if runs == 0 {
+        return Err(err("runs: at least 1"));
+    }
+    let sc = self::scenario(scenario)?;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (cmp, _) = hil_sim::commands::compare(&sc, runs, seed, threads, false).map_err(err)?;
+    debug_dict(py, &cmp)
+}
