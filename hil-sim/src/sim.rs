@@ -1,12 +1,56 @@
 //! One closed-loop run: gms-core's controller (the firmware's code) against the plant.
 
 use crate::Error;
-use gms_core::controller::{Controller, FfMode};
-use gms_core::reference::{Reference, SUB_PER_COUNT, Segment};
+use gms_core::controller::{Controller, FfMode, PositionOutput};
+use gms_core::reference::{RefSample, Reference, SUB_PER_COUNT, Segment};
 use gms_ident::trace::{Metrics, TraceRow, metrics};
 
 use crate::plant::{Energy, Plant};
 use crate::scenario::{FF_BLOCKS, MAX_SEGMENTS, Scenario};
+
+/// The control schedule of a closed-loop run, one PWM period per call: on the first period of
+/// each position period the position step, with the encoder's count and the reference at that
+/// instant; then, in every period, the current step with the current measured in it, whose
+/// duty drives the period after. The device core's `ControlLoop::step` runs this schedule on
+/// the board and in the virtual device; `hil-sim/tests/schedule.rs` holds the two equal, duty
+/// for duty, on the same inputs, so the runs of `hil-sim run`, `compare` and `demo` are
+/// figures of the device core's control.
+pub struct Schedule<const N: usize> {
+    ctrl: Controller<N>,
+    ratio: u32,
+    phase: u32,
+}
+
+impl<const N: usize> Schedule<N> {
+    /// The schedule of `ctrl` (its current periods per position period from its rates).
+    pub fn new(ctrl: Controller<N>) -> Schedule<N> {
+        let ratio = ctrl.params().ratio().max(1);
+        Schedule {
+            ctrl,
+            ratio,
+            phase: 0,
+        }
+    }
+
+    /// The controller.
+    pub fn controller(&mut self) -> &mut Controller<N> {
+        &mut self.ctrl
+    }
+
+    /// One PWM period: `count` \[counts\] and `reference` are used on a position period's first
+    /// period; `i_meas` \[A\] is the current measured in this period. Returns the duty [-] and,
+    /// on a position period's first, the position step's output.
+    pub fn period(
+        &mut self,
+        count: i64,
+        reference: &RefSample,
+        i_meas: f32,
+    ) -> (f32, Option<PositionOutput>) {
+        let out = (self.phase == 0).then(|| self.ctrl.position_step(count, reference));
+        self.phase = (self.phase + 1) % self.ratio;
+        (self.ctrl.current_step(i_meas).duty, out)
+    }
+}
 
 /// The result of one run.
 pub struct RunResult {
@@ -48,15 +92,16 @@ fn run_with(sc: &Scenario, mode: FfMode, seed: u64, oracle: bool) -> Result<RunR
         cp.ff.adapt.min = 0.0;
         cp.ff.adapt.max = 10.0;
     }
-    let mut ctrl = Controller::<FF_BLOCKS>::try_new(cp).map_err(|e| e.to_string())?;
+    let ctrl = Controller::<FF_BLOCKS>::try_new(cp).map_err(|e| e.to_string())?;
+    let dt_pos = ctrl.dt_pos();
+    let dt_plant = ctrl.dt_cur() as f64 / sc.plant.substeps as f64;
+    let mut sched = Schedule::new(ctrl);
     let segments = sc.segments()?;
     let rpc = sc.plant.rad_per_count;
     let mut reference =
         Reference::<MAX_SEGMENTS>::try_new(&segments, rpc as f32, 0).map_err(|e| e.to_string())?;
     let mut plant = Plant::new(&sc.plant, seed)?;
     let n_cur = cp.ratio();
-    let dt_pos = ctrl.dt_pos();
-    let dt_plant = ctrl.dt_cur() as f64 / sc.plant.substeps as f64;
     let steps = (reference.duration() / dt_pos).ceil() as usize;
     let mut trace = Vec::with_capacity(steps);
     for k in 0..steps {
@@ -65,17 +110,22 @@ fn run_with(sc: &Scenario, mode: FfMode, seed: u64, oracle: bool) -> Result<RunR
         let seg = reference.segment_index();
         let count = plant.encoder();
         if oracle {
-            ctrl.set_adaptive_scale(plant.drift_factor() as f32);
+            sched
+                .controller()
+                .set_adaptive_scale(plant.drift_factor() as f32);
         }
-        let out = ctrl.position_step(count, &r);
         let reference_rad = r.pos as f64 / SUB_PER_COUNT as f64 * rpc;
         let position = count as f64 * rpc;
         let (current, voltage, friction) = (plant.i, plant.voltage, plant.friction);
         let drift = plant.drift_factor();
+        let mut out = PositionOutput::default();
         for _ in 0..n_cur {
             let i_meas = plant.adc();
-            let c = ctrl.current_step(i_meas);
-            plant.set_duty(c.duty);
+            let (duty, pos_out) = sched.period(count, &r, i_meas);
+            if let Some(o) = pos_out {
+                out = o;
+            }
+            plant.set_duty(duty);
             for _ in 0..sc.plant.substeps {
                 plant.step(dt_plant);
             }

@@ -1,0 +1,98 @@
+//! One control-loop schedule: `hil-sim`'s closed-loop runs (`run`, `compare`, `demo`: the
+//! README's figures) step the controller through `hil_sim::sim::Schedule`; the board and the
+//! virtual device run the device core's `ControlLoop`. Fed the same encoder counts and the same
+//! current-sense codes period by period, along a move, the two give the same duty in every
+//! PWM period, bit for bit: the runs' figures are the device core's control.
+
+use gms_core::device::{
+    self, Board, ControlLoop, Inputs, MoveRequest, Requests, calibrate_sense, default_settings,
+};
+use gms_core::reference::{Motion, SUB_PER_COUNT};
+use hil_sim::sim::Schedule;
+
+#[test]
+fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
+    let board = Board {
+        bridge_wake_s: 0.0,
+        ..gms_core::boards::f405::BOARD
+    };
+    let s = default_settings();
+    let applied = device::prepare(&s, &board).unwrap();
+    let mut shadow = Schedule::new(applied.ctrl.clone());
+    let zero = calibrate_sense(&board, s.sense_v_per_a, || Some(16 * 2048));
+    let sense = zero.sense;
+    let buf: &'static mut [f32] = Box::leak(vec![0.0; 8192].into_boxed_slice());
+    let mut lp = ControlLoop::new(board, applied, zero.sense, zero.faults, 0, buf);
+    let ratio = lp.ratio();
+    let rpc = s.rad_per_count();
+    let n = 16u32;
+    // A plant stand-in: the axis follows the reference with a lag and a wobble of a few
+    // counts, the current wanders over ±0.1 A (codes around the zero).
+    let mut count: i64 = 0;
+    // Taken last first: the enable, then the move.
+    let mut pending = vec![
+        Requests::default(),
+        Requests {
+            enable: true,
+            ..Requests::default()
+        },
+    ];
+    let mut compared = 0;
+    for k in 0..40_000u32 {
+        let codes = n * 2048 + ((k.wrapping_mul(2_654_435_761) >> 20) % (n * 60));
+        let codes = codes - n * 30;
+        let inp = Inputs {
+            encoder: count as u32,
+            current_codes: codes,
+            since_last: 8400,
+        };
+        let phase0 = k % ratio == 0;
+        let out = lp.step(inp, |st, _| {
+            if !phase0 {
+                return None;
+            }
+            let mut r = pending.pop();
+            if let Some(req) = &mut r
+                && !req.enable
+            {
+                // The move, planned from the reference as the front plans it: 0.3 rad at up
+                // to 0.4 rad/s and back.
+                let plan = Motion::plan(st.reference, 0.3, Some(0.4), rpc).unwrap();
+                req.motion = Some(MoveRequest {
+                    plan,
+                    from_step: st.steps,
+                });
+            }
+            r
+        });
+        assert!(out.enabled || k == 0, "the loop went off at period {k}");
+        if !out.enabled {
+            continue;
+        }
+        if k == 0 {
+            // The enable resets the loop's controller where the axis is: the same for the
+            // shadow.
+            shadow.controller().reset();
+        }
+        let st = lp.status();
+        let amps = s.sense_dir * sense.amps_sum(codes, n);
+        let (duty, _) = shadow.period(st.pos, &st.reference, amps);
+        assert_eq!(
+            duty.to_bits(),
+            out.duty.to_bits(),
+            "period {k}: the schedule's duty {duty}, the device core's {}",
+            out.duty
+        );
+        compared += 1;
+        lp.finish(3000);
+        // The axis: the reference's count less a lag and a wobble.
+        if phase0 {
+            let target = st.reference.pos / SUB_PER_COUNT as i64;
+            count = target - 3 + (k as i64 / ratio as i64 % 7);
+        }
+    }
+    assert!(compared > 39_000, "{compared}");
+    // The move really went somewhere: 0.3 rad of counts.
+    let reached = lp.status().pos as f64 * rpc as f64;
+    assert!((reached - 0.3).abs() < 1e-3, "{reached}");
+}
