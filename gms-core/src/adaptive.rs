@@ -68,10 +68,10 @@ impl Default for AdaptiveParams {
 }
 
 impl AdaptiveParams {
-    /// Checks the ranges (the protocol's table, [`crate::protocol::PARAMS`]) and that
+    /// Checks the ranges (the settings table, [`crate::settings::SPECS`]) and that
     /// `min <= max`; the error names the field by its protocol path.
     pub fn validate(&self) -> Result<(), &'static str> {
-        use crate::protocol::range;
+        use crate::settings::range;
         let ok = |v: f32, (lo, hi): (f32, f32)| v.is_finite() && v >= lo && v <= hi;
         if !ok(self.gain, const { range("ff.adapt.gain") }) {
             return Err("ff.adapt.gain");

@@ -205,10 +205,10 @@ impl<const N: usize> ControllerParams<N> {
     }
 
     /// Checks every parameter; the error names the first offending one by its protocol path
-    /// (`pos.kp`, `gms.fs`, …). The ranges are the protocol's table ([`crate::protocol::PARAMS`]),
+    /// (`pos.kp`, `gms.fs`, …). The ranges are the settings table ([`crate::settings::SPECS`]),
     /// the one range table of the project: a set runs here exactly when the protocol accepts it.
     pub fn validate(&self) -> Result<(), ControllerError> {
-        use crate::protocol::range;
+        use crate::settings::range;
         let a = &self.ff.actuator;
         // One row per parameter: its path, its value, its range from the protocol's table.
         macro_rules! row {

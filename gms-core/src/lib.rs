@@ -39,6 +39,7 @@ pub mod reference;
 pub mod selftest;
 #[cfg(feature = "serde")]
 mod serde_array;
+pub mod settings;
 pub mod static_map;
 #[cfg(feature = "store")]
 pub mod store;

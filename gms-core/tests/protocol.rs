@@ -567,3 +567,22 @@ proptest! {
         prop_assert_eq!(parse(&line), Ok(c), "{}", line);
     }
 }
+
+/// The protocol's table and the settings table (units and ranges, below the models) name the
+/// same numeric parameters in the same order, with the same units and ranges.
+#[test]
+fn the_protocol_table_takes_every_spec_once() {
+    use gms_core::settings::SPECS;
+    let numeric: Vec<_> = PARAMS
+        .iter()
+        .filter_map(|p| match p.access {
+            Access::Number { min, max, .. } => Some((p.path, p.unit, min, max)),
+            _ => None,
+        })
+        .collect();
+    let specs: Vec<_> = SPECS
+        .iter()
+        .map(|s| (s.path, s.unit, s.min, s.max))
+        .collect();
+    assert_eq!(numeric, specs);
+}

@@ -20,7 +20,8 @@
 //!
 //! - `reader`: [`LineReader`] (bytes to lines).
 //! - `command`: [`parse`] (a line to a [`Command`]), [`ErrorCode`].
-//! - `params`: [`PARAMS`] (the one parameter table: paths, units, ranges), [`with_value`].
+//! - `params`: [`PARAMS`] (the one parameter table: each path's field in the settings; its units
+//!   and ranges from the leaf [`crate::settings`]), [`with_value`].
 //! - `exec`: [`Device`] (what a device offers), [`execute`] (a line to its reply).
 
 use core::fmt::{self, Write};

@@ -1,6 +1,8 @@
 //! The parameter table: every settable path with its unit, range and access; reading and setting one, and a whole set validated.
 
 use super::*;
+pub use crate::settings::range;
+use crate::settings::spec;
 
 /// The controller settings the protocol edits (the firmware's whole parameter set).
 pub type Settings = ControllerParams<6>;
@@ -45,83 +47,74 @@ pub struct Param {
     pub access: Access,
 }
 
+/// A numeric parameter: its unit and range from [`crate::settings::SPECS`], its field here.
 macro_rules! num {
-    ($path:literal, $unit:literal, $min:expr, $max:expr, |$s:ident| $field:expr) => {
+    ($path:literal, |$s:ident| $field:expr) => {
         Param {
             path: $path,
-            unit: $unit,
+            unit: spec($path).unit,
             access: Access::Number {
                 get: |$s: &Settings| $field,
                 set: |$s: &mut Settings, v: f32| $field = v,
-                min: $min,
-                max: $max,
-                integer: false,
+                min: spec($path).min,
+                max: spec($path).max,
+                integer: spec($path).integer,
             },
         }
     };
 }
 
-/// Every parameter, in `list` order. Ranges are the protocol's; the whole set must also pass
+/// Every parameter, in `list` order: its path and field (units and ranges are
+/// [`crate::settings::SPECS`]'s); the whole set must also pass
 /// [`ControllerParams::validate`].
 pub const PARAMS: &[Param] = &[
-    num!("rate.pos_hz", "Hz", 100.0, 50_000.0, |s| s.pos_rate_hz),
-    num!("rate.cur_hz", "Hz", 100.0, 100_000.0, |s| s.cur_rate_hz),
-    num!("pos.kp", "N·m/rad", 0.0, 1e3, |s| s.pid.kp),
-    num!("pos.ki", "N·m/(rad·s)", 0.0, 1e6, |s| s.pid.ki),
-    num!("pos.kd", "N·m·s/rad", 0.0, 1e3, |s| s.pid.kd),
-    num!("pos.d_filter_hz", "Hz", 1.0, 1e5, |s| s.pid.d_filter_hz),
-    num!("pos.i_limit", "N·m", 0.0, 1e3, |s| s.pid.i_limit),
-    num!("cur.kp", "V/A", 0.0, 1e4, |s| s.current.kp),
-    num!("cur.ki", "V/(A·s)", 0.0, 1e8, |s| s.current.ki),
-    num!("motor.k_m", "N·m/A", 1e-6, 10.0, |s| s.motor.k_m),
-    num!("motor.r", "ohm", 0.0, 1e4, |s| s.motor.r),
-    num!("motor.k_e", "V·s/rad", 0.0, 10.0, |s| s.motor.k_e),
-    num!("lim.i_max", "A", 1e-6, 100.0, |s| s.i_max),
-    num!("lim.v_supply", "V", 0.1, 1e3, |s| s.v_supply),
-    num!("lim.pos_min", "rad", -1e5, 1e5, |s| s.pos_min),
-    num!("lim.pos_max", "rad", -1e5, 1e5, |s| s.pos_max),
-    num!("enc.dir", "-", -1.0, 1.0, |s| s.enc_dir),
-    num!("enc.counts_per_rev", "count/rev", 4.0, 1e10, |s| s
-        .counts_per_rev),
-    num!("sense.dir", "-", -1.0, 1.0, |s| s.sense_dir),
-    num!("sense.v_per_a", "V/A", 1e-3, 1e3, |s| s.sense_v_per_a),
+    num!("rate.pos_hz", |s| s.pos_rate_hz),
+    num!("rate.cur_hz", |s| s.cur_rate_hz),
+    num!("pos.kp", |s| s.pid.kp),
+    num!("pos.ki", |s| s.pid.ki),
+    num!("pos.kd", |s| s.pid.kd),
+    num!("pos.d_filter_hz", |s| s.pid.d_filter_hz),
+    num!("pos.i_limit", |s| s.pid.i_limit),
+    num!("cur.kp", |s| s.current.kp),
+    num!("cur.ki", |s| s.current.ki),
+    num!("motor.k_m", |s| s.motor.k_m),
+    num!("motor.r", |s| s.motor.r),
+    num!("motor.k_e", |s| s.motor.k_e),
+    num!("lim.i_max", |s| s.i_max),
+    num!("lim.v_supply", |s| s.v_supply),
+    num!("lim.pos_min", |s| s.pos_min),
+    num!("lim.pos_max", |s| s.pos_max),
+    num!("enc.dir", |s| s.enc_dir),
+    num!("enc.counts_per_rev", |s| s.counts_per_rev),
+    num!("sense.dir", |s| s.sense_dir),
+    num!("sense.v_per_a", |s| s.sense_v_per_a),
     Param {
         path: "ff.mode",
         unit: "-",
         access: Access::Mode,
     },
-    num!("ff.gain", "-", 0.0, 2.0, |s| s.ff.gain),
-    num!("ff.inertia", "kg·m^2", 0.0, 1.0, |s| s.motor.inertia),
-    num!("ff.static_band", "rad/s", 0.0, 1e3, |s| s.ff.static_band),
-    num!("ff.adapt.gain", "1/s", 0.0, 1e4, |s| s.ff.adapt.gain),
-    num!("ff.adapt.min", "-", 0.0, 10.0, |s| s.ff.adapt.min),
-    num!("ff.adapt.max", "-", 0.0, 10.0, |s| s.ff.adapt.max),
-    num!("ff.adapt.deadzone", "N·m", 0.0, 1e3, |s| s
-        .ff
-        .adapt
-        .deadzone),
-    num!("ff.adapt.vmin", "rad/s", 0.0, 1e4, |s| s.ff.adapt.v_min),
+    num!("ff.gain", |s| s.ff.gain),
+    num!("ff.inertia", |s| s.motor.inertia),
+    num!("ff.static_band", |s| s.ff.static_band),
+    num!("ff.adapt.gain", |s| s.ff.adapt.gain),
+    num!("ff.adapt.min", |s| s.ff.adapt.min),
+    num!("ff.adapt.max", |s| s.ff.adapt.max),
+    num!("ff.adapt.deadzone", |s| s.ff.adapt.deadzone),
+    num!("ff.adapt.vmin", |s| s.ff.adapt.v_min),
     Param {
         path: "ff.adapt.scale",
         unit: "-",
         access: Access::Estimate(Estimate::AdaptScale),
     },
-    num!("gms.fs", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fs),
-    num!("gms.fc", "N·m", 0.0, 10.0, |s| s.ff.actuator.stribeck.fc),
-    num!("gms.vs", "rad/s", 1e-9, 1e4, |s| s.ff.actuator.stribeck.vs),
-    num!("gms.delta", "-", 0.01, 10.0, |s| s
-        .ff
-        .actuator
-        .stribeck
-        .delta),
-    num!("gms.sigma", "N·m·s/rad", 0.0, 10.0, |s| s
-        .ff
-        .actuator
-        .sigma),
-    num!("gms.c", "N·m/s", 1e-12, 1e6, |s| s.ff.actuator.c),
+    num!("gms.fs", |s| s.ff.actuator.stribeck.fs),
+    num!("gms.fc", |s| s.ff.actuator.stribeck.fc),
+    num!("gms.vs", |s| s.ff.actuator.stribeck.vs),
+    num!("gms.delta", |s| s.ff.actuator.stribeck.delta),
+    num!("gms.sigma", |s| s.ff.actuator.sigma),
+    num!("gms.c", |s| s.ff.actuator.c),
     Param {
         path: "gms.blocks",
-        unit: "-",
+        unit: spec("gms.blocks").unit,
         access: Access::Number {
             get: |s: &Settings| s.ff.actuator.blocks_used() as f32,
             // The blocks past the count become unused (k = alpha = 0); those kept keep their
@@ -129,60 +122,24 @@ pub const PARAMS: &[Param] = &[
             set: |s: &mut Settings, v: f32| {
                 s.ff.actuator = s.ff.actuator.with_blocks_used(v as usize);
             },
-            min: 1.0,
-            max: 6.0,
-            integer: true,
+            min: spec("gms.blocks").min,
+            max: spec("gms.blocks").max,
+            integer: spec("gms.blocks").integer,
         },
     },
-    num!("gms.k1", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[0]
-        .k),
-    num!("gms.k2", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[1]
-        .k),
-    num!("gms.k3", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[2]
-        .k),
-    num!("gms.k4", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[3]
-        .k),
-    num!("gms.k5", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[4]
-        .k),
-    num!("gms.k6", "N·m/rad", 0.0, 1e9, |s| s.ff.actuator.blocks[5]
-        .k),
-    num!("gms.a1", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[0].alpha),
-    num!("gms.a2", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[1].alpha),
-    num!("gms.a3", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[2].alpha),
-    num!("gms.a4", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[3].alpha),
-    num!("gms.a5", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[4].alpha),
-    num!("gms.a6", "-", 0.0, 1.0, |s| s.ff.actuator.blocks[5].alpha),
+    num!("gms.k1", |s| s.ff.actuator.blocks[0].k),
+    num!("gms.k2", |s| s.ff.actuator.blocks[1].k),
+    num!("gms.k3", |s| s.ff.actuator.blocks[2].k),
+    num!("gms.k4", |s| s.ff.actuator.blocks[3].k),
+    num!("gms.k5", |s| s.ff.actuator.blocks[4].k),
+    num!("gms.k6", |s| s.ff.actuator.blocks[5].k),
+    num!("gms.a1", |s| s.ff.actuator.blocks[0].alpha),
+    num!("gms.a2", |s| s.ff.actuator.blocks[1].alpha),
+    num!("gms.a3", |s| s.ff.actuator.blocks[2].alpha),
+    num!("gms.a4", |s| s.ff.actuator.blocks[3].alpha),
+    num!("gms.a5", |s| s.ff.actuator.blocks[4].alpha),
+    num!("gms.a6", |s| s.ff.actuator.blocks[5].alpha),
 ];
-
-const fn str_eq(a: &str, b: &str) -> bool {
-    let (a, b) = (a.as_bytes(), b.as_bytes());
-    if a.len() != b.len() {
-        return false;
-    }
-    let mut i = 0;
-    while i < a.len() {
-        if a[i] != b[i] {
-            return false;
-        }
-        i += 1;
-    }
-    true
-}
-
-/// The range `(min, max)` of the numeric parameter `path` in [`PARAMS`], for use in constant
-/// context only (`const { range("pos.kp") }`): an unknown path fails the build.
-pub const fn range(path: &str) -> (f32, f32) {
-    let mut i = 0;
-    while i < PARAMS.len() {
-        if str_eq(PARAMS[i].path, path)
-            && let Access::Number { min, max, .. } = PARAMS[i].access
-        {
-            return (min, max);
-        }
-        i += 1;
-    }
-    panic!("not a numeric parameter of the table")
-}
 
 /// The parameter with this path.
 pub fn find(path: &str) -> Option<&'static Param> {
