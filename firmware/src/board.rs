@@ -32,7 +32,7 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, pac, peripherals};
 use f4_regs::{clock, pwm, sense};
-use gms_core::drive::{self, Deadman, Stall};
+use gms_core::drive;
 
 #[cfg(feature = "board-f405")]
 bind_interrupts!(struct Irqs {
@@ -413,39 +413,6 @@ pub fn start_control() {
         interrupt::TIM8_UP_TIM13.enable();
         interrupt::ADC.enable();
         interrupt::DMA2_STREAM0.enable();
-    }
-}
-
-/// The control interrupt: the current samples of this PWM period are in — or the sense DMA
-/// failed, which switches the bridge off for good.
-#[interrupt]
-fn DMA2_STREAM0() {
-    static mut LOOP: Option<crate::control::Loop> = None;
-    let error = sense::dma_error(pac::DMA2);
-    if error != Stall::None {
-        sense::ack(pac::DMA2);
-        crate::control::trip(error);
-        return;
-    }
-    crate::control::on_sample(LOOP);
-}
-
-/// The deadman, once per PWM period at TIM8's update (the counter's bottom, before the
-/// period's step): two periods without a step switch the bridge off (gms-core's
-/// `drive::Deadman`); after a trip the update interrupt is switched off.
-#[interrupt]
-fn TIM8_UP_TIM13() {
-    static mut DEADMAN: Deadman = Deadman::new();
-    if pwm::deadman_tick(pac::TIM8, DEADMAN, crate::control::steps()) {
-        crate::control::trip(Stall::NoStep);
-    }
-}
-
-/// The sense ADC overran: the bridge off for good, the interrupt off (its flag cleared).
-#[interrupt]
-fn ADC() {
-    if sense::adc_overrun(pac::ADC1) != Stall::None {
-        crate::control::trip(Stall::AdcOverrun);
     }
 }
 

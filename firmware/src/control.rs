@@ -27,6 +27,10 @@ use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
 use gms_core::drive::{Faults, Stall};
 use static_cell::ConstStaticCell;
 
+use embassy_stm32::{interrupt, pac};
+use f4_regs::{pwm, sense};
+use gms_core::drive::Deadman;
+
 use crate::board::ControlHw;
 use crate::irq::IrqOffRawMutex;
 
@@ -181,5 +185,41 @@ pub fn on_sample(slot: &mut Option<Loop>) {
         Some(l) => l.step(),
         // Not handed over yet: keep the bridge off and the flag clear.
         None => crate::board::idle_sample(),
+    }
+}
+
+// The interrupt handlers of the control path live here, beside the loop they run: `board.rs`
+// sets up their hardware and priorities (`start_control`) and never calls into this module.
+
+/// The control interrupt: the current samples of this PWM period are in — or the sense DMA
+/// failed, which switches the bridge off for good.
+#[interrupt]
+fn DMA2_STREAM0() {
+    static mut LOOP: Option<Loop> = None;
+    let error = sense::dma_error(pac::DMA2);
+    if error != Stall::None {
+        sense::ack(pac::DMA2);
+        trip(error);
+        return;
+    }
+    on_sample(LOOP);
+}
+
+/// The deadman, once per PWM period at TIM8's update (the counter's bottom, before the
+/// period's step): two periods without a step switch the bridge off (gms-core's
+/// `drive::Deadman`); after a trip the update interrupt is switched off.
+#[interrupt]
+fn TIM8_UP_TIM13() {
+    static mut DEADMAN: Deadman = Deadman::new();
+    if pwm::deadman_tick(pac::TIM8, DEADMAN, steps()) {
+        trip(Stall::NoStep);
+    }
+}
+
+/// The sense ADC overran: the bridge off for good, the interrupt off (its flag cleared).
+#[interrupt]
+fn ADC() {
+    if sense::adc_overrun(pac::ADC1) != Stall::None {
+        trip(Stall::AdcOverrun);
     }
 }
