@@ -11,7 +11,7 @@ use crate::client::{
     check_faults, get_param, guarded, hold_current, means, narrow_limits, position, primitive,
     rad_per_count, scales_line, timed_run,
 };
-use crate::estimate::{inductance_from_step, inertia_from_pulse, local_parabolas};
+use crate::estimate::{inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope};
 use crate::settings::restoring;
 
 /// What commissioning measured and decided.
@@ -349,29 +349,19 @@ pub(crate) fn commission_steps(
             if rows.len() < 2 {
                 return Err(Error::Device("an empty capture".into()));
             }
-            // The speed: the least-squares slope of the position (every sample, so that a
-            // coarse encoder's counts average out rather than only the two ends').
+            // The speed: the least-squares slope of the position.
             let m = means(&rows);
-            let (mut stt, mut stx) = (0.0, 0.0);
-            for r in &rows {
-                stt += (r[0] - m[0]).powi(2);
-                stx += (r[0] - m[0]) * (r[1] - m[1]);
-            }
-            let w = stx / stt.max(dt * dt);
+            let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+            let x: Vec<f64> = rows.iter().map(|r| r[1]).collect();
+            let w = ls_slope(&t, &x, dt * dt).unwrap_or(0.0);
             pts.push((w, m[3] - c.r * m[2]));
         }
     }
-    let n = pts.len() as f64;
-    let (mw, me) = (
-        pts.iter().map(|p| p.0).sum::<f64>() / n,
-        pts.iter().map(|p| p.1).sum::<f64>() / n,
-    );
-    let sww = pts.iter().map(|p| (p.0 - mw).powi(2)).sum::<f64>();
-    let swe = pts.iter().map(|p| (p.0 - mw) * (p.1 - me)).sum::<f64>();
-    if sww <= 0.0 {
-        return Err(Error::Device("the speed runs did not move the axis".into()));
-    }
-    c.k_e = swe / sww;
+    let (w, e): (Vec<f64>, Vec<f64>) = pts.iter().copied().unzip();
+    c.k_e = match ls_slope(&w, &e, f64::MIN_POSITIVE) {
+        Some(k) if w.iter().any(|x| *x != w[0]) => k,
+        _ => return Err(Error::Device("the speed runs did not move the axis".into())),
+    };
     c.lines.push(format!(
         "back-EMF constant: {} from {} runs up to {} rad/s (k_M = k_e in SI)",
         si(c.k_e, "V·s/rad"),

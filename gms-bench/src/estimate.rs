@@ -41,6 +41,28 @@ pub fn local_parabolas(t: &[f64], y: &[f64], h: usize) -> Vec<(f64, f64, f64, us
     out
 }
 
+/// The least-squares slope of `y` against `x` (a line through the points' centroid):
+/// `Σ(x − x̄)(y − ȳ) / max(Σ(x − x̄)², min_sxx)`. The speed of a constant-speed run from its
+/// position samples (every sample, so that a coarse encoder's counts average out rather than
+/// only the two ends'), the back-EMF constant from (speed, V − R i) points. `None` without
+/// points.
+pub fn ls_slope(x: &[f64], y: &[f64], min_sxx: f64) -> Option<f64> {
+    let n = x.len().min(y.len());
+    if n == 0 {
+        return None;
+    }
+    let (mx, my) = (
+        x[..n].iter().sum::<f64>() / n as f64,
+        y[..n].iter().sum::<f64>() / n as f64,
+    );
+    let (mut sxx, mut sxy) = (0.0, 0.0);
+    for i in 0..n {
+        sxx += (x[i] - mx).powi(2);
+        sxy += (x[i] - mx) * (y[i] - my);
+    }
+    Some(sxy / sxx.max(min_sxx))
+}
+
 /// The reflected inertia \[kg·m²\] from one current pulse of `pulse` \[s\] that starts at
 /// t = 0 and the coast after it: `samples` are `(t [s], speed [rad/s], acceleration [rad/s²],
 /// current [A])` along the motion's direction. Friction is the same during the pulse and the
@@ -143,6 +165,32 @@ pub fn inductance_from_step(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A line's slope exactly; with noise, the slope of the least-squares line (checked
+    /// against the normal equations solved independently); no points, none.
+    #[test]
+    fn least_squares_slopes() {
+        let x: Vec<f64> = (0..50).map(|i| 0.1 + i as f64 * 2e-3).collect();
+        let y: Vec<f64> = x.iter().map(|x| 3.0 - 0.75 * x).collect();
+        assert!((ls_slope(&x, &y, 0.0).unwrap() + 0.75).abs() < 1e-12);
+        let yn: Vec<f64> = y
+            .iter()
+            .enumerate()
+            .map(|(i, y)| y + 1e-3 * ((i * 7919 % 13) as f64 - 6.0))
+            .collect();
+        // Normal equations of y = a + b x: [n Σx; Σx Σx²] [a b] = [Σy Σxy].
+        let n = x.len() as f64;
+        let (sx, sxx) = (x.iter().sum::<f64>(), x.iter().map(|x| x * x).sum::<f64>());
+        let (sy, sxy) = (
+            yn.iter().sum::<f64>(),
+            x.iter().zip(&yn).map(|(x, y)| x * y).sum::<f64>(),
+        );
+        let b = (n * sxy - sx * sy) / (n * sxx - sx * sx);
+        assert!((ls_slope(&x, &yn, 0.0).unwrap() - b).abs() < 1e-9 * b.abs());
+        assert_eq!(ls_slope(&[], &[], 0.0), None);
+        // A single instant: the floor keeps the slope finite.
+        assert_eq!(ls_slope(&[1.0, 1.0], &[0.0, 2.0], 1e-8), Some(0.0));
+    }
 
     /// A parabola's speed and acceleration are found exactly at every sample.
     #[test]

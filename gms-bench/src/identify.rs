@@ -106,27 +106,35 @@ pub fn identify_on<B: Bench>(
             Ok(_) => kept(),
             Err(w) => format!("the bridge is off; the data could not be written: {w}"),
         };
-        return Err(match e {
-            Error::Device(m) => Error::Device(format!("{m}; {kept}")),
-            Error::Params(m) => Error::Params(format!("{m}; {kept}")),
-            Error::Data(m) => Error::Data(format!("{m}; {kept}")),
-            Error::Io(m) => Error::Io(format!("{m}; {kept}")),
-            Error::Link(m) => Error::Link(format!("{m}; {kept}")),
-            Error::Faulted { faults, during } => Error::Faulted {
-                faults,
-                during: Some(match during {
-                    Some(d) => format!("{d}; {kept}"),
-                    None => kept,
-                }),
-            },
-            e @ Error::Refused(_) => Error::Device(format!("{e}; {kept}")),
-        });
+        return Err(e.with_note(&kept));
     }
     let (pre, slide, lag) = written.map_err(Error::Io)?;
-    let mut id = gms_ident::identify::identify_from(&gms_ident::identify::Inputs {
+    // The fits on the gathered arrays (the CSVs hold the same numbers: f64's shortest
+    // decimal reads back exactly); their names in messages are the files'.
+    use gms_ident::identify::{Data, Table, identify_data};
+    let (xs, fs): (Vec<f64>, Vec<f64>) = g.presliding.iter().copied().unzip();
+    let (vs, fv): (Vec<f64>, Vec<f64>) = g.sliding.iter().copied().unzip();
+    // The load's direction, as `presliding_csv` writes it.
+    let dir: Vec<f64> = fs
+        .iter()
+        .map(|f| if *f < 0.0 { -1.0 } else { 1.0 })
+        .collect();
+    let pre = Table {
+        name: pre.display().to_string(),
+        cols: vec![xs, fs, dir],
+    };
+    let slide = Table {
+        name: slide.display().to_string(),
+        cols: vec![vs, fv],
+    };
+    let lag = lag.zip(g.lag.as_ref()).map(|(p, (t, x, f))| Table {
+        name: p.display().to_string(),
+        cols: vec![t.clone(), x.clone(), f.clone()],
+    });
+    let mut id = identify_data(&Data {
         presliding: Some(&pre),
         sliding: Some(&slide),
-        lag: lag.as_deref(),
+        lag: lag.as_ref(),
         blocks,
         asymmetric,
     })?;
@@ -140,65 +148,6 @@ pub fn identify_on<B: Bench>(
     Ok((g, id))
 }
 
-/// Sends a parameter file to the device: its `[friction]` (a GMS model of 1 to 6 blocks, the
-/// compensator's) as `gms.*` (with `gms.blocks` when fewer than 6), its `[device]` table by protocol path, staged and committed as
-/// one set (weights that must sum to 1 cannot change one `set` at a time), so the device
-/// takes all or nothing. A firmware without staging gets one `set` at a time, retried while
-/// that makes progress. Returns the number of parameters sent.
-pub fn load_params(
-    b: &mut impl Bench,
-    pf: &gms_ident::paramfile::ParamFile,
-) -> Result<usize, Error> {
-    use gms_ident::paramfile::ModelKind;
-    let f = &pf.friction;
-    let n = f.blocks.as_ref().map_or(0, Vec::len);
-    if f.negative.is_some() {
-        return Err(Error::Params(
-            "[friction.negative]: the device's compensator has one Stribeck curve for both \
-             directions; nothing loaded (fit without --asymmetric, or remove the table)"
-                .into(),
-        ));
-    }
-    if f.model != ModelKind::Gms || !(1..=6).contains(&n) {
-        return Err(Error::Params(format!(
-            "[friction] must be a gms model of 1 to 6 blocks for the device's compensator \
-             (it is {} with {n} blocks)",
-            f.model
-        )));
-    }
-    f.gms_params::<6>()
-        .map_err(|e| e.to_string())
-        .and_then(|p| p.validate().map_err(|e| e.to_string()))
-        .map_err(|e| Error::Params(format!("[friction] {e}")))?;
-    let mut sets: Vec<(String, String)> = Vec::new();
-    if n < 6 {
-        // First: the blocks past n become unused, then the n blocks are set.
-        sets.push(("gms.blocks".into(), format!("{n}")));
-    }
-    for (k, v) in [
-        ("fs", f.fs),
-        ("fc", f.fc),
-        ("vs", f.vs),
-        ("delta", f.delta.or(Some(1.0))),
-        ("sigma", f.sigma.or(Some(0.0))),
-        ("c", f.c),
-    ] {
-        if let Some(v) = v {
-            sets.push((format!("gms.{k}"), format!("{v}")));
-        }
-    }
-    for (i, blk) in f.blocks.iter().flatten().enumerate() {
-        sets.push((format!("gms.k{}", i + 1), format!("{}", blk.k)));
-        sets.push((format!("gms.a{}", i + 1), format!("{}", blk.alpha)));
-    }
-    for (k, v) in pf.device.iter().flatten() {
-        let v = match v {
-            toml::Value::Float(x) => format!("{x}"),
-            toml::Value::Integer(x) => format!("{x}"),
-            toml::Value::String(s) => s.clone(),
-            _ => return Err(Error::Params(format!("[device] `{k}` is not a value"))),
-        };
-        sets.push((k.clone(), v));
-    }
-    crate::settings::apply(b, &sets, false)
-}
+/// Loads a parameter file into a device (see [`crate::paramfile::load`]: the one mapping
+/// between files and settings).
+pub use crate::paramfile::load as load_params;

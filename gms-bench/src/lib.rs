@@ -10,6 +10,7 @@
 //!   bridge off on failure).
 //! - [`experiments`]: the paper's sliding, pre-sliding and frictional-lag runs, their plans.
 //! - [`identify`]: the whole identification on a device, loading a parameter file.
+//! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
 //! - [`settings`]: the device's settings as one typed value, and the snapshot that puts them
 //!   back around every run ([`settings::restoring`]).
 //! - [`tune_ff`]: the feedforward gain from repeated sine tests.
@@ -25,6 +26,7 @@ pub mod commission;
 pub mod estimate;
 pub mod experiments;
 pub mod identify;
+pub mod paramfile;
 pub mod settings;
 pub mod tune_ff;
 

@@ -165,28 +165,8 @@ pub fn restoring<B: Bench, T>(
             "the run ended, but the settings could not be put back: {e}"
         ))),
         (Err(e), Ok(_)) => Err(e),
-        (Err(e), Err(back)) => Err(with_note(
-            e,
-            &format!("the settings could not be put back: {back}"),
-        )),
-    }
-}
-
-/// `e` with a note added to its message, its kind kept.
-fn with_note(e: Error, note: &str) -> Error {
-    match e {
-        Error::Data(m) => Error::Data(format!("{m}; {note}")),
-        Error::Params(m) => Error::Params(format!("{m}; {note}")),
-        Error::Io(m) => Error::Io(format!("{m}; {note}")),
-        Error::Link(m) => Error::Link(format!("{m}; {note}")),
-        Error::Device(m) => Error::Device(format!("{m}; {note}")),
-        Error::Faulted { faults, during } => Error::Faulted {
-            faults,
-            during: Some(match during {
-                Some(d) => format!("{d}; {note}"),
-                None => note.to_string(),
-            }),
-        },
-        e @ Error::Refused(_) => Error::Device(format!("{e}; {note}")),
+        (Err(e), Err(back)) => {
+            Err(e.with_note(&format!("the settings could not be put back: {back}")))
+        }
     }
 }

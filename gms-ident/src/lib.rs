@@ -116,6 +116,26 @@ impl Error {
         matches!(self, Error::Refused(r) if r.is(code))
     }
 
+    /// The error with `note` added to its message (after `; `), its kind kept (a refusal
+    /// becomes [`Error::Device`]: its code no longer describes the whole).
+    pub fn with_note(self, note: &str) -> Error {
+        match self {
+            Error::Data(m) => Error::Data(format!("{m}; {note}")),
+            Error::Params(m) => Error::Params(format!("{m}; {note}")),
+            Error::Io(m) => Error::Io(format!("{m}; {note}")),
+            Error::Link(m) => Error::Link(format!("{m}; {note}")),
+            Error::Device(m) => Error::Device(format!("{m}; {note}")),
+            Error::Faulted { faults, during } => Error::Faulted {
+                faults,
+                during: Some(match during {
+                    Some(d) => format!("{d}; {note}"),
+                    None => note.to_string(),
+                }),
+            },
+            e @ Error::Refused(_) => Error::Device(format!("{e}; {note}")),
+        }
+    }
+
     /// The latched faults this error reports, if it is about them.
     pub fn faults(&self) -> Option<Faults> {
         match self {

@@ -137,3 +137,100 @@ fn stribeck_fit_recovers_table1_within_the_issue_tolerances() {
             .contains("too few")
     );
 }
+
+/// The identification on arrays and on the same numbers in CSV files (the other reader) give
+/// the same set; bad arrays get a one-line error naming the data.
+#[test]
+fn identification_on_arrays_is_the_files_identification() {
+    use gms_ident::identify::{Data, Inputs, Table, identify_data, identify_from};
+    let p = presets::table1();
+    let (fs, fc, vs) = (
+        p.stribeck.fs as f64,
+        p.stribeck.fc as f64,
+        p.stribeck.vs as f64,
+    );
+    let virgin = |x: f64| -> f64 {
+        p.blocks
+            .iter()
+            .map(|b| (b.k as f64 * x).min(b.alpha as f64 * fs))
+            .sum()
+    };
+    let xs: Vec<f64> = (1..120).map(|i| 3.8e-6 * 1.06f64.powi(i)).collect();
+    let fx: Vec<f64> = xs
+        .iter()
+        .enumerate()
+        .map(|(i, &x)| virgin(x) * (1.0 + 0.005 * noise(i)))
+        .collect();
+    let dir = vec![1.0; xs.len()];
+    let v: Vec<f64> = (0..30).map(|i| 0.01 * 1.25f64.powi(i)).collect();
+    let fv: Vec<f64> = v
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| {
+            (fc + (fs - fc) * (-(v / vs).powi(2)).exp() + 1e-5 * v) * (1.0 + 0.005 * noise(i + 7))
+        })
+        .collect();
+    let dirp = tempfile::tempdir().unwrap();
+    let (pre_p, slide_p) = (dirp.path().join("pre.csv"), dirp.path().join("slide.csv"));
+    let mut text = String::from("x,f,dir\n");
+    for i in 0..xs.len() {
+        text += &format!("{},{},{}\n", xs[i], fx[i], dir[i]);
+    }
+    std::fs::write(&pre_p, text).unwrap();
+    let mut text = String::from("v,f\n");
+    for i in 0..v.len() {
+        text += &format!("{},{}\n", v[i], fv[i]);
+    }
+    std::fs::write(&slide_p, text).unwrap();
+    let from_files = identify_from(&Inputs {
+        presliding: Some(&pre_p),
+        sliding: Some(&slide_p),
+        lag: None,
+        blocks: 6,
+        asymmetric: false,
+    })
+    .unwrap();
+    let pre = Table {
+        name: "pre-sliding".into(),
+        cols: vec![xs.clone(), fx.clone(), dir],
+    };
+    let slide = Table {
+        name: "sliding".into(),
+        cols: vec![v, fv],
+    };
+    let data = Data {
+        presliding: Some(&pre),
+        sliding: Some(&slide),
+        lag: None,
+        blocks: 6,
+        asymmetric: false,
+    };
+    let from_arrays = identify_data(&data).unwrap();
+    assert_eq!(from_arrays.spec, from_files.spec);
+    assert!((from_arrays.spec.fs.unwrap() / fs - 1.0).abs() < 0.02);
+    // A non-finite value, or columns of different lengths: refused, naming the data.
+    let bad = Table {
+        name: "pre-sliding".into(),
+        cols: vec![xs.clone(), vec![f64::NAN; xs.len()]],
+    };
+    let e = match identify_data(&Data {
+        presliding: Some(&bad),
+        ..data
+    }) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("a NaN was fitted"),
+    };
+    assert!(e.starts_with("pre-sliding: non-finite"), "{e}");
+    let short = Table {
+        name: "pre-sliding".into(),
+        cols: vec![xs, fx[..10].to_vec()],
+    };
+    let e = match identify_data(&Data {
+        presliding: Some(&short),
+        ..data
+    }) {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("columns of different lengths were fitted"),
+    };
+    assert!(e.contains("different lengths"), "{e}");
+}

@@ -4,13 +4,13 @@
 use gms_core::protocol::Command;
 use std::path::Path;
 
-use gms_bench::{commission, load_params};
+use gms_bench::load_params;
 use gms_ident::Error;
 use gms_tune::Link;
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::run::RunBench;
+use gms_tune::jobs::{self, Job, Outcome};
 
 /// Runs the commissioning; writes `out`; applies/saves on request.
 pub fn run(
@@ -21,17 +21,31 @@ pub fn run(
     save: bool,
     json: bool,
 ) -> Result<(), Fail> {
-    let pf = crate::device_params(link)?;
     let mut bar = Bar::new();
-    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
-    let r = commission(&mut bench, speed);
-    let link = bench.link;
-    let c = r.map_err(|e| match e {
-        Error::Params(m) => Fail::Usage(m),
-        e => Fail::Device(format!("{e}; the bridge is off, nothing changed")),
-    })?;
-    let (pf, text) = gms_tune::run::commissioned_file(&c, pf);
-    gms_ident::io::write_atomic(out, text.as_bytes()).map_err(|e| Fail::Usage(e.to_string()))?;
+    let r = jobs::run(
+        link,
+        Job::Commission {
+            speed,
+            out: Some(out.to_path_buf()),
+        },
+        ctrl_c(),
+        "interrupted (Ctrl-C)",
+        &mut bar,
+        &mut |_, _, _| {},
+    );
+    let (c, pf) = match r {
+        Ok(Outcome::Commissioned {
+            commissioned, file, ..
+        }) => (commissioned, *file),
+        Ok(_) => return Err(Fail::Device("the job gave no commissioning".into())),
+        Err(Error::Params(m)) => return Err(Fail::Usage(m)),
+        Err(Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(e) => {
+            return Err(Fail::Device(format!(
+                "{e}; the bridge is off, nothing changed"
+            )));
+        }
+    };
     if json {
         let settings: serde_json::Map<String, serde_json::Value> = c
             .settings()
@@ -65,7 +79,7 @@ pub fn run(
     }
     if apply || save {
         let n = load_params(link, &pf).map_err(|e| Fail::Device(e.to_string()))?;
-        eprintln!("loaded {n} parameters into the device");
+        eprintln!("loaded into the device ({n} parameters changed)");
         if save {
             link.ask(Command::Save)?;
             eprintln!("saved");

@@ -13,7 +13,7 @@ use gms_tune::Link;
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::run::RunBench;
+use gms_tune::jobs::{self, Job, Outcome};
 
 /// What `gms-tune identify` is asked.
 pub struct Args {
@@ -74,21 +74,31 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     );
     let started = Instant::now();
     let mut bar = Bar::new();
-    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
-    let r = gms_bench::identify_on(
-        &mut bench,
-        &plans,
-        &a.report,
-        a.blocks,
-        a.asymmetric,
-        &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
+    let r = jobs::run(
+        link,
+        Job::Identify {
+            ranges: a.ranges.clone(),
+            report: a.report.clone(),
+            out: Some(a.out.clone()),
+            blocks: a.blocks,
+            asymmetric: a.asymmetric,
+        },
+        ctrl_c(),
+        "interrupted (Ctrl-C)",
+        &mut bar,
+        &mut |_, _, _| {},
     );
-    let link = bench.link;
     bar.bar.finish_and_clear();
-    let (g, id) = r.map_err(|e| match e {
-        Error::Params(m) => Fail::Usage(m),
-        e => Fail::Device(e.to_string()),
-    })?;
+    let (g, id) = match r {
+        Ok(Outcome::Identified {
+            gathered,
+            identified,
+            ..
+        }) => (gathered, identified),
+        Ok(_) => return Err(Fail::Device("the job gave no identification".into())),
+        Err(Error::Params(m)) => return Err(Fail::Usage(m)),
+        Err(e) => return Err(Fail::Device(e.to_string())),
+    };
     eprintln!(
         "experiments done in {:.1} s: {} pre-sliding points, {} sliding points, {} lag samples",
         started.elapsed().as_secs_f64(),
@@ -96,8 +106,6 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         g.sliding.len(),
         g.lag.as_ref().map_or(0, |l| l.0.len())
     );
-    gms_tune::run::write_identified(&id, &a.report, Some(&a.out))
-        .map_err(|e| Fail::Usage(e.to_string()))?;
     if a.json {
         let v = serde_json::json!({
             "friction": id.spec,
@@ -118,7 +126,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     }
     if a.apply || a.save {
         let n = crate::load(link, &a.out)?;
-        eprintln!("loaded {n} parameters into the device");
+        eprintln!("loaded into the device ({n} parameters changed)");
         if a.save {
             link.ask(Command::Save)?;
             eprintln!("saved");

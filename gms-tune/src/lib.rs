@@ -1,6 +1,7 @@
 //! The bench tool's link to a device (`gms-tune`): a serial port or TCP, one request line at
 //! a time, replies read up to their `ok`/`err` line, telemetry (`#` lines) set aside.
 
+pub mod jobs;
 pub mod params;
 pub mod run;
 #[cfg(feature = "ui")]

@@ -4,7 +4,7 @@
 use gms_core::protocol::Command;
 use std::path::Path;
 
-use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
+use gms_ident::paramfile::ParamFile;
 
 use crate::{Link, LinkError};
 
@@ -55,56 +55,21 @@ pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
 }
 
 /// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
-/// and `[device]` (everything else settable, by protocol path).
+/// and `[device]` (everything else settable, by protocol path) ([`gms_bench::paramfile`]).
 pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
-    to_file(&list(link)?).map_err(LinkError::Device)
+    gms_bench::paramfile::dump(link).map_err(|e| LinkError::Device(e.to_string()))
 }
 
-/// The parameter file of a `list` (read-only estimates left out).
+/// The parameter file of a `list` (read-only estimates left out): the rows read into the
+/// device core's settings, then [`gms_bench::paramfile::file_of`].
 pub fn to_file(listed: &[Listed]) -> Result<ParamFile, String> {
-    let params: Vec<&Listed> = listed.iter().filter(|p| !p.read_only()).collect();
-    let num = |k: &str| {
-        params
-            .iter()
-            .find(|p| p.path == k)
-            .and_then(|p| p.value.parse::<f64>().ok())
-    };
-    // The blocks in use (`gms.blocks`; a firmware without it has all six), unused ones
-    // (k = alpha = 0) left out of the file.
-    let used = num("gms.blocks").map_or(6, |n| n as usize).clamp(1, 6);
-    let mut blocks = Vec::new();
-    for i in 1..=used {
-        match (num(&format!("gms.k{i}")), num(&format!("gms.a{i}"))) {
-            (Some(k), Some(alpha)) => blocks.push(BlockSpec { k, alpha }),
-            _ => return Err(format!("list has no gms.k{i}/gms.a{i}")),
-        }
-    }
-    let friction = FrictionSpec {
-        model: ModelKind::Gms,
-        fs: num("gms.fs"),
-        fc: num("gms.fc"),
-        vs: num("gms.vs"),
-        delta: num("gms.delta"),
-        sigma: num("gms.sigma"),
-        c: num("gms.c"),
-        blocks: Some(blocks),
-        ..FrictionSpec::default()
-    };
-    let mut device = toml::Table::new();
-    for p in &params {
-        if p.path.starts_with("gms.") {
-            continue;
-        }
-        let value = match p.value.parse::<f64>() {
-            Ok(x) => toml::Value::Float(x),
-            Err(_) => toml::Value::String(p.value.clone()),
-        };
-        device.insert(p.path.clone(), value);
-    }
-    Ok(ParamFile {
-        friction,
-        device: Some(device),
-    })
+    let lines: Vec<String> = listed
+        .iter()
+        .filter(|p| !p.read_only())
+        .map(|p| format!("{} {}", p.path, p.value))
+        .collect();
+    let s = gms_bench::settings::parse_list(&lines).map_err(|e| e.to_string())?;
+    Ok(gms_bench::paramfile::file_of(&s))
 }
 
 /// Why a parameter file was not loaded.

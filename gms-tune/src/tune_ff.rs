@@ -6,13 +6,13 @@
 use gms_core::protocol::Command;
 use std::path::PathBuf;
 
-use gms_bench::{TUNE_FF_FLAT_SE, TuneFfPlan, tune_ff};
+use gms_bench::{TUNE_FF_FLAT_SE, TuneFfPlan};
 use gms_tune::Link;
 use gms_tune::run::{tune_ff_json, tune_ff_summary};
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::run::RunBench;
+use gms_tune::jobs::{self, Job, Outcome};
 
 /// What `gms-tune tune-ff` is asked.
 pub struct Args {
@@ -55,51 +55,33 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     }
     let rpc = gms_bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let mut bar = Bar::new();
-    let mut bench = RunBench::new(link, ctrl_c(), "interrupted (Ctrl-C)", &mut bar);
-    bench.stage("tune-ff", seconds);
     let quiet = a.json;
-    let r = tune_ff(&mut bench, &a.plan, |i, g, rms| {
-        if !quiet {
-            println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / rpc)
-        }
-    });
-    let link = bench.link;
+    let r = jobs::run(
+        link,
+        Job::TuneFf {
+            plan: a.plan.clone(),
+            out: Some(a.out.clone()),
+        },
+        ctrl_c(),
+        "interrupted (Ctrl-C)",
+        &mut bar,
+        &mut |i, g, rms| {
+            if !quiet {
+                println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / rpc)
+            }
+        },
+    );
     bar.bar.finish_and_clear();
-    let t = r.map_err(|e| Fail::Device(format!("{e}; the bridge is off, ff.gain as it was")))?;
-    let mut csv = String::from("gain,rms_rad\n");
-    for (g, r) in &t.curve {
-        csv += &format!("{g},{r}\n");
-    }
-    gms_ident::io::write_atomic(&a.out.join("curve.csv"), csv.as_bytes())
-        .map_err(|e| Fail::Usage(e.to_string()))?;
-    let pts: Vec<(f64, f64)> = t.curve.iter().map(|(g, r)| (*g, r / rpc)).collect();
-    // The fitted parabola (RMS = √(mean square)) over the refinement's window.
-    let fit: Vec<(f64, f64)> = match t.optimum {
-        Some(o) => (0..=60)
-            .map(|i| {
-                let g = t.window.0 + (t.window.1 - t.window.0) * i as f64 / 60.0;
-                let ms = o.min + o.curvature * (g - o.at).powi(2);
-                (g, ms.max(0.0).sqrt() / rpc)
-            })
-            .collect(),
-        None => Vec::new(),
+    let t = match r {
+        Ok(Outcome::TunedFf(t)) => t,
+        Ok(_) => return Err(Fail::Device("the job gave no tuning".into())),
+        Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(e) => {
+            return Err(Fail::Device(format!(
+                "{e}; the bridge is off, ff.gain as it was"
+            )));
+        }
     };
-    let title = match t.optimum {
-        Some(o) if t.decided => format!(
-            "tune-ff: sine RMS error against ff.gain; optimum {:.3} ± {:.3}",
-            o.at,
-            o.half_width()
-        ),
-        _ => "tune-ff: sine RMS error against ff.gain; no clear optimum".to_string(),
-    };
-    gms_ident::plot::fit_plot(
-        &a.out.join("curve.svg"),
-        &title,
-        ("ff.gain [-]", "RMS error [counts]"),
-        &pts,
-        &fit,
-    )
-    .map_err(Fail::Usage)?;
     if a.json {
         println!("{}", tune_ff_json(&t));
     } else {

@@ -181,7 +181,10 @@ impl Device {
             ..Default::default()
         };
         plan.check().map_err(err)?;
-        let t = self.run_bench(|b| gms_bench::tune_ff(b, &plan, |_, _, _| {}))?;
+        let t = match self.run_job(gms_tune::jobs::Job::TuneFf { plan, out: None })? {
+            gms_tune::jobs::Outcome::TunedFf(t) => t,
+            _ => return Err(err("the job gave no tuning")),
+        };
         let d = PyDict::new(py);
         d.set_item("curve", t.curve.clone())?;
         d.set_item("chosen", t.chosen)?;
@@ -197,7 +200,10 @@ impl Device {
     /// "settings": {protocol path: value}}; nothing applied (send the settings to apply).
     #[pyo3(signature = (speed = 1.0))]
     fn commission<'py>(&mut self, py: Python<'py>, speed: f64) -> PyResult<Bound<'py, PyDict>> {
-        let c = self.run_bench(|b| gms_bench::commission(b, speed))?;
+        let c = match self.run_job(gms_tune::jobs::Job::Commission { speed, out: None })? {
+            gms_tune::jobs::Outcome::Commissioned { commissioned, .. } => commissioned,
+            _ => return Err(err("the job gave no commissioning")),
+        };
         let d = PyDict::new(py);
         d.set_item("lines", c.lines.clone())?;
         let s = PyDict::new(py);
@@ -219,12 +225,22 @@ impl Device {
         report: PathBuf,
         blocks: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let dev = gms_bench::DeviceInfo::read(&mut self.link).map_err(err)?;
-        let plans = gms_bench::Plans::new(&dev, &gms_bench::Ranges::default()).map_err(err)?;
-        let (g, id) = self.run_bench(|b| {
-            gms_bench::identify_on(b, &plans, &report, blocks, false, &mut |_, _, _| {})
-        })?;
-        let (_, text) = gms_tune::run::write_identified(&id, &report, None).map_err(err)?;
+        let job = gms_tune::jobs::Job::Identify {
+            ranges: gms_bench::Ranges::default(),
+            report,
+            out: None,
+            blocks,
+            asymmetric: false,
+        };
+        let (g, id, text) = match self.run_job(job)? {
+            gms_tune::jobs::Outcome::Identified {
+                gathered,
+                identified,
+                text,
+                ..
+            } => (gathered, identified, text),
+            _ => return Err(err("the job gave no identification")),
+        };
         let d = PyDict::new(py);
         d.set_item("params", text)?;
         d.set_item("report", id.report.clone())?;
@@ -243,14 +259,18 @@ impl gms_tune::run::Hooks for Quiet {
 }
 
 impl Device {
-    /// Runs `f` on the link as the command line's run bench.
-    fn run_bench<T>(
-        &mut self,
-        f: impl FnOnce(&mut gms_tune::run::RunBench<'_, '_>) -> Result<T, gms_ident::Error>,
-    ) -> PyResult<T> {
+    /// Runs a job with the command line's and the window's code (`gms_tune::jobs`).
+    fn run_job(&mut self, job: gms_tune::jobs::Job) -> PyResult<gms_tune::jobs::Outcome> {
         let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
         let mut quiet = Quiet;
-        let mut b = gms_tune::run::RunBench::new(&mut self.link, stop, "stopped", &mut quiet);
-        f(&mut b).map_err(|e| err(format!("{e}; the bridge is off")))
+        gms_tune::jobs::run(
+            &mut self.link,
+            job,
+            stop,
+            "stopped",
+            &mut quiet,
+            &mut |_, _, _| {},
+        )
+        .map_err(|e| err(format!("{e}; the bridge is off")))
     }
 }

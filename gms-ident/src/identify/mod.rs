@@ -143,12 +143,70 @@ pub struct Inputs<'a> {
 /// The whole identification: [`identify_with`] plus, when a frictional-lag record is given,
 /// C fitted to it by [`fit_lag`] (else the paper's rule, printed as an assumption).
 pub fn identify_from(inp: &Inputs<'_>) -> Result<Identified, Error> {
-    identify_from_inner(inp).map_err(Error::Data)
+    let read = |p: Option<&std::path::Path>, names: &[&str], optional: &[&str]| {
+        p.map(|p| {
+            read_columns(p, names, optional).map(|cols| Table {
+                name: p.display().to_string(),
+                cols,
+            })
+        })
+        .transpose()
+    };
+    let pre = read(inp.presliding, &["x", "f"], &["dir"]).map_err(Error::Data)?;
+    let slide = read(inp.sliding, &["v", "f"], &[]).map_err(Error::Data)?;
+    let lag = read(inp.lag, &["t", "x", "f"], &[]).map_err(Error::Data)?;
+    identify_data(&Data {
+        presliding: pre.as_ref(),
+        sliding: slide.as_ref(),
+        lag: lag.as_ref(),
+        blocks: inp.blocks,
+        asymmetric: inp.asymmetric,
+    })
 }
 
-fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
+/// One experiment's data as columns, and its name for messages (a file's path, or what the
+/// data is).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// For messages: where the data came from.
+    pub name: String,
+    /// The columns: pre-sliding `x [rad], f [N·m][, dir]`; sliding `v [rad/s], f [N·m]`; lag
+    /// `t [s], x [rad], f [N·m]`.
+    pub cols: Vec<Vec<f64>>,
+}
+
+/// The whole identification on arrays (what [`identify_from`] reads from files).
+#[derive(Debug, Clone, Copy)]
+pub struct Data<'a> {
+    /// Pre-sliding data.
+    pub presliding: Option<&'a Table>,
+    /// Sliding data.
+    pub sliding: Option<&'a Table>,
+    /// A frictional-lag record: C is fitted to it (needs both of the above).
+    pub lag: Option<&'a Table>,
+    /// Number of Maxwell-slip blocks (1..=32).
+    pub blocks: usize,
+    /// Fit each sliding direction separately.
+    pub asymmetric: bool,
+}
+
+/// The whole identification on arrays: as [`identify_from`], the data given as columns.
+pub fn identify_data(d: &Data<'_>) -> Result<Identified, Error> {
+    identify_data_inner(d).map_err(Error::Data)
+}
+
+fn identify_data_inner(inp: &Data<'_>) -> Result<Identified, String> {
     let (pre, slide, blocks, asymmetric) =
         (inp.presliding, inp.sliding, inp.blocks, inp.asymmetric);
+    for t in [pre, slide, inp.lag].into_iter().flatten() {
+        let n = t.cols.first().map_or(0, Vec::len);
+        if t.cols.iter().any(|c| c.len() != n && !c.is_empty()) {
+            return Err(format!("{}: columns of different lengths", t.name));
+        }
+        if t.cols.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(format!("{}: non-finite value", t.name));
+        }
+    }
     if inp.lag.is_some() && (pre.is_none() || slide.is_none()) {
         return Err(
             "--lag needs --presliding and --sliding: C is fitted with the other parameters fixed"
@@ -166,7 +224,10 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
     let virgin = match pre {
         None => None,
         Some(p) => {
-            let cols = read_columns(p, &["x", "f"], &["dir"])?;
+            let cols = &p.cols;
+            if cols.len() < 2 {
+                return Err(format!("{}: pre-sliding data needs x and f", p.name));
+            }
             let (x, f) = (&cols[0], &cols[1]);
             let dir = cols.get(2).filter(|d| !d.is_empty());
             let side = |want: f64| -> (Vec<f64>, Vec<f64>) {
@@ -216,7 +277,7 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
             }
             let (xa, fa) = (xm, fm);
             virgin_data = xa.iter().copied().zip(fa.iter().copied()).collect();
-            let fit = fit_virgin(&xa, &fa, blocks).map_err(|e| format!("{}: {e}", p.display()))?;
+            let fit = fit_virgin(&xa, &fa, blocks).map_err(|e| format!("{}: {e}", p.name))?;
             report.push(format!(
                 "pre-sliding: {} points, {} blocks, plateau Fs {:.4e}, RMS residual {:.3e} ({:.2} % of Fs)",
                 xa.len(),
@@ -240,7 +301,10 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
     let stribeck = match slide {
         None => None,
         Some(p) => {
-            let cols = read_columns(p, &["v", "f"], &[])?;
+            let cols = &p.cols;
+            if cols.len() < 2 {
+                return Err(format!("{}: sliding data needs v and f", p.name));
+            }
             if asymmetric {
                 let (vn, fn_): (Vec<f64>, Vec<f64>) = cols[0]
                     .iter()
@@ -249,7 +313,7 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
                     .map(|(v, f)| (-v, f.abs()))
                     .unzip();
                 let fit = fit_stribeck(&vn, &fn_)
-                    .map_err(|e| format!("{} (negative direction): {e}", p.display()))?;
+                    .map_err(|e| format!("{} (negative direction): {e}", p.name))?;
                 report.push(format!(
                     "sliding, v < 0: {} points; fs {:.4e}, fc {:.4e}, vs {:.4e}, delta {:.4}, sigma {:.4e}",
                     vn.len(), fit.fs, fit.fc, fit.vs, fit.delta, fit.sigma
@@ -266,7 +330,7 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
             let v: Vec<f64> = keep.iter().map(|&i| v[i]).collect();
             let f: Vec<f64> = keep.iter().map(|&i| f[i]).collect();
             sliding_data = v.iter().copied().zip(f.iter().copied()).collect();
-            let fit = fit_stribeck(&v, &f).map_err(|e| format!("{}: {e}", p.display()))?;
+            let fit = fit_stribeck(&v, &f).map_err(|e| format!("{}: {e}", p.name))?;
             let se = fit.std_err.unwrap_or([f64::NAN; 5]);
             report.push(format!(
                 "sliding: {} points, RMS residual {:.3e}; fs {:.4e} ± {:.1e}, fc {:.4e} ± {:.1e}, vs {:.4e} ± {:.1e}, delta {:.4} ± {:.1e}, sigma {:.4e} ± {:.1e} (one sigma)",
@@ -341,9 +405,12 @@ fn identify_from_inner(inp: &Inputs<'_>) -> Result<Identified, String> {
         .map_err(|e| format!("the identified set is invalid: {e}"))?;
     let mut lag = None;
     if let Some(p) = inp.lag {
-        let cols = read_columns(p, &["t", "x", "f"], &[])?;
-        let fit = fit_lag(&spec, &cols[0], &cols[1], &cols[2])
-            .map_err(|e| format!("{}: {e}", p.display()))?;
+        let cols = &p.cols;
+        if cols.len() < 3 {
+            return Err(format!("{}: a lag record needs t, x and f", p.name));
+        }
+        let fit =
+            fit_lag(&spec, &cols[0], &cols[1], &cols[2]).map_err(|e| format!("{}: {e}", p.name))?;
         // Replace the rule's line.
         report.retain(|l| !l.starts_with("assumed: C = "));
         report.push(format!(

@@ -535,7 +535,6 @@ fn run_job(
     events: &Sender<Event>,
     wake: &dyn Fn(),
 ) -> Result<Outcome, String> {
-    use crate::run::RunBench;
     let mut rep = Reporter {
         events,
         wake,
@@ -545,60 +544,66 @@ fn run_job(
         last: Instant::now(),
     };
     let why = "stopped (the window's Stop)";
-    match job {
-        Job::Commission { speed, out } => {
-            let pf = params::read(l).map_err(|e| e.to_string())?;
-            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
-            b.stage("commission", 5.0);
-            let c = gms_bench::commission(&mut b, speed)
-                .map_err(|e| format!("{e}; the bridge is off, nothing changed"))?;
-            let (file, text) = crate::run::commissioned_file(&c, pf);
-            gms_ident::io::write_atomic(&out, text.as_bytes()).map_err(|e| e.to_string())?;
-            let mut lines = c.lines.clone();
-            lines.push(format!("wrote {}", out.display()));
-            Ok(Outcome::Commissioned {
-                lines,
-                file: Box::new(file),
-            })
+    let job = match job {
+        Job::Commission { speed, out } => crate::jobs::Job::Commission {
+            speed,
+            out: Some(out),
+        },
+        Job::TuneFf(plan) => crate::jobs::Job::TuneFf { plan, out: None },
+        Job::Identify { report, out } => crate::jobs::Job::Identify {
+            ranges: gms_bench::Ranges::default(),
+            report,
+            out: Some(out),
+            blocks: 6,
+            asymmetric: false,
+        },
+    };
+    let (kind, out, report) = match &job {
+        crate::jobs::Job::Commission { out, .. } => ("commission", out.clone(), None),
+        crate::jobs::Job::TuneFf { .. } => ("tune-ff", None, None),
+        crate::jobs::Job::Identify { report, out, .. } => {
+            ("identify", out.clone(), Some(report.clone()))
         }
-        Job::TuneFf(plan) => {
-            plan.check().map_err(|e| e.to_string())?;
-            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
-            b.stage("tune-ff", plan.steps as f64 * plan.seconds);
-            let t = gms_bench::tune_ff(&mut b, &plan, |_, g, rms| {
-                let _ = events.send(Event::FfPoint(g, rms));
-            })
-            .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
-            Ok(Outcome::TunedFf(t))
+    };
+    let r = crate::jobs::run(l, job, stop.clone(), why, &mut rep, &mut |_, g, rms| {
+        let _ = events.send(Event::FfPoint(g, rms));
+    });
+    let wrote = |lines: &mut Vec<String>| {
+        if let Some(o) = &out {
+            lines.push(match &report {
+                Some(r) => format!("wrote {} and the report in {}", o.display(), r.display()),
+                None => format!("wrote {}", o.display()),
+            });
         }
-        Job::Identify { report, out } => {
-            let dev = gms_bench::DeviceInfo::read(l).map_err(|e| e.to_string())?;
-            let plans = gms_bench::Plans::new(&dev, &gms_bench::Ranges::default())
-                .map_err(|e| e.to_string())?;
-            let mut b = RunBench::new(l, stop.clone(), why, &mut rep);
-            let (g, id) = gms_bench::identify_on(
-                &mut b,
-                &plans,
-                &report,
-                6,
-                false,
-                &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
-            )
-            .map_err(|e| e.to_string())?;
-            let (file, _) = crate::run::write_identified(&id, &report, Some(&out))
-                .map_err(|e| e.to_string())?;
-            let mut lines = id.report.clone();
-            lines.push(format!(
-                "wrote {} and the report in {}",
-                out.display(),
-                report.display()
-            ));
+    };
+    match r {
+        Ok(crate::jobs::Outcome::Commissioned {
+            commissioned, file, ..
+        }) => {
+            let mut lines = commissioned.lines.clone();
+            wrote(&mut lines);
+            Ok(Outcome::Commissioned { lines, file })
+        }
+        Ok(crate::jobs::Outcome::TunedFf(t)) => Ok(Outcome::TunedFf(*t)),
+        Ok(crate::jobs::Outcome::Identified {
+            gathered,
+            identified,
+            file,
+            ..
+        }) => {
+            let mut lines = identified.report.clone();
+            wrote(&mut lines);
             Ok(Outcome::Identified {
                 report: lines,
-                presliding: g.presliding,
-                sliding: g.sliding,
-                file: Box::new(file),
+                presliding: gathered.presliding,
+                sliding: gathered.sliding,
+                file,
             })
         }
+        Err(e) => Err(match kind {
+            "commission" => format!("{e}; the bridge is off, nothing changed"),
+            "tune-ff" => format!("{e}; the bridge is off, ff.gain as it was"),
+            _ => e.to_string(),
+        }),
     }
 }
