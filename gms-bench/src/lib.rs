@@ -13,8 +13,8 @@
 //! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
 //! - [`settings`]: the device's settings as one typed value, and the snapshot that puts them
 //!   back around every run ([`settings::restoring`]).
-//! - [`tune_ff`]: the feedforward gain from repeated sine tests.
-//! - [`commission`]: the motor's constants, the directions, the loops' gains; its estimators
+//! - [`tune_ff`](mod@tune_ff): the feedforward gain from repeated sine tests.
+//! - [`commission`](mod@commission): the motor's constants, the directions, the loops' gains; its estimators
 //!   as pure functions of the recorded data in [`estimate`].
 //!
 //! Everything is also re-exported at the crate's root.
