@@ -27,6 +27,7 @@ pub mod controller;
 pub mod device;
 pub mod drive;
 pub mod error;
+pub mod frf;
 pub mod gms;
 pub mod hw;
 pub mod lugre;
