@@ -452,7 +452,6 @@ impl<const N: usize> Controller<N> {
         };
     }
 
-    /// Clears every integrator, filter and friction state (the axis is at rest).
     /// Current mode: the current loop holds `amps` \[A\] (clamped to `i_max`) with the
     /// position loop off (no speed feedforward: the reference speed is taken as 0).
     pub fn hold_current(&mut self, amps: f32) {

@@ -426,13 +426,7 @@ fn on_the_default_plant_the_bench_sees_both_sources() {
 
 /// The device's clock (`status` key `t`) \[s\].
 fn device_time(dev: &mut LocalDevice) -> f64 {
-    use gms_bench::Bench;
-    let (_, st) = dev.request("status").unwrap();
-    st.split_whitespace()
-        .find_map(|w| w.strip_prefix("t="))
-        .unwrap()
-        .parse()
-        .unwrap()
+    gms_bench::status(dev).unwrap().t
 }
 
 /// A bench that notes where the axis is after every wait.

@@ -232,9 +232,13 @@ fn the_adaptive_scale_is_read_kept_across_sets_and_read_only() {
 /// Device time (`status` `t=`) [s].
 fn device_time(c: &mut Client) -> f64 {
     let st = c.ask("status");
-    st.split_whitespace()
-        .find_map(|w| w.strip_prefix("t=")?.parse().ok())
-        .unwrap_or_else(|| panic!("no t in {st}"))
+    let text = st
+        .trim()
+        .strip_prefix("ok ")
+        .unwrap_or_else(|| panic!("{st}"));
+    gms_core::device::StatusReply::parse(text)
+        .unwrap_or_else(|e| panic!("{e}: {st}"))
+        .t
 }
 
 #[test]
