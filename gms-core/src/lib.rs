@@ -41,6 +41,7 @@ pub mod selftest;
 #[cfg(feature = "serde")]
 mod serde_array;
 pub mod settings;
+pub mod shaping;
 pub mod static_map;
 #[cfg(feature = "store")]
 pub mod store;

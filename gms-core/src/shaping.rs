@@ -1,0 +1,149 @@
+//! Loop-shaping filters for the current reference (issue 26, not yet in the loop): two notches
+//! and a low-pass, each off at 0 Hz. A notch is the Audio EQ Cookbook's peaking filter cut by
+//! `depth_db` at `f_hz` with quality `q` (a finite depth: a resonance is attenuated, not
+//! removed, so the loop's phase is disturbed only near it); the low-pass a second-order
+//! Butterworth. The coefficients come from the `biquad` crate (`Coefficients::from_params`),
+//! and each stage runs as its direct form 2 transposed in f32; [`Shaping::response`]
+//! evaluates the same coefficients' transfer function on the unit circle (for plots and for
+//! the margins a filter would give).
+
+use biquad::{Biquad, Coefficients, DirectForm2Transposed, Hertz, Q_BUTTERWORTH_F32, Type};
+
+/// One notch: a cut of `depth_db` \[dB\] at `f_hz` \[Hz\] (0: off) with quality `q` [-].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Notch {
+    /// Centre frequency \[Hz\]; 0 switches the notch off.
+    pub f_hz: f32,
+    /// Quality factor [-] (centre frequency over bandwidth), 0.1 … 50.
+    pub q: f32,
+    /// Attenuation at the centre \[dB\], 0 … 60.
+    pub depth_db: f32,
+}
+
+/// The loop-shaping filters' settings.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ShapingParams {
+    /// The two notches.
+    pub notch: [Notch; 2],
+    /// The low-pass's corner frequency \[Hz\]; 0 switches it off.
+    pub lp_hz: f32,
+}
+
+/// Why a set of filters cannot run at a rate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShapingError {
+    /// A frequency is negative, not finite, or not below 0.45 × the rate.
+    Frequency,
+    /// A notch's quality is outside 0.1 … 50.
+    Quality,
+    /// A notch's depth is outside 0 … 60 dB.
+    Depth,
+}
+
+impl ShapingError {
+    /// The one-line reason.
+    pub fn reason(self) -> &'static str {
+        match self {
+            ShapingError::Frequency => {
+                "a filter frequency must be 0 (off) or positive and below 0.45 × the loop rate"
+            }
+            ShapingError::Quality => "a notch's q must be from 0.1 to 50",
+            ShapingError::Depth => "a notch's depth must be from 0 to 60 dB",
+        }
+    }
+}
+
+/// The filters, ready to run at one rate.
+#[derive(Debug, Clone, Copy)]
+pub struct Shaping {
+    coeffs: [Option<Coefficients<f32>>; 3],
+    stages: [Option<DirectForm2Transposed<f32>>; 3],
+}
+
+fn frequency(f: f32, rate: f32) -> Result<Option<Hertz<f32>>, ShapingError> {
+    if f == 0.0 {
+        return Ok(None);
+    }
+    if !(f > 0.0 && f.is_finite() && f < 0.45 * rate) {
+        return Err(ShapingError::Frequency);
+    }
+    Hertz::from_hz(f)
+        .map(Some)
+        .map_err(|_| ShapingError::Frequency)
+}
+
+impl Shaping {
+    /// The filters of `p` at a sample rate of `rate_hz` \[Hz\], or why not.
+    pub fn try_new(p: &ShapingParams, rate_hz: f32) -> Result<Shaping, ShapingError> {
+        let fs = Hertz::from_hz(rate_hz).map_err(|_| ShapingError::Frequency)?;
+        let mut coeffs = [None; 3];
+        for (c, n) in coeffs.iter_mut().zip(&p.notch) {
+            let Some(f0) = frequency(n.f_hz, rate_hz)? else {
+                continue;
+            };
+            if !(n.q >= 0.1 && n.q <= 50.0) {
+                return Err(ShapingError::Quality);
+            }
+            if !(n.depth_db >= 0.0 && n.depth_db <= 60.0) {
+                return Err(ShapingError::Depth);
+            }
+            *c = Some(
+                Coefficients::<f32>::from_params(Type::PeakingEQ(-n.depth_db), fs, f0, n.q)
+                    .map_err(|_| ShapingError::Frequency)?,
+            );
+        }
+        if let Some(f0) = frequency(p.lp_hz, rate_hz)? {
+            coeffs[2] = Some(
+                Coefficients::<f32>::from_params(Type::LowPass, fs, f0, Q_BUTTERWORTH_F32)
+                    .map_err(|_| ShapingError::Frequency)?,
+            );
+        }
+        Ok(Shaping {
+            coeffs,
+            stages: coeffs.map(|c| c.map(DirectForm2Transposed::<f32>::new)),
+        })
+    }
+
+    /// Filters one sample (the stages in order: notch 1, notch 2, low-pass).
+    pub fn run(&mut self, x: f32) -> f32 {
+        let mut y = x;
+        for s in self.stages.iter_mut().flatten() {
+            y = s.run(y);
+        }
+        y
+    }
+
+    /// Clears the stages' state (the signal at rest).
+    pub fn reset(&mut self) {
+        for s in self.stages.iter_mut().flatten() {
+            s.reset_state();
+        }
+    }
+
+    /// The filters' frequency response at `f_hz` \[Hz\] for the rate `rate_hz` \[Hz\]: the
+    /// complex gain `(re, im)` of the cascade.
+    pub fn response(&self, f_hz: f64, rate_hz: f64) -> (f64, f64) {
+        let w = core::f64::consts::TAU * f_hz / rate_hz;
+        // z^-1 = e^{-jw}, z^-2 = e^{-2jw}.
+        let (c1, s1) = (libm::cos(w), -libm::sin(w));
+        let (c2, s2) = (libm::cos(2.0 * w), -libm::sin(2.0 * w));
+        let mut h = (1.0, 0.0);
+        for c in self.coeffs.iter().flatten() {
+            let num = (
+                c.b0 as f64 + c.b1 as f64 * c1 + c.b2 as f64 * c2,
+                c.b1 as f64 * s1 + c.b2 as f64 * s2,
+            );
+            let den = (
+                1.0 + c.a1 as f64 * c1 + c.a2 as f64 * c2,
+                c.a1 as f64 * s1 + c.a2 as f64 * s2,
+            );
+            let d = den.0 * den.0 + den.1 * den.1;
+            let stage = (
+                (num.0 * den.0 + num.1 * den.1) / d,
+                (num.1 * den.0 - num.0 * den.1) / d,
+            );
+            h = (h.0 * stage.0 - h.1 * stage.1, h.0 * stage.1 + h.1 * stage.0);
+        }
+        h
+    }
+}
