@@ -10,7 +10,7 @@ use gms_tune::Link;
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::jobs::{self, Job, Outcome};
+use gms_tune::jobs;
 
 /// Runs the commissioning; writes `out`; applies/saves on request.
 pub fn run(
@@ -22,22 +22,14 @@ pub fn run(
     json: bool,
 ) -> Result<(), Fail> {
     let mut bar = Bar::new();
-    let r = jobs::run(
-        link,
-        Job::Commission {
-            speed,
-            out: Some(out.to_path_buf()),
-        },
-        ctrl_c(),
-        "interrupted (Ctrl-C)",
-        &mut bar,
-        &mut |_, _, _| {},
-    );
+    let mut ctl = jobs::Control {
+        stop: ctrl_c(),
+        why: "interrupted (Ctrl-C)",
+        hooks: &mut bar,
+    };
+    let r = jobs::commission(link, speed, Some(out), &mut ctl);
     let (c, pf) = match r {
-        Ok(Outcome::Commissioned {
-            commissioned, file, ..
-        }) => (commissioned, *file),
-        Ok(_) => return Err(Fail::Device("the job gave no commissioning".into())),
+        Ok(j) => (j.commissioned, j.file),
         Err(Error::Params(m)) => return Err(Fail::Usage(m)),
         Err(Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {

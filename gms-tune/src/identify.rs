@@ -7,13 +7,13 @@ use gms_core::protocol::Command;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use gms_bench::{self, DeviceInfo, LagPlan, Plans, Ranges, check_faults};
+use gms_bench::{self, LagPlan, Ranges, check_faults};
 use gms_ident::Error;
 use gms_tune::Link;
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::jobs::{self, Job, Outcome};
+use gms_tune::jobs;
 
 /// What `gms-tune identify` is asked.
 pub struct Args {
@@ -53,9 +53,11 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
             a.blocks
         )));
     }
-    let dev = DeviceInfo::read(link).map_err(|e| Fail::Device(e.to_string()))?;
     check_faults(link).map_err(|e| Fail::Device(format!("{e}: `clear` it first")))?;
-    let plans = Plans::new(&dev, &a.ranges).map_err(|e| Fail::Usage(e.to_string()))?;
+    let (dev, plans) = jobs::identify_plans(link, &a.ranges).map_err(|e| match e {
+        Error::Params(m) => Fail::Usage(m),
+        e => Fail::Device(e.to_string()),
+    })?;
     let dt = dev.dt();
     let pre_steps = (dev.fs / (dev.k_m * plans.presliding.step)).ceil() as u32;
     let total = plans.presliding.duration(pre_steps, dt, dev.vs)
@@ -74,28 +76,23 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     );
     let started = Instant::now();
     let mut bar = Bar::new();
-    let r = jobs::run(
+    let mut ctl = jobs::Control {
+        stop: ctrl_c(),
+        why: "interrupted (Ctrl-C)",
+        hooks: &mut bar,
+    };
+    let r = jobs::identify(
         link,
-        Job::Identify {
-            ranges: a.ranges.clone(),
-            report: a.report.clone(),
-            out: Some(a.out.clone()),
-            blocks: a.blocks,
-            asymmetric: a.asymmetric,
-        },
-        ctrl_c(),
-        "interrupted (Ctrl-C)",
-        &mut bar,
-        &mut |_, _, _| {},
+        &plans,
+        &a.report,
+        Some(&a.out),
+        a.blocks,
+        a.asymmetric,
+        &mut ctl,
     );
     bar.bar.finish_and_clear();
     let (g, id) = match r {
-        Ok(Outcome::Identified {
-            gathered,
-            identified,
-            ..
-        }) => (gathered, identified),
-        Ok(_) => return Err(Fail::Device("the job gave no identification".into())),
+        Ok(j) => (j.gathered, j.identified),
         Err(Error::Params(m)) => return Err(Fail::Usage(m)),
         Err(e) => return Err(Fail::Device(e.to_string())),
     };

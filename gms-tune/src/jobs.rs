@@ -1,16 +1,15 @@
 //! The long bench runs as jobs, one API for the command line, the window and Python: each job
-//! reads what it needs from the device, plans, runs its `gms_bench` workflow on a stoppable
-//! bench ([`RunBench`]: a stop flag, progress hooks; the device's settings put back
-//! whatever ends it) and writes its files. The callers only present the outcome, and apply it
-//! when asked.
+//! ([`identify`], [`tune_ff`], [`commission`]) runs its `gms_bench` workflow on a stoppable
+//! bench ([`RunBench`]: a stop flag, progress hooks; the device's settings put back whatever
+//! ends it) and writes its files. The callers only present the outcome, and apply it when
+//! asked.
 
-use std::path::PathBuf;
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use gms_bench::{
-    Commissioned, DeviceInfo, Gathered, Plans, Ranges, TuneFf, TuneFfPlan, commission, identify_on,
-    tune_ff,
+    Commissioned, DeviceInfo, Gathered, Plans, Ranges, TuneFf, TuneFfPlan, identify_on,
 };
 use gms_ident::Error;
 use gms_ident::identify::Identified;
@@ -19,140 +18,130 @@ use gms_ident::paramfile::ParamFile;
 use crate::Link;
 use crate::run::{Hooks, RunBench, commissioned_file, write_identified};
 
-/// A long run.
-#[derive(Debug, Clone)]
-pub enum Job {
-    /// The paper's identification: pre-sliding, sliding and lag experiments, then the fits.
-    Identify {
-        /// The experiments' ranges (`None`s: from the device's model).
-        ranges: Ranges,
-        /// Directory for the data, the report and the plots.
-        report: PathBuf,
-        /// The identified parameter file, if one is to be written.
-        out: Option<PathBuf>,
-        /// GMS blocks to fit.
-        blocks: usize,
-        /// Fit each sliding direction on its own.
-        asymmetric: bool,
-    },
-    /// The feedforward gain from repeated sine tests.
-    TuneFf {
-        /// The sweep.
-        plan: TuneFfPlan,
-        /// Directory for `curve.csv` and `curve.svg`, if they are to be written.
-        out: Option<PathBuf>,
-    },
-    /// The motor's constants, the directions and the loops' gains.
-    Commission {
-        /// The back-EMF runs' speed \[rad/s\].
-        speed: f64,
-        /// The parameter file to write (the device's set with the results), if any.
-        out: Option<PathBuf>,
-    },
+/// How a job is run: a stop flag (`why` says by what it was set) and the hooks told of each
+/// stage and wait.
+pub struct Control<'a> {
+    /// Set: the run ends at its next request or wait.
+    pub stop: Arc<AtomicBool>,
+    /// What stopped it, for the error (e.g. "interrupted (Ctrl-C)").
+    pub why: &'static str,
+    /// Told of each stage and each wait.
+    pub hooks: &'a mut dyn Hooks,
 }
 
-/// What a job found.
-pub enum Outcome {
-    /// An identification: the data gathered, the fits, the parameter file and its text.
-    Identified {
-        /// The experiments' data.
-        gathered: Box<Gathered>,
-        /// The fits and their report.
-        identified: Box<Identified>,
-        /// The identified parameter file.
-        file: Box<ParamFile>,
-        /// Its text.
-        text: String,
-    },
-    /// A feedforward tuning.
-    TunedFf(Box<TuneFf>),
-    /// A commissioning: its findings, the device's set with them as a parameter file, its text.
-    Commissioned {
-        /// The findings.
-        commissioned: Box<Commissioned>,
-        /// The parameter file.
-        file: Box<ParamFile>,
-        /// Its text.
-        text: String,
-    },
+impl Control<'_> {
+    fn bench<'l, 'h>(&'h mut self, link: &'l mut Link) -> RunBench<'l, 'h> {
+        RunBench::new(link, self.stop.clone(), self.why, self.hooks)
+    }
 }
 
-/// The device's identification plans for `ranges` (what `Job::Identify` will run; for a
-/// caller that shows the plan first).
+/// What an identification found: the data gathered, the fits, the parameter file and its text.
+pub struct Identification {
+    /// The experiments' data.
+    pub gathered: Gathered,
+    /// The fits and their report.
+    pub identified: Identified,
+    /// The identified parameter file.
+    pub file: ParamFile,
+    /// Its text.
+    pub text: String,
+}
+
+/// What a commissioning found, and the device's set with it as a parameter file.
+pub struct Commissioning {
+    /// The findings.
+    pub commissioned: Commissioned,
+    /// The device's settings with the findings, as a parameter file.
+    pub file: ParamFile,
+    /// Its text.
+    pub text: String,
+}
+
+/// The device's identification plans for `ranges`: what [`identify`] runs (a caller shows
+/// them first).
 pub fn identify_plans(link: &mut Link, ranges: &Ranges) -> Result<(DeviceInfo, Plans), Error> {
     let dev = DeviceInfo::read(link)?;
     let plans = Plans::new(&dev, ranges)?;
     Ok((dev, plans))
 }
 
-/// Runs `job` on `link`: `stop` set ends it (`why` says by what), `hooks` hear each stage and
-/// wait, `point(test, gain, rms)` each tune-ff test. The bridge is off and the device's
-/// settings are as they were after it, however it ended.
-pub fn run(
+/// The paper's identification with `plans`: the pre-sliding, sliding and lag experiments, the
+/// fits of `blocks` blocks (`asymmetric`: each sliding direction on its own), the data, report
+/// and plots in `report`, the parameter file in `out` if given. The bridge is off and the
+/// device's settings as they were after it, however it ended.
+pub fn identify(
     link: &mut Link,
-    job: Job,
-    stop: Arc<AtomicBool>,
-    why: &'static str,
-    hooks: &mut dyn Hooks,
+    plans: &Plans,
+    report: &Path,
+    out: Option<&Path>,
+    blocks: usize,
+    asymmetric: bool,
+    ctl: &mut Control<'_>,
+) -> Result<Identification, Error> {
+    let mut b = ctl.bench(link);
+    let (gathered, identified) = identify_on(
+        &mut b,
+        plans,
+        report,
+        blocks,
+        asymmetric,
+        &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
+    )?;
+    let (file, text) = write_identified(&identified, report, out)?;
+    Ok(Identification {
+        gathered,
+        identified,
+        file,
+        text,
+    })
+}
+
+/// The feedforward gain from `plan`'s sine tests, `point(test, gain, rms)` told of each;
+/// `curve.csv` and `curve.svg` in `out` if given. The gain is as it was after it.
+pub fn tune_ff(
+    link: &mut Link,
+    plan: &TuneFfPlan,
+    out: Option<&Path>,
+    ctl: &mut Control<'_>,
     point: &mut dyn FnMut(usize, f64, f64),
-) -> Result<Outcome, Error> {
-    match job {
-        Job::Identify {
-            ranges,
-            report,
-            out,
-            blocks,
-            asymmetric,
-        } => {
-            let (_, plans) = identify_plans(link, &ranges)?;
-            let mut b = RunBench::new(link, stop, why, hooks);
-            let (gathered, identified) = identify_on(
-                &mut b,
-                &plans,
-                &report,
-                blocks,
-                asymmetric,
-                &mut |b: &mut RunBench<'_, '_>, name, seconds| b.stage(name, seconds),
-            )?;
-            let (file, text) = write_identified(&identified, &report, out.as_deref())?;
-            Ok(Outcome::Identified {
-                gathered: Box::new(gathered),
-                identified: Box::new(identified),
-                file: Box::new(file),
-                text,
-            })
-        }
-        Job::TuneFf { plan, out } => {
-            plan.check()?;
-            if let Some(dir) = &out {
-                std::fs::create_dir_all(dir)
-                    .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
-            }
-            let (_, seconds) = plan.tests();
-            let mut b = RunBench::new(link, stop, why, hooks);
-            b.stage("tune-ff", seconds);
-            let t = tune_ff(&mut b, &plan, point)?;
-            if let Some(dir) = &out {
-                write_tune_ff(&t, dir)?;
-            }
-            Ok(Outcome::TunedFf(Box::new(t)))
-        }
-        Job::Commission { speed, out } => {
-            let before = gms_bench::paramfile::dump(link)?;
-            let mut b = RunBench::new(link, stop, why, hooks);
-            b.stage("commission", 5.0);
-            let c = commission(&mut b, speed)?;
-            let (file, text) = commissioned_file(&c, before);
-            if let Some(out) = &out {
-                gms_ident::io::write_atomic(out, text.as_bytes())?;
-            }
-            Ok(Outcome::Commissioned {
-                commissioned: Box::new(c),
-                file: Box::new(file),
-                text,
-            })
-        }
+) -> Result<TuneFf, Error> {
+    plan.check()?;
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
     }
+    let (_, seconds) = plan.tests();
+    let mut b = ctl.bench(link);
+    b.stage("tune-ff", seconds);
+    let t = gms_bench::tune_ff(&mut b, plan, point)?;
+    if let Some(dir) = out {
+        write_tune_ff(&t, dir)?;
+    }
+    Ok(t)
+}
+
+/// The motor's constants, the directions and the loops' gains (back-EMF runs at `speed`
+/// \[rad/s\]); the device's set with them written to `out` if given. The device's settings are
+/// as they were after it: the caller applies the file when asked.
+pub fn commission(
+    link: &mut Link,
+    speed: f64,
+    out: Option<&Path>,
+    ctl: &mut Control<'_>,
+) -> Result<Commissioning, Error> {
+    let before = gms_bench::paramfile::dump(link)?;
+    let mut b = ctl.bench(link);
+    b.stage("commission", 5.0);
+    let commissioned = gms_bench::commission(&mut b, speed)?;
+    let (file, text) = commissioned_file(&commissioned, before);
+    if let Some(out) = out {
+        gms_ident::io::write_atomic(out, text.as_bytes())?;
+    }
+    Ok(Commissioning {
+        commissioned,
+        file,
+        text,
+    })
 }
 
 /// tune-ff's files in `dir`: `curve.csv` (gain, RMS \[rad\]) and `curve.svg` (the curve in

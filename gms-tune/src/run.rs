@@ -309,11 +309,7 @@ fn status_text(v: StatusValue) -> String {
         StatusValue::Number(x) if x.fract() == 0.0 && x.abs() < 1e15 => format!("{x}"),
         StatusValue::Number(x) => gms_ident::units::num4(x),
         StatusValue::Text(t) => t.to_string(),
-        StatusValue::Faults(f) => {
-            let mut names = String::new();
-            let _ = f.write_names(&mut names);
-            names
-        }
+        StatusValue::Faults(f) => gms_ident::fault_names(f),
     }
 }
 

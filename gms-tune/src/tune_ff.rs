@@ -12,7 +12,7 @@ use gms_tune::run::{tune_ff_json, tune_ff_summary};
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
-use gms_tune::jobs::{self, Job, Outcome};
+use gms_tune::jobs;
 
 /// What `gms-tune tune-ff` is asked.
 pub struct Args {
@@ -56,25 +56,19 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     let rpc = gms_bench::rad_per_count(link).map_err(|e| Fail::Device(e.to_string()))?;
     let mut bar = Bar::new();
     let quiet = a.json;
-    let r = jobs::run(
-        link,
-        Job::TuneFf {
-            plan: a.plan.clone(),
-            out: Some(a.out.clone()),
-        },
-        ctrl_c(),
-        "interrupted (Ctrl-C)",
-        &mut bar,
-        &mut |i, g, rms| {
-            if !quiet {
-                println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / rpc)
-            }
-        },
-    );
+    let mut ctl = jobs::Control {
+        stop: ctrl_c(),
+        why: "interrupted (Ctrl-C)",
+        hooks: &mut bar,
+    };
+    let r = jobs::tune_ff(link, &a.plan, Some(&a.out), &mut ctl, &mut |i, g, rms| {
+        if !quiet {
+            println!("{:4}  {g:7.3}  {:8.3}", i + 1, rms / rpc)
+        }
+    });
     bar.bar.finish_and_clear();
     let t = match r {
-        Ok(Outcome::TunedFf(t)) => t,
-        Ok(_) => return Err(Fail::Device("the job gave no tuning".into())),
+        Ok(t) => t,
         Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {
             return Err(Fail::Device(format!(

@@ -90,9 +90,7 @@ impl Device {
                 gms_core::device::StatusValue::Number(x) => d.set_item(k, x)?,
                 gms_core::device::StatusValue::Text(t) => d.set_item(k, t)?,
                 gms_core::device::StatusValue::Faults(f) => {
-                    let mut names = String::new();
-                    let _ = f.write_names(&mut names);
-                    d.set_item(k, names)?
+                    d.set_item(k, gms_ident::fault_names(f))?
                 }
             }
         }
@@ -181,10 +179,8 @@ impl Device {
             ..Default::default()
         };
         plan.check().map_err(err)?;
-        let t = match self.run_job(gms_tune::jobs::Job::TuneFf { plan, out: None })? {
-            gms_tune::jobs::Outcome::TunedFf(t) => t,
-            _ => return Err(err("the job gave no tuning")),
-        };
+        let t =
+            self.job(|l, ctl| gms_tune::jobs::tune_ff(l, &plan, None, ctl, &mut |_, _, _| {}))?;
         let d = PyDict::new(py);
         d.set_item("curve", t.curve.clone())?;
         d.set_item("chosen", t.chosen)?;
@@ -200,10 +196,9 @@ impl Device {
     /// "settings": {protocol path: value}}; nothing applied (send the settings to apply).
     #[pyo3(signature = (speed = 1.0))]
     fn commission<'py>(&mut self, py: Python<'py>, speed: f64) -> PyResult<Bound<'py, PyDict>> {
-        let c = match self.run_job(gms_tune::jobs::Job::Commission { speed, out: None })? {
-            gms_tune::jobs::Outcome::Commissioned { commissioned, .. } => commissioned,
-            _ => return Err(err("the job gave no commissioning")),
-        };
+        let c = self
+            .job(|l, ctl| gms_tune::jobs::commission(l, speed, None, ctl))?
+            .commissioned;
         let d = PyDict::new(py);
         d.set_item("lines", c.lines.clone())?;
         let s = PyDict::new(py);
@@ -225,22 +220,12 @@ impl Device {
         report: PathBuf,
         blocks: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let job = gms_tune::jobs::Job::Identify {
-            ranges: gms_bench::Ranges::default(),
-            report,
-            out: None,
-            blocks,
-            asymmetric: false,
-        };
-        let (g, id, text) = match self.run_job(job)? {
-            gms_tune::jobs::Outcome::Identified {
-                gathered,
-                identified,
-                text,
-                ..
-            } => (gathered, identified, text),
-            _ => return Err(err("the job gave no identification")),
-        };
+        let (_, plans) =
+            gms_tune::jobs::identify_plans(&mut self.link, &gms_bench::Ranges::default())
+                .map_err(err)?;
+        let j = self
+            .job(|l, ctl| gms_tune::jobs::identify(l, &plans, &report, None, blocks, false, ctl))?;
+        let (g, id, text) = (j.gathered, j.identified, j.text);
         let d = PyDict::new(py);
         d.set_item("params", text)?;
         d.set_item("report", id.report.clone())?;
@@ -260,17 +245,19 @@ impl gms_tune::run::Hooks for Quiet {
 
 impl Device {
     /// Runs a job with the command line's and the window's code (`gms_tune::jobs`).
-    fn run_job(&mut self, job: gms_tune::jobs::Job) -> PyResult<gms_tune::jobs::Outcome> {
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    fn job<T>(
+        &mut self,
+        f: impl FnOnce(
+            &mut gms_tune::Link,
+            &mut gms_tune::jobs::Control<'_>,
+        ) -> Result<T, gms_ident::Error>,
+    ) -> PyResult<T> {
         let mut quiet = Quiet;
-        gms_tune::jobs::run(
-            &mut self.link,
-            job,
-            stop,
-            "stopped",
-            &mut quiet,
-            &mut |_, _, _| {},
-        )
-        .map_err(|e| err(format!("{e}; the bridge is off")))
+        let mut ctl = gms_tune::jobs::Control {
+            stop: std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
+            why: "stopped",
+            hooks: &mut quiet,
+        };
+        f(&mut self.link, &mut ctl).map_err(|e| err(format!("{e}; the bridge is off")))
     }
 }

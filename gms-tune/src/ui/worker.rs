@@ -543,67 +543,46 @@ fn run_job(
         total: 0.0,
         last: Instant::now(),
     };
-    let why = "stopped (the window's Stop)";
-    let job = match job {
-        Job::Commission { speed, out } => crate::jobs::Job::Commission {
-            speed,
-            out: Some(out),
-        },
-        Job::TuneFf(plan) => crate::jobs::Job::TuneFf { plan, out: None },
-        Job::Identify { report, out } => crate::jobs::Job::Identify {
-            ranges: gms_bench::Ranges::default(),
-            report,
-            out: Some(out),
-            blocks: 6,
-            asymmetric: false,
-        },
+    let mut ctl = crate::jobs::Control {
+        stop: stop.clone(),
+        why: "stopped (the window's Stop)",
+        hooks: &mut rep,
     };
-    let (kind, out, report) = match &job {
-        crate::jobs::Job::Commission { out, .. } => ("commission", out.clone(), None),
-        crate::jobs::Job::TuneFf { .. } => ("tune-ff", None, None),
-        crate::jobs::Job::Identify { report, out, .. } => {
-            ("identify", out.clone(), Some(report.clone()))
-        }
-    };
-    let r = crate::jobs::run(l, job, stop.clone(), why, &mut rep, &mut |_, g, rms| {
-        let _ = events.send(Event::FfPoint(g, rms));
-    });
-    let wrote = |lines: &mut Vec<String>| {
-        if let Some(o) = &out {
-            lines.push(match &report {
-                Some(r) => format!("wrote {} and the report in {}", o.display(), r.display()),
-                None => format!("wrote {}", o.display()),
-            });
-        }
-    };
-    match r {
-        Ok(crate::jobs::Outcome::Commissioned {
-            commissioned, file, ..
-        }) => {
-            let mut lines = commissioned.lines.clone();
-            wrote(&mut lines);
-            Ok(Outcome::Commissioned { lines, file })
-        }
-        Ok(crate::jobs::Outcome::TunedFf(t)) => Ok(Outcome::TunedFf(*t)),
-        Ok(crate::jobs::Outcome::Identified {
-            gathered,
-            identified,
-            file,
-            ..
-        }) => {
-            let mut lines = identified.report.clone();
-            wrote(&mut lines);
-            Ok(Outcome::Identified {
-                report: lines,
-                presliding: gathered.presliding,
-                sliding: gathered.sliding,
-                file,
+    match job {
+        Job::Commission { speed, out } => {
+            let c = crate::jobs::commission(l, speed, Some(&out), &mut ctl)
+                .map_err(|e| format!("{e}; the bridge is off, nothing changed"))?;
+            let mut lines = c.commissioned.lines;
+            lines.push(format!("wrote {}", out.display()));
+            Ok(Outcome::Commissioned {
+                lines,
+                file: Box::new(c.file),
             })
         }
-        Err(e) => Err(match kind {
-            "commission" => format!("{e}; the bridge is off, nothing changed"),
-            "tune-ff" => format!("{e}; the bridge is off, ff.gain as it was"),
-            _ => e.to_string(),
-        }),
+        Job::TuneFf(plan) => {
+            let t = crate::jobs::tune_ff(l, &plan, None, &mut ctl, &mut |_, g, rms| {
+                let _ = events.send(Event::FfPoint(g, rms));
+            })
+            .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
+            Ok(Outcome::TunedFf(t))
+        }
+        Job::Identify { report, out } => {
+            let (_, plans) = crate::jobs::identify_plans(l, &gms_bench::Ranges::default())
+                .map_err(|e| e.to_string())?;
+            let id = crate::jobs::identify(l, &plans, &report, Some(&out), 6, false, &mut ctl)
+                .map_err(|e| e.to_string())?;
+            let mut lines = id.identified.report;
+            lines.push(format!(
+                "wrote {} and the report in {}",
+                out.display(),
+                report.display()
+            ));
+            Ok(Outcome::Identified {
+                report: lines,
+                presliding: id.gathered.presliding,
+                sliding: id.gathered.sliding,
+                file: Box::new(id.file),
+            })
+        }
     }
 }

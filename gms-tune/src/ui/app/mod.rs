@@ -419,8 +419,7 @@ impl App {
                 ui.label(format!("drive {}", st.drive.name()));
                 ui.label(format!("pos {:.6} rad", st.pos));
                 ui.label(format!("error {} counts", st.error_counts));
-                names.clear();
-                let _ = st.faults.write_names(&mut names);
+                names = gms_ident::fault_names(st.faults);
             }
             if names == "none" {
                 ui.label("faults: none");
