@@ -406,6 +406,11 @@ pub fn position(b: &mut impl Bench) -> Result<f64, Error> {
     Ok(status(b)?.pos)
 }
 
+/// The device's soft stroke limits `(lim.pos_min, lim.pos_max)` \[rad\].
+pub fn soft_limits(b: &mut impl Bench) -> Result<(f64, f64), Error> {
+    Ok((get_param(b, "lim.pos_min")?, get_param(b, "lim.pos_max")?))
+}
+
 /// The device's stroke limits narrowed to `window` each way around where the axis is;
 /// returns the previous ones.
 pub fn narrow_limits(b: &mut impl Bench, window: f64) -> Result<(f64, f64), Error> {

@@ -9,6 +9,8 @@
 //! - [`client`]: the bench and its primitives (parameters, `status`, capture, moves, the
 //!   bridge off on failure).
 //! - [`experiments`]: the paper's sliding, pre-sliding and frictional-lag runs, their plans.
+//! - [`frf`](mod@frf): frequency response — the stepped-sine sweep of the device's own
+//!   measurement, the transfer functions, the margins, the pre-sliding stiffness.
 //! - [`identify`]: the whole identification on a device, loading a parameter file.
 //! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
 //! - [`settings`]: the device's settings as one typed value, and the snapshot that puts them
@@ -25,6 +27,7 @@ pub mod client;
 pub mod commission;
 pub mod estimate;
 pub mod experiments;
+pub mod frf;
 pub mod identify;
 pub mod paramfile;
 pub mod settings;

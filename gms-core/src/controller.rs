@@ -11,6 +11,7 @@ use crate::gms::{Gms, GmsParams};
 use crate::math::{self, clamp};
 use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::shaping::{Shaping, ShapingParams};
 use crate::static_map::{StaticMap, StaticParams};
 
 /// The least stiffness of a GMS block in use on the device [N·m/rad] (0 marks an unused one).
@@ -146,6 +147,9 @@ pub struct ControllerParams<const N: usize> {
     pub sense_v_per_a: f32,
     /// Position PID.
     pub pid: PidParams,
+    /// Loop-shaping filters on the current command (notches and a low-pass; all off by
+    /// default).
+    pub shaping: ShapingParams,
     /// Current PI.
     pub current: CurrentParams,
     /// Motor model.
@@ -216,7 +220,8 @@ impl<const N: usize> ControllerParams<N> {
                 ($path, $v, const { range($path) })
             };
         }
-        let scalars: [(&'static str, f32, (f32, f32)); 27] = [
+        let f = &self.shaping;
+        let scalars: [(&'static str, f32, (f32, f32)); 34] = [
             row!("rate.pos_hz", self.pos_rate_hz),
             row!("rate.cur_hz", self.cur_rate_hz),
             row!("pos.kp", self.pid.kp),
@@ -224,6 +229,13 @@ impl<const N: usize> ControllerParams<N> {
             row!("pos.kd", self.pid.kd),
             row!("pos.d_filter_hz", self.pid.d_filter_hz),
             row!("pos.i_limit", self.pid.i_limit),
+            row!("filt.notch1.f_hz", f.notch[0].f_hz),
+            row!("filt.notch1.q", f.notch[0].q),
+            row!("filt.notch1.depth_db", f.notch[0].depth_db),
+            row!("filt.notch2.f_hz", f.notch[1].f_hz),
+            row!("filt.notch2.q", f.notch[1].q),
+            row!("filt.notch2.depth_db", f.notch[1].depth_db),
+            row!("filt.lp.f_hz", f.lp_hz),
             row!("cur.kp", self.current.kp),
             row!("cur.ki", self.current.ki),
             row!("motor.k_m", self.motor.k_m),
@@ -252,6 +264,17 @@ impl<const N: usize> ControllerParams<N> {
         }
         if self.pos_min >= self.pos_max {
             return Err(ControllerError::Invalid("lim.pos_min"));
+        }
+        // The filters run at the position rate: a frequency must lie below 0.45 of it.
+        let nyquist = 0.45 * self.pos_rate_hz;
+        for (name, hz) in [
+            ("filt.notch1.f_hz", f.notch[0].f_hz),
+            ("filt.notch2.f_hz", f.notch[1].f_hz),
+            ("filt.lp.f_hz", f.lp_hz),
+        ] {
+            if hz != 0.0 && hz >= nyquist {
+                return Err(ControllerError::Invalid(name));
+            }
         }
         if self.enc_dir != 1.0 && self.enc_dir != -1.0 {
             return Err(ControllerError::Invalid("enc.dir"));
@@ -352,6 +375,7 @@ pub struct Controller<const N: usize> {
     cur_integ: f32,
     e_cur: f32,
     adapt: Adaptive,
+    shaping: Shaping,
     out: PositionOutput,
 }
 
@@ -386,8 +410,11 @@ impl<const N: usize> Controller<N> {
                 .map_or(0.0, |g| p.ff.ratio * g.stribeck.fs);
         let mut adapt = Adaptive::new(f_norm);
         adapt.reset(&p.ff.adapt);
+        let shaping = Shaping::try_new(&p.shaping, p.pos_rate_hz)
+            .map_err(|_| ControllerError::Invalid("filt"))?;
         Ok(Controller {
             adapt,
+            shaping,
             rpc: p.rad_per_count(),
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
@@ -474,6 +501,7 @@ impl<const N: usize> Controller<N> {
         self.a_ref = 0.0;
         self.cur_integ = 0.0;
         self.e_cur = 0.0;
+        self.shaping.reset();
         self.out = PositionOutput::default();
     }
 
@@ -526,6 +554,7 @@ impl<const N: usize> Controller<N> {
         self.w_ref = old.w_ref;
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
+        self.shaping.take_state_from(&old.shaping);
 
         // Position loop: the same torque (times k_M new / k_M old) at the last inputs.
         let p = self.p;
@@ -639,7 +668,9 @@ impl<const N: usize> Controller<N> {
         // direction the error would push it further.
         let integ_new = clamp(self.integ + pid.ki * error * self.dt_pos, pid.i_limit);
         let torque = p_term + integ_new + d_term + ff_fric + ff_inertia;
-        let i_unsat = torque / self.p.motor.k_m;
+        // The loop-shaping filters act on the whole command (feedback and feedforward alike:
+        // a resonance is excited by either); the limit comes after them.
+        let i_unsat = self.shaping.run(torque / self.p.motor.k_m);
         let i_cmd = clamp(i_unsat, self.p.i_max);
         let saturated = i_cmd != i_unsat;
         if !saturated || (error > 0.0) != (i_unsat > 0.0) {
@@ -670,6 +701,18 @@ impl<const N: usize> Controller<N> {
             saturated,
         };
         self.out
+    }
+
+    /// Adds `amps` \[A\] to the current command of the last position step, within `i_max`:
+    /// a frequency-response excitation at the plant's input (after the loop-shaping filters,
+    /// so that a measured loop gain includes them). Returns the command now \[A\].
+    pub fn inject_current(&mut self, amps: f32) -> f32 {
+        let want = self.i_cmd + amps;
+        let i = clamp(want, self.p.i_max);
+        self.i_cmd = i;
+        self.out.i_cmd = i;
+        self.out.saturated |= i != want;
+        i
     }
 
     /// One current-loop step on the measured current `i_meas` \[A\]; returns the voltage and

@@ -22,15 +22,28 @@
 
 use crate::reference::sin_cos;
 
-/// The channels demodulated at once (e.g. the injected signal, the current commanded, the
-/// position).
-pub const CHANNELS: usize = 3;
+/// The channels demodulated at once: on the device the injected signal, the current
+/// commanded, the current measured and the position ([`Channel`]).
+pub const CHANNELS: usize = 4;
+
+/// The channels a device demodulates, in [`LockIn`] order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Channel {
+    /// The injected sine (A at the current command, rad at the position reference).
+    Injected = 0,
+    /// The current command after the injection \[A\].
+    Command = 1,
+    /// The current measured \[A\].
+    Current = 2,
+    /// The position measured, relative to the reference without the injection \[rad\].
+    Position = 3,
+}
 
 /// Why a frequency-response measurement cannot be set up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrfError {
-    /// The frequency is not in (0, rate / 4): a sine needs four samples a period to be
-    /// measured with its phase.
+    /// The frequency is not in (0, 0.45 × rate): above it the samples of a period no longer
+    /// tell its phase (the Nyquist frequency, with a margin).
     Frequency,
     /// The amplitude is not finite and positive.
     Amplitude,
@@ -42,7 +55,7 @@ impl FrfError {
     /// The one-line reason.
     pub fn reason(self) -> &'static str {
         match self {
-            FrfError::Frequency => "the frequency must be above 0 and below a quarter of the rate",
+            FrfError::Frequency => "the frequency must be above 0 and below 0.45 × the loop rate",
             FrfError::Amplitude => "the amplitude must be a positive number",
             FrfError::TooLong => "too many samples per period at this rate",
         }
@@ -67,7 +80,7 @@ impl Sine {
     /// `amp`: `k` whole periods in `n` samples, with `k` the smallest number of periods that
     /// puts the frequency within 0.1 % of the one asked (at most 64).
     pub fn new(freq_hz: f32, rate_hz: f32, amp: f32) -> Result<Sine, FrfError> {
-        if !(freq_hz > 0.0 && rate_hz > 0.0 && freq_hz < rate_hz / 4.0) {
+        if !(freq_hz > 0.0 && rate_hz > 0.0 && freq_hz < 0.45 * rate_hz) {
             return Err(FrfError::Frequency);
         }
         if !(amp > 0.0 && amp.is_finite()) {
@@ -153,6 +166,8 @@ pub struct LockIn {
     sum_s: [f64; CHANNELS],
     /// Σ x cos over the completed groups.
     sum_c: [f64; CHANNELS],
+    /// Σ over the completed groups of each group's |Σ x sin + j Σ x cos|².
+    sum_sq: [f64; CHANNELS],
     /// Samples in the completed groups.
     samples: u64,
     /// Completed groups.
@@ -210,6 +225,7 @@ impl LockIn {
             part_c: [0.0; CHANNELS],
             sum_s: [0.0; CHANNELS],
             sum_c: [0.0; CHANNELS],
+            sum_sq: [0.0; CHANNELS],
             samples: 0,
             groups: 0,
         }
@@ -230,6 +246,9 @@ impl LockIn {
             for (sum, part) in self.sum_c.iter_mut().zip(&self.part_c) {
                 *sum += *part as f64;
             }
+            for ((sq, ps), pc) in self.sum_sq.iter_mut().zip(&self.part_s).zip(&self.part_c) {
+                *sq += (ps * ps + pc * pc) as f64;
+            }
             self.part_s = [0.0; CHANNELS];
             self.part_c = [0.0; CHANNELS];
             self.samples += n as u64;
@@ -242,6 +261,22 @@ impl LockIn {
         self.groups
     }
 
+    /// Channel `ch`'s coherence over the completed groups \[0, 1\]: the power of the mean
+    /// phasor over the mean power of the groups' phasors, `|Σ P_g|² / (G Σ |P_g|²)` (1 when
+    /// every group gave the same response; noise and drift lower it). `None` before the
+    /// second group (one group is always coherent with itself) or for a channel that is 0.
+    pub fn coherence(&self, ch: usize) -> Option<f64> {
+        let (s, c, sq) = (
+            *self.sum_s.get(ch)?,
+            *self.sum_c.get(ch)?,
+            *self.sum_sq.get(ch)?,
+        );
+        if self.groups < 2 || sq.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
+            return None;
+        }
+        Some(((s * s + c * c) / (self.groups as f64 * sq)).min(1.0))
+    }
+
     /// Channel `ch`'s phasor over the completed groups (`None` before the first).
     pub fn phasor(&self, ch: usize) -> Option<Phasor> {
         if self.samples == 0 || ch >= CHANNELS {
@@ -252,5 +287,228 @@ impl LockIn {
             re: k * self.sum_s[ch],
             im: k * self.sum_c[ch],
         })
+    }
+}
+
+/// Where a device injects its sine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Injection {
+    /// Added to the current command after the position loop and its filters \[A\]: the plant
+    /// (position per current) and the open loop (the loop gain) are measured from it.
+    Current,
+    /// Added to the position reference \[rad\] (with its velocity and acceleration): the
+    /// closed loop (position per reference).
+    Position,
+}
+
+impl Injection {
+    /// The protocol's name: `current` or `position`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Injection::Current => "current",
+            Injection::Position => "position",
+        }
+    }
+
+    /// The injection with this name.
+    pub fn from_name(name: &str) -> Option<Injection> {
+        match name {
+            "current" => Some(Injection::Current),
+            "position" => Some(Injection::Position),
+            _ => None,
+        }
+    }
+}
+
+/// Where a measurement stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FrfState {
+    /// None asked since start.
+    #[default]
+    Idle,
+    /// Injecting, the response not yet steady: not summed.
+    Settling,
+    /// Injecting and summing.
+    Measuring,
+    /// Every group summed: the result stands, the injection is over.
+    Done,
+    /// Ended before its groups were summed (the bridge went off, a fault, `frf off`, another
+    /// measurement): what was summed stands.
+    Stopped,
+}
+
+impl FrfState {
+    /// The protocol's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            FrfState::Idle => "idle",
+            FrfState::Settling => "settling",
+            FrfState::Measuring => "measuring",
+            FrfState::Done => "done",
+            FrfState::Stopped => "stopped",
+        }
+    }
+
+    /// True while the sine is injected.
+    pub fn running(self) -> bool {
+        matches!(self, FrfState::Settling | FrfState::Measuring)
+    }
+}
+
+/// A measurement as asked: the sine, where it goes, and how many groups of whole periods
+/// settle and are then summed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrfSpec {
+    /// Where the sine is injected.
+    pub injection: Injection,
+    /// The sine (its amplitude in A or rad).
+    pub sine: Sine,
+    /// Groups injected before the summing starts (the response's transient).
+    pub settle_groups: u32,
+    /// Groups summed.
+    pub groups: u32,
+}
+
+impl FrfSpec {
+    /// The measurement closest to `periods` periods of `freq_hz` \[Hz\] after `settle`
+    /// periods, at `rate_hz` \[Hz\] (whole groups, at least one of each), amplitude `amp`.
+    pub fn new(
+        injection: Injection,
+        freq_hz: f32,
+        amp: f32,
+        periods: u32,
+        settle: u32,
+        rate_hz: f32,
+    ) -> Result<FrfSpec, FrfError> {
+        let sine = Sine::new(freq_hz, rate_hz, amp)?;
+        let k = sine.periods().max(1);
+        let groups = periods.div_ceil(k).max(1);
+        let settle_groups = settle.div_ceil(k).max(1);
+        if (groups as u64 + settle_groups as u64) * sine.samples() as u64 > u32::MAX as u64 {
+            return Err(FrfError::TooLong);
+        }
+        Ok(FrfSpec {
+            injection,
+            sine,
+            settle_groups,
+            groups,
+        })
+    }
+
+    /// Position steps the whole measurement takes (settling and summing).
+    pub fn steps(&self) -> u64 {
+        (self.settle_groups as u64 + self.groups as u64) * self.sine.samples() as u64
+    }
+}
+
+/// A measurement under way on the device, and its result.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Frf {
+    spec: FrfSpec,
+    state: FrfState,
+    /// Groups completed (settling included).
+    groups_done: u32,
+    lock: LockIn,
+}
+
+/// What a device shows of its measurement (published at the end of each group).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrfReport {
+    /// Where it stands.
+    pub state: FrfState,
+    /// Where the sine went (`None` before the first measurement).
+    pub injection: Option<Injection>,
+    /// The frequency run \[Hz\] (the one asked, fitted to the rate).
+    pub freq_hz: f64,
+    /// The amplitude injected (A or rad).
+    pub amp: f32,
+    /// The sums.
+    pub lock: LockIn,
+    /// Groups to be summed in all.
+    pub groups: u32,
+}
+
+impl Frf {
+    /// A measurement starting now.
+    pub fn start(spec: FrfSpec) -> Frf {
+        Frf {
+            spec,
+            state: FrfState::Settling,
+            groups_done: 0,
+            lock: LockIn::new(),
+        }
+    }
+
+    /// Where it stands.
+    pub fn state(&self) -> FrfState {
+        self.state
+    }
+
+    /// Where the sine goes.
+    pub fn injection(&self) -> Injection {
+        self.spec.injection
+    }
+
+    /// This sample's injected value (0 once it is over), with the excitation's phase.
+    pub fn value(&self) -> (f32, (f32, f32)) {
+        if !self.state.running() {
+            return (0.0, (0.0, 1.0));
+        }
+        let ph = self.spec.sine.phase();
+        (self.spec.sine.amplitude() * ph.0, ph)
+    }
+
+    /// The amplitude injected (A or rad).
+    pub fn amplitude(&self) -> f32 {
+        self.spec.sine.amplitude()
+    }
+
+    /// The sine's angular frequency ω \[rad/s\] at `rate_hz` \[Hz\].
+    pub fn omega(&self, rate_hz: f32) -> f32 {
+        (core::f64::consts::TAU * self.spec.sine.freq_hz(rate_hz)) as f32
+    }
+
+    /// Adds this sample's responses `x` (in [`Channel`] order) taken at phase `ph` (from
+    /// [`Frf::value`]) and moves on; true when a group was completed (a new report is due).
+    pub fn step(&mut self, x: &[f32; CHANNELS], ph: (f32, f32)) -> bool {
+        if !self.state.running() {
+            return false;
+        }
+        let n = self.spec.sine.samples();
+        let done = self.spec.sine.advance();
+        if self.state == FrfState::Measuring {
+            self.lock.add(x, ph, done, n);
+        }
+        if done {
+            self.groups_done = self.groups_done.saturating_add(1);
+            if self.groups_done >= self.spec.settle_groups {
+                self.state = FrfState::Measuring;
+            }
+            if self.groups_done >= self.spec.settle_groups.saturating_add(self.spec.groups) {
+                self.state = FrfState::Done;
+            }
+        }
+        done
+    }
+
+    /// Ends it before its time (what was summed stands); true when it was running.
+    pub fn stop(&mut self) -> bool {
+        let running = self.state.running();
+        if running {
+            self.state = FrfState::Stopped;
+        }
+        running
+    }
+
+    /// The report of it now, the frequency at `rate_hz` \[Hz\].
+    pub fn report(&self, rate_hz: f32) -> FrfReport {
+        FrfReport {
+            state: self.state,
+            injection: Some(self.spec.injection),
+            freq_hz: self.spec.sine.freq_hz(rate_hz),
+            amp: self.spec.sine.amplitude(),
+            lock: self.lock,
+            groups: self.spec.groups,
+        }
     }
 }

@@ -1,5 +1,6 @@
-//! Loop-shaping filters for the current reference (issue 26, not yet in the loop): two notches
-//! and a low-pass, each off at 0 Hz. A notch is the Audio EQ Cookbook's peaking filter cut by
+//! Loop-shaping filters on the position loop's current command: two notches and a low-pass,
+//! each off at 0 Hz (settings `filt.notch1.*`, `filt.notch2.*`, `filt.lp.f_hz`; run by the
+//! controller once per position step, see [`crate::controller`]). A notch is the Audio EQ Cookbook's peaking filter cut by
 //! `depth_db` at `f_hz` with quality `q` (a finite depth: a resonance is attenuated, not
 //! removed, so the loop's phase is disturbed only near it); the low-pass a second-order
 //! Butterworth. The coefficients come from the `biquad` crate (`Coefficients::from_params`),
@@ -10,7 +11,9 @@
 use biquad::{Biquad, Coefficients, DirectForm2Transposed, Hertz, Q_BUTTERWORTH_F32, Type};
 
 /// One notch: a cut of `depth_db` \[dB\] at `f_hz` \[Hz\] (0: off) with quality `q` [-].
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct Notch {
     /// Centre frequency \[Hz\]; 0 switches the notch off.
     pub f_hz: f32,
@@ -20,8 +23,26 @@ pub struct Notch {
     pub depth_db: f32,
 }
 
+impl Notch {
+    /// A notch switched off, with the quality and depth it takes when a frequency is set
+    /// (q 2: a band of half the centre frequency; 20 dB).
+    pub const OFF: Notch = Notch {
+        f_hz: 0.0,
+        q: 2.0,
+        depth_db: 20.0,
+    };
+}
+
+impl Default for Notch {
+    fn default() -> Notch {
+        Notch::OFF
+    }
+}
+
 /// The loop-shaping filters' settings.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 pub struct ShapingParams {
     /// The two notches.
     pub notch: [Notch; 2],
@@ -53,11 +74,22 @@ impl ShapingError {
     }
 }
 
+impl ShapingParams {
+    /// Every filter off.
+    pub const OFF: ShapingParams = ShapingParams {
+        notch: [Notch::OFF; 2],
+        lp_hz: 0.0,
+    };
+}
+
 /// The filters, ready to run at one rate.
 #[derive(Debug, Clone, Copy)]
 pub struct Shaping {
     coeffs: [Option<Coefficients<f32>>; 3],
     stages: [Option<DirectForm2Transposed<f32>>; 3],
+    /// The cascade's last values: `io[0]` its input, `io[i + 1]` the output of stage `i` (its
+    /// input again where the stage is off), for a bumpless change of settings.
+    io: [f32; 4],
 }
 
 fn frequency(f: f32, rate: f32) -> Result<Option<Hertz<f32>>, ShapingError> {
@@ -70,6 +102,11 @@ fn frequency(f: f32, rate: f32) -> Result<Option<Hertz<f32>>, ShapingError> {
     Hertz::from_hz(f)
         .map(Some)
         .map_err(|_| ShapingError::Frequency)
+}
+
+/// The same coefficients (`Coefficients` has no `PartialEq`).
+fn same(a: &Coefficients<f32>, b: &Coefficients<f32>) -> bool {
+    (a.b0, a.b1, a.b2, a.a1, a.a2) == (b.b0, b.b1, b.b2, b.a1, b.a2)
 }
 
 impl Shaping {
@@ -101,14 +138,24 @@ impl Shaping {
         Ok(Shaping {
             coeffs,
             stages: coeffs.map(|c| c.map(DirectForm2Transposed::<f32>::new)),
+            io: [0.0; 4],
         })
+    }
+
+    /// True when every filter is off (the cascade passes its input unchanged).
+    pub fn is_off(&self) -> bool {
+        self.stages.iter().all(Option::is_none)
     }
 
     /// Filters one sample (the stages in order: notch 1, notch 2, low-pass).
     pub fn run(&mut self, x: f32) -> f32 {
         let mut y = x;
-        for s in self.stages.iter_mut().flatten() {
-            y = s.run(y);
+        self.io[0] = x;
+        for (s, io) in self.stages.iter_mut().zip(self.io.iter_mut().skip(1)) {
+            if let Some(s) = s {
+                y = s.run(y);
+            }
+            *io = y;
         }
         y
     }
@@ -117,6 +164,35 @@ impl Shaping {
     pub fn reset(&mut self) {
         for s in self.stages.iter_mut().flatten() {
             s.reset_state();
+        }
+        self.io = [0.0; 4];
+    }
+
+    /// A change of settings without a bump: this cascade (new, at rest) takes the running
+    /// state of `old`. A stage whose coefficients are the same keeps its state; a stage that
+    /// changed or was switched on starts in the steady state of a constant input at the level
+    /// the old stage last gave out (each stage passes 0 Hz unchanged, so the output goes on
+    /// from where it was and only the new stage's response to what follows differs). Cheap: no
+    /// transcendental function, fit for a control step.
+    pub fn take_state_from(&mut self, old: &Shaping) {
+        self.io = old.io;
+        for (i, (s, c)) in self.stages.iter_mut().zip(&self.coeffs).enumerate() {
+            let (Some(s), Some(c)) = (s, c) else {
+                continue;
+            };
+            match (old.stages.get(i).copied().flatten(), old.coeffs.get(i).copied().flatten()) {
+                (Some(o), Some(oc)) if same(&oc, c) => {
+                    s.s1 = o.s1;
+                    s.s2 = o.s2;
+                }
+                _ => {
+                    let level = old.io.get(i + 1).copied().unwrap_or(0.0);
+                    // Direct form 2 transposed at a constant input x = level with output
+                    // y = level: s2 = (b2 − a2) x, s1 = s2 + (b1 − a1) x.
+                    s.s2 = (c.b2 - c.a2) * level;
+                    s.s1 = s.s2 + (c.b1 - c.a1) * level;
+                }
+            }
         }
     }
 

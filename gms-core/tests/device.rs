@@ -183,7 +183,7 @@ fn a_capture_records_what_the_loop_saw() {
             since_last: period,
         };
         lp.step(inp, |_, c| {
-            if let Some(c) = c {
+            if let Some(c) = c.chunk {
                 chunk = Some(*c);
             }
             req.take()

@@ -81,6 +81,34 @@ impl Energy {
     }
 }
 
+/// The plant's constants for a linear model (SI, everything at the motor).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmallSignal {
+    /// Winding resistance \[ohm\].
+    pub r: f64,
+    /// Winding inductance \[H\].
+    pub l: f64,
+    /// Torque constant \[N·m/A\].
+    pub k_m: f64,
+    /// Back-EMF constant \[V·s/rad\].
+    pub k_e: f64,
+    /// The whole inertia at the motor \[kg·m²\].
+    pub j: f64,
+    /// A compliant stage: rotor-side inertia, slide inertia \[kg·m²\], coupling stiffness
+    /// \[N·m/rad\] and damping \[N·m·s/rad\], all reflected to the motor.
+    pub two_mass: Option<(f64, f64, f64, f64)>,
+    /// The actuator friction's stiffness at rest (pre-sliding) \[N·m/rad\].
+    pub k_act: f64,
+    /// The actuator friction's viscous coefficient \[N·m·s/rad\].
+    pub sigma_act: f64,
+    /// The guideway friction's stiffness at rest, reflected \[N·m/rad\].
+    pub k_gw: f64,
+    /// The guideway friction's viscous coefficient, reflected \[N·m·s/rad\].
+    pub sigma_gw: f64,
+    /// Encoder resolution \[rad/count\].
+    pub rad_per_count: f64,
+}
+
 /// The two-mass stage's constants at the motor (reflected).
 #[derive(Debug, Clone, Copy)]
 struct TwoMass {
@@ -111,6 +139,9 @@ pub struct Plant {
     rng: ChaCha8Rng,
     actuator: AnyModel,
     guideway: AnyModel,
+    /// The friction tables drawn for this run (the truth's parameters).
+    act_spec: FrictionSpec,
+    gw_spec: FrictionSpec,
     drift: crate::scenario::Drift,
     ripple: crate::scenario::Ripple,
     gear_ratio: f64,
@@ -207,6 +238,8 @@ impl Plant {
             rng,
             actuator,
             guideway,
+            act_spec: act,
+            gw_spec: gw,
             drift: spec.drift.clone(),
             ripple: spec.ripple.clone(),
             gear_ratio: spec.gear_ratio,
@@ -238,6 +271,47 @@ impl Plant {
             pending_duty: 0.0,
             energy: Energy::default(),
         })
+    }
+
+    /// The plant's constants for a small-signal linear model about its state now
+    /// ([`crate::linear`]): the electrical and mechanical constants as the plant runs them,
+    /// and each friction's stiffness and viscous coefficient from the truth's drawn
+    /// parameters (the blocks' Σk of a GMS, σ0 and σ1 of LuGre; scaled by the drift and the
+    /// screw's factor now; the guideway's reflected to the motor).
+    pub fn small_signal(&self) -> SmallSignal {
+        let stiff = |f: &FrictionSpec| -> (f64, f64) {
+            let k = match f.model {
+                gms_ident::paramfile::ModelKind::Lugre => f.sigma0.unwrap_or(0.0),
+                _ => f
+                    .blocks
+                    .as_ref()
+                    .map_or(0.0, |b| b.iter().map(|b| b.k).sum::<f64>()),
+            };
+            let visc = f.sigma.unwrap_or(0.0)
+                + match f.model {
+                    gms_ident::paramfile::ModelKind::Lugre => f.sigma1.unwrap_or(0.0),
+                    _ => 0.0,
+                };
+            (k, visc)
+        };
+        let drift = self.drift_factor();
+        let screw = self.ripple.screw_factor(self.theta, self.gear_ratio);
+        let (ka, sa) = stiff(&self.act_spec);
+        let (kg, sg) = stiff(&self.gw_spec);
+        let r2 = self.ratio * self.ratio;
+        SmallSignal {
+            r: self.r,
+            l: self.l,
+            k_m: self.k_m,
+            k_e: self.k_e,
+            j: self.j,
+            two_mass: self.two_mass.map(|m| (m.j_m, m.j_l, m.k, m.c)),
+            k_act: drift * screw * ka,
+            sigma_act: drift * screw * sa,
+            k_gw: drift * r2 * kg,
+            sigma_gw: drift * r2 * sg,
+            rad_per_count: self.rad_per_count,
+        }
     }
 
     /// The friction drift factor now [-].

@@ -4,9 +4,11 @@ use crate::controller::PositionOutput;
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
 use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
+use crate::frf::{CHANNELS, Frf, FrfReport, Injection};
+
 use super::{
-    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, Requests, Sample, Status,
-    StepValues,
+    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, FrfRequest, Handover, Requests,
+    Sample, Status, StepValues,
 };
 
 /// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
@@ -170,6 +172,10 @@ pub struct ControlLoop {
     capture: Capture<CaptureBuf>,
     /// A chunk read for the protocol side, handed over at the next exchange.
     chunk: Option<Chunk>,
+    /// The frequency-response measurement (the last one, running or not).
+    frf: Option<Frf>,
+    /// Its report for the protocol side, handed over at the next exchange.
+    frf_report: Option<FrfReport>,
 }
 
 impl ControlLoop {
@@ -216,6 +222,8 @@ impl ControlLoop {
             current_until: None,
             capture: Capture::new(capture),
             chunk: None,
+            frf: None,
+            frf_report: None,
         }
     }
 
@@ -249,6 +257,17 @@ impl ControlLoop {
     pub fn halt(&mut self, faults: Faults) {
         self.faults.latch(faults);
         self.switch_off();
+    }
+
+    /// Ends a running frequency-response measurement (what was summed stands) and hands its
+    /// report over at the next exchange.
+    fn stop_frf(&mut self) {
+        let rate = self.ctrl.params().pos_rate_hz;
+        if let Some(f) = &mut self.frf
+            && f.stop()
+        {
+            self.frf_report = Some(f.report(rate));
+        }
     }
 
     fn switch_off(&mut self) {
@@ -370,10 +389,12 @@ impl ControlLoop {
             }
             None => {}
         }
+        let frf_start = matches!(req.frf, Some(FrfRequest::Start(_)));
         let experiment = req.hold_here
             || req.current.is_some()
             || req.motion.is_some()
-            || req.velocity.is_some();
+            || req.velocity.is_some()
+            || (frf_start && self.enabled && req.current.is_none() && self.current_mode.is_none());
         if experiment && self.enabled {
             self.capture.experiment_started();
         }
@@ -403,6 +424,20 @@ impl ControlLoop {
             plan.skip(behind as f32 * self.ctrl.dt_pos());
             self.motion.start(plan);
         }
+        match req.frf {
+            Some(FrfRequest::Start(spec)) => {
+                self.stop_frf();
+                // Only with the position loop running (not in current mode, not off); the
+                // report says `running` from the next exchange.
+                if self.enabled && self.current_mode.is_none() {
+                    let f = Frf::start(spec);
+                    self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
+                    self.frf = Some(f);
+                }
+            }
+            Some(FrfRequest::Stop) => self.stop_frf(),
+            None => {}
+        }
         if let Some(v) = req.velocity
             && self.enabled
         {
@@ -425,7 +460,7 @@ impl ControlLoop {
     pub fn step(
         &mut self,
         inp: Inputs,
-        exchange: impl FnOnce(Status, Option<&Chunk>) -> Option<Requests>,
+        exchange: impl FnOnce(Status, Handover<'_>) -> Option<Requests>,
     ) -> Outputs {
         self.last_raw = inp.encoder;
         self.enc
@@ -447,7 +482,12 @@ impl ControlLoop {
         }
         if self.phase == 0 {
             let chunk = self.chunk.take();
-            if let Some(req) = exchange(self.status(), chunk.as_ref()) {
+            let report = self.frf_report.take();
+            let h = Handover {
+                chunk: chunk.as_ref(),
+                frf: report.as_ref(),
+            };
+            if let Some(req) = exchange(self.status(), h) {
                 timing = self.take(req);
             }
             self.steps = self.steps.wrapping_add(1);
@@ -472,7 +512,11 @@ impl ControlLoop {
                 }
             } else if self.enabled && self.wake_left == 0 {
                 self.r = self.motion.next(self.ctrl.dt_pos());
-                self.out = self.ctrl.position_step(pos, &self.r);
+                if self.frf.is_some_and(|f| f.state().running()) {
+                    self.frf_step(pos);
+                } else {
+                    self.out = self.ctrl.position_step(pos, &self.r);
+                }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
                 self.out = PositionOutput::default();
@@ -483,6 +527,10 @@ impl ControlLoop {
                     acc: 0.0,
                 };
                 self.out = PositionOutput::default();
+            }
+            if !(self.enabled && self.current_mode.is_none()) {
+                // No position loop: no frequency response.
+                self.stop_frf();
             }
             // The position periods the increment took: one, plus the PWM periods missed since
             // the last position step in whole position periods (rounded up).
@@ -558,6 +606,42 @@ impl ControlLoop {
             return true;
         }
         false
+    }
+
+    /// A position step with the frequency-response sine injected (at the reference or at the
+    /// current command) and the responses summed; `self.r` is the reference without it.
+    fn frf_step(&mut self, pos: i64) {
+        let Some(f) = &mut self.frf else {
+            return;
+        };
+        let rpc = self.ctrl.rad_per_count();
+        let sub = SUB_PER_COUNT;
+        let (v, ph) = f.value();
+        match f.injection() {
+            Injection::Position => {
+                // The sine as a motion: its position, velocity and acceleration.
+                let w = f.omega(self.ctrl.params().pos_rate_hz);
+                let amp_cos = f.amplitude() * ph.1;
+                let r = crate::reference::RefSample {
+                    pos: self
+                        .r
+                        .pos
+                        .saturating_add((v / rpc * sub) as i64),
+                    vel: self.r.vel + w * amp_cos,
+                    acc: self.r.acc - w * w * v,
+                };
+                self.out = self.ctrl.position_step(pos, &r);
+            }
+            Injection::Current => {
+                self.out = self.ctrl.position_step(pos, &self.r);
+                self.ctrl.inject_current(v);
+            }
+        }
+        let y = (pos.saturating_mul(sub as i64).saturating_sub(self.r.pos)) as f32 * (rpc / sub);
+        let x: [f32; CHANNELS] = [v, self.ctrl.last_output().i_cmd, self.current, y];
+        if f.step(&x, ph) {
+            self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
+        }
     }
 
     fn telemetry(&mut self, pos: i64) -> Option<Sample> {

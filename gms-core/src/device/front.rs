@@ -10,8 +10,13 @@ use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile}
 
 use super::{
     Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, MAX_STREAM_HZ,
-    Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest, capture_fields,
+    FrfRequest, Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest,
+    capture_fields,
 };
+use crate::frf::{Channel, FrfSpec, Injection};
+
+/// The longest frequency-response measurement \[s\] (settling and summing).
+pub const FRF_MAX_S: f32 = 600.0;
 
 /// How the protocol side reaches the loop.
 pub trait LoopLink {
@@ -564,5 +569,94 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         match which {
             protocol::Estimate::AdaptScale => self.status_now().adapt_scale,
         }
+    }
+
+    fn frf_start(
+        &mut self,
+        injection: Injection,
+        f_hz: f32,
+        amp: f32,
+        periods: u32,
+        settle: u32,
+    ) -> Result<(), &'static str> {
+        let st = self.status_now();
+        if !st.enabled {
+            return Err("disabled (enable first)");
+        }
+        if matches!(st.drive, Drive::Current(_)) {
+            return Err("in current mode: no position loop (hold first)");
+        }
+        if periods == 0 {
+            return Err("PERIODS must be at least 1");
+        }
+        let rate = self.settings.pos_rate_hz;
+        let spec = FrfSpec::new(injection, f_hz, amp, periods, settle, rate)
+            .map_err(|e| e.reason())?;
+        if spec.steps() as f32 > FRF_MAX_S * rate {
+            return Err("longer than 600 s (fewer periods)");
+        }
+        match injection {
+            Injection::Current => {
+                if amp > self.settings.i_max {
+                    return Err("AMP beyond lim.i_max");
+                }
+            }
+            Injection::Position => {
+                let w = core::f32::consts::TAU * f_hz;
+                if amp * w > crate::reference::VELOCITY_MAX {
+                    return Err("AMP × 2π F_HZ beyond the speed limit (20 rad/s)");
+                }
+                let rpc = self.settings.rad_per_count();
+                let limits = self.board.limits(&self.settings);
+                let here = (st.reference.pos as f64 / SUB_PER_COUNT as f64) as f32;
+                let reach = amp / rpc;
+                if !(here - reach >= limits.pos_min as f32 && here + reach <= limits.pos_max as f32)
+                {
+                    return Err("AMP beyond the soft limits from here");
+                }
+            }
+        }
+        self.post(|r| r.frf = Some(FrfRequest::Start(spec)))
+    }
+
+    fn frf_off(&mut self) -> Result<(), &'static str> {
+        self.post(|r| r.frf = Some(FrfRequest::Stop))
+    }
+
+    fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        let f = self.link.with_mailbox(|m| m.frf);
+        write!(out, "state={}", f.state.name())?;
+        let Some(inj) = f.injection else {
+            return Ok(());
+        };
+        write!(
+            out,
+            " inj={} f_hz={} amp={} groups={}/{}",
+            inj.name(),
+            Num(f.freq_hz as f32),
+            Num(f.amp),
+            f.lock.groups(),
+            f.groups
+        )?;
+        let names = ["in", "cmd", "cur", "pos"];
+        let chans = [
+            Channel::Injected,
+            Channel::Command,
+            Channel::Current,
+            Channel::Position,
+        ];
+        for (name, ch) in names.iter().zip(chans) {
+            let p = f.lock.phasor(ch as usize).unwrap_or_default();
+            write!(out, " {name}={},{}", Num(p.re as f32), Num(p.im as f32))?;
+        }
+        out.write_str(" coh=")?;
+        for (i, ch) in chans.iter().enumerate() {
+            let c = f.lock.coherence(*ch as usize).unwrap_or(f64::NAN);
+            if i > 0 {
+                out.write_char(',')?;
+            }
+            write!(out, "{}", Num(c as f32))?;
+        }
+        Ok(())
     }
 }

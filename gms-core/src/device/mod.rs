@@ -135,6 +135,26 @@ pub struct MoveRequest {
     pub from_step: u64,
 }
 
+/// What the protocol side asks of a frequency-response measurement.
+#[derive(Debug, Clone, Copy)]
+pub enum FrfRequest {
+    /// Start one (a measurement under way is stopped; ignored unless the position loop runs).
+    Start(crate::frf::FrfSpec),
+    /// Stop the one under way (what was summed stands).
+    Stop,
+}
+
+/// What the loop hands the protocol side at an exchange besides its status (each only when
+/// there is something new).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Handover<'a> {
+    /// A chunk of captured samples read ([`CaptureRequest::Read`]).
+    pub chunk: Option<&'a Chunk>,
+    /// The frequency-response measurement's report (at the end of each group of periods, and
+    /// when it stops).
+    pub frf: Option<&'a crate::frf::FrfReport>,
+}
+
 /// What the protocol side asks of the capture.
 #[derive(Debug, Clone, Copy)]
 pub enum CaptureRequest {
@@ -186,6 +206,8 @@ pub struct Requests {
     pub hold_here: bool,
     /// Arm, stop or read the capture.
     pub capture: Option<CaptureRequest>,
+    /// Start or stop a frequency-response measurement.
+    pub frf: Option<FrfRequest>,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -205,6 +227,7 @@ impl Requests {
             || self.current.is_some()
             || self.hold_here
             || self.capture.is_some()
+            || self.frf.is_some()
             || self.stream_every.is_some()
             || self.reset_stats
     }
@@ -332,6 +355,8 @@ pub struct Mailbox {
     pub taken_at: u64,
     /// The last chunk of captured samples read (`CaptureRequest::Read`).
     pub chunk: Chunk,
+    /// The frequency-response measurement's last report.
+    pub frf: crate::frf::FrfReport,
 }
 
 impl Mailbox {
@@ -350,6 +375,7 @@ impl Mailbox {
                 current_steps: None,
                 hold_here: false,
                 capture: None,
+                frf: None,
                 stream_every: None,
                 reset_stats: false,
             },
@@ -384,14 +410,26 @@ impl Mailbox {
                 nfields: 0,
                 values: [0.0; CHUNK_VALUES],
             },
+            frf: crate::frf::FrfReport {
+                state: crate::frf::FrfState::Idle,
+                injection: None,
+                freq_hz: 0.0,
+                amp: 0.0,
+                lock: crate::frf::LockIn::new(),
+                groups: 0,
+            },
         }
     }
 
-    /// The loop's side: publishes `status` and takes the pending requests, if any.
-    pub fn exchange(&mut self, status: Status, chunk: Option<&Chunk>) -> Option<Requests> {
+    /// The loop's side: publishes `status` (and what else it hands over) and takes the
+    /// pending requests, if any.
+    pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<Requests> {
         self.status = status;
-        if let Some(c) = chunk {
+        if let Some(c) = h.chunk {
             self.chunk = *c;
+        }
+        if let Some(f) = h.frf {
+            self.frf = *f;
         }
         if self.requests.pending() {
             self.taken_at = status.steps;
@@ -430,6 +468,7 @@ pub fn default_settings() -> Settings {
             d_filter_hz: 2000.0,
             i_limit: 1e-3,
         },
+        shaping: crate::shaping::ShapingParams::OFF,
         current: CurrentParams { kp: 1.5, ki: 6e4 },
         motor: MotorModel {
             k_m: 6.6e-3,

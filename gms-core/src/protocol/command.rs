@@ -28,6 +28,30 @@ pub enum CaptureCmd<'a> {
     },
 }
 
+/// The frequency-response commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FrfCmd {
+    /// `frf`: the measurement's state and result.
+    Status,
+    /// `frf off`: stop the one under way.
+    Off,
+    /// `frf current|position F_HZ AMP PERIODS SETTLE`: inject a sine of `F_HZ` \[Hz\] and
+    /// `AMP` (A at the current command, rad at the position reference), let `SETTLE` periods
+    /// pass, then demodulate `PERIODS` periods (both rounded up to whole groups).
+    Start {
+        /// Where the sine goes.
+        injection: crate::frf::Injection,
+        /// Frequency \[Hz\].
+        f_hz: f32,
+        /// Amplitude \[A or rad\].
+        amp: f32,
+        /// Periods summed.
+        periods: u32,
+        /// Periods let pass first.
+        settle: u32,
+    },
+}
+
 /// A decimal `u32` (digits only), without core's parser (whose error path the no-panic link
 /// check cannot see through).
 fn parse_u32(s: &str) -> Option<u32> {
@@ -142,6 +166,8 @@ pub enum Command<'a> {
     },
     /// `stream off`.
     StreamOff,
+    /// `frf …`.
+    Frf(FrfCmd),
 }
 
 /// The request line of a command (without the line end): what a host sends, read back by
@@ -216,6 +242,21 @@ impl core::fmt::Display for Command<'_> {
             }
             Command::Stream { fields, rate_hz } => write!(f, "stream {fields} {}", Num(rate_hz)),
             Command::StreamOff => f.write_str("stream off"),
+            Command::Frf(FrfCmd::Status) => f.write_str("frf"),
+            Command::Frf(FrfCmd::Off) => f.write_str("frf off"),
+            Command::Frf(FrfCmd::Start {
+                injection,
+                f_hz,
+                amp,
+                periods,
+                settle,
+            }) => write!(
+                f,
+                "frf {} {} {} {periods} {settle}",
+                injection.name(),
+                Num(f_hz),
+                Num(amp)
+            ),
         }
     }
 }
@@ -357,6 +398,27 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                 }
             };
             Command::Velocity { vel, sweep }
+        }
+        "frf" => {
+            let usage = "usage: frf | frf off | frf current|position F_HZ AMP PERIODS SETTLE";
+            match arg() {
+                None => Command::Frf(FrfCmd::Status),
+                Some("off") => Command::Frf(FrfCmd::Off),
+                Some(w) => {
+                    let injection = crate::frf::Injection::from_name(w).ok_or(bad(usage))?;
+                    let f_hz = arg().and_then(parse_f32).ok_or(bad(usage))?;
+                    let amp = arg().and_then(parse_f32).ok_or(bad(usage))?;
+                    let periods = arg().and_then(parse_u32).ok_or(bad(usage))?;
+                    let settle = arg().and_then(parse_u32).ok_or(bad(usage))?;
+                    Command::Frf(FrfCmd::Start {
+                        injection,
+                        f_hz,
+                        amp,
+                        periods,
+                        settle,
+                    })
+                }
+            }
         }
         "stream" => match arg() {
             Some("off") => Command::StreamOff,

@@ -67,6 +67,28 @@ pub trait Device {
     fn stream(&mut self, fields: &str, rate_hz: f32) -> Result<(), &'static str>;
     /// Stops telemetry.
     fn stream_off(&mut self) -> Result<(), &'static str>;
+    /// Starts a frequency-response measurement: a sine of `f_hz` \[Hz\] and `amp` (A or rad)
+    /// injected at `injection`, `settle` periods let pass, `periods` summed.
+    fn frf_start(
+        &mut self,
+        injection: crate::frf::Injection,
+        f_hz: f32,
+        amp: f32,
+        periods: u32,
+        settle: u32,
+    ) -> Result<(), &'static str> {
+        let _ = (injection, f_hz, amp, periods, settle);
+        Err("no frequency response on this device")
+    }
+    /// Stops the frequency-response measurement under way.
+    fn frf_off(&mut self) -> Result<(), &'static str> {
+        Err("no frequency response on this device")
+    }
+    /// Writes the frequency-response measurement's state and result (without the leading
+    /// `ok `) on one line.
+    fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        out.write_str("state=idle")
+    }
     /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
     /// without adaptation.
     fn estimate(&mut self, which: Estimate) -> f32 {
@@ -81,7 +103,8 @@ pub const HELP: &str = "help | list | get PATH | set PATH VALUE | stage PATH VAL
 discard | save | load | defaults | \
 enable [current] | disable | status | clear | move POS [VEL] | current AMPS [SECONDS] | \
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
-capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT]";
+capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT] | \
+frf [off | current|position F_HZ AMP PERIODS SETTLE]";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
     writeln!(out, "err {} {}", code as u8, reason)
@@ -212,5 +235,18 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         },
         Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
         Command::StreamOff => done(out, dev.stream_off()),
+        Command::Frf(FrfCmd::Status) => {
+            out.write_str("ok ")?;
+            dev.frf_status(out)?;
+            writeln!(out)
+        }
+        Command::Frf(FrfCmd::Off) => done(out, dev.frf_off()),
+        Command::Frf(FrfCmd::Start {
+            injection,
+            f_hz,
+            amp,
+            periods,
+            settle,
+        }) => done(out, dev.frf_start(injection, f_hz, amp, periods, settle)),
     }
 }

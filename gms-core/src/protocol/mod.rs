@@ -17,6 +17,9 @@
 //! | `velocity VEL [AMP F0 F1 SECONDS]` | `ok` or `err`: a constant speed (rad/s), or a sweep around it (rad/s, Hz, Hz, s) |
 //! | `hold` | `ok` or `err`: back to position control, stopping where the axis can |
 //! | `stream FIELDS RATE_HZ`, `stream off` | `ok` or `err` |
+//! | `frf current\|position F_HZ AMP PERIODS SETTLE` | `ok` or `err`: a frequency-response measurement (Hz, A or rad, periods) |
+//! | `frf` | `ok state=… inj=… f_hz=… amp=… groups=… in=RE,IM cmd=RE,IM cur=RE,IM pos=RE,IM coh=…` |
+//! | `frf off` | `ok`: the measurement stops |
 //!
 //! - `reader`: [`LineReader`] (bytes to lines).
 //! - `command`: [`parse`] (a line to a [`Command`]), [`ErrorCode`].

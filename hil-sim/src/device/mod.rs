@@ -24,7 +24,7 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, Chunk, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests,
+    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests,
     Sample, SenseChain, Status,
 };
 use gms_core::drive::BoardLimits;
@@ -116,7 +116,7 @@ impl Sim {
     /// host when `timed` (real time), else counted as 0 (simulated time).
     fn tick(
         &mut self,
-        mut exchange: impl FnMut(Status, Option<&Chunk>) -> Option<Requests>,
+        mut exchange: impl FnMut(Status, device::Handover<'_>) -> Option<Requests>,
         queue: &Mutex<VecDeque<Sample>>,
         timed: bool,
     ) {

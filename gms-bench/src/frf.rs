@@ -1,0 +1,521 @@
+//! Frequency response on a device: a stepped-sine sweep of the device's own measurement
+//! (`frf`: a sine injected and demodulated on the device over whole periods), the transfer
+//! functions made from its phasors, the stability margins of a loop gain, and the pre-sliding
+//! stiffness seen at low frequency.
+//!
+//! Which transfer function each loop is, from the four phasors the device demodulates (the sine
+//! injected `in`, the current commanded after it `cmd`, the current measured `cur`, the position
+//! relative to the reference without the sine `pos`):
+//!
+//! - `plant`: `pos / cmd` \[rad/A\] (the sine at the current command; in closed loop, divided by
+//!   the current actually commanded, so the controller's own reaction does not enter);
+//! - `open`: the loop gain `in / cmd − 1` (the command is `u + d`, the controller's part
+//!   `u = −L · cmd`), dimensionless, the loop-shaping filters included;
+//! - `closed`: `pos / in` (the sine at the position reference).
+
+use gms_core::frf::{FrfState, Injection};
+use gms_core::protocol::{Command, FrfCmd};
+use gms_ident::Error;
+use num_complex::Complex64;
+
+use crate::client::{Bench, status};
+
+/// Which transfer function a sweep measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Loop {
+    /// Position per current commanded \[rad/A\].
+    Plant,
+    /// The loop gain [-].
+    Open,
+    /// Position per position reference [-].
+    Closed,
+}
+
+impl Loop {
+    /// The name on the command line: `plant`, `open` or `closed`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Loop::Plant => "plant",
+            Loop::Open => "open",
+            Loop::Closed => "closed",
+        }
+    }
+
+    /// The loop with this name.
+    pub fn from_name(s: &str) -> Option<Loop> {
+        match s {
+            "plant" => Some(Loop::Plant),
+            "open" => Some(Loop::Open),
+            "closed" => Some(Loop::Closed),
+            _ => None,
+        }
+    }
+
+    /// Where the sine goes for this loop.
+    pub fn injection(self) -> Injection {
+        match self {
+            Loop::Plant | Loop::Open => Injection::Current,
+            Loop::Closed => Injection::Position,
+        }
+    }
+}
+
+/// The device's `frf` reply.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reply {
+    /// Where the measurement stands.
+    pub state: FrfState,
+    /// Where the sine went (`None` before any measurement).
+    pub injection: Option<Injection>,
+    /// The frequency run \[Hz\].
+    pub f_hz: f64,
+    /// The amplitude injected \[A or rad\].
+    pub amp: f64,
+    /// Groups of whole periods summed so far.
+    pub groups: u32,
+    /// Groups to be summed.
+    pub total: u32,
+    /// The phasors `in`, `cmd`, `cur`, `pos` \[A, A, A, rad\] (`re` in phase with the sine).
+    pub phasors: [Complex64; 4],
+    /// Their coherences over the groups \[0, 1\] (NaN before two groups).
+    pub coherence: [f64; 4],
+}
+
+impl Reply {
+    /// Reads the text after `ok` of an `frf` reply.
+    pub fn parse(text: &str) -> Result<Reply, String> {
+        let mut r = Reply {
+            state: FrfState::Idle,
+            injection: None,
+            f_hz: f64::NAN,
+            amp: f64::NAN,
+            groups: 0,
+            total: 0,
+            phasors: [Complex64::new(f64::NAN, f64::NAN); 4],
+            coherence: [f64::NAN; 4],
+        };
+        let mut state = None;
+        let num = |v: &str| {
+            v.parse::<f64>()
+                .map_err(|_| format!("frf: not a number: {v}"))
+        };
+        for word in text.split_ascii_whitespace() {
+            let (k, v) = word
+                .split_once('=')
+                .ok_or_else(|| format!("frf: not key=value: {word}"))?;
+            let pair = |v: &str| -> Result<Complex64, String> {
+                let (a, b) = v
+                    .split_once(',')
+                    .ok_or_else(|| format!("frf: {k} is not RE,IM"))?;
+                Ok(Complex64::new(num(a)?, num(b)?))
+            };
+            match k {
+                "state" => {
+                    state = Some(match v {
+                        "idle" => FrfState::Idle,
+                        "settling" => FrfState::Settling,
+                        "measuring" => FrfState::Measuring,
+                        "done" => FrfState::Done,
+                        "stopped" => FrfState::Stopped,
+                        _ => return Err(format!("frf: unknown state {v}")),
+                    })
+                }
+                "inj" => {
+                    r.injection = Some(
+                        Injection::from_name(v).ok_or_else(|| format!("frf: unknown inj {v}"))?,
+                    )
+                }
+                "f_hz" => r.f_hz = num(v)?,
+                "amp" => r.amp = num(v)?,
+                "groups" => {
+                    let (a, b) = v
+                        .split_once('/')
+                        .ok_or_else(|| format!("frf: groups is not G/N: {v}"))?;
+                    r.groups = a.parse().map_err(|_| format!("frf: groups {v}"))?;
+                    r.total = b.parse().map_err(|_| format!("frf: groups {v}"))?;
+                }
+                "in" => r.phasors[0] = pair(v)?,
+                "cmd" => r.phasors[1] = pair(v)?,
+                "cur" => r.phasors[2] = pair(v)?,
+                "pos" => r.phasors[3] = pair(v)?,
+                "coh" => {
+                    let c: Vec<&str> = v.split(',').collect();
+                    if c.len() != 4 {
+                        return Err(format!("frf: coh needs four values: {v}"));
+                    }
+                    for (slot, w) in r.coherence.iter_mut().zip(c) {
+                        *slot = num(w)?;
+                    }
+                }
+                // Keys a later firmware adds are skipped.
+                _ => {}
+            }
+        }
+        r.state = state.ok_or("frf: no state")?;
+        Ok(r)
+    }
+
+    /// The transfer function of `lp` from these phasors, and its coherence (the lower of the
+    /// coherences of the signals it is made of).
+    pub fn transfer(&self, lp: Loop) -> (Complex64, f64) {
+        let [d, cmd, _, pos] = self.phasors;
+        let [_, c_cmd, _, c_pos] = self.coherence;
+        match lp {
+            Loop::Plant => (pos / cmd, c_pos.min(c_cmd)),
+            Loop::Open => (d / cmd - 1.0, c_cmd),
+            Loop::Closed => (pos / d, c_pos),
+        }
+    }
+}
+
+/// One point of a frequency response.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Point {
+    /// Frequency \[Hz\].
+    pub f_hz: f64,
+    /// The transfer function's value (rad/A for the plant, dimensionless otherwise).
+    pub value: Complex64,
+    /// Its coherence \[0, 1\].
+    pub coherence: f64,
+    /// The device's reply it came from.
+    pub reply: Reply,
+}
+
+impl Point {
+    /// Gain \[dB\].
+    pub fn gain_db(&self) -> f64 {
+        db(self.value)
+    }
+
+    /// Phase \[deg\], in (−180, 180].
+    pub fn phase_deg(&self) -> f64 {
+        self.value.arg().to_degrees()
+    }
+}
+
+/// 20 log10 |z| \[dB\].
+pub fn db(z: Complex64) -> f64 {
+    20.0 * z.norm().log10()
+}
+
+/// A stepped-sine sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// What is measured.
+    pub lp: Loop,
+    /// Lowest frequency \[Hz\].
+    pub from_hz: f64,
+    /// Highest frequency \[Hz\].
+    pub to_hz: f64,
+    /// Frequencies, spaced evenly on a log scale (at least 2).
+    pub points: usize,
+    /// The sine's amplitude: \[A\] for `plant` and `open`, \[rad\] for `closed`.
+    pub amplitude: f64,
+    /// Measure while the axis runs at this speed \[rad/s\] (sliding friction), `None` at rest.
+    pub velocity: Option<f64>,
+    /// Periods summed per point, at least.
+    pub periods: u32,
+    /// Time summed per point, at least \[s\] (more periods at high frequencies).
+    pub seconds: f64,
+}
+
+impl Plan {
+    /// A sweep of `lp` with the bench's defaults: 10 Hz to 3 kHz, 40 points, 8 periods or
+    /// 0.1 s a point, whichever is longer.
+    pub fn new(lp: Loop, amplitude: f64) -> Plan {
+        Plan {
+            lp,
+            from_hz: 10.0,
+            to_hz: 3000.0,
+            points: 40,
+            amplitude,
+            velocity: None,
+            periods: 8,
+            seconds: 0.1,
+        }
+    }
+
+    /// The frequencies asked \[Hz\].
+    pub fn frequencies(&self) -> Vec<f64> {
+        let n = self.points.max(2);
+        let (a, b) = (self.from_hz.ln(), self.to_hz.ln());
+        (0..n)
+            .map(|i| (a + (b - a) * i as f64 / (n - 1) as f64).exp())
+            .collect()
+    }
+
+    /// Periods summed and let settle at `f_hz` \[Hz\]: `periods` or `seconds`' worth, and two
+    /// periods or 20 ms of settling (the loop's transient), whichever is longer.
+    pub fn periods_at(&self, f_hz: f64) -> (u32, u32) {
+        let sum = (self.periods as f64).max((self.seconds * f_hz).ceil());
+        let settle = 2f64.max((0.02 * f_hz).ceil());
+        (sum.min(1e6) as u32, settle.min(1e6) as u32)
+    }
+
+    /// Device time the sweep takes \[s\] (the measurements alone).
+    pub fn device_seconds(&self) -> f64 {
+        self.frequencies()
+            .iter()
+            .map(|f| {
+                let (a, b) = self.periods_at(*f);
+                (a + b) as f64 / f
+            })
+            .sum()
+    }
+
+    /// Checks the plan against the device's position rate \[Hz\] and current limit \[A\].
+    pub fn check(&self, pos_hz: f64, i_max: f64) -> Result<(), Error> {
+        let bad = |m: String| Err(Error::Params(m));
+        if !(self.from_hz > 0.0 && self.from_hz < self.to_hz) {
+            return bad(format!(
+                "--from {} and --to {}: need 0 < from < to",
+                self.from_hz, self.to_hz
+            ));
+        }
+        let nyq = 0.45 * pos_hz;
+        if !(self.to_hz < nyq) {
+            return bad(format!(
+                "--to {} Hz is above the position loop's Nyquist limit ({nyq:.0} Hz = 0.45 × rate.pos_hz)",
+                self.to_hz
+            ));
+        }
+        if !(2..=1000).contains(&self.points) {
+            return bad(format!("--points {}: from 2 to 1000", self.points));
+        }
+        if !(self.amplitude.is_finite() && self.amplitude > 0.0) {
+            return bad(format!("--amplitude {}: must be > 0", self.amplitude));
+        }
+        if self.lp != Loop::Closed && self.amplitude > i_max {
+            return bad(format!(
+                "--amplitude {} A is beyond the current limit lim.i_max = {i_max} A",
+                self.amplitude
+            ));
+        }
+        if let Some(v) = self.velocity
+            && !(v.is_finite() && v != 0.0 && v.abs() <= 20.0)
+        {
+            return bad(format!("--velocity {v}: must be non-zero, at most 20 rad/s"));
+        }
+        Ok(())
+    }
+}
+
+/// Runs one measurement at `f_hz` and waits for its result.
+pub fn measure(
+    b: &mut impl Bench,
+    injection: Injection,
+    f_hz: f64,
+    amp: f64,
+    (periods, settle): (u32, u32),
+) -> Result<Reply, Error> {
+    b.send(Command::Frf(FrfCmd::Start {
+        injection,
+        f_hz: f_hz as f32,
+        amp: amp as f32,
+        periods,
+        settle,
+    }))?;
+    // The device fits the frequency to its rate and rounds to whole groups: a little more
+    // than the periods asked.
+    let expect = (periods + settle) as f64 / f_hz;
+    b.wait(expect)?;
+    for _ in 0..200 {
+        let (_, text) = b.send(Command::Frf(FrfCmd::Status))?;
+        let r = Reply::parse(&text).map_err(Error::Device)?;
+        match r.state {
+            FrfState::Done => return Ok(r),
+            FrfState::Settling | FrfState::Measuring => b.wait(0.05_f64.max(0.1 * expect))?,
+            FrfState::Stopped | FrfState::Idle => {
+                let st = status(b)?;
+                return Err(if !st.faults.is_empty() {
+                    Error::Faulted {
+                        faults: st.faults,
+                        during: Some(format!("the measurement at {f_hz:.1} Hz")),
+                    }
+                } else {
+                    Error::Device(format!(
+                        "the measurement at {f_hz:.1} Hz stopped (bridge {})",
+                        if st.enabled { "on" } else { "off" }
+                    ))
+                });
+            }
+        }
+    }
+    Err(Error::Device(format!(
+        "the measurement at {f_hz:.1} Hz did not end"
+    )))
+}
+
+/// Runs the sweep of `plan` on a device that holds its position (enabled): each point is
+/// pushed onto `out` as it comes and passed to `on_point` (index, point), so that a sweep
+/// that fails keeps what it measured. With `plan.velocity` the axis runs at that speed
+/// during each measurement, turning round before a soft limit. The caller switches the
+/// bridge off on failure ([`crate::client::guarded`]) and restores the settings.
+pub fn sweep(
+    b: &mut impl Bench,
+    plan: &Plan,
+    out: &mut Vec<Point>,
+    mut on_point: impl FnMut(usize, &Point),
+) -> Result<(), Error> {
+    let freqs = plan.frequencies();
+    let mut dir = 1.0;
+    for (i, f) in freqs.iter().enumerate() {
+        let per = plan.periods_at(*f);
+        if let Some(v) = plan.velocity {
+            // Run at the speed, turning round where the next point would pass a limit.
+            let (lo, hi) = crate::client::soft_limits(b)?;
+            let x = crate::client::position(b)?;
+            let span = v.abs() * ((per.0 + per.1) as f64 / f + 0.5);
+            if (dir > 0.0 && x + span > hi) || (dir < 0.0 && x - span < lo) {
+                dir = -dir;
+            }
+            if x + span > hi && x - span < lo {
+                return Err(Error::Params(format!(
+                    "--velocity {v}: the stroke between the soft limits is too short for a point at {f:.1} Hz"
+                )));
+            }
+            b.send(crate::client::velocity(dir * v.abs(), None))?;
+            // The ramp to the speed (50 rad/s²) and a settling time of the loop.
+            b.wait(v.abs() / 50.0 + 0.05)?;
+        }
+        let r = measure(b, plan.lp.injection(), *f, plan.amplitude, per)?;
+        let (value, coherence) = r.transfer(plan.lp);
+        let p = Point {
+            f_hz: r.f_hz,
+            value,
+            coherence,
+            reply: r,
+        };
+        on_point(i, &p);
+        out.push(p);
+    }
+    if plan.velocity.is_some() {
+        b.hold()?;
+    }
+    Ok(())
+}
+
+/// A loop's stability margins from its loop gain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Margins {
+    /// Gain margin \[dB\]: −|L| at the lowest frequency where the phase crosses −180°
+    /// (infinite when it does not cross in the band).
+    pub gain_margin_db: f64,
+    /// Phase margin \[deg\]: 180° + ∠L at the crossover (NaN without a crossover in the band).
+    pub phase_margin_deg: f64,
+    /// Crossover frequency \[Hz\]: the lowest where |L| falls through 1 (NaN without one).
+    pub crossover_hz: f64,
+    /// The frequency of the phase crossover \[Hz\] (NaN without one).
+    pub phase_crossover_hz: f64,
+    /// Peak of the sensitivity |1 / (1 + L)| over the band \[dB\].
+    pub peak_sensitivity_db: f64,
+}
+
+/// The margins of the loop gain `l` given at increasing frequencies `(f_hz, L)`: crossings
+/// are interpolated linearly in log frequency (gain in dB, phase unwrapped from the lowest
+/// frequency).
+pub fn margins(l: &[(f64, Complex64)]) -> Margins {
+    let mut m = Margins {
+        gain_margin_db: f64::INFINITY,
+        phase_margin_deg: f64::NAN,
+        crossover_hz: f64::NAN,
+        phase_crossover_hz: f64::NAN,
+        peak_sensitivity_db: f64::NAN,
+    };
+    let pts: Vec<(f64, Complex64)> = l
+        .iter()
+        .copied()
+        .filter(|(f, z)| *f > 0.0 && z.re.is_finite() && z.im.is_finite())
+        .collect();
+    if pts.is_empty() {
+        return m;
+    }
+    // Unwrapped phase [deg].
+    let mut phase = Vec::with_capacity(pts.len());
+    for (i, (_, z)) in pts.iter().enumerate() {
+        let mut p = z.arg().to_degrees();
+        if i > 0 {
+            let prev: f64 = phase[i - 1];
+            while p - prev > 180.0 {
+                p -= 360.0;
+            }
+            while p - prev < -180.0 {
+                p += 360.0;
+            }
+        }
+        phase.push(p);
+    }
+    let gain: Vec<f64> = pts.iter().map(|(_, z)| db(*z)).collect();
+    let lf: Vec<f64> = pts.iter().map(|(f, _)| f.ln()).collect();
+    let lerp = |i: usize, t: f64, v: &[f64]| v[i] + t * (v[i + 1] - v[i]);
+    for i in 0..pts.len() - 1 {
+        if m.crossover_hz.is_nan() && gain[i] >= 0.0 && gain[i + 1] < 0.0 {
+            let t = gain[i] / (gain[i] - gain[i + 1]);
+            m.crossover_hz = lerp(i, t, &lf).exp();
+            let ph = lerp(i, t, &phase);
+            m.phase_margin_deg = wrap180(180.0 + ph);
+        }
+        if m.phase_crossover_hz.is_nan() {
+            // Crossing −180° (mod 360°) downwards.
+            let k = ((phase[i] + 180.0) / 360.0).floor();
+            let target = -180.0 + 360.0 * k;
+            if phase[i] >= target && phase[i + 1] < target {
+                let t = (phase[i] - target) / (phase[i] - phase[i + 1]);
+                m.phase_crossover_hz = lerp(i, t, &lf).exp();
+                m.gain_margin_db = -lerp(i, t, &gain);
+            }
+        }
+    }
+    m.peak_sensitivity_db = pts
+        .iter()
+        .map(|(_, z)| -db(1.0 + *z))
+        .fold(f64::NEG_INFINITY, f64::max);
+    m
+}
+
+fn wrap180(d: f64) -> f64 {
+    let mut x = d % 360.0;
+    if x > 180.0 {
+        x -= 360.0;
+    }
+    if x <= -180.0 {
+        x += 360.0;
+    }
+    x
+}
+
+/// The pre-sliding spring and the inertia from a plant response measured at rest: below the
+/// spring's resonance the mechanics are `k_m / (K − J ω² + j b ω)`, so `Re(k_m / P)` is a line
+/// in ω² whose intercept is the stiffness `K` \[N·m/rad\] and whose slope is `−J`
+/// \[kg·m²\]. Fitted by least squares over the points below half the frequency where the
+/// plant's phase first passes −90° (the resonance), from the position per current measured
+/// (the current loop's own lag left out). `None` with fewer than three such points.
+pub fn presliding(points: &[Point], k_m: f64) -> Option<(f64, f64)> {
+    let mech: Vec<(f64, Complex64)> = points
+        .iter()
+        .map(|p| (p.f_hz, p.reply.phasors[3] / p.reply.phasors[2]))
+        .collect();
+    let f_res = mech
+        .iter()
+        .find(|(_, z)| z.arg().to_degrees() < -90.0)
+        .map(|(f, _)| *f)?;
+    let xy: Vec<(f64, f64)> = mech
+        .iter()
+        .filter(|(f, _)| *f <= 0.5 * f_res)
+        .map(|(f, z)| {
+            let w = std::f64::consts::TAU * f;
+            (w * w, (k_m / z).re)
+        })
+        .collect();
+    if xy.len() < 3 {
+        return None;
+    }
+    let n = xy.len() as f64;
+    let (sx, sy) = xy.iter().fold((0.0, 0.0), |a, (x, y)| (a.0 + x, a.1 + y));
+    let (mx, my) = (sx / n, sy / n);
+    let (sxx, sxy) = xy.iter().fold((0.0, 0.0), |a, (x, y)| {
+        (a.0 + (x - mx) * (x - mx), a.1 + (x - mx) * (y - my))
+    });
+    let slope = sxy / sxx;
+    Some((my - slope * mx, -slope))
+}
