@@ -217,6 +217,9 @@ pub struct Plan {
     pub periods: u32,
     /// Time summed per point, at least \[s\] (more periods at high frequencies).
     pub seconds: f64,
+    /// Points measured again in each interval where a loop gain's margins are decided (the
+    /// open loop: 3 by default; 0: none).
+    pub refine: usize,
 }
 
 impl Plan {
@@ -232,6 +235,7 @@ impl Plan {
             velocity: None,
             periods: 8,
             seconds: 0.1,
+            refine: if lp == Loop::Open { 3 } else { 0 },
         }
     }
 
@@ -273,7 +277,7 @@ impl Plan {
             ));
         }
         let nyq = 0.45 * pos_hz;
-        if !(self.to_hz < nyq) {
+        if self.to_hz.is_nan() || self.to_hz >= nyq {
             return bad(format!(
                 "--to {} Hz is above the position loop's Nyquist limit ({nyq:.0} Hz = 0.45 × rate.pos_hz)",
                 self.to_hz
@@ -294,7 +298,9 @@ impl Plan {
         if let Some(v) = self.velocity
             && !(v.is_finite() && v != 0.0 && v.abs() <= 20.0)
         {
-            return bad(format!("--velocity {v}: must be non-zero, at most 20 rad/s"));
+            return bad(format!(
+                "--velocity {v}: must be non-zero, at most 20 rad/s"
+            ));
         }
         Ok(())
     }
@@ -347,38 +353,47 @@ pub fn measure(
 }
 
 /// Runs the sweep of `plan` on a device that holds its position (enabled): each point is
-/// pushed onto `out` as it comes and passed to `on_point` (index, point), so that a sweep
-/// that fails keeps what it measured. With `plan.velocity` the axis runs at that speed
-/// during each measurement, turning round before a soft limit. The caller switches the
-/// bridge off on failure ([`crate::client::guarded`]) and restores the settings.
-pub fn sweep(
-    b: &mut impl Bench,
+/// added to `out` (kept in frequency order) as it comes and passed to `on_point` (a running
+/// count, the point), so that a sweep that fails keeps what it measured. With
+/// `plan.velocity` the axis runs at that speed during each measurement, turning round before
+/// a soft limit; with `plan.refine` the open loop is measured again between the points where
+/// its margins are decided ([`refinement`]). The caller switches the bridge off on failure
+/// ([`crate::client::guarded`]) and restores the settings.
+pub fn sweep<B: Bench>(
+    b: &mut B,
     plan: &Plan,
     out: &mut Vec<Point>,
     mut on_point: impl FnMut(usize, &Point),
 ) -> Result<(), Error> {
-    let freqs = plan.frequencies();
     let mut dir = 1.0;
-    for (i, f) in freqs.iter().enumerate() {
-        let per = plan.periods_at(*f);
+    // The speed asked last [rad/s] (the sweep starts holding).
+    let mut running = 0.0;
+    let mut count = 0;
+    let mut one = |b: &mut B, f: f64, out: &mut Vec<Point>| -> Result<(), Error> {
+        let per = plan.periods_at(f);
         if let Some(v) = plan.velocity {
             // Run at the speed, turning round where the next point would pass a limit.
             let (lo, hi) = crate::client::soft_limits(b)?;
             let x = crate::client::position(b)?;
             let span = v.abs() * ((per.0 + per.1) as f64 / f + 0.5);
-            if (dir > 0.0 && x + span > hi) || (dir < 0.0 && x - span < lo) {
-                dir = -dir;
-            }
             if x + span > hi && x - span < lo {
                 return Err(Error::Params(format!(
                     "--velocity {v}: the stroke between the soft limits is too short for a point at {f:.1} Hz"
                 )));
             }
-            b.send(crate::client::velocity(dir * v.abs(), None))?;
-            // The ramp to the speed (50 rad/s²) and a settling time of the loop.
-            b.wait(v.abs() / 50.0 + 0.05)?;
+            if (dir > 0.0 && x + span > hi) || (dir < 0.0 && x - span < lo) {
+                dir = -dir;
+            }
+            let want = dir * v.abs();
+            if running != want {
+                b.send(crate::client::velocity(want, None))?;
+                // The ramp to the speed (50 rad/s², from the reference's own) and a settling
+                // time of the loop.
+                b.wait((want - running).abs() / 50.0 + 0.05)?;
+                running = want;
+            }
         }
-        let r = measure(b, plan.lp.injection(), *f, plan.amplitude, per)?;
+        let r = measure(b, plan.lp.injection(), f, plan.amplitude, per)?;
         let (value, coherence) = r.transfer(plan.lp);
         let p = Point {
             f_hz: r.f_hz,
@@ -386,8 +401,21 @@ pub fn sweep(
             coherence,
             reply: r,
         };
-        on_point(i, &p);
-        out.push(p);
+        on_point(count, &p);
+        count += 1;
+        let at = out.partition_point(|q| q.f_hz < p.f_hz);
+        out.insert(at, p);
+        Ok(())
+    };
+    for f in plan.frequencies() {
+        one(b, f, out)?;
+    }
+    // Twice: the second pass narrows what the first found (a sharp sensitivity peak).
+    for _ in 0..if plan.refine > 0 { 2 } else { 0 } {
+        let l: Vec<(f64, Complex64)> = out.iter().map(|p| (p.f_hz, p.value)).collect();
+        for f in refinement(&l, plan.refine) {
+            one(b, f, out)?;
+        }
     }
     if plan.velocity.is_some() {
         b.hold()?;
@@ -398,44 +426,45 @@ pub fn sweep(
 /// A loop's stability margins from its loop gain.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Margins {
-    /// Gain margin \[dB\]: −|L| at the lowest frequency where the phase crosses −180°
-    /// (infinite when it does not cross in the band).
+    /// Gain margin \[dB\]: the least of −|L| over the frequencies where the phase crosses
+    /// ±180° (infinite when it does not cross in the band).
     pub gain_margin_db: f64,
-    /// Phase margin \[deg\]: 180° + ∠L at the crossover (NaN without a crossover in the band).
+    /// Where the gain margin is \[Hz\] (NaN without a phase crossover).
+    pub gain_margin_hz: f64,
+    /// Phase margin \[deg\]: the least of 180° − |∠L| over the frequencies where |L| crosses
+    /// 1 (a loop whose gain rises through 1 again at a resonance has more than one).
     pub phase_margin_deg: f64,
-    /// Crossover frequency \[Hz\]: the lowest where |L| falls through 1 (NaN without one).
+    /// Where the phase margin is \[Hz\] (NaN without a crossover).
+    pub phase_margin_hz: f64,
+    /// The crossover frequency \[Hz\]: the lowest where |L| falls through 1, the loop's
+    /// bandwidth (NaN without one).
     pub crossover_hz: f64,
-    /// The frequency of the phase crossover \[Hz\] (NaN without one).
-    pub phase_crossover_hz: f64,
-    /// Peak of the sensitivity |1 / (1 + L)| over the band \[dB\].
+    /// Peak of the sensitivity |1 / (1 + L)| over the points \[dB\].
     pub peak_sensitivity_db: f64,
+    /// Where the sensitivity peaks \[Hz\].
+    pub peak_sensitivity_hz: f64,
 }
 
-/// The margins of the loop gain `l` given at increasing frequencies `(f_hz, L)`: crossings
-/// are interpolated linearly in log frequency (gain in dB, phase unwrapped from the lowest
-/// frequency).
-pub fn margins(l: &[(f64, Complex64)]) -> Margins {
-    let mut m = Margins {
-        gain_margin_db: f64::INFINITY,
-        phase_margin_deg: f64::NAN,
-        crossover_hz: f64::NAN,
-        phase_crossover_hz: f64::NAN,
-        peak_sensitivity_db: f64::NAN,
-    };
-    let pts: Vec<(f64, Complex64)> = l
-        .iter()
-        .copied()
-        .filter(|(f, z)| *f > 0.0 && z.re.is_finite() && z.im.is_finite())
-        .collect();
-    if pts.is_empty() {
-        return m;
+/// Where a loop gain's curve crosses: (index of the point before, fraction towards the next).
+fn crossings(v: &[f64], level: impl Fn(f64) -> Option<f64>) -> Vec<(usize, f64)> {
+    let mut out = Vec::new();
+    for i in 0..v.len().saturating_sub(1) {
+        if let Some(t) = level(v[i]).and_then(|l| {
+            let (a, b) = (v[i] - l, v[i + 1] - l);
+            ((a >= 0.0) != (b >= 0.0)).then(|| a / (a - b))
+        }) {
+            out.push((i, t));
+        }
     }
-    // Unwrapped phase [deg].
-    let mut phase = Vec::with_capacity(pts.len());
-    for (i, (_, z)) in pts.iter().enumerate() {
-        let mut p = z.arg().to_degrees();
-        if i > 0 {
-            let prev: f64 = phase[i - 1];
+    out
+}
+
+/// Phases \[deg\] unwrapped from the first.
+fn unwrapped(z: &[Complex64]) -> Vec<f64> {
+    let mut phase: Vec<f64> = Vec::with_capacity(z.len());
+    for v in z {
+        let mut p = v.arg().to_degrees();
+        if let Some(prev) = phase.last() {
             while p - prev > 180.0 {
                 p -= 360.0;
             }
@@ -445,32 +474,110 @@ pub fn margins(l: &[(f64, Complex64)]) -> Margins {
         }
         phase.push(p);
     }
-    let gain: Vec<f64> = pts.iter().map(|(_, z)| db(*z)).collect();
+    phase
+}
+
+/// The margins of the loop gain `l` given at increasing frequencies `(f_hz, L)`: crossings
+/// interpolated linearly in log frequency (gain in dB, phase unwrapped from the lowest
+/// frequency).
+pub fn margins(l: &[(f64, Complex64)]) -> Margins {
+    let mut m = Margins {
+        gain_margin_db: f64::INFINITY,
+        gain_margin_hz: f64::NAN,
+        phase_margin_deg: f64::NAN,
+        phase_margin_hz: f64::NAN,
+        crossover_hz: f64::NAN,
+        peak_sensitivity_db: f64::NAN,
+        peak_sensitivity_hz: f64::NAN,
+    };
+    let pts: Vec<(f64, Complex64)> = l
+        .iter()
+        .copied()
+        .filter(|(f, z)| *f > 0.0 && z.re.is_finite() && z.im.is_finite())
+        .collect();
+    if pts.is_empty() {
+        return m;
+    }
+    let z: Vec<Complex64> = pts.iter().map(|p| p.1).collect();
+    let phase = unwrapped(&z);
+    let gain: Vec<f64> = z.iter().map(|v| db(*v)).collect();
     let lf: Vec<f64> = pts.iter().map(|(f, _)| f.ln()).collect();
     let lerp = |i: usize, t: f64, v: &[f64]| v[i] + t * (v[i + 1] - v[i]);
-    for i in 0..pts.len() - 1 {
-        if m.crossover_hz.is_nan() && gain[i] >= 0.0 && gain[i + 1] < 0.0 {
-            let t = gain[i] / (gain[i] - gain[i + 1]);
-            m.crossover_hz = lerp(i, t, &lf).exp();
-            let ph = lerp(i, t, &phase);
-            m.phase_margin_deg = wrap180(180.0 + ph);
+    for (i, t) in crossings(&gain, |_| Some(0.0)) {
+        let f = lerp(i, t, &lf).exp();
+        if m.crossover_hz.is_nan() && gain[i] >= 0.0 {
+            m.crossover_hz = f;
         }
-        if m.phase_crossover_hz.is_nan() {
-            // Crossing −180° (mod 360°) downwards.
-            let k = ((phase[i] + 180.0) / 360.0).floor();
-            let target = -180.0 + 360.0 * k;
-            if phase[i] >= target && phase[i + 1] < target {
-                let t = (phase[i] - target) / (phase[i] - phase[i + 1]);
-                m.phase_crossover_hz = lerp(i, t, &lf).exp();
-                m.gain_margin_db = -lerp(i, t, &gain);
-            }
+        let pm = 180.0 - wrap180(lerp(i, t, &phase)).abs();
+        if m.phase_margin_deg.is_nan() || pm < m.phase_margin_deg {
+            m.phase_margin_deg = pm;
+            m.phase_margin_hz = f;
         }
     }
-    m.peak_sensitivity_db = pts
-        .iter()
-        .map(|(_, z)| -db(1.0 + *z))
-        .fold(f64::NEG_INFINITY, f64::max);
+    // Crossings of an odd multiple of 180°: the nearest to each point.
+    let odd = |p: f64| Some(360.0 * ((p - 180.0) / 360.0).round() + 180.0);
+    for (i, t) in crossings(&phase, odd) {
+        let gm = -lerp(i, t, &gain);
+        if gm < m.gain_margin_db {
+            m.gain_margin_db = gm;
+            m.gain_margin_hz = lerp(i, t, &lf).exp();
+        }
+    }
+    for (f, v) in &pts {
+        let s = -db(1.0 + *v);
+        if m.peak_sensitivity_db.is_nan() || s > m.peak_sensitivity_db {
+            m.peak_sensitivity_db = s;
+            m.peak_sensitivity_hz = *f;
+        }
+    }
+    // Between the points: the parabola through the highest and its neighbours.
+    let f: Vec<f64> = pts.iter().map(|p| p.0).collect();
+    let sens: Vec<f64> = z.iter().map(|v| -db(1.0 + *v)).collect();
+    if let Some(e) = extrema(&f, &sens)
+        .into_iter()
+        .filter(|e| e.peak)
+        .max_by(|a, b| a.db.total_cmp(&b.db))
+        && e.db > m.peak_sensitivity_db
+    {
+        m.peak_sensitivity_db = e.db;
+        m.peak_sensitivity_hz = e.f_hz;
+    }
     m
+}
+
+/// Frequencies to measure between the points of a loop gain where its margins are decided:
+/// `per` more in each interval where |L| crosses 1 or the phase crosses ±180°, and around the
+/// sensitivity's peak (log-spaced inside the interval).
+pub fn refinement(l: &[(f64, Complex64)], per: usize) -> Vec<f64> {
+    let z: Vec<Complex64> = l.iter().map(|p| p.1).collect();
+    let phase = unwrapped(&z);
+    let gain: Vec<f64> = z.iter().map(|v| db(*v)).collect();
+    let odd = |p: f64| Some(360.0 * ((p - 180.0) / 360.0).round() + 180.0);
+    let mut at: Vec<usize> = crossings(&gain, |_| Some(0.0))
+        .into_iter()
+        .chain(crossings(&phase, odd))
+        .map(|(i, _)| i)
+        .collect();
+    if let Some((k, _)) = z
+        .iter()
+        .enumerate()
+        .max_by(|a, b| (-db(1.0 + *a.1)).total_cmp(&-db(1.0 + *b.1)))
+    {
+        at.extend([k.saturating_sub(1), k]);
+    }
+    at.sort_unstable();
+    at.dedup();
+    let mut out = Vec::new();
+    for i in at {
+        let (Some(a), Some(b)) = (l.get(i), l.get(i + 1)) else {
+            continue;
+        };
+        let (la, lb) = (a.0.ln(), b.0.ln());
+        for k in 1..=per {
+            out.push((la + (lb - la) * k as f64 / (per + 1) as f64).exp());
+        }
+    }
+    out
 }
 
 fn wrap180(d: f64) -> f64 {
@@ -518,4 +625,71 @@ pub fn presliding(points: &[Point], k_m: f64) -> Option<(f64, f64)> {
     });
     let slope = sxy / sxx;
     Some((my - slope * mx, -slope))
+}
+
+/// A local extreme of a response.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Extremum {
+    /// Its frequency \[Hz\], refined between the points.
+    pub f_hz: f64,
+    /// Its level \[dB\] (of the response it was found in).
+    pub db: f64,
+    /// How far it stands out of the line through its two neighbours \[dB\] (positive for a
+    /// peak and for a dip alike).
+    pub prominence_db: f64,
+    /// A peak (resonance) or a dip (anti-resonance).
+    pub peak: bool,
+}
+
+/// The local maxima and minima of `level_db` over the frequencies `f_hz` (increasing), each
+/// refined by the parabola through it and its two neighbours in log frequency, strongest
+/// first.
+pub fn extrema(f_hz: &[f64], level_db: &[f64]) -> Vec<Extremum> {
+    let n = f_hz.len().min(level_db.len());
+    let mut out = Vec::new();
+    for i in 1..n.saturating_sub(1) {
+        let (a, b, c) = (level_db[i - 1], level_db[i], level_db[i + 1]);
+        let peak = b > a && b > c;
+        let dip = b < a && b < c;
+        if !(peak || dip) {
+            continue;
+        }
+        let (x0, x1, x2) = (f_hz[i - 1].ln(), f_hz[i].ln(), f_hz[i + 1].ln());
+        // The parabola through the three points: its vertex.
+        let d1 = (b - a) / (x1 - x0);
+        let d2 = (c - b) / (x2 - x1);
+        let curv = (d2 - d1) / (x2 - x0);
+        let (x, y) = if curv != 0.0 {
+            let xv = 0.5 * (x0 + x1) - d1 / (2.0 * curv);
+            let xv = xv.clamp(x0, x2);
+            (xv, b + d1 * (xv - x1) + curv * (xv - x0) * (xv - x1))
+        } else {
+            (x1, b)
+        };
+        let line = a + (c - a) * (x1 - x0) / (x2 - x0);
+        out.push(Extremum {
+            f_hz: x.exp(),
+            db: y,
+            prominence_db: (b - line).abs(),
+            peak,
+        });
+    }
+    out.sort_by(|p, q| q.prominence_db.total_cmp(&p.prominence_db));
+    out
+}
+
+/// The resonances and anti-resonances of the mechanics in a plant sweep: the extrema of
+/// `|pos / cur| (2πf)²`, the position per current *measured* (the motor's torque; the current
+/// loop's own roll-off left out) relative to the rigid-body line (a free mass's falls as
+/// 1/ω²), strongest first.
+pub fn plant_extrema(points: &[Point]) -> Vec<Extremum> {
+    let f: Vec<f64> = points.iter().map(|p| p.f_hz).collect();
+    let l: Vec<f64> = points
+        .iter()
+        .map(|p| {
+            let mech = p.reply.phasors[3] / p.reply.phasors[2];
+            db(mech) + 40.0 * (std::f64::consts::TAU * p.f_hz).log10()
+        })
+        .collect();
+    extrema(&f, &l)
 }

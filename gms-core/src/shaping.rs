@@ -180,7 +180,10 @@ impl Shaping {
             let (Some(s), Some(c)) = (s, c) else {
                 continue;
             };
-            match (old.stages.get(i).copied().flatten(), old.coeffs.get(i).copied().flatten()) {
+            match (
+                old.stages.get(i).copied().flatten(),
+                old.coeffs.get(i).copied().flatten(),
+            ) {
                 (Some(o), Some(oc)) if same(&oc, c) => {
                     s.s1 = o.s1;
                     s.s2 = o.s2;

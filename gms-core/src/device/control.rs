@@ -623,10 +623,7 @@ impl ControlLoop {
                 let w = f.omega(self.ctrl.params().pos_rate_hz);
                 let amp_cos = f.amplitude() * ph.1;
                 let r = crate::reference::RefSample {
-                    pos: self
-                        .r
-                        .pos
-                        .saturating_add((v / rpc * sub) as i64),
+                    pos: self.r.pos.saturating_add((v / rpc * sub) as i64),
                     vel: self.r.vel + w * amp_cos,
                     acc: self.r.acc - w * w * v,
                 };

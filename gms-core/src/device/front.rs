@@ -9,8 +9,8 @@ use crate::protocol::{self, Device, Settings};
 use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
-    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, MAX_STREAM_HZ,
-    FrfRequest, Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest,
+    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, FrfRequest,
+    MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest,
     capture_fields,
 };
 use crate::frf::{Channel, FrfSpec, Injection};
@@ -590,8 +590,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             return Err("PERIODS must be at least 1");
         }
         let rate = self.settings.pos_rate_hz;
-        let spec = FrfSpec::new(injection, f_hz, amp, periods, settle, rate)
-            .map_err(|e| e.reason())?;
+        let spec =
+            FrfSpec::new(injection, f_hz, amp, periods, settle, rate).map_err(|e| e.reason())?;
         if spec.steps() as f32 > FRF_MAX_S * rate {
             return Err("longer than 600 s (fewer periods)");
         }

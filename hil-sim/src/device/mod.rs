@@ -24,8 +24,8 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests,
-    Sample, SenseChain, Status,
+    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests, Sample,
+    SenseChain, Status,
 };
 use gms_core::drive::BoardLimits;
 use gms_core::protocol::{self, LineReader, Settings};
