@@ -693,3 +693,127 @@ pub fn plant_extrema(points: &[Point]) -> Vec<Extremum> {
         .collect();
     extrema(&f, &l)
 }
+
+/// What a sweep gave.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sweep {
+    /// The plan it ran.
+    pub plan: Plan,
+    /// The points, in frequency order.
+    pub points: Vec<Point>,
+    /// The margins (the open loop).
+    pub margins: Option<Margins>,
+    /// The pre-sliding stiffness \[N·m/rad\] and inertia \[kg·m²\] (the plant at rest).
+    pub presliding: Option<(f64, f64)>,
+    /// The device's torque constant \[N·m/A\].
+    pub k_m: f64,
+    /// The device's compensator's initial stiffness, the sum of its GMS blocks' \[N·m/rad\].
+    pub model_stiffness: f64,
+}
+
+/// The least coherence of a point that counts as a response (below it the excitation is
+/// lost in the noise).
+pub const MIN_COHERENCE: f64 = 0.9;
+
+/// Runs `plan` on the device: checks it against the device's rate and current limit (nothing
+/// moves on a bad plan), enables, sweeps, and puts the settings back with the bridge off
+/// however it ends ([`crate::settings::restoring`]). The points measured are in `out` even
+/// when it fails (a fault, a lost link, Ctrl-C); a sweep in which no point stands above the
+/// noise is an error: the axis does not respond.
+pub fn run<B: Bench>(
+    b: &mut B,
+    plan: &Plan,
+    out: &mut Vec<Point>,
+    on_point: impl FnMut(usize, &Point),
+) -> Result<Sweep, Error> {
+    let pos_hz = crate::client::get_param(b, "rate.pos_hz")?;
+    let i_max = crate::client::get_param(b, "lim.i_max")?;
+    let k_m = crate::client::get_param(b, "motor.k_m")?;
+    plan.check(pos_hz, i_max)?;
+    let dev = crate::settings::read(b)?;
+    let model_stiffness: f64 = dev
+        .ff
+        .actuator
+        .blocks
+        .iter()
+        .map(|bl| bl.k as f64)
+        .sum::<f64>()
+        + dev.ff.guideway.as_ref().map_or(0.0, |g| {
+            (dev.ff.ratio as f64).powi(2) * g.blocks.iter().map(|bl| bl.k as f64).sum::<f64>()
+        });
+    crate::settings::restoring(b, |b| {
+        crate::client::guarded(b, |b| {
+            b.enable()?;
+            b.wait(0.2)?;
+            sweep(b, plan, out, on_point)?;
+            b.disable()
+        })
+    })?;
+    let responding = out.iter().filter(|p| p.coherence >= MIN_COHERENCE).count();
+    if responding == 0 {
+        return Err(Error::Device(format!(
+            "the axis does not respond: no point of {} stands above the noise (coherence \
+             under {MIN_COHERENCE}; is the motor connected, the bridge powered, the amplitude \
+             large enough?)",
+            out.len()
+        )));
+    }
+    let pairs: Vec<(f64, Complex64)> = out.iter().map(|p| (p.f_hz, p.value)).collect();
+    Ok(Sweep {
+        plan: plan.clone(),
+        points: out.clone(),
+        margins: (plan.lp == Loop::Open).then(|| margins(&pairs)),
+        presliding: (plan.lp == Loop::Plant && plan.velocity.is_none())
+            .then(|| presliding(out, k_m))
+            .flatten(),
+        k_m,
+        model_stiffness,
+    })
+}
+
+/// `frf.csv`: `f_hz,gain_db,phase_deg,coherence`, one line per point.
+pub fn csv(points: &[Point]) -> String {
+    let mut s = String::from("f_hz,gain_db,phase_deg,coherence\n");
+    for p in points {
+        s += &format!(
+            "{},{},{},{}\n",
+            p.f_hz,
+            p.gain_db(),
+            p.phase_deg(),
+            p.coherence
+        );
+    }
+    s
+}
+
+/// `margins.toml`: `gain_margin_db`, `phase_margin_deg`, `crossover_hz`,
+/// `peak_sensitivity_db` (and where each is); `inf` and `nan` where a crossing is not in the
+/// band.
+pub fn margins_toml(m: &Margins) -> String {
+    let v = |x: f64| {
+        if x.is_nan() {
+            "nan".to_string()
+        } else if x.is_infinite() {
+            if x > 0.0 { "inf".into() } else { "-inf".into() }
+        } else {
+            format!("{x}")
+        }
+    };
+    format!(
+        "# gms-tune frf --loop open: the loop's stability margins\n\
+         gain_margin_db = {}\n\
+         phase_margin_deg = {}\n\
+         crossover_hz = {}\n\
+         peak_sensitivity_db = {}\n\
+         gain_margin_hz = {}\n\
+         phase_margin_hz = {}\n\
+         peak_sensitivity_hz = {}\n",
+        v(m.gain_margin_db),
+        v(m.phase_margin_deg),
+        v(m.crossover_hz),
+        v(m.peak_sensitivity_db),
+        v(m.gain_margin_hz),
+        v(m.phase_margin_hz),
+        v(m.peak_sensitivity_hz),
+    )
+}

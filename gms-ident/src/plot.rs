@@ -257,3 +257,107 @@ pub fn fit_plot(
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
+
+/// One curve of a Bode plot: its label, colour, and points `(f [Hz], gain [dB], phase [deg])`;
+/// drawn as markers (`points`) or a line.
+pub struct BodeSeries<'a> {
+    /// The legend's text.
+    pub label: &'a str,
+    /// Its colour.
+    pub colour: RGBColor,
+    /// `(f_hz, gain_db, phase_deg)`.
+    pub data: &'a [(f64, f64, f64)],
+    /// Markers (a measurement) rather than a line (a model).
+    pub points: bool,
+}
+
+/// A Bode plot: gain \[dB\] over phase \[deg\] against a log frequency axis, `marks` drawn as
+/// vertical lines with their labels (crossover, phase crossover).
+pub fn bode_plot(
+    path: &Path,
+    title: &str,
+    series: &[BodeSeries<'_>],
+    marks: &[(f64, String)],
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (900, 750)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let e = |msg: &dyn std::fmt::Display| msg.to_string();
+    let root = root
+        .titled(title, ("sans-serif", 20))
+        .map_err(|x| e(&x))?;
+    let (top, bottom) = root.split_vertically(380);
+    let all = || series.iter().flat_map(|s| s.data.iter());
+    let (f0, f1) = {
+        let (lo, hi) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+        if lo.is_finite() && hi > lo {
+            (lo / 1.1, hi * 1.1)
+        } else {
+            (1.0, 10.0)
+        }
+    };
+    let panels = [
+        (&top, "gain [dB]", 1usize),
+        (&bottom, "phase [deg]", 2usize),
+    ];
+    for (area, label, col) in panels {
+        let pick = |p: &(f64, f64, f64)| if col == 1 { p.1 } else { p.2 };
+        let (y0, y1) = range(all().map(pick).filter(|v| v.is_finite()));
+        let mut c = ChartBuilder::on(area)
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d((f0..f1).log_scale(), y0..y1)
+            .map_err(|x| e(&x))?;
+        c.configure_mesh()
+            .x_desc("frequency [Hz]")
+            .y_desc(label)
+            .draw()
+            .map_err(|x| e(&x))?;
+        for s in series {
+            let colour = s.colour;
+            let pts = s
+                .data
+                .iter()
+                .filter(|p| pick(p).is_finite())
+                .map(|p| (p.0, pick(p)));
+            if s.points {
+                c.draw_series(pts.map(|q| Circle::new(q, 3, colour.filled())))
+                    .map_err(|x| e(&x))?
+                    .label(s.label)
+                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, colour.filled()));
+            } else {
+                c.draw_series(LineSeries::new(pts, colour.stroke_width(2)))
+                    .map_err(|x| e(&x))?
+                    .label(s.label)
+                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], colour));
+            }
+        }
+        for (f, text) in marks {
+            if *f > f0 && *f < f1 {
+                c.draw_series(LineSeries::new(
+                    [(*f, y0), (*f, y1)],
+                    RGBColor(120, 120, 120).stroke_width(1),
+                ))
+                .map_err(|x| e(&x))?;
+                if col == 1 {
+                    c.draw_series(std::iter::once(Text::new(
+                        text.clone(),
+                        (*f, y1 - 0.08 * (y1 - y0)),
+                        ("sans-serif", 13),
+                    )))
+                    .map_err(|x| e(&x))?;
+                }
+            }
+        }
+        if col == 1 {
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerLeft)
+                .draw()
+                .map_err(|x| e(&x))?;
+        }
+    }
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
