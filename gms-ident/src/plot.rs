@@ -4,6 +4,9 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+/// A colour of a plot (plotters'), for the series a caller draws.
+pub use plotters::style::RGBColor;
+
 use crate::trace::TraceRow;
 
 /// Colours of the feedforward modes: none, static, gms, gms-adaptive.
@@ -282,13 +285,13 @@ pub fn bode_plot(
     let root = SVGBackend::new(path, (900, 750)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| e.to_string())?;
     let e = |msg: &dyn std::fmt::Display| msg.to_string();
-    let root = root
-        .titled(title, ("sans-serif", 20))
-        .map_err(|x| e(&x))?;
+    let root = root.titled(title, ("sans-serif", 20)).map_err(|x| e(&x))?;
     let (top, bottom) = root.split_vertically(380);
     let all = || series.iter().flat_map(|s| s.data.iter());
     let (f0, f1) = {
-        let (lo, hi) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| (a.min(p.0), b.max(p.0)));
+        let (lo, hi) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.0), b.max(p.0))
+        });
         if lo.is_finite() && hi > lo {
             (lo / 1.1, hi * 1.1)
         } else {

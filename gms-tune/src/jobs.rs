@@ -1,5 +1,5 @@
 //! The long bench runs as jobs, one API for the command line, the window and Python: each job
-//! ([`identify`], [`tune_ff`], [`commission`]) runs its `gms_bench` workflow on a stoppable
+//! ([`identify`], [`tune_ff`], [`commission`], [`frf`]) runs its `gms_bench` workflow on a stoppable
 //! bench ([`RunBench`]: a stop flag, progress hooks; the device's settings put back whatever
 //! ends it) and writes its files. The callers only present the outcome, and apply it when
 //! asked.
@@ -181,4 +181,136 @@ pub fn write_tune_ff(t: &TuneFf, dir: &std::path::Path) -> Result<(), Error> {
         &fit,
     )
     .map_err(Error::Io)
+}
+
+/// A frequency response: `plan`'s sweep, each point told to `point` as it comes; in `out` if
+/// given `frf.csv`, `bode.svg` and (the open loop) `margins.toml` — written with the points
+/// measured so far when the sweep fails, and then the error says so. The bridge is off and the
+/// settings as they were after it.
+pub fn frf(
+    link: &mut Link,
+    plan: &gms_bench::frf::Plan,
+    out: Option<&Path>,
+    ctl: &mut Control<'_>,
+    point: &mut dyn FnMut(usize, &gms_bench::frf::Point),
+) -> Result<gms_bench::frf::Sweep, Error> {
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
+    }
+    let mut b = ctl.bench(link);
+    b.stage(&format!("frf {}", plan.lp.name()), plan.device_seconds());
+    let mut pts = Vec::new();
+    let r = gms_bench::frf::run(&mut b, plan, &mut pts, point);
+    match (r, out) {
+        (Ok(sweep), Some(dir)) => {
+            write_frf(&sweep, dir)?;
+            Ok(sweep)
+        }
+        (Ok(sweep), None) => Ok(sweep),
+        (Err(e), Some(dir)) if !pts.is_empty() => {
+            gms_ident::io::write_atomic(
+                &dir.join("frf.csv"),
+                gms_bench::frf::csv(&pts).as_bytes(),
+            )?;
+            Err(e.with_note(&format!(
+                "the {} points measured are in {}",
+                pts.len(),
+                dir.join("frf.csv").display()
+            )))
+        }
+        (Err(e), _) => Err(e),
+    }
+}
+
+/// The files of a sweep in `dir`: `frf.csv`, `bode.svg`, and `margins.toml` for the open
+/// loop.
+pub fn write_frf(sweep: &gms_bench::frf::Sweep, dir: &Path) -> Result<(), Error> {
+    use gms_ident::plot::{BodeSeries, bode_plot};
+    gms_ident::io::write_atomic(
+        &dir.join("frf.csv"),
+        gms_bench::frf::csv(&sweep.points).as_bytes(),
+    )?;
+    let mut marks = Vec::new();
+    if let Some(m) = &sweep.margins {
+        gms_ident::io::write_atomic(
+            &dir.join("margins.toml"),
+            gms_bench::frf::margins_toml(m).as_bytes(),
+        )?;
+        if m.crossover_hz.is_finite() {
+            marks.push((
+                m.crossover_hz,
+                format!("crossover {:.0} Hz", m.crossover_hz),
+            ));
+        }
+        if m.phase_margin_hz.is_finite() && m.phase_margin_hz != m.crossover_hz {
+            marks.push((
+                m.phase_margin_hz,
+                format!(
+                    "PM {:.0}° at {:.0} Hz",
+                    m.phase_margin_deg, m.phase_margin_hz
+                ),
+            ));
+        }
+        if m.gain_margin_hz.is_finite() {
+            marks.push((
+                m.gain_margin_hz,
+                format!(
+                    "GM {:.1} dB at {:.0} Hz",
+                    m.gain_margin_db, m.gain_margin_hz
+                ),
+            ));
+        }
+    }
+    let (good, poor): (Vec<_>, Vec<_>) = sweep
+        .points
+        .iter()
+        .partition(|p| p.coherence >= gms_bench::frf::MIN_COHERENCE);
+    let tri = |v: Vec<&gms_bench::frf::Point>| -> Vec<(f64, f64, f64)> {
+        v.iter()
+            .map(|p| (p.f_hz, p.gain_db(), p.phase_deg()))
+            .collect()
+    };
+    let (good, poor) = (tri(good), tri(poor));
+    let unit = match sweep.plan.lp {
+        gms_bench::frf::Loop::Plant => "position per current [dB rad/A]",
+        gms_bench::frf::Loop::Open => "loop gain",
+        gms_bench::frf::Loop::Closed => "position per reference",
+    };
+    let title = format!(
+        "gms-tune frf --loop {}: {unit}{}",
+        sweep.plan.lp.name(),
+        match sweep.plan.velocity {
+            Some(v) => format!(", sliding at {v} rad/s"),
+            None => ", at rest".into(),
+        }
+    );
+    bode_plot(
+        &dir.join("bode.svg"),
+        &title,
+        &[
+            BodeSeries {
+                label: "measured",
+                colour: plotters_blue(),
+                data: &good,
+                points: true,
+            },
+            BodeSeries {
+                label: "below the noise (coherence < 0.9)",
+                colour: plotters_grey(),
+                data: &poor,
+                points: true,
+            },
+        ],
+        &marks,
+    )
+    .map_err(Error::Io)
+}
+
+fn plotters_blue() -> gms_ident::plot::RGBColor {
+    gms_ident::plot::RGBColor(30, 90, 200)
+}
+
+fn plotters_grey() -> gms_ident::plot::RGBColor {
+    gms_ident::plot::RGBColor(170, 170, 170)
 }

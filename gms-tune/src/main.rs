@@ -11,6 +11,7 @@ use gms_ident::paramfile::ParamFile;
 use gms_tune::{Link, LinkError, parse_telemetry};
 
 mod commission;
+mod frf;
 mod identify;
 mod tracked;
 mod tune_ff;
@@ -252,6 +253,50 @@ enum Cmd {
         #[arg(long)]
         save: bool,
     },
+    /// Frequency response: a stepped-sine sweep measured on the device (a sine injected at
+    /// the current command or the position reference, demodulated over whole periods),
+    /// printed point by point; writes frf.csv (f_hz,gain_db,phase_deg,coherence), bode.svg
+    /// and, for the open loop, margins.toml. The plant at rest gives the pre-sliding
+    /// stiffness. Ctrl-C or a fault ends it with the bridge off, the points so far kept.
+    Frf {
+        /// What is measured: `plant` (position per current commanded, rad/A), `open` (the loop
+        /// gain) or `closed` (position per reference).
+        #[arg(long = "loop", value_parser = ["plant", "open", "closed"])]
+        lp: String,
+        /// Lowest frequency \[Hz\].
+        #[arg(long, default_value_t = 10.0)]
+        from: f64,
+        /// Highest frequency \[Hz\] (below 0.45 × rate.pos_hz).
+        #[arg(long, default_value_t = 3000.0)]
+        to: f64,
+        /// Frequencies, log-spaced (2 to 1000).
+        #[arg(long, default_value_t = 40)]
+        points: usize,
+        /// The sine's amplitude: \[A\] for plant and open (default 1 % of lim.i_max),
+        /// \[rad\] for closed (default 20 counts).
+        #[arg(long)]
+        amplitude: Option<f64>,
+        /// Measure while the axis runs at this speed \[rad/s\] (sliding friction: the
+        /// rigid-body line), turning round before the soft limits.
+        #[arg(long, allow_hyphen_values = true)]
+        velocity: Option<f64>,
+        /// Periods summed per point, at least (and 0.1 s).
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+        periods: u32,
+        /// Propose a notch for the largest resonance above the crossover, with the margins it
+        /// would give (--loop open).
+        #[arg(long)]
+        suggest: bool,
+        /// Set the proposed notch (implies --suggest).
+        #[arg(long)]
+        apply: bool,
+        /// Print the result as JSON instead of the readable output.
+        #[arg(long)]
+        json: bool,
+        /// Output directory.
+        #[arg(long, default_value = "frf")]
+        out: PathBuf,
+    },
 }
 
 #[derive(Subcommand)]
@@ -478,6 +523,39 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 json,
             },
         )?,
+        Cmd::Frf {
+            lp,
+            from,
+            to,
+            points,
+            amplitude,
+            velocity,
+            periods,
+            suggest,
+            apply,
+            json,
+            out,
+        } => {
+            let lp = gms_bench::frf::Loop::from_name(&lp)
+                .ok_or_else(|| Fail::Usage(format!("--loop {lp}: plant, open or closed")))?;
+            let mut plan = gms_bench::frf::Plan::new(lp, 0.0);
+            plan.from_hz = from;
+            plan.to_hz = to;
+            plan.points = points;
+            plan.velocity = velocity;
+            plan.periods = periods;
+            frf::run(
+                &mut link,
+                &frf::Args {
+                    plan,
+                    amplitude,
+                    out,
+                    suggest,
+                    apply,
+                    json,
+                },
+            )?
+        }
         #[cfg(feature = "ui")]
         Cmd::Ui { .. } => unreachable!("handled before the link opens"),
         Cmd::Identify {
