@@ -87,8 +87,9 @@ impl ShapingParams {
 pub struct Shaping {
     coeffs: [Option<Coefficients<f32>>; 3],
     stages: [Option<DirectForm2Transposed<f32>>; 3],
-    /// The cascade's last values: `io[0]` its input, `io[i + 1]` the output of stage `i` (its
-    /// input again where the stage is off), for a bumpless change of settings.
+    /// The cascade's last values: `io[0]` its input, `io[i + 1]` the output of stage `i` (not
+    /// kept where the stage is off: its output is its input), for a bumpless change of
+    /// settings.
     io: [f32; 4],
 }
 
@@ -154,8 +155,8 @@ impl Shaping {
         for (s, io) in self.stages.iter_mut().zip(self.io.iter_mut().skip(1)) {
             if let Some(s) = s {
                 y = s.run(y);
+                *io = y;
             }
-            *io = y;
         }
         y
     }
@@ -175,7 +176,16 @@ impl Shaping {
     /// from where it was and only the new stage's response to what follows differs). Cheap: no
     /// transcendental function, fit for a control step.
     pub fn take_state_from(&mut self, old: &Shaping) {
-        self.io = old.io;
+        // The old cascade's value after each stage (an off stage passes its input).
+        let mut after = [old.io[0]; 3];
+        let mut level = old.io[0];
+        for (i, a) in after.iter_mut().enumerate() {
+            if old.stages.get(i).is_some_and(Option::is_some) {
+                level = old.io.get(i + 1).copied().unwrap_or(level);
+            }
+            *a = level;
+        }
+        self.io = [old.io[0], after[0], after[1], after[2]];
         for (i, (s, c)) in self.stages.iter_mut().zip(&self.coeffs).enumerate() {
             let (Some(s), Some(c)) = (s, c) else {
                 continue;
@@ -189,7 +199,7 @@ impl Shaping {
                     s.s2 = o.s2;
                 }
                 _ => {
-                    let level = old.io.get(i + 1).copied().unwrap_or(0.0);
+                    let level = after.get(i).copied().unwrap_or(0.0);
                     // Direct form 2 transposed at a constant input x = level with output
                     // y = level: s2 = (b2 − a2) x, s1 = s2 + (b1 − a1) x.
                     s.s2 = (c.b2 - c.a2) * level;

@@ -11,10 +11,12 @@ use hil_sim::scenario::Scenario;
 use num_complex::Complex64;
 
 /// The default scenario with `extra` keys in `[plant]` and the tables `tables` after it, the
-/// plant's draw off (the truth is nominal).
+/// plant's draw off (the truth is nominal) and 40 integration substeps: the plant's
+/// semi-implicit Euler lags by half a substep (2.3° at 2.6 kHz with the default 10; 0.6° with
+/// 40), which is the simulator's error, not the measurement's.
 fn scenario(extra: &str, tables: &str) -> Scenario {
     Scenario::parse(
-        &format!("[plant]\nvariability = 0.0\n{extra}\n{tables}"),
+        &format!("[plant]\nvariability = 0.0\nsubsteps = 40\n{extra}\n{tables}"),
         "frf",
     )
     .unwrap()
@@ -112,7 +114,7 @@ fn the_plant_sliding_is_the_rigid_body_line() {
     let sc = scenario("", "");
     let mut dev = LocalDevice::new(&sc).unwrap();
     let s = settings::read(&mut dev).unwrap();
-    let mut plan = Plan::new(Loop::Plant, 0.003);
+    let mut plan = Plan::new(Loop::Plant, 0.01);
     plan.velocity = Some(3.0);
     let pts = sweep(&mut dev, &plan);
     let lin = LinearAxis::new(&dev.plant().small_signal(), &s, Operating::Sliding).unwrap();
@@ -121,12 +123,12 @@ fn the_plant_sliding_is_the_rigid_body_line() {
         "sliding at 3 rad/s: {n} of {} points above the noise, worst {db:.2} dB {deg:.2}°",
         pts.len()
     );
-    // Below ~60 Hz the loop's gain (hundreds, on a free mass) leaves microamperes of the
-    // injected 3 mA in the command, under the noise: the band above it is measured.
-    assert!(n >= 24, "{n} points above the noise");
+    // Below ~80 Hz the loop's gain (hundreds, on a free mass) leaves microamperes of the
+    // injected 10 mA in the command, under the noise: the band above it is measured.
+    assert!(n >= 25, "{n} points above the noise");
     assert!(
         pts.iter()
-            .filter(|p| p.f_hz > 70.0 && p.f_hz < 2300.0)
+            .filter(|p| p.f_hz > 85.0 && p.f_hz < 2300.0)
             .all(|p| p.coherence >= 0.99)
     );
     assert!(db <= 1.0 && deg <= 5.0, "{db} dB {deg}°");
@@ -187,12 +189,12 @@ fn model_margins(lin: &LinearAxis) -> frf::Margins {
 }
 
 /// The open loop at rest with the default gains: the measured loop gain is the model's, and
-/// so are its margins (within 1 dB and 3°). With 40 plant substeps: the semi-implicit Euler
-/// of the plant lags by half a substep (1.3° at 1.4 kHz with the default 10), which a loop
-/// with 1.4 dB of gain margin turns into a dB of its sensitivity peak.
+/// so are its margins (within 1 dB and 3°; with the plant's default 10 substeps, its half
+/// substep of lag, 1.3° at 1.4 kHz, is a dB of this loop's sensitivity peak: its gain margin
+/// is 1.4 dB).
 #[test]
 fn the_open_loop_margins_are_the_models() {
-    let sc = scenario("substeps = 40", "");
+    let sc = scenario("", "");
     let mut dev = LocalDevice::new(&sc).unwrap();
     let s = settings::read(&mut dev).unwrap();
     let plan = Plan::new(Loop::Open, 0.003);
@@ -250,7 +252,7 @@ fn step_overshoot(dev: &mut LocalDevice, counts: f64) -> (f64, f64) {
 #[test]
 fn the_suggested_notch_restores_the_phase_margin() {
     let sc = scenario(
-        "substeps = 20",
+        "",
         "[plant.compliance]\nf_hz = 3000.0\nzeta = 0.01\nslide_mass = 50.0\n",
     );
     let mut dev = LocalDevice::new(&sc).unwrap();

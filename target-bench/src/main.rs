@@ -100,14 +100,39 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
 /// `finish`), enabled, during a `move` at 0.3 rad/s with telemetry every 10th position step,
 /// the exchange going through a [`Mailbox`] as on the board; the encoder follows the
 /// reference with a 0-3 count lag.
-fn device_period(out: &mut hio::HostStream) {
+///
+/// `shaped`: with both notches and the low-pass on and a frequency-response measurement
+/// running (a sine at the current command, demodulated) — `device_period_frf`.
+fn device_period(out: &mut hio::HostStream, shaped: bool) {
     // The F405 board as the firmware links it (gms-core's description: 16 conversions per
     // current sample, a 60 % step budget), its bridge driving at once on `enable`.
     let board = Board {
         bridge_wake_s: 0.0,
         ..gms_core::boards::f405::BOARD
     };
-    let settings = device::default_settings();
+    let mut settings = device::default_settings();
+    if shaped {
+        settings.shaping = gms_core::shaping::ShapingParams {
+            notch: [
+                gms_core::shaping::Notch {
+                    f_hz: 700.0,
+                    q: 2.0,
+                    depth_db: 20.0,
+                },
+                gms_core::shaping::Notch {
+                    f_hz: 1500.0,
+                    q: 4.0,
+                    depth_db: 10.0,
+                },
+            ],
+            lp_hz: 3000.0,
+        };
+    }
+    let name = if shaped {
+        "device_period_frf"
+    } else {
+        "device_period"
+    };
     let Ok(a) = device::prepare(&settings, &board) else {
         return;
     };
@@ -137,11 +162,22 @@ fn device_period(out: &mut hio::HostStream) {
     let Ok(plan) = Motion::plan(st.reference, 0.5, Some(0.3), rpc) else {
         return;
     };
+    let frf = gms_core::frf::FrfSpec::new(
+        gms_core::frf::Injection::Current,
+        123.4,
+        0.005,
+        1_000_000,
+        1,
+        settings.pos_rate_hz,
+    )
+    .ok()
+    .filter(|_| shaped);
     let mut mv = Some(Requests {
         motion: Some(MoveRequest {
             plan,
             from_step: st.steps,
         }),
+        frf: frf.map(device::FrfRequest::Start),
         ..Requests::default()
     });
     let ratio = lp.ratio();
@@ -183,14 +219,17 @@ fn device_period(out: &mut hio::HostStream) {
             }
         },
     );
-    if lp.enabled() && lp.status().moving {
-        writeln!(out, "cost device_period {c} {CALLS}").ok();
+    let measuring = !shaped || mb.frf.state == gms_core::frf::FrfState::Measuring;
+    if lp.enabled() && lp.status().moving && measuring {
+        writeln!(out, "cost {name} {c} {CALLS}").ok();
     } else {
-        // A fault switched the loop off: the figure would not be the enabled path's.
+        // A fault switched the loop off, or the measurement is not running: the figure
+        // would not be the path's it names.
         writeln!(
             out,
-            "device_period: the loop left the move (faults {:?})",
-            lp.faults().0
+            "{name}: the loop left the move or the measurement (faults {:?}, frf {})",
+            lp.faults().0,
+            mb.frf.state.name()
         )
         .ok();
     }
@@ -330,7 +369,8 @@ fn main() -> ! {
         writeln!(out, "cost {name} {c} {CALLS}").ok();
     }
 
-    device_period(&mut out);
+    device_period(&mut out, false);
+    device_period(&mut out, true);
 
     {
         let xs = [0.3f32, 1.7, 0.05, 3.0];

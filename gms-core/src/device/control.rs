@@ -481,13 +481,16 @@ impl ControlLoop {
             }
         }
         if self.phase == 0 {
-            let chunk = self.chunk.take();
-            let report = self.frf_report.take();
+            // Handed over by reference and then dropped: a chunk or a report is not copied
+            // in a step that has none.
             let h = Handover {
-                chunk: chunk.as_ref(),
-                frf: report.as_ref(),
+                chunk: self.chunk.as_ref(),
+                frf: self.frf_report.as_ref(),
             };
-            if let Some(req) = exchange(self.status(), h) {
+            let req = exchange(self.status(), h);
+            self.chunk = None;
+            self.frf_report = None;
+            if let Some(req) = req {
                 timing = self.take(req);
             }
             self.steps = self.steps.wrapping_add(1);
@@ -512,7 +515,7 @@ impl ControlLoop {
                 }
             } else if self.enabled && self.wake_left == 0 {
                 self.r = self.motion.next(self.ctrl.dt_pos());
-                if self.frf.is_some_and(|f| f.state().running()) {
+                if self.frf.as_ref().is_some_and(|f| f.state().running()) {
                     self.frf_step(pos);
                 } else {
                     self.out = self.ctrl.position_step(pos, &self.r);
@@ -634,7 +637,13 @@ impl ControlLoop {
                 self.ctrl.inject_current(v);
             }
         }
-        let y = (pos.saturating_mul(sub as i64).saturating_sub(self.r.pos)) as f32 * (rpc / sub);
+        // The position relative to the reference without the sine [rad], from the step's
+        // error (reference minus position): at the current command the reference is that
+        // one; at the reference the sine is in it.
+        let y = match f.injection() {
+            Injection::Current => -self.out.error,
+            Injection::Position => v - self.out.error,
+        };
         let x: [f32; CHANNELS] = [v, self.ctrl.last_output().i_cmd, self.current, y];
         if f.step(&x, ph) {
             self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
