@@ -9,7 +9,7 @@
 //! the exact average over the periods, with no ripple at twice the frequency and no leakage
 //! from the other harmonics of the response. The excitation's phase is an integer index into
 //! the `n` samples (no drift however long it runs); each sample's sine and cosine come from a
-//! rotation by the phase step (computed once, in f64), started afresh at `(0, 1)` with every
+//! rotation by the phase step (computed once), started afresh at `(0, 1)` with every
 //! group, so that every group is the same sequence and a step costs no transcendental function
 //! (the rounding over a group of n samples stays near n × 1e-7: 1e-4 for a 10 Hz sine at
 //! 10 kHz).
@@ -109,14 +109,18 @@ impl Sine {
                 break;
             }
         }
-        let (sin, cos) = libm::sincos(core::f64::consts::TAU * best.0 as f64 / best.1 as f64);
+        // The step's sine and cosine in f32 (the crate's own, as the reference generator's:
+        // no f64 trigonometry in the firmware for this).
+        let (sin, cos) = crate::reference::sin_cos(
+            (core::f64::consts::TAU * best.0 as f64 / best.1 as f64) as f32,
+        );
         Ok(Sine {
             n: best.1,
             k: best.0,
             amp,
             i: 0,
             sc: (0.0, 1.0),
-            step: (sin as f32, cos as f32),
+            step: (sin, cos),
         })
     }
 

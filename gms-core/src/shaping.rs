@@ -1,14 +1,16 @@
 //! Loop-shaping filters on the position loop's current command: two notches and a low-pass,
 //! each off at 0 Hz (settings `filt.notch1.*`, `filt.notch2.*`, `filt.lp.f_hz`; run by the
-//! controller once per position step, see [`crate::controller`]). A notch is the Audio EQ Cookbook's peaking filter cut by
-//! `depth_db` at `f_hz` with quality `q` (a finite depth: a resonance is attenuated, not
-//! removed, so the loop's phase is disturbed only near it); the low-pass a second-order
-//! Butterworth. The coefficients come from the `biquad` crate (`Coefficients::from_params`),
-//! and each stage runs as its direct form 2 transposed in f32; [`Shaping::response`]
+//! controller once per position step, see [`crate::controller`]). A notch is the Audio EQ
+//! Cookbook's peaking filter cut by `depth_db` at `f_hz` with quality `q` (a finite depth: a
+//! resonance is attenuated, not removed, so the loop's phase is disturbed only near it); the
+//! low-pass a second-order Butterworth. Each stage runs as the `biquad` crate's direct form 2
+//! transposed in f32; its coefficients are the cookbook's as `biquad::Coefficients::from_params`
+//! computes them, with the crate's own sine and exponential (a test holds them to the
+//! crate's). [`Shaping::response`]
 //! evaluates the same coefficients' transfer function on the unit circle (for plots and for
 //! the margins a filter would give).
 
-use biquad::{Biquad, Coefficients, DirectForm2Transposed, Hertz, Q_BUTTERWORTH_F32, Type};
+use biquad::{Biquad, Coefficients, DirectForm2Transposed};
 
 /// One notch: a cut of `depth_db` \[dB\] at `f_hz` \[Hz\] (0: off) with quality `q` [-].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,16 +95,63 @@ pub struct Shaping {
     io: [f32; 4],
 }
 
-fn frequency(f: f32, rate: f32) -> Result<Option<Hertz<f32>>, ShapingError> {
+/// `f` checked against the rate: `None` for 0 (off).
+fn frequency(f: f32, rate: f32) -> Result<Option<f32>, ShapingError> {
     if f == 0.0 {
         return Ok(None);
     }
-    if !(f > 0.0 && f.is_finite() && f < 0.45 * rate) {
+    if !(f > 0.0 && f.is_finite() && rate > 0.0 && f < 0.45 * rate) {
         return Err(ShapingError::Frequency);
     }
-    Hertz::from_hz(f)
-        .map(Some)
-        .map_err(|_| ShapingError::Frequency)
+    Ok(Some(f))
+}
+
+/// What a cookbook stage is.
+enum Kind {
+    /// A peaking filter of this gain \[dB\] (negative: a cut).
+    Peaking(f32),
+    /// A low-pass.
+    LowPass,
+}
+
+/// The Audio EQ Cookbook's coefficients of a stage at `f0` \[Hz\] with quality `q` at the
+/// rate `fs` \[Hz\], normalised by a0 — the formulas of `biquad::Coefficients::from_params`
+/// (the test `gms-core/tests/shaping.rs` holds them to it), with the crate's own sine,
+/// cosine and exponential: libm's `sinf`, `cosf` and `powf` that the crate's would link cost
+/// the F405's flash 4 KB.
+fn cookbook(kind: Kind, f0: f32, q: f32, fs: f32) -> Coefficients<f32> {
+    let w0 = core::f32::consts::TAU * f0 / fs;
+    let (sin, cos) = crate::reference::sin_cos(w0);
+    let alpha = sin / (2.0 * q);
+    let (b0, b1, b2, a0, a1, a2) = match kind {
+        Kind::Peaking(db) => {
+            // A = 10^(dB / 40).
+            let a = crate::math::exp(db / 40.0 * core::f32::consts::LN_10);
+            (
+                1.0 + alpha * a,
+                -2.0 * cos,
+                1.0 - alpha * a,
+                1.0 + alpha / a,
+                -2.0 * cos,
+                1.0 - alpha / a,
+            )
+        }
+        Kind::LowPass => (
+            (1.0 - cos) / 2.0,
+            1.0 - cos,
+            (1.0 - cos) / 2.0,
+            1.0 + alpha,
+            -2.0 * cos,
+            1.0 - alpha,
+        ),
+    };
+    Coefficients {
+        a1: a1 / a0,
+        a2: a2 / a0,
+        b0: b0 / a0,
+        b1: b1 / a0,
+        b2: b2 / a0,
+    }
 }
 
 /// The same coefficients (`Coefficients` has no `PartialEq`).
@@ -113,7 +162,6 @@ fn same(a: &Coefficients<f32>, b: &Coefficients<f32>) -> bool {
 impl Shaping {
     /// The filters of `p` at a sample rate of `rate_hz` \[Hz\], or why not.
     pub fn try_new(p: &ShapingParams, rate_hz: f32) -> Result<Shaping, ShapingError> {
-        let fs = Hertz::from_hz(rate_hz).map_err(|_| ShapingError::Frequency)?;
         let mut coeffs = [None; 3];
         for (c, n) in coeffs.iter_mut().zip(&p.notch) {
             let Some(f0) = frequency(n.f_hz, rate_hz)? else {
@@ -125,16 +173,15 @@ impl Shaping {
             if !(n.depth_db >= 0.0 && n.depth_db <= 60.0) {
                 return Err(ShapingError::Depth);
             }
-            *c = Some(
-                Coefficients::<f32>::from_params(Type::PeakingEQ(-n.depth_db), fs, f0, n.q)
-                    .map_err(|_| ShapingError::Frequency)?,
-            );
+            *c = Some(cookbook(Kind::Peaking(-n.depth_db), f0, n.q, rate_hz));
         }
         if let Some(f0) = frequency(p.lp_hz, rate_hz)? {
-            coeffs[2] = Some(
-                Coefficients::<f32>::from_params(Type::LowPass, fs, f0, Q_BUTTERWORTH_F32)
-                    .map_err(|_| ShapingError::Frequency)?,
-            );
+            coeffs[2] = Some(cookbook(
+                Kind::LowPass,
+                f0,
+                core::f32::consts::FRAC_1_SQRT_2,
+                rate_hz,
+            ));
         }
         Ok(Shaping {
             coeffs,

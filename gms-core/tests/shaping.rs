@@ -112,3 +112,73 @@ fn off_is_off_and_bad_settings_are_refused() {
         assert!(!e.reason().is_empty());
     }
 }
+
+/// The response of a cookbook stage as the `biquad` crate computes its coefficients (the
+/// other implementation of the formulas) at `f` for the rate `fs`.
+fn crate_response(t: biquad::Type<f32>, f0: f32, q: f32, fs: f32, f: f64) -> (f64, f64) {
+    use biquad::{Coefficients, ToHertz};
+    let c = Coefficients::<f32>::from_params(t, fs.hz(), f0.hz(), q).unwrap();
+    let w = std::f64::consts::TAU * f / fs as f64;
+    let z1 = (w.cos(), -w.sin());
+    let z2 = ((2.0 * w).cos(), -(2.0 * w).sin());
+    let num = (
+        c.b0 as f64 + c.b1 as f64 * z1.0 + c.b2 as f64 * z2.0,
+        c.b1 as f64 * z1.1 + c.b2 as f64 * z2.1,
+    );
+    let den = (
+        1.0 + c.a1 as f64 * z1.0 + c.a2 as f64 * z2.0,
+        c.a1 as f64 * z1.1 + c.a2 as f64 * z2.1,
+    );
+    let d = den.0 * den.0 + den.1 * den.1;
+    (
+        (num.0 * den.0 + num.1 * den.1) / d,
+        (num.1 * den.0 - num.0 * den.1) / d,
+    )
+}
+
+/// The coefficients the device computes with its own sine and exponential are the `biquad`
+/// crate's (`Coefficients::from_params`, libm's): the same response within 0.01 dB and 0.05°
+/// over notches from 50 Hz to 4.4 kHz (q 0.5 to 20, 6 to 40 dB) and low-passes, at 10 kHz.
+#[test]
+fn the_coefficients_are_the_biquad_crates() {
+    let fs = 10_000.0f32;
+    let (mut worst_db, mut worst_deg) = (0.0f64, 0.0f64);
+    let mut check = |ours: (f64, f64), theirs: (f64, f64)| {
+        let d_db = (db(ours) - db(theirs)).abs();
+        let d_deg = (ours.1.atan2(ours.0) - theirs.1.atan2(theirs.0)).to_degrees();
+        let d_deg = (d_deg + 180.0).rem_euclid(360.0) - 180.0;
+        worst_db = worst_db.max(d_db);
+        worst_deg = worst_deg.max(d_deg.abs());
+    };
+    for f0 in [50.0f32, 700.0, 3000.0, 4400.0] {
+        for q in [0.5f32, 2.0, 20.0] {
+            for depth in [6.0f32, 20.0, 40.0] {
+                let sh = Shaping::try_new(&notch(f0, q, depth), fs).unwrap();
+                for k in 0..60 {
+                    let f = 10.0 * 490f64.powf(k as f64 / 59.0);
+                    check(
+                        sh.response(f, fs as f64),
+                        crate_response(biquad::Type::PeakingEQ(-depth), f0, q, fs, f),
+                    );
+                }
+            }
+        }
+        let lp = ShapingParams {
+            lp_hz: f0,
+            ..ShapingParams::OFF
+        };
+        let sh = Shaping::try_new(&lp, fs).unwrap();
+        for k in 0..60 {
+            let f = 10.0 * 490f64.powf(k as f64 / 59.0);
+            check(
+                sh.response(f, fs as f64),
+                crate_response(biquad::Type::LowPass, f0, biquad::Q_BUTTERWORTH_F32, fs, f),
+            );
+        }
+    }
+    println!("worst {worst_db:.2e} dB, {worst_deg:.2e}°");
+    assert!(
+        worst_db < 0.01 && worst_deg < 0.05,
+        "{worst_db} dB {worst_deg}°"
+    );
+}

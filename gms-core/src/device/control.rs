@@ -515,10 +515,13 @@ impl ControlLoop {
                 }
             } else if self.enabled && self.wake_left == 0 {
                 self.r = self.motion.next(self.ctrl.dt_pos());
-                if self.frf.as_ref().is_some_and(|f| f.state().running()) {
-                    self.frf_step(pos);
-                } else {
-                    self.out = self.ctrl.position_step(pos, &self.r);
+                // One call of the position step whether a frequency response runs or not (the
+                // step inlined once).
+                let frf = self.frf_input();
+                let r = frf.map_or(self.r, |f| f.3);
+                self.out = self.ctrl.position_step(pos, &r);
+                if let Some((v, ph, inj, _)) = frf {
+                    self.frf_output((v, ph, inj));
                 }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
@@ -611,42 +614,47 @@ impl ControlLoop {
         false
     }
 
-    /// A position step with the frequency-response sine injected (at the reference or at the
-    /// current command) and the responses summed; `self.r` is the reference without it.
-    fn frf_step(&mut self, pos: i64) {
-        let Some(f) = &mut self.frf else {
-            return;
-        };
-        let rpc = self.ctrl.rad_per_count();
-        let sub = SUB_PER_COUNT;
+    /// The frequency-response measurement's sample now, if one runs: its injected value, its
+    /// phase, where it goes, and the reference with it (`self.r` with the sine added when it
+    /// goes to the reference).
+    fn frf_input(&self) -> Option<(f32, (f32, f32), Injection, RefSample)> {
+        let f = self.frf.as_ref().filter(|f| f.state().running())?;
         let (v, ph) = f.value();
-        match f.injection() {
+        let r = match f.injection() {
+            Injection::Current => self.r,
             Injection::Position => {
                 // The sine as a motion: its position, velocity and acceleration.
+                let rpc = self.ctrl.rad_per_count();
                 let w = f.omega(self.ctrl.params().pos_rate_hz);
-                let amp_cos = f.amplitude() * ph.1;
-                let r = crate::reference::RefSample {
-                    pos: self.r.pos.saturating_add((v / rpc * sub) as i64),
-                    vel: self.r.vel + w * amp_cos,
+                RefSample {
+                    pos: self.r.pos.saturating_add((v / rpc * SUB_PER_COUNT) as i64),
+                    vel: self.r.vel + w * f.amplitude() * ph.1,
                     acc: self.r.acc - w * w * v,
-                };
-                self.out = self.ctrl.position_step(pos, &r);
+                }
             }
-            Injection::Current => {
-                self.out = self.ctrl.position_step(pos, &self.r);
-                self.ctrl.inject_current(v);
-            }
+        };
+        Some((v, ph, f.injection(), r))
+    }
+
+    /// After a position step with the measurement's sample `(v, ph, inj)`: the sine added to
+    /// the current command (when it goes there) and the responses summed.
+    fn frf_output(&mut self, (v, ph, inj): (f32, (f32, f32), Injection)) {
+        if inj == Injection::Current {
+            self.ctrl.inject_current(v);
         }
         // The position relative to the reference without the sine [rad], from the step's
         // error (reference minus position): at the current command the reference is that
         // one; at the reference the sine is in it.
-        let y = match f.injection() {
+        let y = match inj {
             Injection::Current => -self.out.error,
             Injection::Position => v - self.out.error,
         };
         let x: [f32; CHANNELS] = [v, self.ctrl.last_output().i_cmd, self.current, y];
-        if f.step(&x, ph) {
-            self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
+        let rate = self.ctrl.params().pos_rate_hz;
+        if let Some(f) = &mut self.frf
+            && f.step(&x, ph)
+        {
+            self.frf_report = Some(f.report(rate));
         }
     }
 

@@ -207,6 +207,8 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// The client went away: its stream ends (a new client starts without one).
     pub fn disconnected(&mut self) {
         let _ = self.stream_off();
+        // A frequency response ends with its link (the position loop goes on).
+        let _ = self.frf_off();
         // An experiment (current or speed) ends with its link: the bridge goes off. A held
         // position or a move goes on.
         if self.status_now().drive != Drive::Position {
@@ -219,6 +221,12 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// within the link's timeout they are withdrawn and nothing changes.
     fn post(&mut self, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
         self.link.with_mailbox(|m| f(&mut m.requests));
+        self.wait_taken()
+    }
+
+    /// The wait of [`Front::post`], one copy for every request (not generic: the firmware's
+    /// flash).
+    fn wait_taken(&mut self) -> Result<(), &'static str> {
         let t0 = self.link.now_us();
         let timeout = self.link.timeout_us();
         loop {
