@@ -406,8 +406,171 @@ pub(crate) fn commission_steps(
     // 10. The position loop's gains for this motor and loop, kd between the device's
     //    friction model's Stribeck slope and the loops' stability limit.
     c.pos = Some(position_gains_for(b, &mut c, cur_hz, ratio)?);
+    // 11. The loop as built, measured: the open loop at rest with what was found, its margins
+    //     beside the model's; gains backed off while the phase margin is under 30°.
+    loop_check(b, &mut c, ratio)?;
     b.disable()?;
     Ok(c)
+}
+
+/// The least phase margin commissioning leaves \[deg\]: below it the gains are backed off.
+pub const MIN_PHASE_MARGIN: f64 = 30.0;
+
+/// The factor the position gains are backed off by, and how many times at most.
+pub const BACK_OFF: (f64, usize) = (0.7, 3);
+
+/// The modelled loop gain's margins for what `c` found (the linear model of
+/// `gms_ident::linear` with the measured R, L, k_M, J, the friction model's pre-sliding
+/// stiffness times `scale` and viscous term, and the device's settings `s` with the gains).
+fn modelled_margins(
+    c: &Commissioned,
+    s: &gms_core::protocol::Settings,
+    scale: f64,
+    band: (f64, f64),
+) -> Option<crate::frf::Margins> {
+    use gms_ident::linear::{LinearAxis, Operating, SmallSignal};
+    let k_act: f64 = s.ff.actuator.blocks.iter().map(|b| b.k as f64).sum::<f64>() * scale;
+    let ss = SmallSignal {
+        r: c.r,
+        l: c.inductance,
+        k_m: c.k_e,
+        k_e: c.k_e,
+        j: c.inertia,
+        two_mass: None,
+        k_act,
+        sigma_act: s.ff.actuator.sigma as f64 * scale,
+        k_gw: 0.0,
+        sigma_gw: 0.0,
+        rad_per_count: s.rad_per_count() as f64,
+    };
+    let lin = LinearAxis::new(&ss, s, Operating::Rest).ok()?;
+    let l: Vec<(f64, num_complex::Complex64)> = (0..1000)
+        .map(|i| {
+            let f = band.0 * (band.1 / band.0).powf(i as f64 / 999.0);
+            let z = lin.open_loop(f);
+            (f, num_complex::Complex64::new(z.re, z.im))
+        })
+        .collect();
+    Some(crate::frf::margins(&l))
+}
+
+/// Step 11: the gains found set (with the motor's figures and the current loop's PI), the
+/// open loop measured at rest by a short sweep (`frf`, 20 points from 20 Hz to 0.4 × the
+/// position rate), its margins printed beside the model's; while the measured phase margin
+/// is under [`MIN_PHASE_MARGIN`] the position gains are backed off ([`BACK_OFF`]) and
+/// measured again. A sweep that cannot be made (a coarse encoder that shows no response at
+/// rest, a fault) is said and does not stop commissioning. The device's settings are put back
+/// by the caller's snapshot.
+fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<(), Error> {
+    use crate::frf::{Loop, Plan};
+    let Some(mut g) = c.pos else {
+        return Ok(());
+    };
+    let i_max = get_param(b, "lim.i_max")?;
+    let pos_hz = get_param(b, "rate.pos_hz")?;
+    let mut plan = Plan::new(Loop::Open, 0.01 * i_max);
+    plan.from_hz = 20.0;
+    plan.to_hz = 0.4 * pos_hz;
+    plan.points = 20;
+    plan.seconds = 0.05;
+    for round in 0..=BACK_OFF.1 {
+        let mut sets: Vec<(String, String)> = c
+            .settings()
+            .into_iter()
+            .filter(|(k, _)| !k.starts_with("pos."))
+            .map(|(k, v)| (k.to_string(), format!("{v}")))
+            .collect();
+        sets.extend([
+            ("pos.kp".to_string(), format!("{}", g.kp)),
+            ("pos.ki".to_string(), format!("{}", g.ki)),
+            ("pos.kd".to_string(), format!("{}", g.kd)),
+        ]);
+        crate::settings::apply(b, &sets, false)?;
+        let s = crate::settings::read(b)?;
+        let model = modelled_margins(c, &s, scale, (plan.from_hz, plan.to_hz));
+        // From off: position control holding where the axis is (not the current mode the
+        // steps before left it in).
+        b.disable()?;
+        b.clear()?;
+        b.enable()?;
+        b.wait(0.3)?;
+        let mut pts = Vec::new();
+        let measured = crate::frf::sweep(b, &plan, &mut pts, |_, _| {});
+        let good = pts
+            .iter()
+            .filter(|p| p.coherence >= crate::frf::MIN_COHERENCE)
+            .count();
+        let m = match measured {
+            Ok(()) if good >= pts.len() / 2 => {
+                let l: Vec<(f64, num_complex::Complex64)> = pts
+                    .iter()
+                    .filter(|p| p.coherence >= crate::frf::MIN_COHERENCE)
+                    .map(|p| (p.f_hz, p.value))
+                    .collect();
+                crate::frf::margins(&l)
+            }
+            Ok(()) => {
+                c.lines.push(format!(
+                    "open loop: not measured ({good} of {} points above the noise at rest: the \
+                     encoder's count hides the response)",
+                    pts.len()
+                ));
+                break;
+            }
+            Err(e) => {
+                let _ = b.disable();
+                if e.faults().is_none() || round == BACK_OFF.1 {
+                    c.lines.push(format!("open loop: not measured ({e})"));
+                    break;
+                }
+                c.lines.push(format!(
+                    "open loop: the measurement tripped ({e}): gains backed off ×{}",
+                    BACK_OFF.0
+                ));
+                g.kp *= BACK_OFF.0;
+                g.ki *= BACK_OFF.0;
+                g.kd *= BACK_OFF.0;
+                continue;
+            }
+        };
+        let model_text = model.map_or("—".to_string(), |m| {
+            format!(
+                "{:.1}°, {:.2} dB, crossover {:.0} Hz",
+                m.phase_margin_deg, m.gain_margin_db, m.crossover_hz
+            )
+        });
+        c.lines.push(format!(
+            "open loop at rest (kp {}, kd {}): measured phase margin {:.1}° (at {:.0} Hz), \
+             gain margin {:.2} dB, crossover {:.0} Hz; modelled {model_text}",
+            num4(g.kp),
+            num4(g.kd),
+            m.phase_margin_deg,
+            m.phase_margin_hz,
+            m.gain_margin_db,
+            m.crossover_hz
+        ));
+        if m.phase_margin_deg >= MIN_PHASE_MARGIN || m.phase_margin_deg.is_nan() {
+            break;
+        }
+        if round == BACK_OFF.1 {
+            c.lines.push(format!(
+                "  warning: the phase margin is still under {MIN_PHASE_MARGIN}° after backing \
+                 off {} times (a resonance? gms-tune frf --loop open --suggest)",
+                BACK_OFF.1
+            ));
+            break;
+        }
+        c.lines.push(format!(
+            "  warning: phase margin under {MIN_PHASE_MARGIN}°: position gains backed off ×{}",
+            BACK_OFF.0
+        ));
+        g.kp *= BACK_OFF.0;
+        g.ki *= BACK_OFF.0;
+        g.kd *= BACK_OFF.0;
+    }
+    b.disable()?;
+    c.pos = Some(g);
+    Ok(())
 }
 
 /// The position loop's gains for the motor `c` measured, the current loop at `cur_hz` with

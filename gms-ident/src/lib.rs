@@ -16,6 +16,7 @@ use gms_core::protocol::ErrorCode;
 pub mod gains;
 pub mod identify;
 pub mod io;
+pub mod linear;
 pub mod optimum;
 pub mod paramfile;
 pub mod plot;

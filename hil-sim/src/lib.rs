@@ -13,7 +13,6 @@ pub mod commands;
 pub mod device;
 pub mod experiment;
 pub mod friction_cmd;
-pub mod linear;
 pub mod plant;
 pub mod scenario;
 pub mod sim;

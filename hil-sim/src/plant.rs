@@ -47,6 +47,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::scenario::Plant as PlantSpec;
+use gms_ident::linear::SmallSignal;
 use gms_ident::paramfile::{AnyModel, FrictionSpec};
 
 /// Energy ledger of a run \[J\], accumulated in f64.
@@ -79,34 +80,6 @@ impl Energy {
     pub fn mechanical(&self) -> f64 {
         self.friction + self.kinetic + self.spring + self.damping + self.cogging
     }
-}
-
-/// The plant's constants for a linear model (SI, everything at the motor).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SmallSignal {
-    /// Winding resistance \[ohm\].
-    pub r: f64,
-    /// Winding inductance \[H\].
-    pub l: f64,
-    /// Torque constant \[N·m/A\].
-    pub k_m: f64,
-    /// Back-EMF constant \[V·s/rad\].
-    pub k_e: f64,
-    /// The whole inertia at the motor \[kg·m²\].
-    pub j: f64,
-    /// A compliant stage: rotor-side inertia, slide inertia \[kg·m²\], coupling stiffness
-    /// \[N·m/rad\] and damping \[N·m·s/rad\], all reflected to the motor.
-    pub two_mass: Option<(f64, f64, f64, f64)>,
-    /// The actuator friction's stiffness at rest (pre-sliding) \[N·m/rad\].
-    pub k_act: f64,
-    /// The actuator friction's viscous coefficient \[N·m·s/rad\].
-    pub sigma_act: f64,
-    /// The guideway friction's stiffness at rest, reflected \[N·m/rad\].
-    pub k_gw: f64,
-    /// The guideway friction's viscous coefficient, reflected \[N·m·s/rad\].
-    pub sigma_gw: f64,
-    /// Encoder resolution \[rad/count\].
-    pub rad_per_count: f64,
 }
 
 /// The two-mass stage's constants at the motor (reflected).
@@ -274,7 +247,7 @@ impl Plant {
     }
 
     /// The plant's constants for a small-signal linear model about its state now
-    /// ([`crate::linear`]): the electrical and mechanical constants as the plant runs them,
+    /// ([`gms_ident::linear`]): the electrical and mechanical constants as the plant runs them,
     /// and each friction's stiffness and viscous coefficient from the truth's drawn
     /// parameters (the blocks' Σk of a GMS, σ0 and σ1 of LuGre; scaled by the drift and the
     /// screw's factor now; the guideway's reflected to the motor).

@@ -1,8 +1,9 @@
-//! The simulator's own linear model of the axis and its loops, derived from the plant's
-//! equations and the controller's (not from any measurement): what a frequency-response tool
-//! is checked against.
+//! A linear model of the axis and its loops, derived from the plant's equations and the
+//! controller's (not from any measurement): what the simulator checks a frequency-response
+//! measurement against (with its plant's own constants, `hil_sim::plant::Plant::small_signal`),
+//! and what commissioning models the loop with (with the constants it measured).
 //!
-//! The plant, linearised ([`crate::plant::SmallSignal`]): the winding `L di/dt = v − R i −
+//! The plant, linearised ([`SmallSignal`]): the winding `L di/dt = v − R i −
 //! k_E ω_m`; the rotor `J_m ω̇_m = k_M i − K_a θ_m − σ_a ω_m − K (θ_m − θ_l) − c (ω_m − ω_l)`
 //! and the slide `J_l ω̇_l = K (θ_m − θ_l) + c (ω_m − ω_l) − K_g θ_l − σ_g ω_l` (a rigid stage:
 //! one inertia carrying both frictions). The frictions are their small-signal forms: at rest
@@ -26,7 +27,33 @@ use nalgebra::{Complex, DMatrix, DVector};
 use gms_core::protocol::Settings;
 use gms_core::shaping::Shaping;
 
-use crate::plant::SmallSignal;
+/// The plant's constants for a linear model (SI, everything at the motor).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmallSignal {
+    /// Winding resistance \[ohm\].
+    pub r: f64,
+    /// Winding inductance \[H\].
+    pub l: f64,
+    /// Torque constant \[N·m/A\].
+    pub k_m: f64,
+    /// Back-EMF constant \[V·s/rad\].
+    pub k_e: f64,
+    /// The whole inertia at the motor \[kg·m²\].
+    pub j: f64,
+    /// A compliant stage: rotor-side inertia, slide inertia \[kg·m²\], coupling stiffness
+    /// \[N·m/rad\] and damping \[N·m·s/rad\], all reflected to the motor.
+    pub two_mass: Option<(f64, f64, f64, f64)>,
+    /// The actuator friction's stiffness at rest (pre-sliding) \[N·m/rad\].
+    pub k_act: f64,
+    /// The actuator friction's viscous coefficient \[N·m·s/rad\].
+    pub sigma_act: f64,
+    /// The guideway friction's stiffness at rest, reflected \[N·m/rad\].
+    pub k_gw: f64,
+    /// The guideway friction's viscous coefficient, reflected \[N·m·s/rad\].
+    pub sigma_gw: f64,
+    /// Encoder resolution \[rad/count\].
+    pub rad_per_count: f64,
+}
 
 type C64 = Complex<f64>;
 
