@@ -162,7 +162,9 @@ impl Reply {
         let [_, c_cmd, _, c_pos] = self.coherence;
         match lp {
             Loop::Plant => (pos / cmd, c_pos.min(c_cmd)),
-            Loop::Open => (d / cmd - 1.0, c_cmd),
+            // The loop gain is made of the position's response too: an encoder that does not
+            // see the motion leaves the command equal to the sine (L = 0, "coherent").
+            Loop::Open => (d / cmd - 1.0, c_cmd.min(c_pos)),
             Loop::Closed => (pos / d, c_pos),
         }
     }

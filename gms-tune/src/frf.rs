@@ -5,9 +5,10 @@
 
 use std::path::PathBuf;
 
-use gms_bench::frf::{Loop, MIN_COHERENCE, Plan, Point, Suggestion, Sweep, suggest_notch};
+use gms_bench::frf::{Loop, MIN_COHERENCE, Plan, Point, suggest_notch};
 use gms_tune::Link;
 use gms_tune::jobs;
+use gms_tune::run::{frf_json as json, frf_summary as summary};
 
 use crate::Fail;
 use crate::tracked::{Bar, ctrl_c};
@@ -134,110 +135,4 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         }
     }
     Ok(())
-}
-
-/// The readable result: margins, pre-sliding stiffness, the notch proposed.
-pub fn summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
-    let mut out = Vec::new();
-    let good = s
-        .points
-        .iter()
-        .filter(|p| p.coherence >= MIN_COHERENCE)
-        .count();
-    out.push(format!(
-        "{good} of {} points above the noise (coherence ≥ {MIN_COHERENCE})",
-        s.points.len()
-    ));
-    if let Some(m) = &s.margins {
-        out.push(format!(
-            "crossover {:.1} Hz; phase margin {:.1}° (at {:.0} Hz); gain margin {:.2} dB (at {:.0} Hz); peak sensitivity {:.2} dB (at {:.0} Hz)",
-            m.crossover_hz,
-            m.phase_margin_deg,
-            m.phase_margin_hz,
-            m.gain_margin_db,
-            m.gain_margin_hz,
-            m.peak_sensitivity_db,
-            m.peak_sensitivity_hz
-        ));
-        if m.phase_margin_deg < 30.0 {
-            out.push(format!(
-                "warning: the phase margin {:.1}° is under 30°: the loop rings (--suggest \
-                 proposes a notch; or lower pos.kp/pos.kd)",
-                m.phase_margin_deg
-            ));
-        }
-    }
-    if let Some((k, j)) = s.presliding {
-        out.push(format!(
-            "pre-sliding stiffness {k:.4} N·m/rad (inertia {j:.3e} kg·m²); the device's GMS \
-             model: Σk = {:.4} N·m/rad ({:+.1} %). At this amplitude; a larger one slips the \
-             stiffest blocks and reads softer.",
-            s.model_stiffness,
-            100.0 * (k / s.model_stiffness - 1.0)
-        ));
-    }
-    if let Some(g) = sug {
-        out.push(format!(
-            "resonance at {:.1} Hz ({:+.1} dB): notch {} at {:.1} Hz, q {}, {} dB deep",
-            g.resonance.0,
-            g.resonance.1,
-            g.slot + 1,
-            g.notch.f_hz,
-            g.notch.q,
-            g.notch.depth_db
-        ));
-        out.push(format!(
-            "with it: phase margin {:.1}° (was {:.1}°), gain margin {:.2} dB (was {:.2} dB), \
-             peak sensitivity {:.2} dB (was {:.2} dB)",
-            g.after.phase_margin_deg,
-            g.before.phase_margin_deg,
-            g.after.gain_margin_db,
-            g.before.gain_margin_db,
-            g.after.peak_sensitivity_db,
-            g.before.peak_sensitivity_db
-        ));
-    }
-    out
-}
-
-fn num(x: f64) -> serde_json::Value {
-    serde_json::Number::from_f64(x).map_or(serde_json::Value::Null, serde_json::Value::Number)
-}
-
-fn margins_json(m: &gms_bench::frf::Margins) -> serde_json::Value {
-    serde_json::json!({
-        "gain_margin_db": num(m.gain_margin_db),
-        "gain_margin_hz": num(m.gain_margin_hz),
-        "phase_margin_deg": num(m.phase_margin_deg),
-        "phase_margin_hz": num(m.phase_margin_hz),
-        "crossover_hz": num(m.crossover_hz),
-        "peak_sensitivity_db": num(m.peak_sensitivity_db),
-        "peak_sensitivity_hz": num(m.peak_sensitivity_hz),
-    })
-}
-
-/// The result as JSON: the points, the margins, the pre-sliding fit, the notch proposed
-/// (non-finite values as null).
-pub fn json(s: &Sweep, sug: Option<&Suggestion>) -> serde_json::Value {
-    serde_json::json!({
-        "loop": s.plan.lp.name(),
-        "points": s.points.iter().map(|p| serde_json::json!({
-            "f_hz": num(p.f_hz),
-            "gain_db": num(p.gain_db()),
-            "phase_deg": num(p.phase_deg()),
-            "coherence": num(p.coherence),
-        })).collect::<Vec<_>>(),
-        "margins": s.margins.as_ref().map(margins_json),
-        "presliding": s.presliding.map(|(k, j)| serde_json::json!({
-            "stiffness": num(k), "inertia": num(j), "model_stiffness": num(s.model_stiffness),
-        })),
-        "suggestion": sug.map(|g| serde_json::json!({
-            "slot": g.slot + 1,
-            "f_hz": num(g.notch.f_hz as f64),
-            "q": num(g.notch.q as f64),
-            "depth_db": num(g.notch.depth_db as f64),
-            "before": margins_json(&g.before),
-            "after": margins_json(&g.after),
-        })),
-    })
 }

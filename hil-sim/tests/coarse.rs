@@ -152,6 +152,9 @@ fn identification_on_a_coarse_encoder() {
     let sc = scenario("");
     let mut dev = LocalDevice::new(&sc).unwrap();
     let c = commission(&mut dev, 5.0).unwrap();
+    for l in &c.lines {
+        eprintln!("  {l}");
+    }
     for (k, v) in c.settings() {
         assert!(
             dev.ask(&format!("set {k} {v}")).starts_with("ok"),

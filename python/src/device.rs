@@ -209,6 +209,74 @@ impl Device {
         Ok(d)
     }
 
+    /// frf(loop="open", start=10.0, stop=3000.0, points=40, amplitude=None, velocity=None,
+    /// periods=8) -> dict: `gms-tune frf` — a stepped-sine sweep measured on the device;
+    /// {"f_hz", "gain_db", "phase_deg", "coherence", "re", "im": numpy arrays in frequency
+    /// order, "margins": {gain_margin_db, phase_margin_deg, crossover_hz,
+    /// peak_sensitivity_db, …} (loop "open"), "presliding": (stiffness [N·m/rad], inertia
+    /// [kg·m²]) (loop "plant" at rest), "model_stiffness": the device's GMS Σk}. `amplitude`
+    /// in A (plant, open; default 1 % of lim.i_max) or rad (closed; default 20 counts). The
+    /// bridge is off and the settings as they were after it.
+    #[pyo3(signature = (r#loop = "open", start = 10.0, stop = 3000.0, points = 40, amplitude = None, velocity = None, periods = 8))]
+    #[allow(clippy::too_many_arguments)]
+    fn frf<'py>(
+        &mut self,
+        py: Python<'py>,
+        r#loop: &str,
+        start: f64,
+        stop: f64,
+        points: usize,
+        amplitude: Option<f64>,
+        velocity: Option<f64>,
+        periods: u32,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use gms_bench::frf::{Loop, Plan};
+        let lp = Loop::from_name(r#loop)
+            .ok_or_else(|| err(format!("loop {loop:?}: plant, open or closed", loop = r#loop)))?;
+        let i_max = gms_bench::get_param(&mut self.link, "lim.i_max").map_err(err)?;
+        let rpc = gms_bench::rad_per_count(&mut self.link).map_err(err)?;
+        let mut plan = Plan::new(
+            lp,
+            amplitude.unwrap_or(match lp {
+                Loop::Closed => 20.0 * rpc,
+                _ => 0.01 * i_max,
+            }),
+        );
+        plan.from_hz = start;
+        plan.to_hz = stop;
+        plan.points = points;
+        plan.velocity = velocity;
+        plan.periods = periods;
+        let s = self.job(|l, ctl| gms_tune::jobs::frf(l, &plan, None, ctl, &mut |_, _| {}))?;
+        let d = PyDict::new(py);
+        let col = |f: &dyn Fn(&gms_bench::frf::Point) -> f64| -> Vec<f64> {
+            s.points.iter().map(f).collect()
+        };
+        d.set_item("f_hz", PyArray1::from_vec(py, col(&|p| p.f_hz)))?;
+        d.set_item("gain_db", PyArray1::from_vec(py, col(&|p| p.gain_db())))?;
+        d.set_item("phase_deg", PyArray1::from_vec(py, col(&|p| p.phase_deg())))?;
+        d.set_item("coherence", PyArray1::from_vec(py, col(&|p| p.coherence)))?;
+        d.set_item("re", PyArray1::from_vec(py, col(&|p| p.value.re)))?;
+        d.set_item("im", PyArray1::from_vec(py, col(&|p| p.value.im)))?;
+        match &s.margins {
+            Some(m) => {
+                let md = PyDict::new(py);
+                md.set_item("gain_margin_db", m.gain_margin_db)?;
+                md.set_item("gain_margin_hz", m.gain_margin_hz)?;
+                md.set_item("phase_margin_deg", m.phase_margin_deg)?;
+                md.set_item("phase_margin_hz", m.phase_margin_hz)?;
+                md.set_item("crossover_hz", m.crossover_hz)?;
+                md.set_item("peak_sensitivity_db", m.peak_sensitivity_db)?;
+                md.set_item("peak_sensitivity_hz", m.peak_sensitivity_hz)?;
+                d.set_item("margins", md)?;
+            }
+            None => d.set_item("margins", py.None())?,
+        }
+        d.set_item("presliding", s.presliding)?;
+        d.set_item("model_stiffness", s.model_stiffness)?;
+        Ok(d)
+    }
+
     /// identify(report="identify-report", blocks=6) -> dict: `gms-tune identify` — the
     /// experiments on the device (CSVs in `report`), the fits: {"params": the parameter
     /// file's text, "report": lines, "presliding": [(x, f)], "sliding": [(v, f)]}; nothing

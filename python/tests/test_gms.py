@@ -269,3 +269,35 @@ def test_device_runs_the_bench_experiments(tmp_path):
     finally:
         p.kill()
         p.wait()
+
+
+def test_device_frf_returns_arrays_and_margins(tmp_path):
+    # The default plant, nominal, 20 x real time: the plant at rest shows the pre-sliding
+    # spring (the actuator's blocks, Σk 1.2477 N·m/rad, and the guideway's, 2e-4 reflected);
+    # the open loop its margins (the default gains: about 9° and 1.4 dB, at the pre-sliding
+    # resonance).
+    sc = tmp_path / "nominal.toml"
+    sc.write_text("[plant]\nvariability = 0.0\n")
+    p, addr = serve("--speed", 20, "--scenario", sc)
+    try:
+        d = gms.Device(tcp=addr, timeout=2.0)
+        pl = d.frf("plant", start=20.0, stop=2000.0, points=12, amplitude=0.003)
+        assert len(pl["f_hz"]) == 12 and np.all(np.diff(pl["f_hz"]) > 0)
+        assert np.all(pl["coherence"] > 0.9)
+        k, j = pl["presliding"]
+        assert k == pytest.approx(1.2477 + 2.0e-4, rel=0.03)
+        assert j == pytest.approx(6e-8, rel=0.1)
+        assert pl["margins"] is None
+        ol = d.frf("open", start=20.0, stop=3000.0, points=16, amplitude=0.003)
+        m = ol["margins"]
+        assert 0.0 < m["phase_margin_deg"] < 30.0 and 0.5 < m["gain_margin_db"] < 4.0
+        assert len(ol["gain_db"]) > 16  # the refinement around the crossings
+        with pytest.raises(gms.GmsError, match="Nyquist"):
+            d.frf("open", stop=6000.0)
+        with pytest.raises(gms.GmsError, match="lim.i_max"):
+            d.frf("plant", amplitude=5.0)
+        assert d.status()["enabled"] == 0
+        assert d.get("pos.kp") == 0.2
+    finally:
+        p.kill()
+        p.wait()

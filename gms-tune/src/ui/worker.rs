@@ -85,6 +85,8 @@ pub enum Job {
         /// The identified parameter file.
         out: PathBuf,
     },
+    /// `gms-tune frf` (with `--suggest` for the open loop).
+    Frf(gms_bench::frf::Plan),
 }
 
 /// What a long run gave.
@@ -109,6 +111,15 @@ pub enum Outcome {
         sliding: Vec<(f64, f64)>,
         /// The identified set.
         file: Box<gms_ident::paramfile::ParamFile>,
+    },
+    /// A frequency response, and for the open loop the notch proposed (not applied).
+    Frf {
+        /// The sweep.
+        sweep: Box<gms_bench::frf::Sweep>,
+        /// The notch proposed, or why none.
+        suggestion: Option<Result<gms_bench::frf::Suggestion, String>>,
+        /// The device's filters when it was measured.
+        shaping: gms_core::shaping::ShapingParams,
     },
 }
 
@@ -192,6 +203,8 @@ pub enum Event {
     },
     /// A point of the feedforward sweep as it is measured (gain, RMS error \[rad\]).
     FfPoint(f64, f64),
+    /// A point of a frequency response as it is measured.
+    FrfPoint(gms_bench::frf::Point),
     /// A long run ended: what it gave, or why not (the bridge is off then).
     Done(Result<Outcome, String>),
 }
@@ -565,6 +578,25 @@ fn run_job(
             })
             .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
             Ok(Outcome::TunedFf(t))
+        }
+        Job::Frf(plan) => {
+            let sweep = crate::jobs::frf(l, &plan, None, &mut ctl, &mut |_, p| {
+                let _ = events.send(Event::FrfPoint(*p));
+            })
+            .map_err(|e| format!("{e}; the bridge is off, the settings as they were"))?;
+            let settings = gms_bench::settings::read(l).map_err(|e| e.to_string())?;
+            let suggestion = (plan.lp == gms_bench::frf::Loop::Open).then(|| {
+                gms_bench::frf::suggest_notch(
+                    &sweep.points,
+                    &settings.shaping,
+                    settings.pos_rate_hz as f64,
+                )
+            });
+            Ok(Outcome::Frf {
+                sweep: Box::new(sweep),
+                suggestion,
+                shaping: settings.shaping,
+            })
         }
         Job::Identify { report, out } => {
             let (_, plans) = crate::jobs::identify_plans(l, &gms_bench::Ranges::default())

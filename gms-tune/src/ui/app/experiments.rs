@@ -135,6 +135,9 @@ impl App {
                 let pts = t.curve.iter().map(|(g, r)| [*g, r / rpc]).collect();
                 ff_plot(ui, pts, Some(t.chosen));
             }
+            Some(Ok(Outcome::Frf { .. })) => {
+                ui.label("The frequency response is on the Frequency response page.");
+            }
             Some(Ok(Outcome::Identified {
                 report,
                 presliding,

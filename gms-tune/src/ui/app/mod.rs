@@ -11,6 +11,7 @@ use gms_core::device::StatusReply;
 use gms_core::model::FrictionModel;
 
 mod experiments;
+mod frf;
 mod friction;
 mod live;
 mod motion;
@@ -55,6 +56,8 @@ pub enum Tab {
     Motion,
     /// Commissioning, feedforward tuning and identification.
     Experiments,
+    /// Frequency response: the Bode plot, the margins, the notches.
+    Frf,
 }
 
 /// A long run under way.
@@ -166,6 +169,10 @@ pub struct App {
     pub running: Option<Running>,
     /// The feedforward sweep's points so far (gain, RMS \[counts\]).
     pub ff_points: Vec<[f64; 2]>,
+    /// The frequency response's points so far, in frequency order.
+    pub frf_points: Vec<gms_bench::frf::Point>,
+    /// The frequency-response page's inputs.
+    pub frf_inputs: frf::FrfInputs,
     /// The last long run's result, or why it failed.
     pub outcome: Option<Result<Outcome, String>>,
 }
@@ -205,6 +212,8 @@ impl App {
             inputs: ExperimentInputs::default(),
             running: None,
             ff_points: Vec::new(),
+            frf_points: Vec::new(),
+            frf_inputs: frf::FrfInputs::default(),
             outcome: None,
         }
     }
@@ -221,6 +230,7 @@ impl App {
             total: 0.0,
         });
         self.ff_points.clear();
+        self.frf_points.clear();
         self.outcome = None;
         self.note(format!("{what}: started"));
         self.send(Cmd::Run(job));
@@ -316,6 +326,10 @@ impl App {
                     let rpc = self.rad_per_count();
                     self.ff_points.push([g, rms / rpc])
                 }
+                Event::FrfPoint(p) => {
+                    let at = self.frf_points.partition_point(|q| q.f_hz < p.f_hz);
+                    self.frf_points.insert(at, p);
+                }
                 Event::Done(r) => {
                     let what = self.running.take().map_or(String::new(), |r| r.what);
                     match &r {
@@ -363,6 +377,7 @@ impl App {
                 ui.selectable_value(&mut self.tab, Tab::Friction, "Friction loop");
                 ui.selectable_value(&mut self.tab, Tab::Motion, "Motion");
                 ui.selectable_value(&mut self.tab, Tab::Experiments, "Experiments");
+                ui.selectable_value(&mut self.tab, Tab::Frf, "Frequency response");
             });
             ui.separator();
             match self.tab {
@@ -370,6 +385,7 @@ impl App {
                 Tab::Friction => self.friction(ui),
                 Tab::Motion => self.motion(ui),
                 Tab::Experiments => self.experiments(ui),
+                Tab::Frf => self.frf(ui),
             }
         });
         // Telemetry arrives continuously: a smooth frame rate while the link is up.
