@@ -159,7 +159,8 @@ impl Reply {
     /// coherences of the signals it is made of).
     pub fn transfer(&self, lp: Loop) -> (Complex64, f64) {
         let [d, cmd, _, pos] = self.phasors;
-        let [_, c_cmd, _, c_pos] = self.coherence;
+        // NaN (a signal that is exactly 0, or a single group) is no evidence of a response.
+        let [_, c_cmd, _, c_pos] = self.coherence.map(|c| if c.is_nan() { 0.0 } else { c });
         match lp {
             Loop::Plant => (pos / cmd, c_pos.min(c_cmd)),
             // The loop gain is made of the position's response too: an encoder that does not
