@@ -182,3 +182,64 @@ fn the_coefficients_are_the_biquad_crates() {
         "{worst_db} dB {worst_deg}°"
     );
 }
+
+/// A change of filters while they run is bumpless: switched on at a steady level, a notch's
+/// output stays at that level (no transient); retuned while a sine runs through it, the
+/// output's step at the change is no larger than its steps before.
+#[test]
+fn a_change_of_filters_is_bumpless() {
+    let fs = 10_000.0f32;
+    // Off, then a notch and the low-pass switched on at a steady 0.3 A.
+    let mut a = Shaping::try_new(&ShapingParams::OFF, fs).unwrap();
+    for _ in 0..10 {
+        a.run(0.3);
+    }
+    let p = ShapingParams {
+        notch: [
+            Notch {
+                f_hz: 700.0,
+                q: 2.0,
+                depth_db: 20.0,
+            },
+            Notch::OFF,
+        ],
+        lp_hz: 2000.0,
+    };
+    let mut b = Shaping::try_new(&p, fs).unwrap();
+    b.take_state_from(&a);
+    for k in 0..200 {
+        let y = b.run(0.3);
+        assert!((y - 0.3).abs() < 1e-5, "step {k}: {y}");
+    }
+    // Retuned while a 50 Hz sine runs through it (the notch moved, the low-pass the same).
+    let x = |k: usize| 0.2 * (std::f32::consts::TAU * 50.0 * k as f32 / fs).sin();
+    let mut largest = 0.0f32;
+    let mut last = 0.0;
+    // The change at k = 450: the sine at its peak.
+    for k in 0..450 {
+        let y = b.run(x(k));
+        if k > 250 {
+            largest = largest.max((y - last).abs());
+        }
+        last = y;
+    }
+    let mut q = p;
+    q.notch[0].f_hz = 900.0;
+    q.notch[0].depth_db = 30.0;
+    let mut c = Shaping::try_new(&q, fs).unwrap();
+    c.take_state_from(&b);
+    let y = c.run(x(450));
+    // Without the hand-over (a filter at rest) the first output is a jump of the whole level.
+    let mut cold = Shaping::try_new(&q, fs).unwrap();
+    let jump_cold = (cold.run(x(450)) - last).abs();
+    println!(
+        "step at the change {:.2e} A, largest step before {largest:.2e} A, at rest {jump_cold:.2e} A",
+        (y - last).abs()
+    );
+    assert!(
+        (y - last).abs() <= 1.5 * largest,
+        "{} vs {largest}",
+        (y - last).abs()
+    );
+    assert!(jump_cold > 5.0 * largest);
+}
