@@ -468,6 +468,14 @@ pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
             g.after.peak_sensitivity_db,
             g.before.peak_sensitivity_db
         ));
+        if s.plan.velocity.is_none() {
+            out.push(
+                "  (measured at rest: a resonance of the friction's pre-sliding spring moves with \
+                 the amplitude and is gone when the axis slides, and a notch near the sliding \
+                 loop's crossover costs it phase; --velocity shows the stage's own resonances)"
+                    .into(),
+            );
+        }
     }
     out
 }
