@@ -304,3 +304,35 @@ fn the_suggested_notch_restores_the_phase_margin() {
         "{over0} {over1} {ring0} {ring1}"
     );
 }
+
+/// A measurement ends with `disable` and with a lost link (the position loop holding on), and
+/// what it summed stands; it is refused in current mode.
+#[test]
+fn disable_and_a_lost_link_end_a_measurement() {
+    let sc = scenario("", "");
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let state = |dev: &mut LocalDevice| {
+        let (_, text) = dev.request("frf").unwrap();
+        frf::Reply::parse(&text).unwrap()
+    };
+    dev.request("enable").unwrap();
+    dev.request("frf current 100 0.003 1000 2").unwrap();
+    dev.wait(0.1).unwrap();
+    assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Measuring);
+    dev.request("disable").unwrap();
+    dev.wait(0.01).unwrap();
+    let r = state(&mut dev);
+    assert_eq!(r.state, gms_core::frf::FrfState::Stopped);
+    assert!(r.groups > 0 && r.phasors[0].norm() > 0.0029, "{r:?}");
+    dev.request("enable").unwrap();
+    dev.request("frf current 100 0.003 1000 2").unwrap();
+    dev.wait(0.1).unwrap();
+    dev.disconnect();
+    dev.wait(0.01).unwrap();
+    assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Stopped);
+    let st = gms_bench::status(&mut dev).unwrap();
+    assert!(st.enabled, "the position loop goes on holding");
+    dev.request("current 0").unwrap();
+    let e = dev.request("frf current 100 0.003 8 2").unwrap_err();
+    assert!(e.to_string().contains("current mode"), "{e}");
+}
