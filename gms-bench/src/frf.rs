@@ -721,7 +721,8 @@ pub struct Sweep {
     pub presliding: Option<(f64, f64)>,
     /// The device's torque constant \[N·m/A\].
     pub k_m: f64,
-    /// The device's compensator's initial stiffness, the sum of its GMS blocks' \[N·m/rad\].
+    /// The device's compensator's initial stiffness, the sum of its GMS blocks' k (`gms.k1` …
+    /// `gms.k6`, the actuator's) \[N·m/rad\].
     pub model_stiffness: f64,
 }
 
@@ -745,16 +746,8 @@ pub fn run<B: Bench>(
     let k_m = crate::client::get_param(b, "motor.k_m")?;
     plan.check(pos_hz, i_max)?;
     let dev = crate::settings::read(b)?;
-    let model_stiffness: f64 = dev
-        .ff
-        .actuator
-        .blocks
-        .iter()
-        .map(|bl| bl.k as f64)
-        .sum::<f64>()
-        + dev.ff.guideway.as_ref().map_or(0.0, |g| {
-            (dev.ff.ratio as f64).powi(2) * g.blocks.iter().map(|bl| bl.k as f64).sum::<f64>()
-        });
+    // The GMS model the protocol shows (`gms.k1` … `gms.k6`: the actuator's).
+    let model_stiffness: f64 = dev.ff.actuator.blocks.iter().map(|bl| bl.k as f64).sum();
     crate::settings::restoring(b, |b| {
         crate::client::guarded(b, |b| {
             b.enable()?;

@@ -13,6 +13,8 @@
 //!   measurement, the transfer functions, the margins, the pre-sliding stiffness.
 //! - [`identify`]: the whole identification on a device, loading a parameter file.
 //! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
+//! - [`posmap`]: the position map measured — runs both ways, a harmonic fit, the cogging
+//!   (direction-even) and the friction's scale (direction-odd) at each angle.
 //! - [`settings`]: the device's settings as one typed value, and the snapshot that puts them
 //!   back around every run ([`settings::restoring`]).
 //! - [`tune_ff`](mod@tune_ff): the feedforward gain from repeated sine tests.
@@ -30,6 +32,7 @@ pub mod experiments;
 pub mod frf;
 pub mod identify;
 pub mod paramfile;
+pub mod posmap;
 pub mod settings;
 pub mod tune_ff;
 

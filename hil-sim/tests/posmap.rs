@@ -1,0 +1,84 @@
+//! The position map measured on the virtual device (issue 29, the bench side), against the
+//! ripple hidden in the simulated plant (`[plant.ripple]`: a cogging torque of 12 cycles per
+//! motor revolution with a second harmonic, and a once-per-revolution modulation of the
+//! friction), which the measurement is not told. Run with `--nocapture` for the figures.
+
+use gms_bench::posmap::{self, MapPlan};
+use gms_bench::settings;
+use hil_sim::device::LocalDevice;
+use hil_sim::scenario::Scenario;
+
+/// A direct-drive screw (the gearhead's ratio 1, the lead scaled to keep the slide's travel
+/// per motor radian), the ripple as the issue describes it, the guideway negligible and not
+/// compensated, the friction exactly the device's model (so the friction's true scale is the
+/// screw's factor alone).
+const RIPPLE: &str = "[plant]
+variability = 0.0
+gear_ratio = 1.0
+lead = 1.13636e-4
+[plant.ripple]
+amplitude = 20e-6
+per_rev = 12
+phase = 0.3
+harmonics = [{ order = 2, amplitude = 6e-6, phase = 0.5 }]
+screw_friction = 0.1
+screw_phase = 0.7
+[plant.guideway]
+fs = 1e-6
+fc = 1e-6
+[controller.ff]
+guideway = false
+";
+
+#[test]
+fn the_map_finds_the_hidden_cogging_and_the_screws_friction() {
+    let sc = Scenario::parse(RIPPLE, "ripple").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let s = settings::read(&mut dev).unwrap();
+    let plan = MapPlan::default();
+    let t0 = dev.plant().t;
+    let data = posmap::measure(&mut dev, &plan).unwrap();
+    let took = dev.plant().t - t0;
+    let sliding = posmap::model_sliding_friction(&s, plan.speed);
+    let map = posmap::fit(&data, &plan, sliding).unwrap();
+    let r = &sc.plant.ripple;
+    let truth: Vec<f64> = map.angle.iter().map(|a| r.cogging(*a).0).collect();
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let err: Vec<f64> = map.offset.iter().zip(&truth).map(|(m, t)| m - t).collect();
+    let rel = rms(&err) / rms(&truth);
+    // The phase: the circular shift of the measured offset that best matches the truth,
+    // refined by a parabola [bins].
+    let n = map.angle.len() as i64;
+    let corr = |k: i64| -> f64 {
+        (0..n)
+            .map(|i| map.offset[((i + k).rem_euclid(n)) as usize] * truth[i as usize])
+            .sum()
+    };
+    let best = (-8..=8i64)
+        .max_by(|a, b| corr(*a).total_cmp(&corr(*b)))
+        .unwrap();
+    let (c0, c1, c2) = (corr(best - 1), corr(best), corr(best + 1));
+    let shift = best as f64 + 0.5 * (c0 - c2) / (c0 - 2.0 * c1 + c2);
+    let scale_err = map
+        .angle
+        .iter()
+        .zip(&map.scale)
+        .map(|(a, k)| (k - r.screw_factor(*a, sc.plant.gear_ratio)).abs())
+        .fold(0.0f64, f64::max);
+    println!(
+        "map of {} bins from {} + {} samples, {took:.1} s of device time: offset RMS error {:.1} % of the cogging's RMS ({:.2e} N·m), shift {shift:+.2} bins; friction scale worst error {:.4} (model sliding friction {:.3e} N·m); fit residuals {:.2e} / {:.2e} N·m",
+        map.angle.len(),
+        data.forward.len(),
+        data.backward.len(),
+        100.0 * rel,
+        rms(&truth),
+        scale_err,
+        sliding,
+        map.residual.0,
+        map.residual.1
+    );
+    assert!(rel < 0.10, "offset {rel}");
+    assert!(shift.abs() < 1.0, "shift {shift}");
+    assert!(scale_err < 0.05, "scale {scale_err}");
+    assert!(took < 30.0, "{took} s");
+}
