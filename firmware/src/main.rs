@@ -147,7 +147,11 @@ async fn main(spawner: Spawner) {
     static CAPTURE: ConstStaticCell<[f32; board::CAPTURE_VALUES as usize]> =
         ConstStaticCell::new([0.0; board::CAPTURE_VALUES as usize]);
     let capture = CAPTURE.take();
-    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture);
+    // The position map's table, likewise (4 KiB).
+    static MAP: ConstStaticCell<[f32; gms_core::posmap::MAP_VALUES]> =
+        ConstStaticCell::new([0.0; gms_core::posmap::MAP_VALUES]);
+    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture)
+        .with_map(MAP.take());
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     Loop::new(hw, core, telemetry_tx).hand_over();
     // The stack guard: an MPU region with no access at the bottom of the stack, before

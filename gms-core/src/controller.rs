@@ -171,6 +171,8 @@ pub struct ControllerParams<const N: usize> {
     pub sense_dir: f32,
     /// Friction feedforward.
     pub ff: FeedforwardParams<N>,
+    /// The position map's settings (its table is the control loop's, [`crate::posmap`]).
+    pub map: crate::posmap::MapParams,
 }
 
 /// Why a controller parameter set was rejected.
@@ -221,7 +223,8 @@ impl<const N: usize> ControllerParams<N> {
             };
         }
         let f = &self.shaping;
-        let scalars: [(&'static str, f32, (f32, f32)); 34] = [
+        let m = &self.map;
+        let scalars: [(&'static str, f32, (f32, f32)); 38] = [
             row!("rate.pos_hz", self.pos_rate_hz),
             row!("rate.cur_hz", self.cur_rate_hz),
             row!("pos.kp", self.pid.kp),
@@ -250,6 +253,10 @@ impl<const N: usize> ControllerParams<N> {
             row!("ff.gain", self.ff.gain),
             row!("ff.inertia", self.motor.inertia),
             row!("ff.static_band", self.ff.static_band),
+            row!("map.enable", m.enable),
+            row!("map.period", m.period),
+            row!("map.bins", m.bins),
+            row!("map.origin", m.origin),
             row!("gms.fs", a.stribeck.fs),
             row!("gms.fc", a.stribeck.fc),
             row!("gms.vs", a.stribeck.vs),
@@ -275,6 +282,16 @@ impl<const N: usize> ControllerParams<N> {
             if hz != 0.0 && hz >= nyquist {
                 return Err(ControllerError::Invalid(name));
             }
+        }
+        if m.enable != 0.0 && m.enable != 1.0 {
+            return Err(ControllerError::Invalid("map.enable"));
+        }
+        if m.bins != (m.bins as u32) as f32 {
+            return Err(ControllerError::Invalid("map.bins"));
+        }
+        // A bin at least a count wide.
+        if m.period / m.bins < self.rad_per_count() {
+            return Err(ControllerError::Invalid("map.period"));
         }
         if self.enc_dir != 1.0 && self.enc_dir != -1.0 {
             return Err(ControllerError::Invalid("enc.dir"));
@@ -376,6 +393,9 @@ pub struct Controller<const N: usize> {
     e_cur: f32,
     adapt: Adaptive,
     shaping: Shaping,
+    /// The position map's sample at the reference: torque offset \[N·m\], friction scale [-]
+    /// (0 and 1 without a map), set by the control loop before each position step.
+    map_sample: (f32, f32),
     out: PositionOutput,
 }
 
@@ -415,6 +435,7 @@ impl<const N: usize> Controller<N> {
         Ok(Controller {
             adapt,
             shaping,
+            map_sample: (0.0, 1.0),
             rpc: p.rad_per_count(),
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
@@ -555,6 +576,13 @@ impl<const N: usize> Controller<N> {
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
         self.shaping.take_state_from(&old.shaping);
+        // The map's sample goes on (the loop sets the next one); a map switched off is gone
+        // from the next step, the integrator taking its torque over below.
+        self.map_sample = if self.p.map.enable != 0.0 {
+            old.map_sample
+        } else {
+            (0.0, 1.0)
+        };
 
         // Position loop: the same torque (times k_M new / k_M old) at the last inputs.
         let p = self.p;
@@ -565,7 +593,8 @@ impl<const N: usize> Controller<N> {
         let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
         let p_term = p.pid.kp * o.error;
         let d_term = p.pid.kd * self.d_filt;
-        let ff_fric = p.ff.gain * ff_scale * self.friction_now();
+        let (map_offset, map_scale) = self.map_sample;
+        let ff_fric = p.ff.gain * ff_scale * self.friction_now() * map_scale + map_offset;
         let ff_inertia = p.motor.inertia * self.a_ref;
         let integ = before - (p_term + d_term + ff_fric + ff_inertia);
         self.integ = clamp(if integ.is_finite() { integ } else { 0.0 }, p.pid.i_limit);
@@ -662,12 +691,13 @@ impl<const N: usize> Controller<N> {
         let ff_model = self.friction_ff(dx_ref, r.vel);
         let adaptive = self.p.ff.mode == FfMode::GmsAdaptive;
         let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
-        let ff_fric = self.p.ff.gain * ff_scale * ff_model;
+        let (map_offset, map_scale) = self.map_sample;
+        let ff_fric = self.p.ff.gain * ff_scale * ff_model * map_scale;
         let ff_inertia = self.p.motor.inertia * r.acc;
         // Conditional integration: the integrator stops when the command is saturated in the
         // direction the error would push it further.
         let integ_new = clamp(self.integ + pid.ki * error * self.dt_pos, pid.i_limit);
-        let torque = p_term + integ_new + d_term + ff_fric + ff_inertia;
+        let torque = p_term + integ_new + d_term + ff_fric + map_offset + ff_inertia;
         // The loop-shaping filters act on the whole command (feedback and feedforward alike:
         // a resonance is excited by either); the limit comes after them.
         let i_unsat = self.shaping.run(torque / self.p.motor.k_m);
@@ -694,13 +724,20 @@ impl<const N: usize> Controller<N> {
             p: p_term,
             i: self.integ,
             d: d_term,
-            ff_friction: ff_fric,
+            ff_friction: ff_fric + map_offset,
             ff_scale,
             ff_inertia,
             i_cmd,
             saturated,
         };
         self.out
+    }
+
+    /// The position map's sample for the next position step: the torque offset \[N·m\] added
+    /// to the feedforward and the scale \[-\] on the friction feedforward (the control loop
+    /// sets it from its table at the reference; 0 and 1: no map).
+    pub fn set_map_sample(&mut self, offset: f32, scale: f32) {
+        self.map_sample = (offset, scale);
     }
 
     /// Adds `amps` \[A\] to the current command of the last position step, within `i_max`:

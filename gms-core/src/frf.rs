@@ -23,21 +23,20 @@
 //! oscillator; a whole-period correlation is exact for a periodic excitation and is a few
 //! lines, so it is written here.
 
-/// The channels demodulated at once: on the device the injected signal, the current
-/// commanded, the current measured and the position ([`Channel`]).
-pub const CHANNELS: usize = 4;
+/// The channels demodulated at once: on the device the current commanded, the current
+/// measured and the position ([`Channel`]); the sine injected is known exactly (its
+/// amplitude, in phase) and not summed.
+pub const CHANNELS: usize = 3;
 
 /// The channels a device demodulates, in [`LockIn`] order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Channel {
-    /// The injected sine (A at the current command, rad at the position reference).
-    Injected = 0,
     /// The current command after the injection \[A\].
-    Command = 1,
+    Command = 0,
     /// The current measured \[A\].
-    Current = 2,
+    Current = 1,
     /// The position measured, relative to the reference without the injection \[rad\].
-    Position = 3,
+    Position = 2,
 }
 
 /// Why a frequency-response measurement cannot be set up.

@@ -34,6 +34,7 @@ pub mod lugre;
 pub mod math;
 pub mod model;
 pub mod numtext;
+pub mod posmap;
 pub mod presets;
 pub mod protocol;
 pub mod reference;

@@ -21,7 +21,7 @@ fn low_pass(freq: f32, rate: f32, a: f64, groups: u32) -> ((f64, f64), (f64, f64
         started |= k >= settle && boundary;
         let done = sine.advance();
         if started {
-            lock.add(&[u as f32, y as f32, 0.0, 0.0], phase, done, sine.samples());
+            lock.add(&[u as f32, y as f32, 0.0], phase, done, sine.samples());
         }
         boundary = done;
         k += 1;
@@ -63,7 +63,7 @@ fn harmonics_and_offsets_do_not_leak_into_the_whole_period_result() {
         // groups of periods reject all but the fundamental.
         let x = amp * (th + ph).sin() + 0.5 * (3.0 * th + 1.0).sin() + 0.2;
         let done = sine.advance();
-        lock.add(&[x as f32, 0.0, 0.0, 0.0], (s, c), done, sine.samples());
+        lock.add(&[x as f32, 0.0, 0.0], (s, c), done, sine.samples());
     }
     let p = lock.phasor(0).unwrap();
     assert!((p.abs() - amp).abs() < 1e-5, "{p:?}");

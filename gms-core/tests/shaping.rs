@@ -80,7 +80,7 @@ fn the_running_filter_has_the_computed_response() {
             started |= k > 20_000 && boundary;
             let done = sine.advance();
             if started {
-                lock.add(&[x, y, 0.0, 0.0], phase, done, sine.samples());
+                lock.add(&[x, y, 0.0], phase, done, sine.samples());
             }
             boundary = done;
             k += 1;

@@ -102,8 +102,9 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
 /// reference with a 0-3 count lag.
 ///
 /// `shaped`: with both notches and the low-pass on and a frequency-response measurement
-/// running (a sine at the current command, demodulated) — `device_period_frf`.
-fn device_period(out: &mut hio::HostStream, shaped: bool) {
+/// running (a sine at the current command, demodulated) — `device_period_frf`; `mapped`: with
+/// the position map acting (512 bins over a revolution) — `device_period_map`.
+fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
     // The F405 board as the firmware links it (gms-core's description: 16 conversions per
     // current sample, a 60 % step budget), its bridge driving at once on `enable`.
     let board = Board {
@@ -128,10 +129,13 @@ fn device_period(out: &mut hio::HostStream, shaped: bool) {
             lp_hz: 3000.0,
         };
     }
-    let name = if shaped {
-        "device_period_frf"
-    } else {
-        "device_period"
+    if mapped {
+        settings.map.enable = 1.0;
+    }
+    let name = match (shaped, mapped) {
+        (true, _) => "device_period_frf",
+        (false, true) => "device_period_map",
+        (false, false) => "device_period",
     };
     let Ok(a) = device::prepare(&settings, &board) else {
         return;
@@ -139,9 +143,12 @@ fn device_period(out: &mut hio::HostStream, shaped: bool) {
     let zero = device::calibrate_sense(&board, 3.4, || Some(board.sense_oversample * 2048));
     let rpc = settings.rad_per_count();
     static mut CAPTURE: [f32; 256] = [0.0; 256];
-    // SAFETY: the benchmark's only reference to the buffer, taken once.
+    // SAFETY: the benchmark's references to the buffer, one per call, never alive together.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
-    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture);
+    static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
+    // SAFETY: the benchmark's references to the table, one per call, never alive together.
+    let map = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
+    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture).with_map(map);
     let mut mb = Mailbox::new();
     // About 0.02 A: the board's 16 conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
     let codes = board.sense_oversample * (2048 + 84);
@@ -369,8 +376,9 @@ fn main() -> ! {
         writeln!(out, "cost {name} {c} {CALLS}").ok();
     }
 
-    device_period(&mut out, false);
-    device_period(&mut out, true);
+    device_period(&mut out, false, false);
+    device_period(&mut out, true, false);
+    device_period(&mut out, false, true);
 
     {
         let xs = [0.3f32, 1.7, 0.05, 3.0];

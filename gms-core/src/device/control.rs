@@ -5,10 +5,11 @@ use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, 
 use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
 use crate::frf::{CHANNELS, Frf, FrfReport, Injection};
+use crate::posmap::MapCursor;
 
 use super::{
-    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, FrfRequest, Handover, Requests,
-    Sample, Status, StepValues,
+    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, FrfRequest, Handover, MapRequest,
+    Requests, Sample, Status, StepValues,
 };
 
 /// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
@@ -176,7 +177,15 @@ pub struct ControlLoop {
     frf: Option<Frf>,
     /// Its report for the protocol side, handed over at the next exchange.
     frf_report: Option<FrfReport>,
+    /// The position map's table (offset and scale interleaved), if the shell gave one.
+    map_table: Option<MapTable>,
+    /// Where the reference is in the map, while the map acts.
+    map_cursor: Option<MapCursor>,
 }
+
+/// The buffer of a position map's table ([`crate::posmap::MAP_VALUES`] values; the shell's: a
+/// static on the board).
+pub type MapTable = &'static mut [f32];
 
 impl ControlLoop {
     /// A loop at rest (bridge off) running the parameter set `a` on `board`, with the current
@@ -224,7 +233,31 @@ impl ControlLoop {
             chunk: None,
             frf: None,
             frf_report: None,
+            map_table: None,
+            map_cursor: None,
         }
+    }
+
+    /// The loop with a position map's table (`table`: [`crate::posmap::MAP_VALUES`] values;
+    /// cleared: offsets 0, scales 1). Without one the map settings have no effect and the
+    /// map's requests read and write nothing.
+    pub fn with_map(mut self, table: MapTable) -> Self {
+        for pair in table.chunks_exact_mut(2) {
+            if let [o, k] = pair {
+                (*o, *k) = (0.0, 1.0);
+            }
+        }
+        self.map_table = Some(table);
+        self.map_cursor_from(self.r.pos);
+        self
+    }
+
+    /// The map's cursor for the settings now at the reference `reference` (none while the map
+    /// is off or there is no table).
+    fn map_cursor_from(&mut self, reference: i64) {
+        let p = self.ctrl.params();
+        self.map_cursor = (p.map.enable != 0.0 && self.map_table.is_some())
+            .then(|| MapCursor::new(&p.map, self.ctrl.rad_per_count(), reference));
     }
 
     /// The PWM timer setting (prescaler, period) of the running set.
@@ -370,6 +403,51 @@ impl ControlLoop {
             }
             self.ctrl = next;
             self.limits = a.limits;
+            self.map_cursor_from(self.r.pos);
+        }
+        match req.map {
+            Some(MapRequest::Write { start, n, values }) => {
+                if let Some(t) = self.map_table.as_deref_mut() {
+                    let from = 2 * start as usize;
+                    let len = 2 * (n as usize).min(super::MAP_WRITE_BINS);
+                    if let Some(dst) = t.get_mut(from..) {
+                        for (d, v) in dst.iter_mut().zip(values.iter().take(len)) {
+                            *d = *v;
+                        }
+                    }
+                }
+            }
+            Some(MapRequest::Read { start, max }) => {
+                let mut c = Chunk {
+                    start,
+                    samples: 0,
+                    nfields: 2,
+                    values: [0.0; super::CHUNK_VALUES],
+                };
+                if let Some(t) = self.map_table.as_deref() {
+                    let n = (max as usize)
+                        .min(super::CHUNK_VALUES / 2)
+                        .min((t.len() / 2).saturating_sub(start as usize));
+                    let from = 2 * start as usize;
+                    if let Some(src) = t.get(from..) {
+                        for (d, v) in c.values.iter_mut().zip(src.iter().take(2 * n)) {
+                            *d = *v;
+                        }
+                        c.samples = n as u32;
+                    }
+                }
+                self.chunk = Some(c);
+            }
+            Some(MapRequest::Clear) => {
+                if let Some(t) = self.map_table.as_deref_mut() {
+                    for pair in t.chunks_exact_mut(2) {
+                        if let [o, k] = pair {
+                            (*o, *k) = (0.0, 1.0);
+                        }
+                    }
+                }
+            }
+            None => {}
         }
         if req.disable {
             self.switch_off();
@@ -457,30 +535,15 @@ impl ControlLoop {
 
     /// One PWM period: `inp` as measured now, `exchange` the shell's access to the mailbox
     /// (called once per position step with the status; returns the pending requests).
+    ///
+    /// In two halves around the exchange (`step_in`, `step_out`), inlined here.
     pub fn step(
         &mut self,
         inp: Inputs,
         exchange: impl FnOnce(Status, Handover<'_>) -> Option<Requests>,
     ) -> Outputs {
-        self.last_raw = inp.encoder;
-        self.enc
-            .update(directed(inp.encoder, self.ctrl.params().enc_dir));
-        self.current = self.ctrl.params().sense_dir
-            * self
-                .sense
-                .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
-        let mut timing = None;
-        let mut sample = None;
-        let mut new_faults = Faults::NONE;
-        let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
-        if missed > 0 {
-            self.missed_since_pos = self.missed_since_pos.saturating_add(missed);
-            if self.enabled {
-                self.stats.record_missed(missed);
-                new_faults.latch(Faults::OVERRUN);
-            }
-        }
-        if self.phase == 0 {
+        let (position, faults) = self.step_in(inp);
+        let mut req = if position {
             // Handed over by reference and then dropped: a chunk or a report is not copied
             // in a step that has none.
             let h = Handover {
@@ -490,7 +553,47 @@ impl ControlLoop {
             let req = exchange(self.status(), h);
             self.chunk = None;
             self.frf_report = None;
-            if let Some(req) = req {
+            req
+        } else {
+            None
+        };
+        self.step_out(position, faults, &mut req)
+    }
+
+    /// The period's inputs read; true when it is a position step (and the exchange is due),
+    /// with the faults found so far.
+    #[inline(always)]
+    fn step_in(&mut self, inp: Inputs) -> (bool, Faults) {
+        self.last_raw = inp.encoder;
+        self.enc
+            .update(directed(inp.encoder, self.ctrl.params().enc_dir));
+        self.current = self.ctrl.params().sense_dir
+            * self
+                .sense
+                .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
+        let mut new_faults = Faults::NONE;
+        let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
+        if missed > 0 {
+            self.missed_since_pos = self.missed_since_pos.saturating_add(missed);
+            if self.enabled {
+                self.stats.record_missed(missed);
+                new_faults.latch(Faults::OVERRUN);
+            }
+        }
+        (self.phase == 0, new_faults)
+    }
+
+    /// The rest of the period after the exchange (`req`: what it gave, at a position step).
+    #[inline(always)]
+    fn step_out(&mut self, position: bool, faults: Faults, req: &mut Option<Requests>) -> Outputs {
+        let mut timing = None;
+        let mut sample = None;
+        let mut new_faults = faults;
+        if position {
+            // Moved out only when there is one (an `Option::take` copies the whole value).
+            if req.is_some()
+                && let Some(req) = req.take()
+            {
                 timing = self.take(req);
             }
             self.steps = self.steps.wrapping_add(1);
@@ -518,10 +621,17 @@ impl ControlLoop {
                 // One call of the position step whether a frequency response runs or not (the
                 // step inlined once).
                 let frf = self.frf_input();
-                let r = frf.map_or(self.r, |f| f.3);
+                let r = match frf {
+                    Some((v, ph, Injection::Position)) => self.frf_reference(v, ph),
+                    _ => self.r,
+                };
+                if let (Some(c), Some(t)) = (&mut self.map_cursor, self.map_table.as_deref()) {
+                    let (offset, scale) = c.sample(r.pos, t);
+                    self.ctrl.set_map_sample(offset, scale);
+                }
                 self.out = self.ctrl.position_step(pos, &r);
-                if let Some((v, ph, inj, _)) = frf {
-                    self.frf_output((v, ph, inj));
+                if let Some(f) = frf {
+                    self.frf_output(f);
                 }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
@@ -557,22 +667,29 @@ impl ControlLoop {
             new_faults.latch(drive::check(&m, &self.limits, self.enabled));
             sample = self.telemetry(pos);
             let p = self.ctrl.params();
-            self.capture.step(&StepValues {
-                steps: self.steps,
-                dt: self.ctrl.dt_pos(),
-                pos,
-                reference: self.r.pos,
-                rad_per_count: self.ctrl.rad_per_count(),
-                error: self.out.error,
-                ff: self.out.ff_friction,
-                current: self.current,
-                friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
-                volts: if self.enabled {
-                    self.duty * p.v_supply
-                } else {
-                    0.0
-                },
-            });
+            // The step's values only for a capture armed or recording (not built in every
+            // step for nothing).
+            if matches!(
+                self.capture.state().0,
+                super::CaptureState::Armed | super::CaptureState::Recording
+            ) {
+                self.capture.step(&StepValues {
+                    steps: self.steps,
+                    dt: self.ctrl.dt_pos(),
+                    pos,
+                    reference: self.r.pos,
+                    rad_per_count: self.ctrl.rad_per_count(),
+                    error: self.out.error,
+                    ff: self.out.ff_friction,
+                    current: self.current,
+                    friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
+                    volts: if self.enabled {
+                        self.duty * p.v_supply
+                    } else {
+                        0.0
+                    },
+                });
+            }
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
             // Over-current is checked at every current step.
             new_faults.latch(Faults::OVER_CURRENT);
@@ -615,25 +732,25 @@ impl ControlLoop {
     }
 
     /// The frequency-response measurement's sample now, if one runs: its injected value, its
-    /// phase, where it goes, and the reference with it (`self.r` with the sine added when it
-    /// goes to the reference).
-    fn frf_input(&self) -> Option<(f32, (f32, f32), Injection, RefSample)> {
+    /// phase and where it goes.
+    fn frf_input(&self) -> Option<(f32, (f32, f32), Injection)> {
         let f = self.frf.as_ref().filter(|f| f.state().running())?;
         let (v, ph) = f.value();
-        let r = match f.injection() {
-            Injection::Current => self.r,
-            Injection::Position => {
-                // The sine as a motion: its position, velocity and acceleration.
-                let rpc = self.ctrl.rad_per_count();
-                let w = f.omega(self.ctrl.params().pos_rate_hz);
-                RefSample {
-                    pos: self.r.pos.saturating_add((v / rpc * SUB_PER_COUNT) as i64),
-                    vel: self.r.vel + w * f.amplitude() * ph.1,
-                    acc: self.r.acc - w * w * v,
-                }
-            }
-        };
-        Some((v, ph, f.injection(), r))
+        Some((v, ph, f.injection()))
+    }
+
+    /// The reference with the measurement's sine `v` (phase `ph`) added: its position,
+    /// velocity and acceleration.
+    fn frf_reference(&self, v: f32, ph: (f32, f32)) -> RefSample {
+        let rpc = self.ctrl.rad_per_count();
+        let (w, amp) = self.frf.as_ref().map_or((0.0, 0.0), |f| {
+            (f.omega(self.ctrl.params().pos_rate_hz), f.amplitude())
+        });
+        RefSample {
+            pos: self.r.pos.saturating_add((v / rpc * SUB_PER_COUNT) as i64),
+            vel: self.r.vel + w * amp * ph.1,
+            acc: self.r.acc - w * w * v,
+        }
     }
 
     /// After a position step with the measurement's sample `(v, ph, inj)`: the sine added to
@@ -649,7 +766,7 @@ impl ControlLoop {
             Injection::Current => -self.out.error,
             Injection::Position => v - self.out.error,
         };
-        let x: [f32; CHANNELS] = [v, self.ctrl.last_output().i_cmd, self.current, y];
+        let x: [f32; CHANNELS] = [self.ctrl.last_output().i_cmd, self.current, y];
         let rate = self.ctrl.params().pos_rate_hz;
         if let Some(f) = &mut self.frf
             && f.step(&x, ph)

@@ -10,8 +10,8 @@ use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile}
 
 use super::{
     Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, FrfRequest,
-    MAX_STREAM_HZ, Mailbox, MoveRequest, Requests, Sample, Status, StatusReply, VelocityRequest,
-    capture_fields,
+    MAP_WRITE_BINS, MAX_STREAM_HZ, Mailbox, MapRequest, MoveRequest, Requests, Sample, Status,
+    StatusReply, VelocityRequest, capture_fields,
 };
 use crate::frf::{Channel, FrfSpec, Injection};
 
@@ -220,7 +220,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// them, so that a reply and the status after it agree. If the loop does not take them
     /// within the link's timeout they are withdrawn and nothing changes.
     fn post(&mut self, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
-        self.link.with_mailbox(|m| f(&mut m.requests));
+        self.link.with_mailbox(|m| m.post(f));
         self.wait_taken()
     }
 
@@ -232,15 +232,16 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         loop {
             let (pending, taken, steps) = self
                 .link
-                .with_mailbox(|m| (m.requests.pending(), m.taken_at, m.status.steps));
+                .with_mailbox(|m| (m.posted, m.taken_at, m.status.steps));
             if !pending && steps > taken {
                 return Ok(());
             }
             if self.link.now_us().saturating_sub(t0) > timeout {
                 let withdrawn = self.link.with_mailbox(|m| {
-                    let p = m.requests.pending();
+                    let p = m.posted;
                     if p {
                         m.requests = Requests::default();
+                        m.posted = false;
                     }
                     p
                 });
@@ -627,6 +628,84 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         self.post(|r| r.frf = Some(FrfRequest::Start(spec)))
     }
 
+    fn map_write(&mut self, start: u32, pairs: &str) -> Result<(), &'static str> {
+        if self.settings.map.enable != 0.0 {
+            return Err("map.enable is 1: set it to 0 to write the table");
+        }
+        let mut values = [0.0f32; 2 * MAP_WRITE_BINS];
+        let mut n = 0usize;
+        for pair in pairs.split_ascii_whitespace() {
+            // The comma by hand: `split_once` brings a panicking branch into the link.
+            let comma = pair.bytes().position(|c| c == b',').unwrap_or(pair.len());
+            let (o, s) = (pair.get(..comma), pair.get(comma.saturating_add(1)..));
+            let (Some(o), Some(s)) = (
+                o.and_then(protocol::parse_f32),
+                s.and_then(protocol::parse_f32),
+            ) else {
+                return Err("a bin is OFFSET,SCALE (N·m, -)");
+            };
+            if !crate::posmap::valid_bin(o, s) {
+                return Err("a bin's offset beyond 10 N·m or scale outside 0 … 2");
+            }
+            match values.get_mut(2 * n..2 * n + 2) {
+                Some([a, b]) => (*a, *b) = (o, s),
+                _ => return Err("at most 8 bins a line"),
+            }
+            n += 1;
+        }
+        let bins = self.settings.map.bins as u32;
+        if start.saturating_add(n as u32) > bins {
+            return Err("beyond map.bins");
+        }
+        self.post(|r| {
+            r.map = Some(MapRequest::Write {
+                start,
+                n: n as u32,
+                values,
+            })
+        })
+    }
+
+    fn map_read(
+        &mut self,
+        start: u32,
+        count: u32,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str> {
+        let end = start
+            .saturating_add(count)
+            .min(self.settings.map.bins as u32);
+        let mut at = start;
+        while at < end {
+            self.post(|r| {
+                r.map = Some(MapRequest::Read {
+                    start: at,
+                    max: end - at,
+                })
+            })?;
+            let c = self.link.with_mailbox(|m| m.chunk);
+            if c.start != at || c.samples == 0 || c.nfields != 2 {
+                return Err("no position map on this device");
+            }
+            for s in 0..c.samples as usize {
+                let (o, k) = match c.values.get(2 * s..2 * s + 2) {
+                    Some([o, k]) => (*o, *k),
+                    _ => (0.0, 1.0),
+                };
+                writeln!(out, "{},{}", Num(o), Num(k)).map_err(|_| "reply too long")?;
+            }
+            at += c.samples;
+        }
+        Ok(())
+    }
+
+    fn map_clear(&mut self) -> Result<(), &'static str> {
+        if self.settings.map.enable != 0.0 {
+            return Err("map.enable is 1: set it to 0 to clear the table");
+        }
+        self.post(|r| r.map = Some(MapRequest::Clear))
+    }
+
     fn frf_off(&mut self) -> Result<(), &'static str> {
         self.post(|r| r.frf = Some(FrfRequest::Stop))
     }
@@ -646,24 +725,18 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             f.lock.groups(),
             f.groups
         )?;
-        let names = ["in", "cmd", "cur", "pos"];
-        let chans = [
-            Channel::Injected,
-            Channel::Command,
-            Channel::Current,
-            Channel::Position,
-        ];
+        // The sine injected is known exactly: its amplitude, in phase, coherent.
+        write!(out, " in={},0", Num(f.amp))?;
+        let names = ["cmd", "cur", "pos"];
+        let chans = [Channel::Command, Channel::Current, Channel::Position];
         for (name, ch) in names.iter().zip(chans) {
             let p = f.lock.phasor(ch as usize).unwrap_or_default();
             write!(out, " {name}={},{}", Num(p.re as f32), Num(p.im as f32))?;
         }
-        out.write_str(" coh=")?;
-        for (i, ch) in chans.iter().enumerate() {
-            let c = f.lock.coherence(*ch as usize).unwrap_or(f64::NAN);
-            if i > 0 {
-                out.write_char(',')?;
-            }
-            write!(out, "{}", Num(c as f32))?;
+        out.write_str(" coh=1")?;
+        for ch in chans {
+            let c = f.lock.coherence(ch as usize).unwrap_or(f64::NAN);
+            write!(out, ",{}", Num(c as f32))?;
         }
         Ok(())
     }

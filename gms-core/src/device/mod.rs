@@ -28,7 +28,7 @@ pub use capture::{
 };
 
 pub use control::{
-    ControlLoop, Inputs, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
+    ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
 };
 pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, startup};
 pub use status::{DriveKind, StatusError, StatusReply, StatusValue};
@@ -135,6 +135,33 @@ pub struct MoveRequest {
     pub from_step: u64,
 }
 
+/// What the protocol side asks of the position map's table.
+#[derive(Debug, Clone, Copy)]
+pub enum MapRequest {
+    /// Write bins `start` … `start + n − 1` from `values` (offset and scale interleaved),
+    /// checked on the protocol side.
+    Write {
+        /// First bin.
+        start: u32,
+        /// Bins.
+        n: u32,
+        /// Their values, interleaved.
+        values: [f32; 2 * MAP_WRITE_BINS],
+    },
+    /// Copy bins from `start` (at most `max`) into the mailbox's chunk (two fields).
+    Read {
+        /// First bin.
+        start: u32,
+        /// Bins at most.
+        max: u32,
+    },
+    /// Offsets 0, scales 1.
+    Clear,
+}
+
+/// The most bins one `map write` carries.
+pub const MAP_WRITE_BINS: usize = 8;
+
 /// What the protocol side asks of a frequency-response measurement.
 #[derive(Debug, Clone, Copy)]
 pub enum FrfRequest {
@@ -208,6 +235,8 @@ pub struct Requests {
     pub capture: Option<CaptureRequest>,
     /// Start or stop a frequency-response measurement.
     pub frf: Option<FrfRequest>,
+    /// Write, read or clear the position map's table.
+    pub map: Option<MapRequest>,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -228,6 +257,7 @@ impl Requests {
             || self.hold_here
             || self.capture.is_some()
             || self.frf.is_some()
+            || self.map.is_some()
             || self.stream_every.is_some()
             || self.reset_stats
     }
@@ -353,6 +383,9 @@ pub struct Mailbox {
     pub status: Status,
     /// The position step at which the loop last took requests.
     pub taken_at: u64,
+    /// Requests were posted and not taken yet (set by the protocol side with them: the loop
+    /// looks at this flag, not at every request, in each step).
+    pub posted: bool,
     /// The last chunk of captured samples read (`CaptureRequest::Read`).
     pub chunk: Chunk,
     /// The frequency-response measurement's last report.
@@ -376,6 +409,7 @@ impl Mailbox {
                 hold_here: false,
                 capture: None,
                 frf: None,
+                map: None,
                 stream_every: None,
                 reset_stats: false,
             },
@@ -404,6 +438,7 @@ impl Mailbox {
                 capture_origin: 0,
             },
             taken_at: 0,
+            posted: false,
             chunk: Chunk {
                 start: 0,
                 samples: 0,
@@ -421,6 +456,12 @@ impl Mailbox {
         }
     }
 
+    /// The protocol side's: adds requests (`f` fills them in) for the loop to take.
+    pub fn post(&mut self, f: impl FnOnce(&mut Requests)) {
+        f(&mut self.requests);
+        self.posted = self.requests.pending();
+    }
+
     /// The loop's side: publishes `status` (and what else it hands over) and takes the
     /// pending requests, if any.
     pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<Requests> {
@@ -431,7 +472,8 @@ impl Mailbox {
         if let Some(f) = h.frf {
             self.frf = *f;
         }
-        if self.requests.pending() {
+        if self.posted {
+            self.posted = false;
             self.taken_at = status.steps;
             Some(core::mem::take(&mut self.requests))
         } else {
@@ -469,6 +511,7 @@ pub fn default_settings() -> Settings {
             i_limit: 1e-3,
         },
         shaping: crate::shaping::ShapingParams::OFF,
+        map: crate::posmap::MapParams::DEFAULT,
         current: CurrentParams { kp: 1.5, ki: 6e4 },
         motor: MotorModel {
             k_m: 6.6e-3,

@@ -52,6 +52,28 @@ pub enum FrfCmd {
     },
 }
 
+/// The position map's table commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MapCmd<'a> {
+    /// `map read START COUNT`: bins START.. (COUNT at most [`MAX_READ`]), `offset,scale` a line.
+    Read {
+        /// First bin.
+        start: u32,
+        /// Bins.
+        count: u32,
+    },
+    /// `map write START OFFSET,SCALE …`: bins from START (at most
+    /// [`crate::device::MAP_WRITE_BINS`] a line).
+    Write {
+        /// First bin.
+        start: u32,
+        /// The pairs, as text (`offset,scale` separated by spaces).
+        pairs: &'a str,
+    },
+    /// `map clear`: offsets 0, scales 1.
+    Clear,
+}
+
 /// A decimal `u32` (digits only), without core's parser (whose error path the no-panic link
 /// check cannot see through).
 fn parse_u32(s: &str) -> Option<u32> {
@@ -168,6 +190,8 @@ pub enum Command<'a> {
     StreamOff,
     /// `frf …`.
     Frf(FrfCmd),
+    /// `map …`.
+    Map(MapCmd<'a>),
 }
 
 /// The request line of a command (without the line end): what a host sends, read back by
@@ -242,6 +266,9 @@ impl core::fmt::Display for Command<'_> {
             }
             Command::Stream { fields, rate_hz } => write!(f, "stream {fields} {}", Num(rate_hz)),
             Command::StreamOff => f.write_str("stream off"),
+            Command::Map(MapCmd::Read { start, count }) => write!(f, "map read {start} {count}"),
+            Command::Map(MapCmd::Write { start, pairs }) => write!(f, "map write {start} {pairs}"),
+            Command::Map(MapCmd::Clear) => f.write_str("map clear"),
             Command::Frf(FrfCmd::Status) => f.write_str("frf"),
             Command::Frf(FrfCmd::Off) => f.write_str("frf off"),
             Command::Frf(FrfCmd::Start {
@@ -398,6 +425,40 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                 }
             };
             Command::Velocity { vel, sweep }
+        }
+        "map" => {
+            let usage =
+                "usage: map read START COUNT | map write START OFFSET,SCALE ... | map clear";
+            let int = |w: Option<&str>| w.and_then(parse_u32).ok_or(bad(usage));
+            match arg() {
+                Some("read") => {
+                    let start = int(arg())?;
+                    let count = int(arg())?;
+                    if count == 0 || count > MAX_READ {
+                        return Err(bad("COUNT from 1 to 64"));
+                    }
+                    Command::Map(MapCmd::Read { start, count })
+                }
+                Some("write") => {
+                    let start = int(arg())?;
+                    // The rest of the line: the pairs (checked by the device).
+                    let rest = line
+                        .trim_start()
+                        .strip_prefix("map")
+                        .map(str::trim_start)
+                        .and_then(|r| r.strip_prefix("write"))
+                        .map(str::trim_start)
+                        .and_then(|r| r.strip_prefix(r.split_ascii_whitespace().next()?))
+                        .map(str::trim)
+                        .unwrap_or("");
+                    if rest.is_empty() {
+                        return Err(bad(usage));
+                    }
+                    return Ok(Command::Map(MapCmd::Write { start, pairs: rest }));
+                }
+                Some("clear") => Command::Map(MapCmd::Clear),
+                _ => return Err(bad(usage)),
+            }
         }
         "frf" => {
             let usage = "usage: frf | frf off | frf current|position F_HZ AMP PERIODS SETTLE";

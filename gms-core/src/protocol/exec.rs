@@ -89,6 +89,26 @@ pub trait Device {
     fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
         out.write_str("state=idle")
     }
+    /// Writes bins `start`.. of the position map from `pairs` (`offset,scale` separated by
+    /// spaces): all or none.
+    fn map_write(&mut self, start: u32, pairs: &str) -> Result<(), &'static str> {
+        let _ = (start, pairs);
+        Err("no position map on this device")
+    }
+    /// Writes bins `start`.. (`count` at most) of the position map, `offset,scale` a line.
+    fn map_read(
+        &mut self,
+        start: u32,
+        count: u32,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str> {
+        let _ = (start, count, out);
+        Err("no position map on this device")
+    }
+    /// Clears the position map (offsets 0, scales 1).
+    fn map_clear(&mut self) -> Result<(), &'static str> {
+        Err("no position map on this device")
+    }
     /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
     /// without adaptation.
     fn estimate(&mut self, which: Estimate) -> f32 {
@@ -104,7 +124,8 @@ discard | save | load | defaults | \
 enable [current] | disable | status | clear | move POS [VEL] | current AMPS [SECONDS] | \
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
 capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT] | \
-frf [off | current|position F_HZ AMP PERIODS SETTLE]";
+frf [off | current|position F_HZ AMP PERIODS SETTLE] | \
+map read START COUNT | map write START OFFSET,SCALE ... | map clear";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
     writeln!(out, "err {} {}", code as u8, reason)
@@ -235,6 +256,12 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         },
         Command::Stream { fields, rate_hz } => done(out, dev.stream(fields, rate_hz)),
         Command::StreamOff => done(out, dev.stream_off()),
+        Command::Map(MapCmd::Read { start, count }) => {
+            let r = dev.map_read(start, count, out);
+            done(out, r)
+        }
+        Command::Map(MapCmd::Write { start, pairs }) => done(out, dev.map_write(start, pairs)),
+        Command::Map(MapCmd::Clear) => done(out, dev.map_clear()),
         Command::Frf(FrfCmd::Status) => {
             out.write_str("ok ")?;
             dev.frf_status(out)?;

@@ -198,7 +198,10 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
                 encoder,
                 // One buffer per power-up of a virtual device (a board's is a static).
                 Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
-            ),
+            )
+            .with_map(Box::leak(
+                vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice(),
+            )),
             plant,
             adc,
             substeps: sc.plant.substeps,

@@ -155,6 +155,9 @@ fn main() -> ! {
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the check's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
+    static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
+    // SAFETY: the check's only reference to the table, taken once.
+    let map_table = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
     let core = ControlLoop::new(
         board,
         start.applied,
@@ -162,7 +165,8 @@ fn main() -> ! {
         zero.faults,
         black_box(0),
         capture,
-    );
+    )
+    .with_map(map_table);
     let link = CheckLink {
         mailbox: Mailbox::new(),
         core,
