@@ -199,8 +199,9 @@ pub struct PosMap {
 }
 
 /// The map from a measurement: each direction fitted with `plan.order` harmonics of the
-/// period, the even part the offset, the odd part over `sliding` (the device's model's sliding
-/// friction at the speed \[N·m\], > 0) the scale, sampled at `plan.bins` bins.
+/// period (those under four standard errors of the noise dropped), the even part the offset,
+/// the odd part over `sliding` (the device's model's sliding friction at the speed \[N·m\],
+/// > 0) the scale, sampled at `plan.bins` bins.
 pub fn fit(data: &MapData, plan: &MapPlan, sliding: f64) -> Result<PosMap, Error> {
     plan.check()?;
     if !(sliding.is_finite() && sliding > 0.0) {
@@ -217,7 +218,7 @@ pub fn fit(data: &MapData, plan: &MapPlan, sliding: f64) -> Result<PosMap, Error
             ))
         })
     };
-    let (cf, cb) = (fit_one(&data.forward)?, fit_one(&data.backward)?);
+    let (mut cf, mut cb) = (fit_one(&data.forward)?, fit_one(&data.backward)?);
     let rms = |s: &[(f64, f64)], c: &[f64]| {
         (s.iter()
             .map(|(th, y)| (y - harmonic_eval(c, plan.period, *th)).powi(2))
@@ -225,6 +226,22 @@ pub fn fit(data: &MapData, plan: &MapPlan, sliding: f64) -> Result<PosMap, Error
             / s.len().max(1) as f64)
             .sqrt()
     };
+    let residual = (rms(&data.forward, &cf), rms(&data.backward, &cb));
+    // Only the harmonics that stand out of the noise: a coefficient's standard error is about
+    // the residual × √(2/N); a harmonic whose amplitude is under 4 of them is dropped (on an
+    // axis without ripple the map is then flat, not the noise of the run).
+    for (c, r, n) in [
+        (&mut cf, residual.0, data.forward.len()),
+        (&mut cb, residual.1, data.backward.len()),
+    ] {
+        let floor = 4.0 * r * (2.0 / n.max(1) as f64).sqrt();
+        for ab in c.get_mut(1..).unwrap_or(&mut []).chunks_exact_mut(2) {
+            if ab[0].hypot(ab[1]) < floor {
+                ab[0] = 0.0;
+                ab[1] = 0.0;
+            }
+        }
+    }
     let angle: Vec<f64> = (0..plan.bins)
         .map(|i| plan.period * i as f64 / plan.bins as f64)
         .collect();
@@ -243,7 +260,7 @@ pub fn fit(data: &MapData, plan: &MapPlan, sliding: f64) -> Result<PosMap, Error
         offset,
         scale,
         friction: sliding,
-        residual: (rms(&data.forward, &cf), rms(&data.backward, &cb)),
+        residual,
     })
 }
 
@@ -268,4 +285,88 @@ pub fn model_sliding_friction(s: &gms_core::protocol::Settings, speed: f64) -> f
         sigma: g.sigma,
     })
     .map_or(0.0, |m| m.force_at(speed.abs() as f32) as f64)
+}
+
+/// Writes `map` into the device's table (its geometry set first, the map off while it is
+/// written: the device refuses writes while it acts), 3 bins a request; leaves `map.enable`
+/// as it was unless `enable`. Returns the bins written.
+pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Error> {
+    let n = map.offset.len();
+    if !(8..=gms_core::posmap::MAP_BINS_MAX).contains(&n) || map.scale.len() != n {
+        return Err(Error::Params(format!(
+            "a map of {n} bins: the device holds 8 to {}",
+            gms_core::posmap::MAP_BINS_MAX
+        )));
+    }
+    b.set("map.enable", 0.0)?;
+    crate::settings::apply(
+        b,
+        &[
+            ("map.bins".to_string(), format!("{n}")),
+            ("map.period".to_string(), format!("{}", map.period)),
+        ],
+        false,
+    )?;
+    let mut start = 0;
+    while start < n {
+        // Three bins a line (a line is at most 120 characters), each value f32's shortest
+        // round trip with an exponent (at most 14 characters).
+        let end = (start + 3).min(n);
+        let pairs: Vec<String> = (start..end)
+            .map(|i| format!("{:e},{:e}", map.offset[i] as f32, map.scale[i] as f32))
+            .collect();
+        b.request(&format!("map write {start} {}", pairs.join(" ")))?;
+        start = end;
+    }
+    if enable {
+        b.set("map.enable", 1.0)?;
+    }
+    Ok(n)
+}
+
+/// The device's table: `(offset [N·m], scale [-])` per bin of its `map.bins`.
+pub fn read(b: &mut impl Bench) -> Result<Vec<(f64, f64)>, Error> {
+    let bins = get_param(b, "map.bins")? as u32;
+    let mut out = Vec::with_capacity(bins as usize);
+    let mut start = 0;
+    while start < bins {
+        let count = (bins - start).min(64);
+        let (lines, _) = b.request(&format!("map read {start} {count}"))?;
+        for l in &lines {
+            let (o, s) = l
+                .split_once(',')
+                .and_then(|(o, s)| Some((o.parse().ok()?, s.parse().ok()?)))
+                .ok_or_else(|| Error::Device(format!("bad map line: {l}")))?;
+            out.push((o, s));
+        }
+        if lines.is_empty() {
+            return Err(Error::Device(format!("map read {start}: no bins")));
+        }
+        start += lines.len() as u32;
+    }
+    Ok(out)
+}
+
+/// The position error's RMS \[rad\] while the axis runs at `speed` \[rad/s\] for `seconds` (a
+/// timed run from where it holds, captured whole; the ramp and half a second after it left
+/// out). The bridge is off after it.
+pub fn run_error_rms(b: &mut impl Bench, speed: f64, seconds: f64) -> Result<f64, Error> {
+    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
+    let t_acc = speed.abs() / crate::client::VELOCITY_ACC;
+    guarded(b, |b| {
+        b.enable()?;
+        b.wait(0.1)?;
+        crate::client::timed_run(b, speed, seconds + 0.5, "t,error", dt)?;
+        let rows = capture_rows(b)?;
+        let e: Vec<f64> = rows
+            .iter()
+            .filter(|r| r[0] >= t_acc + 0.5 && r[0] <= t_acc + seconds + 0.5)
+            .map(|r| r[1])
+            .collect();
+        b.disable()?;
+        if e.is_empty() {
+            return Err(Error::Device("no samples at constant speed".into()));
+        }
+        Ok((e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt())
+    })
 }

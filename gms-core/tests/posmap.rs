@@ -50,7 +50,9 @@ fn the_cursor_interpolates_the_table_at_the_reference() {
         let (eo, es) = expect(r);
         // Between bins 63 and 0 the line runs from 63 down to 0: the fraction's error is
         // what f32 keeps of the phase (~1e-7 of the period).
-        worst = worst.max((o as f64 - eo).abs()).max((s as f64 - es).abs() * 100.0);
+        worst = worst
+            .max((o as f64 - eo).abs())
+            .max((s as f64 - es).abs() * 100.0);
     }
     assert!(worst < 2e-3, "worst {worst}");
     // Without a table (or a short one) the map is neutral.
