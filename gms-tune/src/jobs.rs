@@ -314,3 +314,72 @@ fn plotters_blue() -> gms_ident::plot::RGBColor {
 fn plotters_grey() -> gms_ident::plot::RGBColor {
     gms_ident::plot::RGBColor(170, 170, 170)
 }
+
+/// A position map: `plan`'s runs both ways and the fit (the scale relative to the device's
+/// model's sliding friction at the speed); `out` (a `map.csv` path) and the plots beside it
+/// if given. The bridge is off and the settings as they were after it; the caller applies it.
+pub fn map(
+    link: &mut Link,
+    plan: &gms_bench::posmap::MapPlan,
+    out: Option<&Path>,
+    ctl: &mut Control<'_>,
+) -> Result<(gms_bench::posmap::MapData, gms_bench::posmap::PosMap), Error> {
+    plan.check()?;
+    let settings = gms_bench::settings::read(link)?;
+    let sliding = gms_bench::posmap::model_sliding_friction(&settings, plan.speed);
+    let mut b = ctl.bench(link);
+    b.stage("map", plan.device_seconds());
+    let data = gms_bench::posmap::measure(&mut b, plan)?;
+    let map = gms_bench::posmap::fit(&data, plan, sliding)?;
+    if let Some(path) = out {
+        write_map(&data, &map, path)?;
+    }
+    Ok((data, map))
+}
+
+/// The map's files: `path` (`angle_rad,torque_nm,friction_scale`), and beside it
+/// `map.svg` (the torque each way, sample by sample, under the offset fitted) and
+/// `map-scale.svg` (the friction's scale).
+pub fn write_map(
+    data: &gms_bench::posmap::MapData,
+    map: &gms_bench::posmap::PosMap,
+    path: &Path,
+) -> Result<(), Error> {
+    gms_ident::io::write_atomic(path, gms_bench::posmap::csv(map).as_bytes())?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let wrap = |a: f64| a.rem_euclid(map.period);
+    let pts: Vec<(f64, f64)> = data
+        .forward
+        .iter()
+        .chain(&data.backward)
+        .map(|(a, t)| (wrap(*a), t * 1e6))
+        .collect();
+    let offset: Vec<(f64, f64)> = map
+        .angle
+        .iter()
+        .zip(&map.offset)
+        .map(|(a, o)| (*a, o * 1e6))
+        .collect();
+    gms_ident::plot::fit_plot(
+        &dir.join("map.svg"),
+        "gms-tune map: the torque each way (points) and the offset fitted (the even part)",
+        ("angle [rad]", "torque [µN·m]"),
+        &pts,
+        &offset,
+    )
+    .map_err(Error::Io)?;
+    let scale: Vec<(f64, f64)> = map
+        .angle
+        .iter()
+        .zip(&map.scale)
+        .map(|(a, k)| (*a, *k))
+        .collect();
+    gms_ident::plot::fit_plot(
+        &dir.join("map-scale.svg"),
+        "gms-tune map: the friction's scale (the odd part over the model's sliding friction)",
+        ("angle [rad]", "friction scale [-]"),
+        &[],
+        &scale,
+    )
+    .map_err(Error::Io)
+}

@@ -13,6 +13,7 @@ use gms_tune::{Link, LinkError, parse_telemetry};
 mod commission;
 mod frf;
 mod identify;
+mod map;
 mod tracked;
 mod tune_ff;
 
@@ -297,6 +298,34 @@ enum Cmd {
         #[arg(long, default_value = "frf")]
         out: PathBuf,
     },
+    /// Position map: slow constant-speed runs both ways over whole periods (timed on the
+    /// device, captured whole), the torque at each angle fitted with harmonics of the period;
+    /// the even part is the torque offset (cogging), the odd part the friction's scale of the
+    /// device's model; writes the CSV (angle_rad,torque_nm,friction_scale) and map.svg,
+    /// map-scale.svg beside it. Ctrl-C or a fault ends it with the bridge off.
+    Map {
+        /// The runs' speed [rad/s].
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
+        /// Periods run each way.
+        #[arg(long, default_value_t = 1.0)]
+        revs: f64,
+        /// The map's bins (8 to 512 to apply).
+        #[arg(long, default_value_t = 512)]
+        bins: usize,
+        /// The map's period [rad] (default one motor revolution).
+        #[arg(long, default_value_t = std::f64::consts::TAU)]
+        period: f64,
+        /// Harmonics of the period in the fit.
+        #[arg(long, default_value_t = 64)]
+        order: usize,
+        /// The CSV written.
+        #[arg(long, default_value = "map.csv")]
+        out: PathBuf,
+        /// Write the map into the device and switch it on (map.enable 1).
+        #[arg(long)]
+        apply: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -556,6 +585,28 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 },
             )?
         }
+        Cmd::Map {
+            speed,
+            revs,
+            bins,
+            period,
+            order,
+            out,
+            apply,
+        } => map::run(
+            &mut link,
+            &map::Args {
+                plan: gms_bench::posmap::MapPlan {
+                    speed,
+                    periods: revs,
+                    period,
+                    bins,
+                    order,
+                },
+                out,
+                apply,
+            },
+        )?,
         #[cfg(feature = "ui")]
         Cmd::Ui { .. } => unreachable!("handled before the link opens"),
         Cmd::Identify {
