@@ -277,6 +277,85 @@ impl Device {
         Ok(d)
     }
 
+    /// map(speed=1.0, revs=1.0, bins=512, order=64, apply=False) -> dict: `gms-tune map` —
+    /// runs both ways over whole periods of one motor revolution, the harmonic fit:
+    /// {"angle", "offset" [N·m], "scale": numpy arrays per bin, "friction": the model's
+    /// sliding friction the scale is of [N·m], "forward", "backward": (angle, torque) samples};
+    /// `apply` writes it into the device and switches it on.
+    #[pyo3(signature = (speed = 1.0, revs = 1.0, bins = 512, order = 64, apply = false))]
+    fn map<'py>(
+        &mut self,
+        py: Python<'py>,
+        speed: f64,
+        revs: f64,
+        bins: usize,
+        order: usize,
+        apply: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let plan = gms_bench::posmap::MapPlan {
+            speed,
+            periods: revs,
+            bins,
+            order,
+            ..Default::default()
+        };
+        plan.check().map_err(err)?;
+        let (data, map) = self.job(|l, ctl| gms_tune::jobs::map(l, &plan, None, ctl))?;
+        if apply {
+            gms_bench::posmap::write(&mut self.link, &map, true).map_err(err)?;
+        }
+        let d = PyDict::new(py);
+        d.set_item("angle", PyArray1::from_vec(py, map.angle.clone()))?;
+        d.set_item("offset", PyArray1::from_vec(py, map.offset.clone()))?;
+        d.set_item("scale", PyArray1::from_vec(py, map.scale.clone()))?;
+        d.set_item("friction", map.friction)?;
+        d.set_item("forward", data.forward)?;
+        d.set_item("backward", data.backward)?;
+        Ok(d)
+    }
+
+    /// map_read() -> (offset, scale): the device's table as numpy arrays (its `map.bins` bins;
+    /// N·m and -).
+    fn map_read<'py>(
+        &mut self,
+        py: Python<'py>,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+        let t = gms_bench::posmap::read(&mut self.link).map_err(err)?;
+        let (o, s): (Vec<f64>, Vec<f64>) = t.into_iter().unzip();
+        Ok((PyArray1::from_vec(py, o), PyArray1::from_vec(py, s)))
+    }
+
+    /// map_write(offset, scale, period=2π, enable=False): writes a table of 8 to 512 bins over
+    /// `period` [rad] into the device (the map off while it is written), and switches it on if
+    /// `enable`.
+    #[pyo3(signature = (offset, scale, period = std::f64::consts::TAU, enable = false))]
+    fn map_write(
+        &mut self,
+        offset: PyReadonlyArray1<'_, f64>,
+        scale: PyReadonlyArray1<'_, f64>,
+        period: f64,
+        enable: bool,
+    ) -> PyResult<usize> {
+        let (o, s) = (offset.as_slice()?.to_vec(), scale.as_slice()?.to_vec());
+        if o.len() != s.len() {
+            return Err(err(format!(
+                "offset and scale of different lengths ({} and {})",
+                o.len(),
+                s.len()
+            )));
+        }
+        let n = o.len();
+        let map = gms_bench::posmap::PosMap {
+            period,
+            angle: (0..n).map(|i| period * i as f64 / n as f64).collect(),
+            offset: o,
+            scale: s,
+            friction: f64::NAN,
+            residual: (f64::NAN, f64::NAN),
+        };
+        gms_bench::posmap::write(&mut self.link, &map, enable).map_err(err)
+    }
+
     /// identify(report="identify-report", blocks=6) -> dict: `gms-tune identify` — the
     /// experiments on the device (CSVs in `report`), the fits: {"params": the parameter
     /// file's text, "report": lines, "presliding": [(x, f)], "sliding": [(v, f)]}; nothing

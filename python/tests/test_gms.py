@@ -302,3 +302,35 @@ def test_device_frf_returns_arrays_and_margins(tmp_path):
     finally:
         p.kill()
         p.wait()
+
+
+def test_device_map_finds_the_ripple_and_round_trips_the_table(tmp_path):
+    # A direct-drive screw with a hidden 12/rev cogging (20 µN·m) and a ±10 % once-per-rev
+    # friction; 20 x real time.
+    sc = tmp_path / "ripple.toml"
+    sc.write_text(
+        "[plant]\nvariability = 0.0\ngear_ratio = 1.0\nlead = 1.13636e-4\n"
+        "[plant.ripple]\namplitude = 20e-6\nper_rev = 12\nscrew_friction = 0.1\n"
+        "[plant.guideway]\nfs = 1e-6\nfc = 1e-6\n[controller.ff]\nguideway = false\n"
+    )
+    p, addr = serve("--speed", 20, "--scenario", sc)
+    try:
+        d = gms.Device(tcp=addr, timeout=2.0)
+        m = d.map(bins=256, order=48, apply=True)
+        assert len(m["angle"]) == 256
+        truth = 20e-6 * np.sin(12 * m["angle"])
+        assert np.sqrt(np.mean((m["offset"] - truth) ** 2)) < 0.1 * np.sqrt(np.mean(truth**2))
+        assert np.max(np.abs(m["scale"] - (1.0 + 0.1 * np.sin(m["angle"])))) < 0.05
+        assert d.get("map.enable") == 1 and d.get("map.bins") == 256
+        o, s = d.map_read()
+        assert np.allclose(o, m["offset"], rtol=1e-6, atol=1e-12)
+        assert np.allclose(s, m["scale"], rtol=1e-6)
+        with pytest.raises(gms.GmsError, match="map.enable is 1"):
+            d.request("map clear")
+        with pytest.raises(gms.GmsError, match="different lengths"):
+            d.map_write(np.zeros(8), np.ones(9))
+        d.map_write(np.zeros(8), np.ones(8), enable=False)
+        assert d.get("map.bins") == 8 and d.get("map.enable") == 0
+    finally:
+        p.kill()
+        p.wait()
