@@ -349,7 +349,9 @@ pub fn write_map(
     let dir = path.parent().unwrap_or(Path::new("."));
     let wrap = |a: f64| a.rem_euclid(map.period);
     // At most about 1600 points drawn (the plot stays light; the CSV has the map).
-    let every = (data.forward.len() + data.backward.len()).div_ceil(1600).max(1);
+    let every = (data.forward.len() + data.backward.len())
+        .div_ceil(1600)
+        .max(1);
     let pts: Vec<(f64, f64)> = data
         .forward
         .iter()
