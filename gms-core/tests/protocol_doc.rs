@@ -61,3 +61,18 @@ fn the_protocol_reference_lists_every_parameter() {
         );
     }
 }
+
+/// The parameters of a group (the path's first segment: `pos`, `ff`, `map`, …) are listed
+/// together: the window draws a group per run of them, and a group split in two would be two
+/// widgets of one name.
+#[test]
+fn each_group_of_parameters_is_listed_together() {
+    let mut seen: Vec<&str> = Vec::new();
+    for p in PARAMS {
+        let g = p.path.split('.').next().unwrap();
+        if seen.last() != Some(&g) {
+            assert!(!seen.contains(&g), "the group {g} comes back at {}", p.path);
+            seen.push(g);
+        }
+    }
+}

@@ -119,11 +119,13 @@ fn the_map_cancels_the_ripple_and_does_no_harm_without_it() {
             for v in [3.0, -3.0, 0.5, -0.5] {
                 rms.push(posmap::run_error_rms(&mut dev, v, 2.0).unwrap() / rpc);
             }
+            // The paper's sine test (2 mrad at 1 Hz, reversals) on top.
+            rms.push(gms_bench::sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap() / rpc);
         }
-        let (off, on) = rms.split_at(4);
+        let (off, on) = rms.split_at(5);
         println!(
-            "{name}: error RMS [counts] at 3, −3, 0.5, −0.5 rad/s without the map {:.2} {:.2} {:.2} {:.2}, with it {:.2} {:.2} {:.2} {:.2}",
-            off[0], off[1], off[2], off[3], on[0], on[1], on[2], on[3]
+            "{name}: error RMS [counts] at 3, −3, 0.5, −0.5 rad/s without the map {:.2} {:.2} {:.2} {:.2}, with it {:.2} {:.2} {:.2} {:.2}; the sine test {:.3} → {:.3}",
+            off[0], off[1], off[2], off[3], on[0], on[1], on[2], on[3], off[4], on[4]
         );
         if name == "ripple" {
             assert!(
