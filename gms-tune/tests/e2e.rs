@@ -198,6 +198,10 @@ fn main() {
             "the_window_measures_a_frequency_response",
             the_window_measures_a_frequency_response,
         ),
+        (
+            "the_window_measures_and_applies_a_position_map",
+            the_window_measures_and_applies_a_position_map,
+        ),
         #[cfg(unix)]
         (
             "identify_stops_on_ctrl_c_with_the_bridge_off",
@@ -1582,4 +1586,58 @@ fn the_window_measures_a_frequency_response() {
     }
     h.step();
     assert!(h.query_by_label("Apply the notch").is_some());
+}
+
+/// The window's Position map page on an axis with a hidden cogging: the map measured, its
+/// ripple shown, applied (the device's map switched on, the switch showing it), switched off.
+fn the_window_measures_and_applies_a_position_map() {
+    use egui_kittest::kittest::Queryable;
+    use gms_tune::ui::worker::Outcome;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let sc = quiet_scenario(
+        d,
+        "gear_ratio = 1.0\nlead = 1.13636e-4\n[plant.ripple]\namplitude = 20e-6\nper_rev = 12",
+    );
+    let srv = Server::start_with("tcp", &d.join("flash.img"), 20.0, Some(&sc));
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| !a.rows.is_empty()));
+    h.state_mut().tab = gms_tune::ui::app::Tab::Map;
+    h.step();
+    h.get_by_label("bins").click();
+    h.step();
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
+    h.step();
+    h.get_by_label("bins").type_text("256");
+    h.step();
+    h.get_by_label("Measure the map").click();
+    h.step();
+    assert!(h.state().running.is_some());
+    let done = step_until(&mut h, 90.0, |a| a.outcome.is_some());
+    assert!(done, "{:?} {:?}", h.state().running, h.state().log);
+    match h.state().outcome.clone().unwrap() {
+        Ok(Outcome::Map { map, .. }) => {
+            assert_eq!(map.angle.len(), 256);
+            let peak = map.offset.iter().fold(0.0f64, |a, o| a.max(o.abs()));
+            assert!((peak - 20e-6).abs() < 4e-6, "{peak}");
+        }
+        other => panic!("{other:?}"),
+    }
+    h.step();
+    h.get_by_label("Apply the map").click();
+    let on = |a: &gms_tune::ui::App| {
+        a.rows
+            .iter()
+            .any(|r| r.listed.path == "map.enable" && r.listed.value == "1")
+    };
+    assert!(step_until(&mut h, 20.0, on), "{:?}", h.state().log);
+    h.get_by_label("the map acts (map.enable)").click();
+    assert!(step_until(&mut h, 5.0, |a| !on(a)));
+    drop(h);
+    let bins: f64 = tune(&srv, &["get", "map.bins"], d)
+        .1
+        .trim()
+        .parse()
+        .unwrap();
+    assert_eq!(bins, 256.0);
 }

@@ -60,6 +60,8 @@ pub enum Cmd {
     Load(PathBuf),
     /// Send a parameter set as one set (a result to apply), then read `list` again.
     Apply(Box<gms_ident::paramfile::ParamFile>),
+    /// Write a position map into the device and switch it on, then read `list` again.
+    WriteMap(Box<gms_bench::posmap::PosMap>),
     /// A long run; [`Worker::stop`] ends it.
     Run(Job),
     /// End the worker.
@@ -87,6 +89,8 @@ pub enum Job {
     },
     /// `gms-tune frf` (with `--suggest` for the open loop).
     Frf(gms_bench::frf::Plan),
+    /// `gms-tune map`.
+    Map(gms_bench::posmap::MapPlan),
 }
 
 /// What a long run gave.
@@ -111,6 +115,13 @@ pub enum Outcome {
         sliding: Vec<(f64, f64)>,
         /// The identified set.
         file: Box<gms_ident::paramfile::ParamFile>,
+    },
+    /// A position map (not applied).
+    Map {
+        /// The samples each way.
+        data: Box<gms_bench::posmap::MapData>,
+        /// The map fitted.
+        map: Box<gms_bench::posmap::PosMap>,
     },
     /// A frequency response, and for the open loop the notch proposed (not applied).
     Frf {
@@ -499,6 +510,16 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             });
             out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
         }
+        Cmd::WriteMap(m) => {
+            let result = gms_bench::posmap::write(l, &m, true)
+                .map(|n| format!("{n} bins written, map.enable 1"))
+                .map_err(|e| e.to_string());
+            out.push(Event::Reply {
+                line: "map write".into(),
+                result,
+            });
+            out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+        }
         Cmd::Run(_) | Cmd::Quit => {}
     }
     Ok(out)
@@ -578,6 +599,14 @@ fn run_job(
             })
             .map_err(|e| format!("{e}; the bridge is off, ff.gain as it was"))?;
             Ok(Outcome::TunedFf(t))
+        }
+        Job::Map(plan) => {
+            let (data, map) = crate::jobs::map(l, &plan, None, &mut ctl)
+                .map_err(|e| format!("{e}; the bridge is off, the settings as they were"))?;
+            Ok(Outcome::Map {
+                data: Box::new(data),
+                map: Box::new(map),
+            })
         }
         Job::Frf(plan) => {
             let sweep = crate::jobs::frf(l, &plan, None, &mut ctl, &mut |_, p| {

@@ -138,6 +138,9 @@ impl App {
             Some(Ok(Outcome::Frf { .. })) => {
                 ui.label("The frequency response is on the Frequency response page.");
             }
+            Some(Ok(Outcome::Map { .. })) => {
+                ui.label("The position map is on the Position map page.");
+            }
             Some(Ok(Outcome::Identified {
                 report,
                 presliding,

@@ -14,6 +14,7 @@ mod experiments;
 mod frf;
 mod friction;
 mod live;
+mod map;
 mod motion;
 mod params;
 
@@ -58,6 +59,8 @@ pub enum Tab {
     Experiments,
     /// Frequency response: the Bode plot, the margins, the notches.
     Frf,
+    /// The position map: measured, shown, applied; `map.enable`.
+    Map,
 }
 
 /// A long run under way.
@@ -173,6 +176,8 @@ pub struct App {
     pub frf_points: Vec<gms_bench::frf::Point>,
     /// The frequency-response page's inputs.
     pub frf_inputs: frf::FrfInputs,
+    /// The position map page's inputs.
+    pub map_inputs: map::MapInputs,
     /// The last long run's result, or why it failed.
     pub outcome: Option<Result<Outcome, String>>,
 }
@@ -214,6 +219,7 @@ impl App {
             ff_points: Vec::new(),
             frf_points: Vec::new(),
             frf_inputs: frf::FrfInputs::default(),
+            map_inputs: map::MapInputs::default(),
             outcome: None,
         }
     }
@@ -378,6 +384,7 @@ impl App {
                 ui.selectable_value(&mut self.tab, Tab::Motion, "Motion");
                 ui.selectable_value(&mut self.tab, Tab::Experiments, "Experiments");
                 ui.selectable_value(&mut self.tab, Tab::Frf, "Frequency response");
+                ui.selectable_value(&mut self.tab, Tab::Map, "Position map");
             });
             ui.separator();
             match self.tab {
@@ -386,6 +393,7 @@ impl App {
                 Tab::Motion => self.motion(ui),
                 Tab::Experiments => self.experiments(ui),
                 Tab::Frf => self.frf(ui),
+                Tab::Map => self.map(ui),
             }
         });
         // Telemetry arrives continuously: a smooth frame rate while the link is up.
