@@ -91,7 +91,10 @@ async fn main(spawner: Spawner) {
 
     // Parameters: the stored set, or the defaults (and a fault if a stored set was unusable);
     // never a mix. The decision is gms-core's.
-    let mut store = storage::new(rest.flash);
+    // The store keeps the position map too, in a static buffer (8 KiB: out of the stack).
+    static STORE_MAP: ConstStaticCell<[u8; gms_core::store::MAP_BUFFER_LEN]> =
+        ConstStaticCell::new([0; gms_core::store::MAP_BUFFER_LEN]);
+    let mut store = storage::new(rest.flash).with_map_buffer(STORE_MAP.take());
     let defaults = device::default_settings();
     let start = match device::startup(store.load(), &defaults, &board::BOARD) {
         Ok(s) => s,
@@ -150,8 +153,16 @@ async fn main(spawner: Spawner) {
     // The position map's table, likewise (4 KiB).
     static MAP: ConstStaticCell<[f32; gms_core::posmap::MAP_VALUES]> =
         ConstStaticCell::new([0.0; gms_core::posmap::MAP_VALUES]);
+    let table = MAP.take();
+    // The stored map for these settings, or none; a map of another period or bin count is
+    // left out with the reason (the decision is gms-core's).
+    match gms_core::posmap::restore(&mut store, &start.settings.map, table) {
+        Ok(true) => info!("position map loaded from the store"),
+        Ok(false) => {}
+        Err(why) => warn!("{}", why),
+    }
     let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture)
-        .with_map(MAP.take());
+        .with_map(table);
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     Loop::new(hw, core, telemetry_tx).hand_over();
     // The stack guard: an MPU region with no access at the bottom of the stack, before

@@ -143,3 +143,159 @@ impl MapCursor {
         (i, u - i as f32)
     }
 }
+
+/// Bytes of a stored map: version (1), period (f32), bins (u16), the table's values (f32,
+/// little-endian, [`MAP_VALUES`] of them, unused bins 0), CRC-32 (4).
+pub const MAP_RECORD_LEN: usize = 1 + 4 + 2 + 4 * MAP_VALUES + 4;
+
+/// Version of the stored map.
+pub const MAP_RECORD_VERSION: u8 = 1;
+
+/// Why a stored map was not used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MapRecordError {
+    /// Not one record long.
+    Length,
+    /// The checksum does not match.
+    Checksum,
+    /// Another record version.
+    Version,
+    /// Written for another period or bin count than the settings have.
+    Geometry,
+    /// A bin out of its range.
+    Invalid,
+}
+
+impl MapRecordError {
+    /// The one-line reason.
+    pub fn reason(self) -> &'static str {
+        match self {
+            MapRecordError::Length => "stored map: wrong length",
+            MapRecordError::Checksum => "stored map: checksum mismatch",
+            MapRecordError::Version => "stored map: other version",
+            MapRecordError::Geometry => {
+                "stored map: another period or bin count than map.period and map.bins"
+            }
+            MapRecordError::Invalid => "stored map: a bin out of range",
+        }
+    }
+}
+
+/// Puts value `k` of a table (offset and scale interleaved) into the record `out`.
+pub fn map_record_put(out: &mut [u8], k: usize, v: f32) {
+    for (slot, b) in out.iter_mut().skip(7 + 4 * k).zip(v.to_le_bytes()) {
+        *slot = b;
+    }
+}
+
+/// Completes the record in `out` whose first `2 × bins` values were put
+/// ([`map_record_put`]): the version, the period \[rad\] and the bins, the unused values 0,
+/// the checksum. Returns its length.
+pub fn map_record_finish(period: f32, bins: u32, out: &mut [u8]) -> usize {
+    let bins = bins.min(MAP_BINS_MAX as u32);
+    let head = [MAP_RECORD_VERSION]
+        .into_iter()
+        .chain(period.to_le_bytes())
+        .chain((bins as u16).to_le_bytes());
+    for (slot, b) in out.iter_mut().zip(head) {
+        *slot = b;
+    }
+    for k in 2 * bins as usize..MAP_VALUES {
+        map_record_put(out, k, 0.0);
+    }
+    let body = MAP_RECORD_LEN - 4;
+    let crc = crate::drive::crc32(out.get(..body).unwrap_or(&[]));
+    for (slot, b) in out.iter_mut().skip(body).zip(crc.to_le_bytes()) {
+        *slot = b;
+    }
+    MAP_RECORD_LEN
+}
+
+/// Writes the record of a table (`values`: offset and scale interleaved, the first
+/// `2 × bins` used) of period `period` \[rad\] into `out` (at least [`MAP_RECORD_LEN`] bytes);
+/// returns the bytes written.
+pub fn encode_map(period: f32, bins: u32, values: &[f32], out: &mut [u8]) -> usize {
+    for (k, v) in values
+        .iter()
+        .enumerate()
+        .take(2 * bins.min(MAP_BINS_MAX as u32) as usize)
+    {
+        map_record_put(out, k, *v);
+    }
+    map_record_finish(period, bins, out)
+}
+
+/// Value `k` of the table in a record (0 outside it).
+pub fn map_record_value(rec: &[u8], k: usize) -> f32 {
+    let mut b = [0u8; 4];
+    for (d, v) in b.iter_mut().zip(rec.iter().skip(7 + 4 * k)) {
+        *d = *v;
+    }
+    f32::from_le_bytes(b)
+}
+
+/// A table with no effect: offsets 0, scales 1.
+pub fn clear(table: &mut [f32]) {
+    for pair in table.chunks_exact_mut(2) {
+        if let [o, k] = pair {
+            (*o, *k) = (0.0, 1.0);
+        }
+    }
+}
+
+/// The table in a stored map, for the settings' map `p`: checked whole (length, checksum,
+/// version, the same period and bins as `p`, every bin in range) before anything is written
+/// into `out` (offset and scale interleaved, `2 × bins` values).
+pub fn decode_map(rec: &[u8], p: &MapParams, out: &mut [f32]) -> Result<(), MapRecordError> {
+    if rec.len() != MAP_RECORD_LEN {
+        return Err(MapRecordError::Length);
+    }
+    let (body, tail) = rec.split_at(MAP_RECORD_LEN - 4);
+    let mut crc = [0u8; 4];
+    crc.copy_from_slice(tail);
+    if crate::drive::crc32(body) != u32::from_le_bytes(crc) {
+        return Err(MapRecordError::Checksum);
+    }
+    let byte = |i: usize| body.get(i).copied().unwrap_or(0);
+    if byte(0) != MAP_RECORD_VERSION {
+        return Err(MapRecordError::Version);
+    }
+    let period = f32::from_le_bytes([byte(1), byte(2), byte(3), byte(4)]);
+    let bins = u16::from_le_bytes([byte(5), byte(6)]) as u32;
+    if period.to_bits() != p.period.to_bits() || bins as f32 != p.bins {
+        return Err(MapRecordError::Geometry);
+    }
+    let value = |k: usize| map_record_value(rec, k);
+    for i in 0..bins as usize {
+        if !valid_bin(value(2 * i), value(2 * i + 1)) {
+            return Err(MapRecordError::Invalid);
+        }
+    }
+    for (k, o) in out.iter_mut().enumerate().take(2 * bins as usize) {
+        *o = value(k);
+    }
+    Ok(())
+}
+
+/// The start-up's table: cleared (no effect), then the stored map if there is one for the
+/// settings' geometry. Returns what happened, for the log: `Ok(true)` loaded, `Ok(false)`
+/// none stored, `Err` why a stored one was not used (the table stays clear).
+pub fn restore<S: crate::device::ParamStore + ?Sized>(
+    store: &mut S,
+    p: &MapParams,
+    table: &mut [f32],
+) -> Result<bool, &'static str> {
+    clear(table);
+    let len = match store.load_map() {
+        Ok(Some(len)) => len,
+        Ok(None) => return Ok(false),
+        Err(_) => return Err("stored map unreadable"),
+    };
+    let Some(buf) = store.map_buffer() else {
+        return Ok(false);
+    };
+    let rec = buf.get(..len).ok_or("stored map: wrong length")?;
+    decode_map(rec, p, table).map_err(MapRecordError::reason)?;
+    Ok(true)
+}

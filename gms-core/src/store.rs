@@ -33,6 +33,13 @@ pub const SECTOR_SIZE: usize = 128 * 1024;
 /// The key of the parameter record.
 const KEY: u8 = 1;
 
+/// The key of the position map's record.
+const KEY_MAP: u8 = 2;
+
+/// The bytes a map buffer needs ([`FlashStore::with_map_buffer`]): the record, and a scratch
+/// area for the storage layer (the record, its key and alignment).
+pub const MAP_BUFFER_LEN: usize = 2 * (crate::posmap::MAP_RECORD_LEN + 32);
+
 /// The buffer holds one record plus sequential-storage's key and alignment.
 const BUF: usize = 512;
 const _: () = assert!(RECORD_LEN + 16 <= BUF);
@@ -55,6 +62,8 @@ fn block_on<T>(fut: impl Future<Output = T>) -> T {
 pub struct FlashStore<F: NorFlash> {
     map: Option<Map<F>>,
     buf: [u8; BUF],
+    /// The position map's record and scratch ([`MAP_BUFFER_LEN`] bytes), if given.
+    map_buf: Option<&'static mut [u8]>,
 }
 
 impl<F: NorFlash> FlashStore<F> {
@@ -70,7 +79,18 @@ impl<F: NorFlash> FlashStore<F> {
         let map = MapConfig::<F>::try_new(range)
             .ok()
             .map(|c| MapStorage::new(flash, c, Cache::new_uncached()));
-        FlashStore { map, buf: [0; BUF] }
+        FlashStore {
+            map,
+            buf: [0; BUF],
+            map_buf: None,
+        }
+    }
+
+    /// The store keeps a position map too, in `buf` ([`MAP_BUFFER_LEN`] bytes at least: a
+    /// static on the board, out of the stack).
+    pub fn with_map_buffer(mut self, buf: &'static mut [u8]) -> Self {
+        self.map_buf = (buf.len() >= MAP_BUFFER_LEN).then_some(buf);
+        self
     }
 
     /// The flash back (to inspect it, or to restart on it).
@@ -79,11 +99,26 @@ impl<F: NorFlash> FlashStore<F> {
     }
 }
 
+impl<F: NorFlash> FlashStore<F> {
+    /// The storage layer and its scratch buffer: the map buffer's scratch half when there is
+    /// one (a fetch reads past every item on its way, and a map's is larger than the record's
+    /// buffer), else the record's.
+    fn parts(&mut self) -> Result<(&mut Map<F>, &mut [u8]), StoreError> {
+        let FlashStore { map, buf, map_buf } = self;
+        let map = map.as_mut().ok_or(StoreError::Flash)?;
+        let scratch: &mut [u8] = match map_buf.as_deref_mut() {
+            Some(m) => m.get_mut(MAP_BUFFER_LEN / 2..).ok_or(StoreError::Length)?,
+            None => buf,
+        };
+        Ok((map, scratch))
+    }
+}
+
 impl<F: NorFlash> ParamStore for FlashStore<F> {
     fn load(&mut self) -> Result<Option<[u8; RECORD_LEN]>, StoreError> {
-        let map = self.map.as_mut().ok_or(StoreError::Flash)?;
+        let (map, scratch) = self.parts()?;
         let item: Option<&[u8]> =
-            block_on(map.fetch_item(&mut self.buf, &KEY)).map_err(|_| StoreError::Flash)?;
+            block_on(map.fetch_item(scratch, &KEY)).map_err(|_| StoreError::Flash)?;
         let Some(bytes) = item else {
             return Ok(None);
         };
@@ -96,8 +131,45 @@ impl<F: NorFlash> ParamStore for FlashStore<F> {
     }
 
     fn save(&mut self, rec: &[u8; RECORD_LEN]) -> Result<(), StoreError> {
-        let map = self.map.as_mut().ok_or(StoreError::Flash)?;
+        let (map, scratch) = self.parts()?;
         let value: &[u8] = rec;
-        block_on(map.store_item(&mut self.buf, &KEY, &value)).map_err(|_| StoreError::Flash)
+        block_on(map.store_item(scratch, &KEY, &value)).map_err(|_| StoreError::Flash)
+    }
+
+    fn map_buffer(&mut self) -> Option<&mut [u8]> {
+        let buf = self.map_buf.as_deref_mut()?;
+        buf.get_mut(..MAP_BUFFER_LEN / 2)
+    }
+
+    fn save_map(&mut self, len: usize) -> Result<(), StoreError> {
+        let map = self.map.as_mut().ok_or(StoreError::Flash)?;
+        let buf = self.map_buf.as_deref_mut().ok_or(StoreError::Flash)?;
+        let (rec, scratch) = buf
+            .split_at_mut_checked(MAP_BUFFER_LEN / 2)
+            .ok_or(StoreError::Length)?;
+        let value: &[u8] = rec.get(..len).ok_or(StoreError::Length)?;
+        block_on(map.store_item(scratch, &KEY_MAP, &value)).map_err(|_| StoreError::Flash)
+    }
+
+    fn load_map(&mut self) -> Result<Option<usize>, StoreError> {
+        let map = self.map.as_mut().ok_or(StoreError::Flash)?;
+        let Some(buf) = self.map_buf.as_deref_mut() else {
+            return Ok(None);
+        };
+        let (rec, scratch) = buf
+            .split_at_mut_checked(MAP_BUFFER_LEN / 2)
+            .ok_or(StoreError::Length)?;
+        let item: Option<&[u8]> =
+            block_on(map.fetch_item(scratch, &KEY_MAP)).map_err(|_| StoreError::Flash)?;
+        let Some(bytes) = item else {
+            return Ok(None);
+        };
+        if bytes.len() > rec.len() {
+            return Err(StoreError::Length);
+        }
+        for (d, s) in rec.iter_mut().zip(bytes) {
+            *d = *s;
+        }
+        Ok(Some(bytes.len()))
     }
 }

@@ -346,3 +346,113 @@ fn a_cut_save_that_erases_a_sector_leaves_the_old_or_the_new_record() {
     assert_eq!(f.old + f.new, f.tried);
     println!("the save after {n} saves erases a sector");
 }
+
+/// A store that keeps a position map too (its buffer leaked: one per store, a test's).
+fn map_store(flash: CutFlash) -> FlashStore<CutFlash> {
+    use gms_core::store::MAP_BUFFER_LEN;
+    FlashStore::new(flash).with_map_buffer(Box::leak(vec![0u8; MAP_BUFFER_LEN].into_boxed_slice()))
+}
+
+/// A distinct, valid map record number `i`: 512 bins over a revolution.
+fn map_record(i: u32) -> Vec<u8> {
+    use gms_core::posmap::{MAP_RECORD_LEN, MAP_VALUES, encode_map};
+    let values: Vec<f32> = (0..MAP_VALUES)
+        .map(|k| {
+            if k % 2 == 0 {
+                1e-6 * ((k + i as usize) % 97) as f32
+            } else {
+                1.0 + 1e-3 * ((k / 2 + i as usize) % 13) as f32
+            }
+        })
+        .collect();
+    let mut rec = vec![0u8; MAP_RECORD_LEN];
+    encode_map(std::f32::consts::TAU, 512, &values, &mut rec);
+    rec
+}
+
+/// The map stored in `store`, if any.
+fn stored_map(store: &mut FlashStore<CutFlash>) -> Option<Vec<u8>> {
+    let len = store.load_map().expect("the map loads")?;
+    Some(store.map_buffer().unwrap()[..len].to_vec())
+}
+
+/// Saves the map `rec` into `store`.
+fn save_map(
+    store: &mut FlashStore<CutFlash>,
+    rec: &[u8],
+) -> Result<(), gms_core::device::StoreError> {
+    store.map_buffer().unwrap()[..rec.len()].copy_from_slice(rec);
+    store.save_map(rec.len())
+}
+
+/// The position map beside the parameter record: a save of a new map cut at every write and
+/// erase it makes (and parts of each) leaves the old map or the new one, bit for bit, and the
+/// parameter record untouched; the start-up's restore then loads the one found for the
+/// settings' geometry, and refuses a map of another bin count with its reason.
+#[test]
+fn a_cut_map_save_leaves_the_old_or_the_new_map_and_the_record() {
+    use gms_core::posmap::{MAP_VALUES, MapParams, restore};
+    // A store with a record and map 1.
+    let flash = CutFlash::new(vec![0xFF; IMAGE_LEN], None);
+    let mut store = map_store(flash.clone());
+    store.save(&record(7)).unwrap();
+    save_map(&mut store, &map_record(1)).unwrap();
+    drop(store);
+    let image = flash.image();
+    let (old, new) = (map_record(1), map_record(2));
+    // The save uncut, for its operations.
+    let dry = CutFlash::new(image.clone(), None);
+    save_map(&mut map_store(dry.clone()), &new).unwrap();
+    let ops = dry.ops();
+    let (mut tried, mut found_old, mut found_new) = (0, 0, 0);
+    for (index, op) in ops.iter().enumerate() {
+        for part in parts(*op) {
+            tried += 1;
+            let flash = CutFlash::new(image.clone(), Some((index, part)));
+            assert!(save_map(&mut map_store(flash.clone()), &new).is_err());
+            let after = flash.image();
+            let mut store = map_store(CutFlash::new(after.clone(), None));
+            let what = format!("cut at op {index}/{} ({op:?}) {part:?}", ops.len());
+            match stored_map(&mut store) {
+                Some(m) if m == old => found_old += 1,
+                Some(m) if m == new => found_new += 1,
+                _ => panic!("{what}: neither the old map nor the new one"),
+            }
+            assert_eq!(store.load(), Ok(Some(record(7))), "{what}: the record");
+            // The start-up restores it for a revolution of 512 bins.
+            let mut table = vec![0.0f32; MAP_VALUES];
+            let p = MapParams {
+                enable: 1.0,
+                ..MapParams::DEFAULT
+            };
+            assert_eq!(restore(&mut store, &p, &mut table), Ok(true), "{what}");
+        }
+    }
+    println!(
+        "map save: {} operations, {tried} cuts: {found_old} restarts found the old map, \
+         {found_new} the new",
+        ops.len()
+    );
+    // Every cut left one of the two (the save commits the new item with its last write, so
+    // a cut within it leaves the old); the save uncut leaves the new one.
+    assert_eq!(found_old + found_new, tried);
+    assert!(found_old > 0);
+    assert_eq!(
+        stored_map(&mut map_store(CutFlash::new(dry.image(), None))),
+        Some(new.clone())
+    );
+    // A map of another bin count than the settings': refused with the reason, the table
+    // left with no effect.
+    let mut store = map_store(CutFlash::new(image, None));
+    let mut table = vec![7.0f32; MAP_VALUES];
+    let p = MapParams {
+        bins: 256.0,
+        ..MapParams::DEFAULT
+    };
+    let r = restore(&mut store, &p, &mut table);
+    assert_eq!(
+        r,
+        Err("stored map: another period or bin count than map.period and map.bins")
+    );
+    assert!(table.chunks(2).all(|c| c[0] == 0.0 && c[1] == 1.0));
+}

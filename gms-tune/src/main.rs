@@ -325,6 +325,9 @@ enum Cmd {
         /// Write the map into the device and switch it on (map.enable 1).
         #[arg(long)]
         apply: bool,
+        /// Apply it and save it with the parameters (the bridge is switched off to save).
+        #[arg(long)]
+        save: bool,
     },
 }
 
@@ -593,6 +596,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             order,
             out,
             apply,
+            save,
         } => map::run(
             &mut link,
             &map::Args {
@@ -604,7 +608,8 @@ fn run(cli: Cli) -> Result<(), Fail> {
                     order,
                 },
                 out,
-                apply,
+                apply: apply || save,
+                save,
             },
         )?,
         #[cfg(feature = "ui")]

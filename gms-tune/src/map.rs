@@ -19,6 +19,8 @@ pub struct Args {
     pub out: PathBuf,
     /// Write the map into the device and switch it on.
     pub apply: bool,
+    /// And save it (with the parameters, in flash).
+    pub save: bool,
 }
 
 /// Measures, fits, writes, applies.
@@ -82,6 +84,11 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         let n =
             gms_bench::posmap::write(link, &map, true).map_err(|e| Fail::Device(e.to_string()))?;
         println!("wrote the {n} bins into the device; map.enable 1");
+        if a.save {
+            link.ask(gms_core::protocol::Command::Disable)?;
+            link.ask(gms_core::protocol::Command::Save)?;
+            println!("saved (the bridge is off)");
+        }
     }
     Ok(())
 }

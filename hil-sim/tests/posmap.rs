@@ -139,3 +139,36 @@ fn the_map_cancels_the_ripple_and_does_no_harm_without_it() {
         }
     }
 }
+
+/// The map survives `save` and a power cycle: the table is read back bit for bit after the
+/// restart, with `map.enable` as saved; `load` puts a saved map back over another.
+#[test]
+fn the_map_survives_save_and_a_power_cycle() {
+    let sc = Scenario::parse(RIPPLE, "ripple").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let s = settings::read(&mut dev).unwrap();
+    let plan = MapPlan {
+        bins: 128,
+        order: 40,
+        ..MapPlan::default()
+    };
+    let data = posmap::measure(&mut dev, &plan).unwrap();
+    let map = posmap::fit(&data, &plan, posmap::model_sliding_friction(&s, plan.speed)).unwrap();
+    posmap::write(&mut dev, &map, true).unwrap();
+    let before = posmap::read(&mut dev).unwrap();
+    assert_eq!(before.len(), 128);
+    assert!(dev.ask("disable").starts_with("ok"));
+    assert!(dev.ask("save").starts_with("ok"), "save");
+    // A power cycle on the same flash.
+    let flash = dev.into_flash();
+    let mut dev = LocalDevice::with_flash(&sc, flash).unwrap();
+    assert_eq!(gms_bench::get_param(&mut dev, "map.enable").unwrap(), 1.0);
+    assert_eq!(gms_bench::get_param(&mut dev, "map.bins").unwrap(), 128.0);
+    assert_eq!(posmap::read(&mut dev).unwrap(), before);
+    // Cleared, then `load`: the saved table again.
+    assert!(dev.ask("set map.enable 0").starts_with("ok"));
+    assert!(dev.ask("map clear").starts_with("ok"));
+    assert_ne!(posmap::read(&mut dev).unwrap(), before);
+    assert!(dev.ask("load").starts_with("ok"));
+    assert_eq!(posmap::read(&mut dev).unwrap(), before);
+}

@@ -148,6 +148,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
     static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
     // SAFETY: the benchmark's references to the table, one per call, never alive together.
     let map = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
+    gms_core::posmap::clear(map);
     let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture).with_map(map);
     let mut mb = Mailbox::new();
     // About 0.02 A: the board's 16 conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).

@@ -238,15 +238,11 @@ impl ControlLoop {
         }
     }
 
-    /// The loop with a position map's table (`table`: [`crate::posmap::MAP_VALUES`] values;
-    /// cleared: offsets 0, scales 1). Without one the map settings have no effect and the
-    /// map's requests read and write nothing.
+    /// The loop with a position map's table (`table`: [`crate::posmap::MAP_VALUES`] values,
+    /// as the start-up left it: [`crate::posmap::restore`], or [`crate::posmap::clear`]ed).
+    /// Without one the map settings have no effect and the map's requests read and write
+    /// nothing.
     pub fn with_map(mut self, table: MapTable) -> Self {
-        for pair in table.chunks_exact_mut(2) {
-            if let [o, k] = pair {
-                (*o, *k) = (0.0, 1.0);
-            }
-        }
         self.map_table = Some(table);
         self.map_cursor_from(self.r.pos);
         self
@@ -440,11 +436,7 @@ impl ControlLoop {
             }
             Some(MapRequest::Clear) => {
                 if let Some(t) = self.map_table.as_deref_mut() {
-                    for pair in t.chunks_exact_mut(2) {
-                        if let [o, k] = pair {
-                            (*o, *k) = (0.0, 1.0);
-                        }
-                    }
+                    crate::posmap::clear(t);
                 }
             }
             None => {}

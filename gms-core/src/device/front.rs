@@ -50,6 +50,21 @@ pub trait ParamStore {
     fn save(&mut self, rec: &[u8; RECORD_LEN]) -> Result<(), StoreError>;
     /// The last record stored, `None` if nothing was ever saved.
     fn load(&mut self) -> Result<Option<[u8; RECORD_LEN]>, StoreError>;
+    /// Where a position map's record is put together before [`ParamStore::save_map`] and
+    /// found after [`ParamStore::load_map`] (`None`: this store keeps no map).
+    fn map_buffer(&mut self) -> Option<&mut [u8]> {
+        None
+    }
+    /// Stores the map record in the first `len` bytes of the map buffer, replacing the last
+    /// (the old one stays valid until the new one is whole).
+    fn save_map(&mut self, len: usize) -> Result<(), StoreError> {
+        let _ = len;
+        Err(StoreError::Flash)
+    }
+    /// The last map record stored, into the map buffer: its length, `None` if none.
+    fn load_map(&mut self) -> Result<Option<usize>, StoreError> {
+        Ok(None)
+    }
 }
 
 /// The loop's parameter set for `s` on `board`: the controller, the limits and the PWM timing;
@@ -220,39 +235,76 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// them, so that a reply and the status after it agree. If the loop does not take them
     /// within the link's timeout they are withdrawn and nothing changes.
     fn post(&mut self, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
-        self.link.with_mailbox(|m| m.post(f));
-        self.wait_taken()
+        post_on(&mut self.link, f)
     }
 
-    /// The wait of [`Front::post`], one copy for every request (not generic: the firmware's
-    /// flash).
-    fn wait_taken(&mut self) -> Result<(), &'static str> {
-        let t0 = self.link.now_us();
-        let timeout = self.link.timeout_us();
-        loop {
-            let (pending, taken, steps) = self
-                .link
-                .with_mailbox(|m| (m.posted, m.taken_at, m.status.steps));
-            if !pending && steps > taken {
+    /// Stores the loop's position map (read from it in chunks into the store's map buffer)
+    /// beside the parameter record; nothing when the store keeps no map or the loop has none.
+    fn save_map(&mut self) -> Result<(), &'static str> {
+        let (bins, period) = (self.settings.map.bins as u32, self.settings.map.period);
+        let Front { link, store, .. } = self;
+        let Some(buf) = store.map_buffer() else {
+            return Ok(());
+        };
+        let mut at = 0;
+        while at < bins {
+            post_on(link, |r| {
+                r.map = Some(MapRequest::Read {
+                    start: at,
+                    max: bins - at,
+                })
+            })?;
+            let c = link.with_mailbox(|m| m.chunk);
+            if c.start != at || c.samples == 0 || c.nfields != 2 {
+                // A loop without a table: nothing to keep.
                 return Ok(());
             }
-            if self.link.now_us().saturating_sub(t0) > timeout {
-                let withdrawn = self.link.with_mailbox(|m| {
-                    let p = m.posted;
-                    if p {
-                        m.requests = Requests::default();
-                        m.posted = false;
-                    }
-                    p
-                });
-                return if withdrawn {
-                    Err("control loop not responding")
-                } else {
-                    Ok(())
-                };
+            for (k, v) in c.values.iter().enumerate().take(2 * c.samples as usize) {
+                crate::posmap::map_record_put(buf, 2 * at as usize + k, *v);
             }
-            self.link.pause();
+            at += c.samples;
         }
+        let len = crate::posmap::map_record_finish(period, bins, buf);
+        store
+            .save_map(len)
+            .map_err(|_| "store write failed (the map)")
+    }
+
+    /// Loads the stored position map into the loop's table (the settings' geometry; checked
+    /// whole first, then written in pieces while the bridge is off); nothing when none is
+    /// stored. A map of another period or bin count is refused with the reason.
+    fn load_map(&mut self) -> Result<(), &'static str> {
+        let p = self.settings.map;
+        let Front { link, store, .. } = self;
+        let len = match store.load_map() {
+            Ok(Some(len)) => len,
+            Ok(None) => return Ok(()),
+            Err(_) => return Err("stored map unreadable"),
+        };
+        let Some(buf) = store.map_buffer() else {
+            return Ok(());
+        };
+        let rec = buf.get(..len).ok_or("stored map: wrong length")?;
+        crate::posmap::decode_map(rec, &p, &mut [])
+            .map_err(crate::posmap::MapRecordError::reason)?;
+        let bins = p.bins as usize;
+        let mut start = 0;
+        while start < bins {
+            let n = (bins - start).min(MAP_WRITE_BINS);
+            let mut values = [0.0f32; 2 * MAP_WRITE_BINS];
+            for (k, v) in values.iter_mut().enumerate().take(2 * n) {
+                *v = crate::posmap::map_record_value(rec, 2 * start + k);
+            }
+            post_on(link, |r| {
+                r.map = Some(MapRequest::Write {
+                    start: start as u32,
+                    n: n as u32,
+                    values,
+                })
+            })?;
+            start += n;
+        }
+        Ok(())
     }
 
     /// One telemetry line (`# t=… pos=…\n`) of the fields streamed, SI units.
@@ -300,9 +352,12 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         }
         let rec = drive::encode_settings(&self.settings);
         let r = self.store.save(&rec);
+        // The position map beside it (a store that keeps one, a loop that has one).
+        let m = if r.is_ok() { self.save_map() } else { Ok(()) };
         // A flash write stalls the CPU on a board: the statistics start afresh.
         let _ = self.post(|r| r.reset_stats = true);
-        r.map_err(|_| "store write failed")
+        r.map_err(|_| "store write failed")?;
+        m
     }
 
     fn load(&mut self) -> Result<(), &'static str> {
@@ -315,7 +370,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             Err(_) => return Err("store read failed"),
         };
         let s = drive::decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
-        self.apply(s)
+        self.apply(s)?;
+        self.load_map()
     }
 
     fn defaults(&mut self) -> Result<(), &'static str> {
@@ -739,5 +795,41 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             write!(out, ",{}", Num(c as f32))?;
         }
         Ok(())
+    }
+}
+
+/// [`Front::post`] on a link: the requests `f` fills in posted, and the wait until the loop
+/// has taken them.
+fn post_on<L: LoopLink>(link: &mut L, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
+    link.with_mailbox(|m| m.post(f));
+    wait_taken(link)
+}
+
+/// The wait of [`Front::post`], one copy for every request (not generic over the requests:
+/// the firmware's flash).
+fn wait_taken<L: LoopLink>(link: &mut L) -> Result<(), &'static str> {
+    let t0 = link.now_us();
+    let timeout = link.timeout_us();
+    loop {
+        let (pending, taken, steps) = link.with_mailbox(|m| (m.posted, m.taken_at, m.status.steps));
+        if !pending && steps > taken {
+            return Ok(());
+        }
+        if link.now_us().saturating_sub(t0) > timeout {
+            let withdrawn = link.with_mailbox(|m| {
+                let p = m.posted;
+                if p {
+                    m.requests = Requests::default();
+                    m.posted = false;
+                }
+                p
+            });
+            return if withdrawn {
+                Err("control loop not responding")
+            } else {
+                Ok(())
+            };
+        }
+        link.pause();
     }
 }

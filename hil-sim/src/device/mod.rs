@@ -170,9 +170,15 @@ struct PowerUp {
 fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let defaults = sc.controller_params()?;
     let board = board(sc);
-    let mut store = FlashStore::new(flash);
+    let mut store = FlashStore::new(flash).with_map_buffer(Box::leak(
+        vec![0u8; gms_core::store::MAP_BUFFER_LEN].into_boxed_slice(),
+    ));
     let start = device::startup(store.load(), &defaults, &board)
         .map_err(|e| format!("the scenario's controller: {e}"))?;
+    // The position map's table: the stored map for these settings, or none (a stored map of
+    // another geometry is left out, as on the board).
+    let table = Box::leak(vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice());
+    let _ = gms_core::posmap::restore(&mut store, &start.settings.map, table);
     let adc = Adc::new(sc);
     let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
     let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
@@ -199,9 +205,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
                 // One buffer per power-up of a virtual device (a board's is a static).
                 Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
             )
-            .with_map(Box::leak(
-                vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice(),
-            )),
+            .with_map(table),
             plant,
             adc,
             substeps: sc.plant.substeps,

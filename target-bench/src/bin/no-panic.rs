@@ -158,6 +158,7 @@ fn main() -> ! {
     static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
     // SAFETY: the check's only reference to the table, taken once.
     let map_table = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
+    gms_core::posmap::clear(map_table);
     let core = ControlLoop::new(
         board,
         start.applied,
