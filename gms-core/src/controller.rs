@@ -576,13 +576,9 @@ impl<const N: usize> Controller<N> {
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
         self.shaping.take_state_from(&old.shaping);
-        // The map's sample goes on (the loop sets the next one); a map switched off is gone
-        // from the next step, the integrator taking its torque over below.
-        self.map_sample = if self.p.map.enable != 0.0 {
-            old.map_sample
-        } else {
-            (0.0, 1.0)
-        };
+        // The map's sample is this controller's own (the loop sets it, for the new settings,
+        // before the hand-over): a map switched on or off changes the feedforward, and the
+        // integrator takes the difference over below.
 
         // Position loop: the same torque (times k_M new / k_M old) at the last inputs.
         let p = self.p;

@@ -172,3 +172,46 @@ fn the_map_survives_save_and_a_power_cycle() {
     assert!(dev.ask("load").starts_with("ok"));
     assert_eq!(posmap::read(&mut dev).unwrap(), before);
 }
+
+/// Switching the map on and off while the axis holds is bumpless: the current commanded does
+/// not step by the map's offset at the switch (the position loop's integrator takes it over).
+#[test]
+fn switching_the_map_is_bumpless() {
+    let sc = Scenario::parse(RIPPLE, "ripple").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    // A map of a constant offset of 50 µN·m (7.6 mA at k_M 6.6 mN·m/A) and scale 1.
+    let n = 64;
+    let map = posmap::PosMap {
+        period: std::f64::consts::TAU,
+        angle: (0..n)
+            .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
+            .collect(),
+        offset: vec![50e-6; n],
+        scale: vec![1.0; n],
+        friction: f64::NAN,
+        residual: (0.0, 0.0),
+    };
+    posmap::write(&mut dev, &map, false).unwrap();
+    use gms_bench::Bench;
+    dev.request("enable").unwrap();
+    dev.wait(0.3).unwrap();
+    let mut steps = Vec::new();
+    for on in ["0", "1", "0"] {
+        dev.capture("t,current", 1, 400, false).unwrap();
+        dev.wait(0.01).unwrap();
+        dev.request(&format!("set map.enable {on}")).unwrap();
+        dev.wait(0.05).unwrap();
+        let rows = gms_bench::capture_rows(&mut dev).unwrap();
+        let d: Vec<f64> = rows.windows(2).map(|w| (w[1][1] - w[0][1]).abs()).collect();
+        steps.push(d.iter().fold(0.0f64, |a, x| a.max(*x)));
+    }
+    println!(
+        "largest step of the current between samples: holding {:.2e} A; around the switch on {:.2e} A, off {:.2e} A (the offset is 7.6e-3 A)",
+        steps[0], steps[1], steps[2]
+    );
+    // No larger than the sense's noise and the loop's dither while it holds.
+    assert!(
+        steps[1] < 1.5 * steps[0] && steps[2] < 1.5 * steps[0],
+        "{steps:?}"
+    );
+}

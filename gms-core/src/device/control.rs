@@ -371,6 +371,15 @@ impl ControlLoop {
             // Same rates: the running state is handed over (bumpless); new rates: the new
             // controller starts at rest, keeping what the adaptation learned about the axis.
             let mut next = a.ctrl;
+            // The new map's sample at the reference before the hand-over, so that switching the
+            // map on or off (or another table geometry) is bumpless.
+            if next.params().map.enable != 0.0
+                && let Some(t) = self.map_table.as_deref()
+            {
+                let mut c = MapCursor::new(&next.params().map, next.rad_per_count(), self.r.pos);
+                let (o, s) = c.sample(self.r.pos, t);
+                next.set_map_sample(o, s);
+            }
             next.take_state_from(&self.ctrl);
             let (old, new) = (self.ctrl.params(), next.params());
             // A direction or a scale changed: the loop's feedback changes sign or size.
