@@ -11,6 +11,8 @@
 //! - [`experiments`]: the paper's sliding, pre-sliding and frictional-lag runs, their plans.
 //! - [`frf`](mod@frf): frequency response — the stepped-sine sweep of the device's own
 //!   measurement, the transfer functions, the margins, the pre-sliding stiffness.
+//! - [`ilc`]: iterative learning control's law (a gain with a lead, a zero-phase Q filter, the
+//!   iterations kept and divergence stopped), for the repeated motions of issue 30.
 //! - [`identify`]: the whole identification on a device, loading a parameter file.
 //! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
 //! - [`posmap`]: the position map measured — runs both ways, a harmonic fit, the cogging
@@ -31,6 +33,7 @@ pub mod estimate;
 pub mod experiments;
 pub mod frf;
 pub mod identify;
+pub mod ilc;
 pub mod paramfile;
 pub mod posmap;
 pub mod settings;
