@@ -414,7 +414,7 @@ pub fn soft_limits(b: &mut impl Bench) -> Result<(f64, f64), Error> {
 /// The device's stroke limits narrowed to `window` each way around where the axis is;
 /// returns the previous ones.
 pub fn narrow_limits(b: &mut impl Bench, window: f64) -> Result<(f64, f64), Error> {
-    let (lo, hi) = (get_param(b, "lim.pos_min")?, get_param(b, "lim.pos_max")?);
+    let (lo, hi) = soft_limits(b)?;
     let x = position(b)?;
     let (nlo, nhi) = ((x - window).max(lo), (x + window).min(hi));
     // Narrowing each side keeps pos_min < pos_max after each set.

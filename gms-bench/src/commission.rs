@@ -419,6 +419,13 @@ pub const MIN_PHASE_MARGIN: f64 = 30.0;
 /// The factor the position gains are backed off by, and how many times at most.
 pub const BACK_OFF: (f64, usize) = (0.7, 3);
 
+/// The position gains times [`BACK_OFF`]'s factor.
+fn back_off(g: &mut gms_ident::gains::PositionGains) {
+    g.kp *= BACK_OFF.0;
+    g.ki *= BACK_OFF.0;
+    g.kd *= BACK_OFF.0;
+}
+
 /// The modelled loop gain's margins for what `c` found (the linear model of
 /// `gms_ident::linear` with the measured R, L, k_M, J, the friction model's pre-sliding
 /// stiffness times `scale` and viscous term, and the device's settings `s` with the gains).
@@ -553,9 +560,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
                     "open loop: the measurement tripped ({e}): gains backed off ×{}",
                     BACK_OFF.0
                 ));
-                g.kp *= BACK_OFF.0;
-                g.ki *= BACK_OFF.0;
-                g.kd *= BACK_OFF.0;
+                back_off(&mut g);
                 continue;
             }
         };
@@ -590,9 +595,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
             "  warning: phase margin under {MIN_PHASE_MARGIN}°: position gains backed off ×{}",
             BACK_OFF.0
         ));
-        g.kp *= BACK_OFF.0;
-        g.ki *= BACK_OFF.0;
-        g.kd *= BACK_OFF.0;
+        back_off(&mut g);
     }
     // (The caller switches the bridge off after this step.)
     c.pos = Some(g);

@@ -277,14 +277,8 @@ pub fn csv(m: &PosMap) -> String {
 /// viscous term of its GMS model (`gms.*`, what `list` shows: the actuator's), as the
 /// controller's static map computes them.
 pub fn model_sliding_friction(s: &gms_core::protocol::Settings, speed: f64) -> f64 {
-    use gms_core::static_map::{StaticMap, StaticParams};
-    let g = &s.ff.actuator;
-    StaticMap::try_new(StaticParams {
-        stribeck: g.stribeck,
-        negative: g.negative,
-        sigma: g.sigma,
-    })
-    .map_or(0.0, |m| m.force_at(speed.abs() as f32) as f64)
+    gms_core::static_map::StaticMap::try_new(s.ff.actuator.static_params())
+        .map_or(0.0, |m| m.force_at(speed.abs() as f32) as f64)
 }
 
 /// Writes `map` into the device's table (its geometry set first, the map off while it is

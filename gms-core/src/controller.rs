@@ -12,7 +12,7 @@ use crate::math::{self, clamp};
 use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::shaping::{Shaping, ShapingParams};
-use crate::static_map::{StaticMap, StaticParams};
+use crate::static_map::StaticMap;
 
 /// The least stiffness of a GMS block in use on the device [N·m/rad] (0 marks an unused one).
 pub const MIN_BLOCK_K: f32 = 1e-12;
@@ -399,14 +399,6 @@ pub struct Controller<const N: usize> {
     out: PositionOutput,
 }
 
-fn static_of<const N: usize>(g: &GmsParams<N>) -> StaticParams {
-    StaticParams {
-        stribeck: g.stribeck,
-        negative: g.negative,
-        sigma: g.sigma,
-    }
-}
-
 impl<const N: usize> Controller<N> {
     /// Validates `p` into a controller at rest.
     pub fn try_new(p: ControllerParams<N>) -> Result<Self, ControllerError> {
@@ -414,11 +406,11 @@ impl<const N: usize> Controller<N> {
         let dt_pos = 1.0 / p.pos_rate_hz;
         let gms_act = Gms::try_new(p.ff.actuator).map_err(ControllerError::Actuator)?;
         let map_act =
-            StaticMap::try_new(static_of(&p.ff.actuator)).map_err(ControllerError::Actuator)?;
+            StaticMap::try_new(p.ff.actuator.static_params()).map_err(ControllerError::Actuator)?;
         let (gms_guide, map_guide) = match &p.ff.guideway {
             Some(g) => (
                 Some(Gms::try_new(*g).map_err(ControllerError::Guideway)?),
-                Some(StaticMap::try_new(static_of(g)).map_err(ControllerError::Guideway)?),
+                Some(StaticMap::try_new(g.static_params()).map_err(ControllerError::Guideway)?),
             ),
             None => (None, None),
         };

@@ -203,7 +203,7 @@ pub struct Phasor {
 impl Phasor {
     /// Magnitude.
     pub fn abs(&self) -> f64 {
-        libm_hypot(self.re, self.im)
+        libm::hypot(self.re, self.im)
     }
 
     /// The ratio `self / den` as a complex number `(re, im)`: a transfer function's value.
@@ -217,19 +217,6 @@ impl Phasor {
             (self.im * den.re - self.re * den.im) / d,
         )
     }
-}
-
-fn libm_hypot(a: f64, b: f64) -> f64 {
-    let s = a * a + b * b;
-    // Newton's square root from a good start (no std on the target).
-    if s <= 0.0 || !s.is_finite() {
-        return if s == 0.0 { 0.0 } else { f64::NAN };
-    }
-    let mut r = f64::from_bits((s.to_bits() >> 1) + (1023u64 << 51));
-    for _ in 0..6 {
-        r = 0.5 * (r + s / r);
-    }
-    r
 }
 
 impl LockIn {

@@ -49,6 +49,16 @@ pub struct GmsParams<const N: usize> {
 }
 
 impl<const N: usize> GmsParams<N> {
+    /// The static map of the same sliding friction: the Stribeck curve (and its negative side)
+    /// and the viscous term, `s(v) + σ v` (what the GMS model tends to at a steady speed).
+    pub fn static_params(&self) -> crate::static_map::StaticParams {
+        crate::static_map::StaticParams {
+            stribeck: self.stribeck,
+            negative: self.negative,
+            sigma: self.sigma,
+        }
+    }
+
     /// The number of blocks in use: those before the first unused one (`k = alpha = 0`).
     /// A valid set uses at least one, and every block after the first unused one is unused.
     pub fn blocks_used(&self) -> usize {

@@ -135,13 +135,6 @@ impl MapCursor {
         let (a, b) = (at(i), at(j));
         (a.0 + frac * (b.0 - a.0), a.1 + frac * (b.1 - a.1))
     }
-
-    /// The bin the reference is in now, and the fraction towards the next.
-    pub fn position(&self) -> (u32, f32) {
-        let u = self.phase as f32 * self.per_sub;
-        let i = (u as u32).min(self.bins.saturating_sub(1));
-        (i, u - i as f32)
-    }
 }
 
 /// Bytes of a stored map: version (1), period (f32), bins (u16), the table's values (f32,

@@ -190,11 +190,6 @@ impl Shaping {
         })
     }
 
-    /// True when every filter is off (the cascade passes its input unchanged).
-    pub fn is_off(&self) -> bool {
-        self.stages.iter().all(Option::is_none)
-    }
-
     /// Filters one sample (the stages in order: notch 1, notch 2, low-pass).
     pub fn run(&mut self, x: f32) -> f32 {
         let mut y = x;

@@ -1091,14 +1091,23 @@ fn step_until(
 
 /// Types `text` into the parameter field `path` and presses Enter (a set).
 fn type_param(h: &mut egui_kittest::Harness<'static, gms_tune::ui::App>, path: &str, text: &str) {
+    replace_text(h, path, text);
+    h.key_press(egui::Key::Enter);
+    h.step();
+}
+
+/// Replaces the text of the field labelled `label` with `text`.
+fn replace_text(
+    h: &mut egui_kittest::Harness<'static, gms_tune::ui::App>,
+    label: &str,
+    text: &str,
+) {
     use egui_kittest::kittest::Queryable;
-    h.get_by_label(path).click();
+    h.get_by_label(label).click();
     h.step();
     h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
     h.step();
-    h.get_by_label(path).type_text(text);
-    h.step();
-    h.key_press(egui::Key::Enter);
+    h.get_by_label(label).type_text(text);
     h.step();
 }
 
@@ -1210,12 +1219,7 @@ fn the_window_runs_tune_ff_and_applies_it() {
     h.state_mut().tab = gms_tune::ui::app::Tab::Experiments;
     h.step();
     for (label, v) in [("steps", "5"), ("seconds", "2")] {
-        h.get_by_label(label).click();
-        h.step();
-        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
-        h.step();
-        h.get_by_label(label).type_text(v);
-        h.step();
+        replace_text(&mut h, label, v);
     }
     h.get_by_label("Tune ff").click();
     h.step();
@@ -1560,12 +1564,7 @@ fn the_window_measures_a_frequency_response() {
     h.state_mut().tab = gms_tune::ui::app::Tab::Frf;
     h.step();
     for (label, v) in [("points", "12"), ("amplitude", "0.003")] {
-        h.get_by_label(label).click();
-        h.step();
-        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
-        h.step();
-        h.get_by_label(label).type_text(v);
-        h.step();
+        replace_text(&mut h, label, v);
     }
     h.get_by_label("Measure").click();
     h.step();
@@ -1604,12 +1603,7 @@ fn the_window_measures_and_applies_a_position_map() {
     assert!(step_until(&mut h, 10.0, |a| !a.rows.is_empty()));
     h.state_mut().tab = gms_tune::ui::app::Tab::Map;
     h.step();
-    h.get_by_label("bins").click();
-    h.step();
-    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::A);
-    h.step();
-    h.get_by_label("bins").type_text("256");
-    h.step();
+    replace_text(&mut h, "bins", "256");
     h.get_by_label("Measure the map").click();
     h.step();
     assert!(h.state().running.is_some());

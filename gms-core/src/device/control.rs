@@ -244,16 +244,15 @@ impl ControlLoop {
     /// nothing.
     pub fn with_map(mut self, table: MapTable) -> Self {
         self.map_table = Some(table);
-        self.map_cursor_from(self.r.pos);
+        self.map_cursor = self.map_cursor_for(self.ctrl.params(), self.ctrl.rad_per_count());
         self
     }
 
-    /// The map's cursor for the settings now at the reference `reference` (none while the map
-    /// is off or there is no table).
-    fn map_cursor_from(&mut self, reference: i64) {
-        let p = self.ctrl.params();
-        self.map_cursor = (p.map.enable != 0.0 && self.map_table.is_some())
-            .then(|| MapCursor::new(&p.map, self.ctrl.rad_per_count(), reference));
+    /// The map's cursor for the settings `p` (an encoder of `rpc` rad/count) at the reference
+    /// now (none while the map is off or there is no table).
+    fn map_cursor_for(&self, p: &crate::protocol::Settings, rpc: f32) -> Option<MapCursor> {
+        (p.map.enable != 0.0 && self.map_table.is_some())
+            .then(|| MapCursor::new(&p.map, rpc, self.r.pos))
     }
 
     /// The PWM timer setting (prescaler, period) of the running set.
@@ -371,12 +370,10 @@ impl ControlLoop {
             // Same rates: the running state is handed over (bumpless); new rates: the new
             // controller starts at rest, keeping what the adaptation learned about the axis.
             let mut next = a.ctrl;
-            // The new map's sample at the reference before the hand-over, so that switching the
-            // map on or off (or another table geometry) is bumpless.
-            if next.params().map.enable != 0.0
-                && let Some(t) = self.map_table.as_deref()
-            {
-                let mut c = MapCursor::new(&next.params().map, next.rad_per_count(), self.r.pos);
+            // The new map's cursor, and its sample at the reference set before the hand-over,
+            // so that switching the map on or off (or another table geometry) is bumpless.
+            let mut cursor = self.map_cursor_for(next.params(), next.rad_per_count());
+            if let (Some(c), Some(t)) = (&mut cursor, self.map_table.as_deref()) {
                 let (o, s) = c.sample(self.r.pos, t);
                 next.set_map_sample(o, s);
             }
@@ -408,7 +405,7 @@ impl ControlLoop {
             }
             self.ctrl = next;
             self.limits = a.limits;
-            self.map_cursor_from(self.r.pos);
+            self.map_cursor = cursor;
         }
         match req.map {
             Some(MapRequest::Write { start, n, values }) => {
@@ -537,34 +534,11 @@ impl ControlLoop {
     /// One PWM period: `inp` as measured now, `exchange` the shell's access to the mailbox
     /// (called once per position step with the status; returns the pending requests).
     ///
-    /// In two halves around the exchange (`step_in`, `step_out`), inlined here.
     pub fn step(
         &mut self,
         inp: Inputs,
         exchange: impl FnOnce(Status, Handover<'_>) -> Option<Requests>,
     ) -> Outputs {
-        let (position, faults) = self.step_in(inp);
-        let mut req = if position {
-            // Handed over by reference and then dropped: a chunk or a report is not copied
-            // in a step that has none.
-            let h = Handover {
-                chunk: self.chunk.as_ref(),
-                frf: self.frf_report.as_ref(),
-            };
-            let req = exchange(self.status(), h);
-            self.chunk = None;
-            self.frf_report = None;
-            req
-        } else {
-            None
-        };
-        self.step_out(position, faults, &mut req)
-    }
-
-    /// The period's inputs read; true when it is a position step (and the exchange is due),
-    /// with the faults found so far.
-    #[inline(always)]
-    fn step_in(&mut self, inp: Inputs) -> (bool, Faults) {
         self.last_raw = inp.encoder;
         self.enc
             .update(directed(inp.encoder, self.ctrl.params().enc_dir));
@@ -581,20 +555,19 @@ impl ControlLoop {
                 new_faults.latch(Faults::OVERRUN);
             }
         }
-        (self.phase == 0, new_faults)
-    }
-
-    /// The rest of the period after the exchange (`req`: what it gave, at a position step).
-    #[inline(always)]
-    fn step_out(&mut self, position: bool, faults: Faults, req: &mut Option<Requests>) -> Outputs {
         let mut timing = None;
         let mut sample = None;
-        let mut new_faults = faults;
-        if position {
-            // Moved out only when there is one (an `Option::take` copies the whole value).
-            if req.is_some()
-                && let Some(req) = req.take()
-            {
+        if self.phase == 0 {
+            // Handed over by reference and then dropped: a chunk or a report is not copied
+            // in a step that has none.
+            let h = Handover {
+                chunk: self.chunk.as_ref(),
+                frf: self.frf_report.as_ref(),
+            };
+            let req = exchange(self.status(), h);
+            self.chunk = None;
+            self.frf_report = None;
+            if let Some(req) = req {
                 timing = self.take(req);
             }
             self.steps = self.steps.wrapping_add(1);

@@ -238,6 +238,39 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         post_on(&mut self.link, f)
     }
 
+    /// Writes rows `start..end` that the loop copies into the mailbox's chunk (`ask` puts the
+    /// request for the rows from `at`, `max` at most), one a line, values comma-separated;
+    /// `missing` when a chunk does not come.
+    fn write_chunks(
+        &mut self,
+        (start, end): (u32, u32),
+        ask: impl Fn(&mut Requests, u32, u32),
+        missing: &'static str,
+        out: &mut dyn Write,
+    ) -> Result<(), &'static str> {
+        let mut at = start;
+        while at < end {
+            self.post(|r| ask(r, at, end - at))?;
+            let c = self.link.with_mailbox(|m| m.chunk);
+            if c.start != at || c.samples == 0 {
+                return Err(missing);
+            }
+            let n = c.nfields as usize;
+            for s in 0..c.samples as usize {
+                let row = c.values.get(s * n..(s + 1) * n).unwrap_or(&[]);
+                for (k, v) in row.iter().enumerate() {
+                    if k > 0 {
+                        out.write_str(",").map_err(|_| "reply too long")?;
+                    }
+                    write!(out, "{}", Num(*v)).map_err(|_| "reply too long")?;
+                }
+                writeln!(out).map_err(|_| "reply too long")?;
+            }
+            at += c.samples;
+        }
+        Ok(())
+    }
+
     /// Stores the loop's position map (read from it in chunks into the store's map buffer)
     /// beside the parameter record; nothing when the store keeps no map or the loop has none.
     fn save_map(&mut self) -> Result<(), &'static str> {
@@ -492,32 +525,12 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             return Err("no capture to read (capture: state)");
         }
         let end = start.saturating_add(count).min(st.captured);
-        let mut at = start;
-        while at < end {
-            self.post(|r| {
-                r.capture = Some(CaptureRequest::Read {
-                    start: at,
-                    max: end - at,
-                })
-            })?;
-            let c = self.link.with_mailbox(|m| m.chunk);
-            if c.start != at || c.samples == 0 {
-                return Err("capture read failed");
-            }
-            let n = c.nfields as usize;
-            for s in 0..c.samples as usize {
-                let row = c.values.get(s * n..(s + 1) * n).unwrap_or(&[]);
-                for (k, v) in row.iter().enumerate() {
-                    if k > 0 {
-                        out.write_str(",").map_err(|_| "reply too long")?;
-                    }
-                    write!(out, "{}", Num(*v)).map_err(|_| "reply too long")?;
-                }
-                writeln!(out).map_err(|_| "reply too long")?;
-            }
-            at += c.samples;
-        }
-        Ok(())
+        self.write_chunks(
+            (start, end),
+            |r, start, max| r.capture = Some(CaptureRequest::Read { start, max }),
+            "capture read failed",
+            out,
+        )
     }
 
     fn current(&mut self, amps: f32, seconds: Option<f32>) -> Result<(), &'static str> {
@@ -731,28 +744,12 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         let end = start
             .saturating_add(count)
             .min(self.settings.map.bins as u32);
-        let mut at = start;
-        while at < end {
-            self.post(|r| {
-                r.map = Some(MapRequest::Read {
-                    start: at,
-                    max: end - at,
-                })
-            })?;
-            let c = self.link.with_mailbox(|m| m.chunk);
-            if c.start != at || c.samples == 0 || c.nfields != 2 {
-                return Err("no position map on this device");
-            }
-            for s in 0..c.samples as usize {
-                let (o, k) = match c.values.get(2 * s..2 * s + 2) {
-                    Some([o, k]) => (*o, *k),
-                    _ => (0.0, 1.0),
-                };
-                writeln!(out, "{},{}", Num(o), Num(k)).map_err(|_| "reply too long")?;
-            }
-            at += c.samples;
-        }
-        Ok(())
+        self.write_chunks(
+            (start, end),
+            |r, start, max| r.map = Some(MapRequest::Read { start, max }),
+            "no position map on this device",
+            out,
+        )
     }
 
     fn map_clear(&mut self) -> Result<(), &'static str> {
