@@ -161,8 +161,12 @@ async fn main(spawner: Spawner) {
         Ok(false) => {}
         Err(why) => warn!("{}", why),
     }
+    // The table motion's buffer (reference, two corrections, two period errors: 20 KiB).
+    static TABLE: ConstStaticCell<[f32; gms_core::table::TABLE_VALUES]> =
+        ConstStaticCell::new([0.0; gms_core::table::TABLE_VALUES]);
     let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture)
-        .with_map(table);
+        .with_map(table)
+        .with_table(TABLE.take());
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     Loop::new(hw, core, telemetry_tx).hand_over();
     // The stack guard: an MPU region with no access at the bottom of the stack, before
@@ -187,7 +191,8 @@ async fn main(spawner: Spawner) {
         start.settings,
         defaults,
     )
-    .with_configured(start.configured, false);
+    .with_configured(start.configured, false)
+    .with_table();
     #[cfg(feature = "board-f405")]
     let port = {
         // USB CDC-ACM.

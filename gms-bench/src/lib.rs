@@ -13,6 +13,8 @@
 //!   measurement, the transfer functions, the margins, the pre-sliding stiffness.
 //! - [`ilc`]: iterative learning control's law (a gain with a lead, a zero-phase Q filter, the
 //!   iterations kept and divergence stopped), for the repeated motions of issue 30.
+//! - [`learn`]: learning from repetition on a device — the table motion's path, upload and
+//!   error reads, the iterations.
 //! - [`identify`]: the whole identification on a device, loading a parameter file.
 //! - [`paramfile`]: the parameter file ↔ the device's settings, in one place.
 //! - [`posmap`]: the position map measured — runs both ways, a harmonic fit, the cogging
@@ -34,6 +36,7 @@ pub mod experiments;
 pub mod frf;
 pub mod identify;
 pub mod ilc;
+pub mod learn;
 pub mod paramfile;
 pub mod posmap;
 pub mod settings;

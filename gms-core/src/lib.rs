@@ -47,6 +47,7 @@ pub mod static_map;
 #[cfg(feature = "store")]
 pub mod store;
 pub mod stribeck;
+pub mod table;
 
 pub use error::{Field, ParamError, Side};
 pub use gms::{Block, Gms, GmsParams, UNUSED_BLOCK};

@@ -506,7 +506,7 @@ fn block_count_is_staged_and_applied_with_the_blocks() {
 /// A command a host may send, within what `parse` accepts.
 fn any_command() -> impl Strategy<Value = (u8, String, String, f32, f32, u32, u32, bool)> {
     (
-        0u8..25,
+        0u8..34,
         "[a-z][a-z_.]{0,15}",
         "[a-z0-9_,.-]{1,12}",
         prop::num::f32::NORMAL | prop::num::f32::ZERO,
@@ -526,7 +526,8 @@ proptest! {
     fn a_written_command_parses_back_the_same(
         (which, path, value, x, pos, n, count, flag) in any_command()
     ) {
-        use gms_core::protocol::{CaptureCmd, Command, parse};
+        use gms_core::protocol::{CaptureCmd, Command, TableCmd, parse};
+        use gms_core::table::{Geometry, Which};
         use gms_core::reference::Sweep;
         // A value word must not be one of the keywords that change a command's meaning.
         prop_assume!(!matches!(value.as_str(), "off" | "read" | "next" | "current"));
@@ -561,6 +562,27 @@ proptest! {
             21 => Command::Capture(CaptureCmd::Read { start: n, count }),
             22 => Command::Stream { fields: &value, rate_hz: pos },
             23 => Command::StreamOff,
+            24 => Command::Table(TableCmd::Status),
+            25 => Command::Table(TableCmd::Write {
+                which: if flag { Which::Ref } else { Which::Corr },
+                start: n,
+                values: &value,
+            }),
+            26 => Command::Table(TableCmd::Set(Geometry {
+                points: n,
+                steps: count,
+                origin: (x as f64).clamp(-1e15, 1e15) as i64,
+            })),
+            27 => Command::Table(TableCmd::Use),
+            28 => Command::Table(TableCmd::CorrOff),
+            29 => Command::Table(TableCmd::Run(n)),
+            30 => Command::Table(TableCmd::Stop),
+            31 => Command::Table(TableCmd::Read {
+                which: [Which::Ref, Which::Corr, Which::Err][(n % 3) as usize],
+                start: n,
+                count,
+            }),
+            32 => Command::Table(TableCmd::Clear),
             _ => Command::Empty,
         };
         let line = c.to_string();

@@ -78,8 +78,48 @@ pub struct LinearAxis {
     current: usize,
     /// The position period \[s\].
     dt: f64,
+    ctrl: PositionController,
+}
+
+/// The device's position controller as a transfer function: the PID of
+/// `gms_core::controller` (integral including this step's error, derivative on the measured
+/// position's difference through the first-order filter) times the loop-shaping filters.
+pub struct PositionController {
     s: Settings,
     shaping: Option<Shaping>,
+}
+
+impl PositionController {
+    /// The controller of the settings `s`.
+    pub fn new(s: &Settings) -> Result<PositionController, String> {
+        let shaping = if s.shaping == gms_core::shaping::ShapingParams::OFF {
+            None
+        } else {
+            Some(
+                Shaping::try_new(&s.shaping, s.pos_rate_hz)
+                    .map_err(|e| format!("the filters: {}", e.reason()))?,
+            )
+        };
+        Ok(PositionController { s: *s, shaping })
+    }
+
+    /// The torque commanded per position error \[N·m/rad\] at `f_hz` (the PID and the
+    /// filters; the command is `−C θ` for the measured angle θ).
+    pub fn torque(&self, f_hz: f64) -> C64 {
+        let p = &self.s;
+        let dt = 1.0 / p.pos_rate_hz as f64;
+        let zi = C64::from_polar(1.0, -std::f64::consts::TAU * f_hz * dt);
+        let alpha = 1.0 - (-std::f64::consts::TAU * p.pid.d_filter_hz as f64 * dt).exp();
+        let one = C64::new(1.0, 0.0);
+        let pid = C64::new(p.pid.kp as f64, 0.0)
+            + p.pid.ki as f64 * dt / (one - zi)
+            + p.pid.kd as f64 * alpha * (one - zi) / (dt * (one - (1.0 - alpha) * zi));
+        let filt = self.shaping.as_ref().map_or(one, |sh| {
+            let (re, im) = sh.response(f_hz, p.pos_rate_hz as f64);
+            C64::new(re, im)
+        });
+        pid * filt
+    }
 }
 
 impl LinearAxis {
@@ -153,22 +193,13 @@ impl LinearAxis {
             b = &sa * b + &sb;
             a = &sa * a;
         }
-        let shaping = if s.shaping == gms_core::shaping::ShapingParams::OFF {
-            None
-        } else {
-            Some(
-                Shaping::try_new(&s.shaping, s.pos_rate_hz)
-                    .map_err(|e| format!("the filters: {}", e.reason()))?,
-            )
-        };
         Ok(LinearAxis {
             a,
             b,
             theta: 1,
             current: 0,
             dt: 1.0 / s.pos_rate_hz as f64,
-            s: *s,
-            shaping,
+            ctrl: PositionController::new(s)?,
         })
     }
 
@@ -204,19 +235,7 @@ impl LinearAxis {
     /// The position controller with its filters, from the measured angle to the current
     /// command (the command is `−C θ`) \[A/rad\] at `f_hz`.
     pub fn controller(&self, f_hz: f64) -> C64 {
-        let p = &self.s;
-        let zi = self.z(f_hz).inv();
-        let dt = self.dt;
-        let alpha = 1.0 - (-std::f64::consts::TAU * p.pid.d_filter_hz as f64 * dt).exp();
-        let one = C64::new(1.0, 0.0);
-        let pid = C64::new(p.pid.kp as f64, 0.0)
-            + p.pid.ki as f64 * dt / (one - zi)
-            + p.pid.kd as f64 * alpha * (one - zi) / (dt * (one - (1.0 - alpha) * zi));
-        let filt = self.shaping.as_ref().map_or(one, |sh| {
-            let (re, im) = sh.response(f_hz, p.pos_rate_hz as f64);
-            C64::new(re, im)
-        });
-        pid / p.motor.k_m as f64 * filt
+        self.ctrl.torque(f_hz) / self.ctrl.s.motor.k_m as f64
     }
 
     /// The loop gain `C P` at `f_hz`.

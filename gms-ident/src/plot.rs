@@ -364,3 +364,80 @@ pub fn bode_plot(
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
+
+/// Learning from repetition: the top panel each iteration's RMS and peak error \[counts\]
+/// (`iterations`: `(iteration, rms, peak)`), the bottom the error over the period \[counts\]
+/// against time \[s\] for the labelled passes in `errors` (e.g. the first and the last).
+pub fn learn_plot(
+    path: &Path,
+    title: &str,
+    iterations: &[(f64, f64, f64)],
+    errors: &[(&str, &[(f64, f64)])],
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (1100, 850)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| e.to_string())?;
+    let root = root
+        .titled(title, ("sans-serif", 22))
+        .map_err(|e| e.to_string())?;
+    let panels = root.split_evenly((2, 1));
+    let e = |msg: &dyn std::fmt::Display| msg.to_string();
+    let (x0, x1) = range(iterations.iter().map(|r| r.0));
+    let (_, y1) = range(iterations.iter().flat_map(|r| [r.1, r.2]));
+    let mut c = ChartBuilder::on(&panels[0])
+        .margin(8)
+        .caption("the error per iteration", ("sans-serif", 16))
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, 0.0..y1.max(1e-9))
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .x_desc("iteration")
+        .y_desc("error [counts]")
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (k, (name, col)) in [("RMS", BLUE), ("peak", RED)].into_iter().enumerate() {
+        let pts: Vec<(f64, f64)> = iterations
+            .iter()
+            .map(|r| (r.0, if k == 0 { r.1 } else { r.2 }))
+            .collect();
+        c.draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(2)))
+            .map_err(|x| e(&x))?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col));
+        c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled())))
+            .map_err(|x| e(&x))?;
+    }
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+    let (t0, t1) = range(errors.iter().flat_map(|(_, v)| v.iter().map(|p| p.0)));
+    let (lo, hi) = range(errors.iter().flat_map(|(_, v)| v.iter().map(|p| p.1)));
+    let mut c = ChartBuilder::on(&panels[1])
+        .margin(8)
+        .caption("the error over the period", ("sans-serif", 16))
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(t0..t1, lo..hi)
+        .map_err(|x| e(&x))?;
+    c.configure_mesh()
+        .x_desc("time in the period [s]")
+        .y_desc("error [counts]")
+        .draw()
+        .map_err(|x| e(&x))?;
+    for (i, (name, v)) in errors.iter().enumerate() {
+        let col = MODE_COLOURS[i % MODE_COLOURS.len()];
+        c.draw_series(LineSeries::new(v.iter().copied(), col))
+            .map_err(|x| e(&x))?
+            .label(*name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col));
+    }
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| e(&x))?;
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}

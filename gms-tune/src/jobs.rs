@@ -388,3 +388,65 @@ pub fn write_map(
     )
     .map_err(Error::Io)
 }
+
+/// Learning from repetition: `plan`'s motion played from the device's tables, the correction
+/// learned after each period (`each` told of every iteration as it comes); `iterations.csv`,
+/// `correction.csv` and `learning.svg` in `out` if given. `apply` leaves the best correction
+/// playing for the next runs of the table; otherwise the table plays none after. The axis
+/// holds at the table's start after; the bridge is off on failure.
+pub fn learn(
+    link: &mut Link,
+    plan: &gms_bench::learn::LearnPlan,
+    out: Option<&Path>,
+    apply: bool,
+    ctl: &mut Control<'_>,
+    each: &mut dyn FnMut(&gms_bench::ilc::Iteration),
+) -> Result<gms_bench::learn::Learned, Error> {
+    plan.check()?;
+    if let Some(dir) = out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
+    }
+    let period = match &plan.path {
+        gms_bench::learn::Path::Sine { freq, .. } => 1.0 / freq,
+        gms_bench::learn::Path::Trajectory(rows) => rows.last().map_or(0.0, |r| r.0),
+    };
+    let mut b = ctl.bench(link);
+    b.stage("learn", period * (2 * plan.iterations + 3) as f64);
+    let l = gms_bench::learn::learn(&mut b, plan, each, apply)?;
+    if let Some(dir) = out {
+        write_learned(&l, dir)?;
+    }
+    Ok(l)
+}
+
+/// The learning's files in `dir`: `iterations.csv` (`iteration,rms_counts,peak_counts`),
+/// `correction.csv` (`t_s,position_rad,correction_nm`) and `learning.svg` (the RMS and peak
+/// per iteration; the error over the period at the first pass and the last iteration).
+pub fn write_learned(l: &gms_bench::learn::Learned, dir: &Path) -> Result<(), Error> {
+    use gms_bench::learn::{correction_csv, iterations_csv};
+    gms_ident::io::write_atomic(&dir.join("iterations.csv"), iterations_csv(l).as_bytes())?;
+    gms_ident::io::write_atomic(&dir.join("correction.csv"), correction_csv(l).as_bytes())?;
+    let dt = l.table.as_ref().map_or(1e-3, |t| t.dt());
+    let pts: Vec<(f64, f64, f64)> = l
+        .iterations
+        .iter()
+        .map(|i| (i.n as f64, i.rms, i.peak))
+        .collect();
+    let trace = |e: &[f64]| -> Vec<(f64, f64)> {
+        e.iter()
+            .enumerate()
+            .map(|(k, v)| (k as f64 * dt, *v))
+            .collect()
+    };
+    let first = l.errors.first().map(|e| trace(e)).unwrap_or_default();
+    let last = l.errors.last().map(|e| trace(e)).unwrap_or_default();
+    let last_name = format!("iteration {}", l.errors.len().saturating_sub(1));
+    gms_ident::plot::learn_plot(
+        &dir.join("learning.svg"),
+        "gms-tune learn: the error over the iterations",
+        &pts,
+        &[("first pass", &first), (&last_name, &last)],
+    )
+    .map_err(Error::Io)
+}

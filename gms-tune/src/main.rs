@@ -13,6 +13,7 @@ use gms_tune::{Link, LinkError, parse_telemetry};
 mod commission;
 mod frf;
 mod identify;
+mod learn;
 mod map;
 mod tracked;
 mod tune_ff;
@@ -329,6 +330,39 @@ enum Cmd {
         #[arg(long)]
         save: bool,
     },
+    /// Learning from repetition: a periodic motion played from the device's tables (the
+    /// paper's sine, x = A (1 − cos 2πft), from where the axis holds; or a trajectory file of
+    /// one period, `t_s,position_rad`), the feedforward correction learned after each period
+    /// (iterative learning control on top of the compensation); prints the RMS and peak error
+    /// of each iteration, stops when the error grows (the best correction kept), writes
+    /// DIR/iterations.csv, DIR/correction.csv and DIR/learning.svg. Ctrl-C or a fault ends it
+    /// with the bridge off.
+    Learn {
+        /// The sine's amplitude [rad] and frequency [Hz] (default 0.05 rad at 1 Hz).
+        #[arg(long, num_args = 2, value_names = ["AMPLITUDE", "FREQ"], conflicts_with = "trajectory")]
+        sine: Option<Vec<f64>>,
+        /// A trajectory of one period: a CSV of `t_s,position_rad` (positions as `move`'s).
+        #[arg(long, value_name = "FILE.csv")]
+        trajectory: Option<PathBuf>,
+        /// Learning updates after the first pass.
+        #[arg(long, default_value_t = 10)]
+        iterations: usize,
+        /// The learning gain γ [-] on the loop's own controller (0 < γ ≤ 2).
+        #[arg(long, default_value_t = 0.3)]
+        gain: f64,
+        /// The zero-phase Q filter's corner [Hz] (0: none).
+        #[arg(long = "q-filter", default_value_t = 100.0)]
+        q_filter: f64,
+        /// The lead λ [s] of the error on the correction.
+        #[arg(long, default_value_t = 0.0)]
+        lead: f64,
+        /// The directory written.
+        #[arg(long)]
+        out: PathBuf,
+        /// Leave the learned correction playing for the next runs of the table.
+        #[arg(long)]
+        apply: bool,
+    },
 }
 
 #[derive(Subcommand)]
@@ -612,6 +646,47 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 save,
             },
         )?,
+        Cmd::Learn {
+            sine,
+            trajectory,
+            iterations,
+            gain,
+            q_filter,
+            lead,
+            out,
+            apply,
+        } => {
+            let path = match (sine, trajectory) {
+                (_, Some(file)) => {
+                    let text = std::fs::read_to_string(&file)
+                        .map_err(|e| Fail::Usage(format!("{}: {e}", file.display())))?;
+                    gms_bench::learn::Path::Trajectory(
+                        gms_bench::learn::parse_trajectory(&text)
+                            .map_err(|e| Fail::Usage(format!("{}: {e}", file.display())))?,
+                    )
+                }
+                (Some(v), None) => gms_bench::learn::Path::Sine {
+                    amplitude: v.first().copied().unwrap_or(f64::NAN),
+                    freq: v.get(1).copied().unwrap_or(f64::NAN),
+                },
+                (None, None) => gms_bench::learn::LearnPlan::default().path,
+            };
+            learn::run(
+                &mut link,
+                &learn::Args {
+                    plan: gms_bench::learn::LearnPlan {
+                        path,
+                        iterations,
+                        gain,
+                        q_hz: q_filter,
+                        lead_s: lead,
+                        ..gms_bench::learn::LearnPlan::default()
+                    },
+                    out,
+                    apply,
+                },
+            )?
+        }
         #[cfg(feature = "ui")]
         Cmd::Ui { .. } => unreachable!("handled before the link opens"),
         Cmd::Identify {

@@ -6,6 +6,7 @@ use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
 use crate::frf::{CHANNELS, Frf, FrfReport, Injection};
 use crate::posmap::MapCursor;
+use crate::table::{Player, Recorded, TableReport};
 
 use super::{
     Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, FrfRequest, Handover, MapRequest,
@@ -181,7 +182,18 @@ pub struct ControlLoop {
     map_table: Option<MapTable>,
     /// Where the reference is in the map, while the map acts.
     map_cursor: Option<MapCursor>,
+    /// The table motion's buffer ([`crate::table::TABLE_VALUES`] values), if the shell gave
+    /// one.
+    table_buf: Option<TableBuf>,
+    /// The table motion's player.
+    table: Player,
+    /// Its report for the protocol side, handed over at the next exchange.
+    table_report: Option<TableReport>,
 }
+
+/// The buffer of the table motion ([`crate::table::TABLE_VALUES`] values; the shell's: a
+/// static on the board).
+pub type TableBuf = &'static mut [f32];
 
 /// The buffer of a position map's table ([`crate::posmap::MAP_VALUES`] values; the shell's: a
 /// static on the board).
@@ -235,6 +247,25 @@ impl ControlLoop {
             frf_report: None,
             map_table: None,
             map_cursor: None,
+            table_buf: None,
+            table: Player::default(),
+            table_report: None,
+        }
+    }
+
+    /// The loop with a table motion's buffer (`buf`: [`crate::table::TABLE_VALUES`] values).
+    /// Without one the table's requests are refused by the protocol side and do nothing here.
+    pub fn with_table(mut self, buf: TableBuf) -> Self {
+        self.table_buf = Some(buf);
+        self
+    }
+
+    /// Ends a table run now (another motion takes over, the bridge goes off); its report goes
+    /// over at the next exchange.
+    fn stop_table(&mut self) {
+        if self.table.playing() {
+            self.table.abort();
+            self.table_report = Some(self.table.report());
         }
     }
 
@@ -299,6 +330,7 @@ impl ControlLoop {
     }
 
     fn switch_off(&mut self) {
+        self.stop_table();
         self.enabled = false;
         self.motion.stop();
         self.current_mode = None;
@@ -308,6 +340,7 @@ impl ControlLoop {
     /// Position control holding where the axis is, from rest (entering or leaving current
     /// mode, `enable`).
     fn hold_here(&mut self) {
+        self.stop_table();
         self.ctrl.reset();
         self.current_mode = None;
         let here = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
@@ -447,6 +480,9 @@ impl ControlLoop {
             }
             None => {}
         }
+        if let Some(t) = req.table {
+            self.take_table(&t);
+        }
         if req.disable {
             self.switch_off();
         }
@@ -480,6 +516,7 @@ impl ControlLoop {
         if let Some(amps) = req.current
             && self.enabled
         {
+            self.stop_table();
             self.motion.stop();
             self.current_mode = Some(amps);
             // The pulse counts from the step that takes it.
@@ -494,6 +531,7 @@ impl ControlLoop {
                 // The plan starts at the axis's position (the reference in current mode).
                 self.hold_here();
             }
+            self.stop_table();
             let mut plan = m.plan;
             // The plan starts at the reference of step `from_step`; this step is `steps + 1`.
             let behind = self.steps.saturating_add(1).saturating_sub(m.from_step);
@@ -520,6 +558,7 @@ impl ControlLoop {
             if self.current_mode.is_some() {
                 self.hold_here();
             }
+            self.stop_table();
             let mut p = v.profile;
             // Catch up with the steps since `from_step`, as a move does.
             let behind = self.steps.saturating_add(1).saturating_sub(v.from_step);
@@ -563,10 +602,12 @@ impl ControlLoop {
             let h = Handover {
                 chunk: self.chunk.as_ref(),
                 frf: self.frf_report.as_ref(),
+                table: self.table_report.as_ref(),
             };
             let req = exchange(self.status(), h);
             self.chunk = None;
             self.frf_report = None;
+            self.table_report = None;
             if let Some(req) = req {
                 timing = self.take(req);
             }
@@ -591,7 +632,19 @@ impl ControlLoop {
                     self.ctrl.hold_current(amps);
                 }
             } else if self.enabled && self.wake_left == 0 {
-                self.r = self.motion.next(self.ctrl.dt_pos());
+                let mut corr = 0.0;
+                match (self.table.playing(), self.table_buf.as_deref()) {
+                    (true, Some(t)) => {
+                        let p = self.ctrl.params();
+                        let ts = self
+                            .table
+                            .sample(t, self.ctrl.rad_per_count(), p.pos_rate_hz);
+                        self.r = ts.r;
+                        corr = ts.corr;
+                    }
+                    _ => self.r = self.motion.next(self.ctrl.dt_pos()),
+                }
+                self.ctrl.set_ff_correction(corr);
                 // One call of the position step whether a frequency response runs or not (the
                 // step inlined once).
                 let frf = self.frf_input();
@@ -606,6 +659,17 @@ impl ControlLoop {
                 self.out = self.ctrl.position_step(pos, &r);
                 if let Some(f) = frf {
                     self.frf_output(f);
+                }
+                if let (true, Some(t)) = (self.table.playing(), self.table_buf.as_deref_mut()) {
+                    let counts = self.out.error / self.ctrl.rad_per_count();
+                    match self.table.record(t, counts) {
+                        Recorded::Within => {}
+                        Recorded::PeriodEnd => self.table_report = Some(self.table.report()),
+                        Recorded::RunEnd(at) => {
+                            self.motion.hold_at(at);
+                            self.table_report = Some(self.table.report());
+                        }
+                    }
                 }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
@@ -703,6 +767,42 @@ impl ControlLoop {
             return true;
         }
         false
+    }
+
+    /// Acts on a table request: a read into the chunk; a run only with the position loop
+    /// running and the reference at the table's start (within a count).
+    fn take_table(&mut self, req: &crate::table::TableRequest) {
+        use crate::table::TableRequest;
+        let Some(t) = self.table_buf.as_deref_mut() else {
+            return;
+        };
+        if let TableRequest::Run(_) = req {
+            let here = self.r.pos;
+            let at_start = self
+                .table
+                .start(t)
+                .is_some_and(|s| (s.saturating_sub(here)).unsigned_abs() <= SUB_PER_COUNT as u64);
+            if !(self.enabled && self.current_mode.is_none() && at_start) {
+                return;
+            }
+            if self.motion.is_moving() {
+                return;
+            }
+        }
+        let mut c = Chunk {
+            start: 0,
+            samples: 0,
+            nfields: 1,
+            values: [0.0; super::CHUNK_VALUES],
+        };
+        self.table.take(req, t, &mut c);
+        match req {
+            TableRequest::Read { .. } => self.chunk = Some(c),
+            // The run's first step is the one this exchange starts.
+            TableRequest::Run(_) => self.table.set_started(self.steps.wrapping_add(1)),
+            _ => {}
+        }
+        self.table_report = Some(self.table.report());
     }
 
     /// The frequency-response measurement's sample now, if one runs: its injected value, its

@@ -14,6 +14,10 @@ use super::{
     StatusReply, VelocityRequest, capture_fields,
 };
 use crate::frf::{Channel, FrfSpec, Injection};
+use crate::protocol::TableCmd;
+use crate::table::{
+    TABLE_WRITE_VALUES, TableError, TableReport, TableRequest, TableState, Upload, Which,
+};
 
 /// The longest frequency-response measurement \[s\] (settling and summing).
 pub const FRF_MAX_S: f32 = 600.0;
@@ -162,6 +166,10 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     configured: bool,
     /// `defaults` configures the axis (a simulator's defaults describe its plant).
     defaults_configured: bool,
+    /// The loop has a table motion's buffer.
+    has_table: bool,
+    /// The table being written, as checked so far.
+    upload: Upload,
 }
 
 impl<L: LoopLink, S: ParamStore> Front<L, S> {
@@ -179,7 +187,17 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             nfields: 0,
             configured: false,
             defaults_configured: false,
+            has_table: false,
+            upload: Upload::default(),
         }
+    }
+
+    /// The protocol side of a loop given a table motion's buffer
+    /// ([`super::ControlLoop::with_table`]): the `table` commands act (without, they are
+    /// refused).
+    pub fn with_table(mut self) -> Self {
+        self.has_table = true;
+        self
     }
 
     /// Whether the running settings were configured for the axis (`running`: [`Startup`]'s
@@ -222,8 +240,12 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// The client went away: its stream ends (a new client starts without one).
     pub fn disconnected(&mut self) {
         let _ = self.stream_off();
-        // A frequency response ends with its link (the position loop goes on).
+        // A frequency response ends with its link (the position loop goes on); a table run
+        // at the end of its period (the reference holds at the table's start).
         let _ = self.frf_off();
+        if self.has_table {
+            let _ = self.post(|r| r.table = Some(TableRequest::Stop));
+        }
         // An experiment (current or speed) ends with its link: the bridge goes off. A held
         // position or a move goes on.
         if self.status_now().drive != Drive::Position {
@@ -338,6 +360,11 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             start += n;
         }
         Ok(())
+    }
+
+    /// The table motion's last report.
+    fn table_report(&mut self) -> TableReport {
+        self.link.with_mailbox(|m| m.table)
     }
 
     /// One telemetry line (`# t=… pos=…\n`) of the fields streamed, SI units.
@@ -757,6 +784,191 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             return Err("map.enable is 1: set it to 0 to clear the table");
         }
         self.post(|r| r.map = Some(MapRequest::Clear))
+    }
+
+    fn table_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        if !self.has_table {
+            return out.write_str("state=none");
+        }
+        let t = self.table_report();
+        write!(out, "state={}", t.state.name())?;
+        if let Some(g) = t.geometry {
+            write!(
+                out,
+                " points={} steps={} origin={}",
+                g.points, g.steps, g.origin
+            )?;
+        }
+        write!(
+            out,
+            " period={} periods={} gen={} pending={} started={}",
+            t.period,
+            t.periods,
+            t.generation,
+            u8::from(t.pending),
+            t.started
+        )?;
+        if let Some(d) = t.done {
+            write!(
+                out,
+                " done={} done_gen={} rms={} peak={}",
+                d.period,
+                d.generation,
+                Num(d.rms),
+                Num(d.peak)
+            )?;
+        }
+        Ok(())
+    }
+
+    fn table(&mut self, cmd: TableCmd<'_>, out: &mut dyn Write) -> Result<(), &'static str> {
+        if !self.has_table {
+            return Err("no table motion on this device");
+        }
+        let t = self.table_report();
+        let playing = t.state == TableState::Playing;
+        let reason = |e: TableError| e.reason();
+        match cmd {
+            TableCmd::Status => Ok(()),
+            TableCmd::Write {
+                which,
+                start,
+                values,
+            } => {
+                let mut v = [0.0f32; TABLE_WRITE_VALUES];
+                let mut n = 0usize;
+                for w in values.split_ascii_whitespace() {
+                    let x = protocol::parse_f32(w).ok_or("a value is a number")?;
+                    *v.get_mut(n).ok_or("at most 8 values a line")? = x;
+                    n += 1;
+                }
+                let vals = v.get(..n).unwrap_or(&[]);
+                let mut u = self.upload;
+                match which {
+                    Which::Ref => {
+                        if playing {
+                            return Err("playing (table stop first)");
+                        }
+                        u.write_ref(start, vals).map_err(reason)?;
+                        // The loop drops its correction with the reference.
+                        u.corr_next = 0;
+                    }
+                    _ => {
+                        let g = t.geometry.ok_or("no table set (table set first)")?;
+                        if t.pending {
+                            return Err("a correction waits for the next period's start");
+                        }
+                        let torque = self.settings.motor.k_m * self.settings.i_max;
+                        u.write_corr(start, vals, g.points, torque)
+                            .map_err(|e| match e {
+                                TableError::BadValue => {
+                                    "a value not finite or beyond the drive's torque (k_m × i_max)"
+                                }
+                                e => e.reason(),
+                            })?;
+                    }
+                }
+                self.post(|r| {
+                    r.table = Some(TableRequest::Write {
+                        which,
+                        start,
+                        n: n as u32,
+                        values: v,
+                    })
+                })?;
+                self.upload = u;
+                Ok(())
+            }
+            TableCmd::Set(g) => {
+                if playing {
+                    return Err("playing (table stop first)");
+                }
+                let limits = self.board.limits(&self.settings);
+                self.upload
+                    .check_set(
+                        &g,
+                        self.settings.pos_rate_hz,
+                        self.settings.rad_per_count(),
+                        crate::reference::VELOCITY_MAX,
+                        (limits.pos_min, limits.pos_max),
+                    )
+                    .map_err(reason)?;
+                self.post(|r| r.table = Some(TableRequest::Set(g)))?;
+                self.upload.corr_next = 0;
+                Ok(())
+            }
+            TableCmd::Use => {
+                let g = t.geometry.ok_or("no table set (table set first)")?;
+                if t.pending {
+                    return Err("a correction waits for the next period's start");
+                }
+                if self.upload.corr_next != g.points {
+                    return Err("the correction is not written whole (POINTS values from 0)");
+                }
+                self.post(|r| r.table = Some(TableRequest::Use))?;
+                self.upload.corr_next = 0;
+                Ok(())
+            }
+            TableCmd::CorrOff => self.post(|r| r.table = Some(TableRequest::NoCorrection)),
+            TableCmd::Run(n) => {
+                let g = match t.state {
+                    TableState::Empty => return Err("no table set (table set first)"),
+                    TableState::Playing => return Err("already playing"),
+                    TableState::Ready => t.geometry.ok_or("no table set (table set first)")?,
+                };
+                let st = self.status_now();
+                if !st.enabled {
+                    return Err("disabled (enable first)");
+                }
+                if st.drive != Drive::Position || st.moving {
+                    return Err("the axis is not holding a position (hold first)");
+                }
+                let start = self.upload.start(g.origin);
+                if (st.reference.pos.saturating_sub(start)).unsigned_abs() > SUB_PER_COUNT as u64 {
+                    return Err("the reference is not at the table's start (move there first)");
+                }
+                self.post(|r| r.table = Some(TableRequest::Run(n)))?;
+                if self.table_report().state != TableState::Playing {
+                    return Err("the control loop did not start the table");
+                }
+                Ok(())
+            }
+            TableCmd::Stop => self.post(|r| r.table = Some(TableRequest::Stop)),
+            TableCmd::Read {
+                which,
+                start,
+                count,
+            } => {
+                let points = t.geometry.map_or(0, |g| g.points);
+                match which {
+                    Which::Corr if t.generation == 0 => return Err("no correction played"),
+                    Which::Err if t.done.is_none() => return Err("no period complete yet"),
+                    _ => {}
+                }
+                if points == 0 {
+                    return Err("no table set (table set first)");
+                }
+                let end = start.saturating_add(count).min(points);
+                self.write_chunks(
+                    (start, end),
+                    |r, start, max| r.table = Some(TableRequest::Read { which, start, max }),
+                    "no table to read",
+                    out,
+                )?;
+                if which == Which::Err && self.table_report().done != t.done {
+                    return Err("a period ended during the read (read again)");
+                }
+                Ok(())
+            }
+            TableCmd::Clear => {
+                if playing {
+                    return Err("playing (table stop first)");
+                }
+                self.post(|r| r.table = Some(TableRequest::Clear))?;
+                self.upload = Upload::default();
+                Ok(())
+            }
+        }
     }
 
     fn frf_off(&mut self) -> Result<(), &'static str> {

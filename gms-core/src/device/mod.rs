@@ -28,7 +28,8 @@ pub use capture::{
 };
 
 pub use control::{
-    ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, ZERO_SAMPLES, calibrate_sense,
+    ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, TableBuf, ZERO_SAMPLES,
+    calibrate_sense,
 };
 pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, startup};
 pub use status::{DriveKind, StatusError, StatusReply, StatusValue};
@@ -180,6 +181,8 @@ pub struct Handover<'a> {
     /// The frequency-response measurement's report (at the end of each group of periods, and
     /// when it stops).
     pub frf: Option<&'a crate::frf::FrfReport>,
+    /// The table motion's report (after a request, at each period's end, when a run ends).
+    pub table: Option<&'a crate::table::TableReport>,
 }
 
 /// What the protocol side asks of the capture.
@@ -237,6 +240,8 @@ pub struct Requests {
     pub frf: Option<FrfRequest>,
     /// Write, read or clear the position map's table.
     pub map: Option<MapRequest>,
+    /// The table motion.
+    pub table: Option<crate::table::TableRequest>,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -258,6 +263,7 @@ impl Requests {
             || self.capture.is_some()
             || self.frf.is_some()
             || self.map.is_some()
+            || self.table.is_some()
             || self.stream_every.is_some()
             || self.reset_stats
     }
@@ -390,6 +396,8 @@ pub struct Mailbox {
     pub chunk: Chunk,
     /// The frequency-response measurement's last report.
     pub frf: crate::frf::FrfReport,
+    /// The table motion's last report.
+    pub table: crate::table::TableReport,
 }
 
 impl Mailbox {
@@ -410,6 +418,7 @@ impl Mailbox {
                 capture: None,
                 frf: None,
                 map: None,
+                table: None,
                 stream_every: None,
                 reset_stats: false,
             },
@@ -453,6 +462,16 @@ impl Mailbox {
                 lock: crate::frf::LockIn::new(),
                 groups: 0,
             },
+            table: crate::table::TableReport {
+                state: crate::table::TableState::Empty,
+                geometry: None,
+                period: 0,
+                periods: 0,
+                generation: 0,
+                pending: false,
+                done: None,
+                started: 0,
+            },
         }
     }
 
@@ -471,6 +490,9 @@ impl Mailbox {
         }
         if let Some(f) = h.frf {
             self.frf = *f;
+        }
+        if let Some(t) = h.table {
+            self.table = *t;
         }
         if self.posted {
             self.posted = false;

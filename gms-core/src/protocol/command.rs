@@ -74,6 +74,67 @@ pub enum MapCmd<'a> {
     Clear,
 }
 
+/// The table motion's commands (`table …`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TableCmd<'a> {
+    /// `table`: the state, the geometry, the run and the last complete period.
+    Status,
+    /// `table ref START V …` or `table corr START V …`: points from START of the reference
+    /// \[counts from the origin\] or of the correction being written \[N·m\] (at most
+    /// [`crate::table::TABLE_WRITE_VALUES`] a line), in order from 0.
+    Write {
+        /// Which table (`Ref` or `Corr`).
+        which: crate::table::Which,
+        /// First point.
+        start: u32,
+        /// The values, as text (separated by spaces).
+        values: &'a str,
+    },
+    /// `table set POINTS STEPS ORIGIN`: the reference written is checked whole and played
+    /// with this geometry (STEPS position steps between points, ORIGIN \[counts\]).
+    Set(crate::table::Geometry),
+    /// `table use`: the correction written is played from the next period's start.
+    Use,
+    /// `table corr off`: no correction from the next period's start.
+    CorrOff,
+    /// `table run PERIODS`: play the table from its start.
+    Run(u32),
+    /// `table stop`: end the run at the end of the period under way.
+    Stop,
+    /// `table read ref|corr|err START COUNT`: points START.. (COUNT at most [`MAX_READ`]), a
+    /// value a line.
+    Read {
+        /// Which table.
+        which: crate::table::Which,
+        /// First point.
+        start: u32,
+        /// Points.
+        count: u32,
+    },
+    /// `table clear`: forget the reference and the correction.
+    Clear,
+}
+
+/// A decimal `i64` (an optional sign, then digits), without core's parser.
+fn parse_i64(s: &str) -> Option<i64> {
+    let (neg, digits) = match s.as_bytes().first() {
+        Some(b'-') => (true, s.get(1..)?),
+        Some(b'+') => (false, s.get(1..)?),
+        _ => (false, s),
+    };
+    if digits.is_empty() || digits.len() > 18 {
+        return None;
+    }
+    let mut v: i64 = 0;
+    for b in digits.bytes() {
+        if !b.is_ascii_digit() {
+            return None;
+        }
+        v = v * 10 + i64::from(b - b'0');
+    }
+    Some(if neg { -v } else { v })
+}
+
 /// A decimal `u32` (digits only), without core's parser (whose error path the no-panic link
 /// check cannot see through).
 fn parse_u32(s: &str) -> Option<u32> {
@@ -192,6 +253,8 @@ pub enum Command<'a> {
     Frf(FrfCmd),
     /// `map …`.
     Map(MapCmd<'a>),
+    /// `table …`.
+    Table(TableCmd<'a>),
 }
 
 /// The request line of a command (without the line end): what a host sends, read back by
@@ -269,6 +332,35 @@ impl core::fmt::Display for Command<'_> {
             Command::Map(MapCmd::Read { start, count }) => write!(f, "map read {start} {count}"),
             Command::Map(MapCmd::Write { start, pairs }) => write!(f, "map write {start} {pairs}"),
             Command::Map(MapCmd::Clear) => f.write_str("map clear"),
+            Command::Table(t) => {
+                use crate::table::Which;
+                let name = |w: Which| match w {
+                    Which::Ref => "ref",
+                    Which::Corr => "corr",
+                    Which::Err => "err",
+                };
+                match t {
+                    TableCmd::Status => f.write_str("table"),
+                    TableCmd::Write {
+                        which,
+                        start,
+                        values,
+                    } => write!(f, "table {} {start} {values}", name(which)),
+                    TableCmd::Set(g) => {
+                        write!(f, "table set {} {} {}", g.points, g.steps, g.origin)
+                    }
+                    TableCmd::Use => f.write_str("table use"),
+                    TableCmd::CorrOff => f.write_str("table corr off"),
+                    TableCmd::Run(n) => write!(f, "table run {n}"),
+                    TableCmd::Stop => f.write_str("table stop"),
+                    TableCmd::Read {
+                        which,
+                        start,
+                        count,
+                    } => write!(f, "table read {} {start} {count}", name(which)),
+                    TableCmd::Clear => f.write_str("table clear"),
+                }
+            }
             Command::Frf(FrfCmd::Status) => f.write_str("frf"),
             Command::Frf(FrfCmd::Off) => f.write_str("frf off"),
             Command::Frf(FrfCmd::Start {
@@ -457,6 +549,76 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                     return Ok(Command::Map(MapCmd::Write { start, pairs: rest }));
                 }
                 Some("clear") => Command::Map(MapCmd::Clear),
+                _ => return Err(bad(usage)),
+            }
+        }
+        "table" => {
+            use crate::table::Which;
+            let usage = "usage: table | table ref|corr START V ... | table corr off | \
+table set POINTS STEPS ORIGIN | table use | table run PERIODS | table stop | \
+table read ref|corr|err START COUNT | table clear";
+            let int = |w: Option<&str>| w.and_then(parse_u32).ok_or(bad(usage));
+            match arg() {
+                None => Command::Table(TableCmd::Status),
+                Some("corr") if line.split_ascii_whitespace().nth(2) == Some("off") => {
+                    let _ = arg();
+                    Command::Table(TableCmd::CorrOff)
+                }
+                Some(w @ ("ref" | "corr")) => {
+                    let which = if w == "ref" { Which::Ref } else { Which::Corr };
+                    let start = int(arg())?;
+                    // The rest of the line: the values (checked by the device).
+                    let rest = line
+                        .trim_start()
+                        .strip_prefix("table")
+                        .map(str::trim_start)
+                        .and_then(|r| r.strip_prefix(w))
+                        .map(str::trim_start)
+                        .and_then(|r| r.strip_prefix(r.split_ascii_whitespace().next()?))
+                        .map(str::trim)
+                        .unwrap_or("");
+                    if rest.is_empty() {
+                        return Err(bad(usage));
+                    }
+                    return Ok(Command::Table(TableCmd::Write {
+                        which,
+                        start,
+                        values: rest,
+                    }));
+                }
+                Some("set") => {
+                    let points = int(arg())?;
+                    let steps = int(arg())?;
+                    let origin = arg().and_then(parse_i64).ok_or(bad(usage))?;
+                    Command::Table(TableCmd::Set(crate::table::Geometry {
+                        points,
+                        steps,
+                        origin,
+                    }))
+                }
+                Some("use") => Command::Table(TableCmd::Use),
+                Some("run") => {
+                    let n = int(arg())?;
+                    if n == 0 || n > crate::table::TABLE_MAX_PERIODS {
+                        return Err(bad("PERIODS from 1 to 1000000"));
+                    }
+                    Command::Table(TableCmd::Run(n))
+                }
+                Some("stop") => Command::Table(TableCmd::Stop),
+                Some("read") => {
+                    let which = arg().and_then(Which::from_name).ok_or(bad(usage))?;
+                    let start = int(arg())?;
+                    let count = int(arg())?;
+                    if count == 0 || count > MAX_READ {
+                        return Err(bad("COUNT from 1 to 64"));
+                    }
+                    Command::Table(TableCmd::Read {
+                        which,
+                        start,
+                        count,
+                    })
+                }
+                Some("clear") => Command::Table(TableCmd::Clear),
                 _ => return Err(bad(usage)),
             }
         }

@@ -109,6 +109,15 @@ pub trait Device {
     fn map_clear(&mut self) -> Result<(), &'static str> {
         Err("no position map on this device")
     }
+    /// Writes the table motion's state (without the leading `ok `) on one line.
+    fn table_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+        out.write_str("state=none")
+    }
+    /// Acts on a table motion's command (a read writes its values, one a line, to `out`).
+    fn table(&mut self, cmd: TableCmd<'_>, out: &mut dyn Write) -> Result<(), &'static str> {
+        let _ = (cmd, out);
+        Err("no table motion on this device")
+    }
     /// An on-line estimate (read-only parameter); 1 for the adaptive scale of a device
     /// without adaptation.
     fn estimate(&mut self, which: Estimate) -> f32 {
@@ -125,7 +134,9 @@ enable [current] | disable | status | clear | move POS [VEL] | current AMPS [SEC
 velocity VEL [AMP F0 F1 SECONDS] | hold | stream FIELDS RATE_HZ | stream off | \
 capture [off | FIELDS EVERY SAMPLES [next] | read START COUNT] | \
 frf [off | current|position F_HZ AMP PERIODS SETTLE] | \
-map read START COUNT | map write START OFFSET,SCALE ... | map clear";
+map read START COUNT | map write START OFFSET,SCALE ... | map clear | \
+table [ref|corr START V ... | corr off | set POINTS STEPS ORIGIN | use | run PERIODS | stop | \
+read ref|corr|err START COUNT | clear]";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
     writeln!(out, "err {} {}", code as u8, reason)
@@ -262,6 +273,15 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         }
         Command::Map(MapCmd::Write { start, pairs }) => done(out, dev.map_write(start, pairs)),
         Command::Map(MapCmd::Clear) => done(out, dev.map_clear()),
+        Command::Table(TableCmd::Status) => {
+            out.write_str("ok ")?;
+            dev.table_status(out)?;
+            writeln!(out)
+        }
+        Command::Table(t) => {
+            let r = dev.table(t, out);
+            done(out, r)
+        }
         Command::Frf(FrfCmd::Status) => {
             out.write_str("ok ")?;
             dev.frf_status(out)?;

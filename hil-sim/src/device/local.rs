@@ -72,7 +72,8 @@ impl LocalDevice {
         };
         Ok(LocalDevice {
             dev: Front::new(link, p.store, p.board, p.settings, p.defaults)
-                .with_configured(true, true),
+                .with_configured(true, true)
+                .with_table(),
         })
     }
 
@@ -100,6 +101,16 @@ impl LocalDevice {
     /// experiment (current or speed) ends with the bridge off.
     pub fn disconnect(&mut self) {
         self.dev.disconnected();
+    }
+
+    /// Starts recording the truth at every position step (dropping what was recorded).
+    pub fn record_truth(&mut self) {
+        self.dev.link_mut().sim.truth = Some(Vec::new());
+    }
+
+    /// The truth recorded since [`LocalDevice::record_truth`] (recording stops).
+    pub fn take_truth(&mut self) -> Vec<Truth> {
+        self.dev.link_mut().sim.truth.take().unwrap_or_default()
     }
 
     /// Runs the device for `seconds` of simulated time.

@@ -108,6 +108,36 @@ struct Sim {
     substeps: u32,
     /// Simulated time \[s\].
     t: f64,
+    /// The truth at each position step, while recorded.
+    truth: Option<Vec<Truth>>,
+}
+
+/// The truth at one position step: what the device saw and where the axis really was.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    /// The device's position step.
+    pub steps: u64,
+    /// Its reference \[1/65536 count\].
+    pub reference: i64,
+    /// Its encoder count \[counts\].
+    pub pos: i64,
+    /// The true angle at the step's sampling instant \[counts, fractional\] (the encoder
+    /// reads its floor: the count `n` is the interval `[n, n + 1)`).
+    pub theta_counts: f64,
+}
+
+impl Truth {
+    /// The error against the true position \[counts\]: the reference minus the true angle,
+    /// shifted by the half count the encoder's floor takes off on average (so that a perfect
+    /// tracking of the reading scores alike).
+    pub fn true_error(&self) -> f64 {
+        self.reference as f64 / 65536.0 - (self.theta_counts - 0.5)
+    }
+
+    /// The error the device saw \[counts\]: the reference minus the encoder's count.
+    pub fn device_error(&self) -> f64 {
+        self.reference as f64 / 65536.0 - self.pos as f64
+    }
 }
 
 impl Sim {
@@ -121,6 +151,8 @@ impl Sim {
         timed: bool,
     ) {
         let n = self.core.ratio();
+        // The true angle at the position step's sampling instant (this tick's first period).
+        let (theta, count) = (self.plant.theta, self.plant.encoder());
         let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
         for _ in 0..n {
             let inp = Inputs {
@@ -148,6 +180,15 @@ impl Sim {
                 self.plant.step(dt_plant);
             }
             self.t += dt_plant * self.substeps as f64;
+        }
+        if let Some(truth) = &mut self.truth {
+            let st = self.core.status();
+            truth.push(Truth {
+                steps: st.steps,
+                reference: st.reference.pos,
+                pos: count,
+                theta_counts: theta / self.core.controller().rad_per_count() as f64,
+            });
         }
     }
 }
@@ -205,11 +246,15 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
                 // One buffer per power-up of a virtual device (a board's is a static).
                 Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
             )
-            .with_map(table),
+            .with_map(table)
+            .with_table(Box::leak(
+                vec![0.0; gms_core::table::TABLE_VALUES].into_boxed_slice(),
+            )),
             plant,
             adc,
             substeps: sc.plant.substeps,
             t: 0.0,
+            truth: None,
         },
         store,
         board,

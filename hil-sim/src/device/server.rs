@@ -190,8 +190,9 @@ fn serve_inner(
         start: Instant::now(),
     };
     // The scenario describes the axis: its defaults are configured for it.
-    let mut dev =
-        Front::new(link, flash_store, board, settings, defaults).with_configured(true, true);
+    let mut dev = Front::new(link, flash_store, board, settings, defaults)
+        .with_configured(true, true)
+        .with_table();
     match endpoint {
         Endpoint::Tcp(listener) => {
             let addr = listener

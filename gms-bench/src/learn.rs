@@ -1,0 +1,609 @@
+//! Learning from repetition on a device: a periodic motion played from the device's tables
+//! (`table …`), and after each period the feedforward correction learned from that period's
+//! error ([`crate::ilc`]) and swapped in at the start of the next-but-one (the device plays on
+//! while the host reads, learns and uploads: one iteration is two periods).
+//!
+//! The design's choices (docs/learning.md):
+//!
+//! - **Learning filter** `L = γ C e^{jωλ}`: the device's own position controller `C` (its PID
+//!   and filters, read from the device, [`gms_ident::linear::PositionController`]). A
+//!   correction `γ C e` changes the next period's error by `−γ T e`, `T` the closed loop,
+//!   near 1 over its bandwidth: every frequency the loop follows is learned at the rate
+//!   `1 − γ`, whatever the gains. γ is dimensionless (default 0.5).
+//! - **Lead** λ (default 0): added to the half-bin shift of the device's error bins (each the
+//!   mean over the `steps` steps after its point).
+//! - **Q**: a zero-phase second-order Butterworth at `q_hz` (default 40 Hz) over the period.
+//! - **Stop**: the RMS growing by more than 1 % for `patience` iterations in a row; the best
+//!   correction is then kept.
+
+use gms_ident::Error;
+use gms_ident::linear::PositionController;
+
+use crate::client::{Bench, DeviceInfo, check_faults, guarded, status};
+use crate::ilc::{Iteration, Learner, LearningFilter, QFilter, Stop};
+
+/// The periodic motion learned.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Path {
+    /// `x = A (1 − cos 2π f t)` from where the axis holds: amplitude \[rad\], frequency \[Hz\]
+    /// (the paper's sine test with its reversals).
+    Sine {
+        /// Amplitude A \[rad\].
+        amplitude: f64,
+        /// Frequency f \[Hz\].
+        freq: f64,
+    },
+    /// One period of positions: `(t [s], x [rad])`, t from 0 rising, the last row the
+    /// period's end (its position the first's: the motion repeats), x the protocol's
+    /// position (from the power-up position, as `move` and the soft limits).
+    Trajectory(Vec<(f64, f64)>),
+}
+
+/// What to learn and how.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LearnPlan {
+    /// The motion.
+    pub path: Path,
+    /// Learning updates (iterations after the first pass).
+    pub iterations: usize,
+    /// The learning gain γ [-] (on the controller's own response).
+    pub gain: f64,
+    /// The Q filter's corner \[Hz\] (0: none).
+    pub q_hz: f64,
+    /// The lead λ \[s\].
+    pub lead_s: f64,
+    /// Iterations of growing RMS that stop the learning.
+    pub patience: usize,
+    /// Add the friction's local stiffness along the path to the learning filter.
+    pub stiffness: bool,
+}
+
+impl Default for LearnPlan {
+    fn default() -> Self {
+        LearnPlan {
+            path: Path::Sine {
+                amplitude: 0.05,
+                freq: 1.0,
+            },
+            iterations: 10,
+            gain: 0.3,
+            q_hz: 100.0,
+            lead_s: 0.0,
+            patience: 3,
+            stiffness: true,
+        }
+    }
+}
+
+impl LearnPlan {
+    /// Checks the plan's numbers (not the path against the device: the device does that).
+    pub fn check(&self) -> Result<(), Error> {
+        let bad = |m: &str| Err(Error::Device(m.to_string()));
+        if !(self.gain.is_finite() && self.gain > 0.0 && self.gain <= 2.0) {
+            return bad("the learning gain must be in (0, 2]");
+        }
+        if !(self.q_hz.is_finite() && self.q_hz >= 0.0) {
+            return bad("the Q filter's corner must be >= 0 Hz");
+        }
+        if !self.lead_s.is_finite() || self.lead_s.abs() > 0.1 {
+            return bad("the lead must be within ±0.1 s");
+        }
+        if self.iterations == 0 || self.iterations > 10_000 {
+            return bad("iterations from 1 to 10000");
+        }
+        match &self.path {
+            Path::Sine { amplitude, freq } => {
+                if !(amplitude.is_finite() && *amplitude > 0.0) {
+                    return bad("the sine's amplitude must be > 0 rad");
+                }
+                if !(freq.is_finite() && *freq > 0.0) {
+                    return bad("the sine's frequency must be > 0 Hz");
+                }
+            }
+            Path::Trajectory(rows) => check_trajectory(rows)?,
+        }
+        Ok(())
+    }
+}
+
+/// Checks a trajectory's rows: at least 4, finite, times from 0 strictly rising.
+fn check_trajectory(rows: &[(f64, f64)]) -> Result<(), Error> {
+    let bad = |m: String| Err(Error::Device(m));
+    if rows.len() < 4 {
+        return bad(format!(
+            "the trajectory has {} rows: at least 4",
+            rows.len()
+        ));
+    }
+    if rows.iter().any(|(t, x)| !t.is_finite() || !x.is_finite()) {
+        return bad("the trajectory has a value that is not a number".into());
+    }
+    if rows[0].0 != 0.0 {
+        return bad("the trajectory's first time must be 0 s".into());
+    }
+    for (i, w) in rows.windows(2).enumerate() {
+        if w[1].0 <= w[0].0 {
+            return bad(format!("the trajectory's times must rise (row {})", i + 2));
+        }
+    }
+    Ok(())
+}
+
+/// Reads a trajectory file's text: a header `t_s,position_rad` (or any header whose first
+/// field is not a number), then one `t,x` row a line.
+pub fn parse_trajectory(text: &str) -> Result<Vec<(f64, f64)>, Error> {
+    let mut rows = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut f = line.split(',').map(str::trim);
+        let (a, b) = (f.next().unwrap_or(""), f.next().unwrap_or(""));
+        match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(t), Ok(x)) if f.next().is_none() => rows.push((t, x)),
+            _ if i == 0 && a.parse::<f64>().is_err() => {}
+            _ => {
+                return Err(Error::Device(format!(
+                    "trajectory line {}: expected `t_s,position_rad`, found `{line}`",
+                    i + 1
+                )));
+            }
+        }
+    }
+    check_trajectory(&rows)?;
+    Ok(rows)
+}
+
+/// A table as the device plays it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Table {
+    /// Points in a period.
+    pub points: u32,
+    /// Position steps between points.
+    pub steps: u32,
+    /// The origin \[counts\].
+    pub origin: i64,
+    /// The reference at the points \[counts from the origin\].
+    pub values: Vec<f64>,
+    /// The position-loop rate \[Hz\].
+    pub rate: f64,
+    /// The encoder's resolution \[rad/count\].
+    pub rad_per_count: f64,
+}
+
+impl Table {
+    /// The period \[s\].
+    pub fn period(&self) -> f64 {
+        f64::from(self.points) * f64::from(self.steps) / self.rate
+    }
+
+    /// The time between points \[s\].
+    pub fn dt(&self) -> f64 {
+        f64::from(self.steps) / self.rate
+    }
+
+    /// The first point's position \[rad\] (the protocol's).
+    pub fn start_rad(&self) -> f64 {
+        (self.origin as f64 + self.values.first().copied().unwrap_or(0.0)) * self.rad_per_count
+    }
+}
+
+/// The most points the device's table holds.
+pub const POINTS: u32 = gms_core::table::TABLE_POINTS as u32;
+
+/// The table for `path` at the position rate `rate` \[Hz\] with an encoder of `rpc`
+/// \[rad/count\], a sine starting at `here` \[counts\]: as many points as the device holds at the
+/// fewest steps apart (a period of whole steps, rounded to whole points).
+pub fn plan_table(path: &Path, rate: f64, rpc: f64, here: f64) -> Result<Table, Error> {
+    let period_s = match path {
+        Path::Sine { freq, .. } => 1.0 / freq,
+        Path::Trajectory(rows) => rows.last().map_or(0.0, |r| r.0),
+    };
+    let total = (period_s * rate).round();
+    if !(total >= 4.0 && total <= 600.0 * rate) {
+        return Err(Error::Device(format!(
+            "a period of {period_s} s: from 4 position steps to 600 s"
+        )));
+    }
+    let total = total as u64;
+    let steps = total.div_ceil(u64::from(POINTS)).max(1);
+    let points = ((total as f64 / steps as f64).round() as u32).clamp(4, POINTS);
+    let dt = steps as f64 / rate;
+    let (origin, values) = match path {
+        Path::Sine { amplitude, .. } => {
+            let a = amplitude / rpc;
+            let w = std::f64::consts::TAU / f64::from(points);
+            let v = (0..points)
+                .map(|k| a * (1.0 - (w * f64::from(k)).cos()))
+                .collect();
+            (here.round() as i64, v)
+        }
+        Path::Trajectory(rows) => {
+            let x0 = rows[0].1 / rpc;
+            let origin = x0.round() as i64;
+            // The file's period stretched onto the table's (they differ by under a step).
+            let scale = rows.last().map_or(1.0, |r| r.0) / (f64::from(points) * dt);
+            let v = (0..points)
+                .map(|k| interpolate(rows, f64::from(k) * dt * scale) / rpc - origin as f64)
+                .collect();
+            (origin, v)
+        }
+    };
+    Ok(Table {
+        points,
+        steps: steps as u32,
+        origin,
+        values,
+        rate,
+        rad_per_count: rpc,
+    })
+}
+
+/// Linear interpolation of `rows` at `t` (held beyond the ends).
+fn interpolate(rows: &[(f64, f64)], t: f64) -> f64 {
+    let i = rows.partition_point(|r| r.0 <= t);
+    match (rows.get(i.wrapping_sub(1)), rows.get(i)) {
+        (Some(a), Some(b)) => a.1 + (b.1 - a.1) * (t - a.0) / (b.0 - a.0),
+        (Some(a), None) => a.1,
+        (None, Some(b)) => b.1,
+        (None, None) => 0.0,
+    }
+}
+
+/// The device's `table` status.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TableStatus {
+    /// `empty`, `ready` or `playing` (`none`: no table motion on this device).
+    pub playing: bool,
+    /// A reference is set.
+    pub ready: bool,
+    /// Periods completed in the run.
+    pub period: u32,
+    /// The correction's generation played.
+    pub generation: u32,
+    /// A correction waits for the next period's start.
+    pub pending: bool,
+    /// The position step the run started at.
+    pub started: u64,
+    /// The last complete period: its number, its correction's generation, RMS and peak
+    /// \[counts\].
+    pub done: Option<(u32, u32, f64, f64)>,
+}
+
+/// Reads the device's `table` status.
+pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
+    let (_, text) = b.request("table")?;
+    let mut s = TableStatus::default();
+    let mut done = (None, None, None, None);
+    for kv in text.split_ascii_whitespace() {
+        let Some((k, v)) = kv.split_once('=') else {
+            continue;
+        };
+        let int = || v.parse::<u32>().ok();
+        match k {
+            "state" => {
+                s.playing = v == "playing";
+                s.ready = v == "ready" || v == "playing";
+                if v == "none" {
+                    return Err(Error::Device("the device has no table motion".into()));
+                }
+            }
+            "period" => s.period = int().unwrap_or(0),
+            "gen" => s.generation = int().unwrap_or(0),
+            "pending" => s.pending = v == "1",
+            "started" => s.started = v.parse().unwrap_or(0),
+            "done" => done.0 = int(),
+            "done_gen" => done.1 = int(),
+            "rms" => done.2 = v.parse::<f64>().ok(),
+            "peak" => done.3 = v.parse::<f64>().ok(),
+            _ => {}
+        }
+    }
+    if let (Some(a), Some(g), Some(r), Some(p)) = done {
+        s.done = Some((a, g, r, p));
+    }
+    Ok(s)
+}
+
+/// Writes `values` to the device's table `which` (`ref` or `corr`), as many a line as the
+/// protocol's line carries (eight at most).
+fn write_values(b: &mut impl Bench, which: &str, values: &[f64]) -> Result<(), Error> {
+    let max_line = gms_core::protocol::MAX_LINE - 1;
+    let mut at = 0;
+    while at < values.len() {
+        let mut line = format!("table {which} {at}");
+        let mut n = 0;
+        while let Some(v) = values.get(at + n) {
+            // f32's shortest decimal: the device reads back the same value.
+            let word = format!(" {}", *v as f32);
+            if n == gms_core::table::TABLE_WRITE_VALUES || line.len() + word.len() > max_line {
+                break;
+            }
+            line.push_str(&word);
+            n += 1;
+        }
+        b.request(&line)?;
+        at += n.max(1);
+    }
+    Ok(())
+}
+
+/// Uploads the reference and sets it (the device checks it whole: continuous, within the
+/// speed limit and the soft limits; nothing moves if it refuses).
+pub fn set_table(b: &mut impl Bench, t: &Table) -> Result<(), Error> {
+    write_values(b, "ref", &t.values)?;
+    b.request(&format!("table set {} {} {}", t.points, t.steps, t.origin))
+        .map(drop)
+}
+
+/// Uploads a correction \[N·m at the points\] and has it played from the next period's start.
+pub fn use_correction(b: &mut impl Bench, u: &[f64]) -> Result<(), Error> {
+    write_values(b, "corr", u)?;
+    b.request("table use").map(drop)
+}
+
+/// Reads `n` values of the device's table `which` (`ref`, `corr` or `err`).
+pub fn read_values(b: &mut impl Bench, which: &str, n: u32) -> Result<Vec<f64>, Error> {
+    let mut out = Vec::with_capacity(n as usize);
+    let max = gms_core::protocol::MAX_READ;
+    while (out.len() as u32) < n {
+        let at = out.len() as u32;
+        let (lines, _) = b.request(&format!("table read {which} {at} {}", (n - at).min(max)))?;
+        if lines.is_empty() {
+            return Err(Error::Device(format!("table read {which}: no values")));
+        }
+        for l in lines {
+            out.push(
+                l.trim()
+                    .parse::<f64>()
+                    .map_err(|_| Error::Device(format!("table read {which}: `{l}`")))?,
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// What the learning gave.
+#[derive(Debug, Clone, Default)]
+pub struct Learned {
+    /// The table played.
+    pub table: Option<Table>,
+    /// Each iteration's figures (from 0: the first pass), RMS and peak over every step
+    /// \[counts\].
+    pub iterations: Vec<Iteration>,
+    /// Each iteration's error at the points \[counts\] (each bin the mean over its steps).
+    pub errors: Vec<Vec<f64>>,
+    /// The correction kept (the best) \[N·m at the points\].
+    pub correction: Vec<f64>,
+    /// Why it stopped early, if it did.
+    pub stopped: Option<Stop>,
+    /// The device's periods each iteration was measured in.
+    pub periods: Vec<u32>,
+    /// The position step the run started at (the device's count: period `p` is the steps
+    /// from `started + p × points × steps`).
+    pub started: u64,
+}
+
+/// Waits until the device has completed a period after `after` played with the correction
+/// `generation`; returns its figures. Fails when the run has stopped or faulted.
+fn wait_period(
+    b: &mut impl Bench,
+    period_s: f64,
+    after: Option<u32>,
+    generation: u32,
+) -> Result<(u32, f64, f64), Error> {
+    // Three periods at most: the one under way, the one the correction waits for, its own.
+    let tries = 80;
+    for _ in 0..tries {
+        let s = table_status(b)?;
+        if let Some((p, g, rms, peak)) = s.done
+            && g == generation
+            && after.is_none_or(|a| p > a)
+        {
+            return Ok((p, rms, peak));
+        }
+        if !s.playing {
+            check_faults(b)?;
+            return Err(Error::Device(
+                "the table run ended before the period came (bridge off?)".into(),
+            ));
+        }
+        b.wait(period_s / 25.0)?;
+    }
+    check_faults(b)?;
+    Err(Error::Device(
+        "no period completed in 3 periods' time".into(),
+    ))
+}
+
+/// Runs the learning on the device: the table set (the device refuses a path beyond its
+/// limits before anything moves), the axis brought to its start, the periods played with
+/// the correction learned after each (`progress` called with each iteration's figures), the
+/// best correction kept; `apply` leaves it set for the next runs of the table, otherwise the
+/// table plays no correction after. The axis holds at the table's start after; the bridge is
+/// off on failure.
+pub fn learn(
+    b: &mut impl Bench,
+    plan: &LearnPlan,
+    mut progress: impl FnMut(&Iteration),
+    apply: bool,
+) -> Result<Learned, Error> {
+    plan.check()?;
+    guarded(b, |b| {
+        let info = DeviceInfo::read(b)?;
+        let settings = crate::settings::read(b)?;
+        let ctrl = PositionController::new(&settings).map_err(Error::Device)?;
+        b.enable()?;
+        let st = status(b)?;
+        let rpc = info.rad_per_count;
+        let here = st.pos / rpc + f64::from(st.error_counts);
+        let t = plan_table(&plan.path, info.pos_hz, rpc, here)?;
+        set_table(b, &t)?;
+        if (t.start_rad() - st.pos).abs() > 0.5 * rpc {
+            crate::client::move_to(b, t.start_rad(), 0.5)?;
+            b.wait(0.2)?;
+        }
+        let n = t.points as usize;
+        let rate = 1.0 / t.dt();
+        // The bins are centred (steps − 1)/2 position steps after their points.
+        let centre = (f64::from(t.steps) - 1.0) / 2.0 / info.pos_hz;
+        let l = LearningFilter::shaped(n, rate, plan.gain, plan.lead_s - centre, |f| {
+            ctrl.torque(f) * rpc
+        });
+        let l = if plan.stiffness {
+            let k = friction_stiffness(&settings, &t);
+            l.with_pointwise(k.iter().map(|k| plan.gain * k * rpc).collect())
+        } else {
+            l
+        };
+        let q = QFilter::new(plan.q_hz, rate);
+        let mut learner = Learner::new(l, q, plan.patience);
+        let mut out = Learned {
+            table: Some(t.clone()),
+            ..Learned::default()
+        };
+        let periods = 2 * plan.iterations as u32 + 4;
+        b.request(&format!("table run {periods}"))?;
+        out.started = table_status(b)?.started;
+        // The first period starts from rest: the first pass is the second, in the periodic
+        // state the learning works on.
+        let mut last = Some(0);
+        for i in 0..=plan.iterations {
+            // The correction learned after iteration i − 1 is generation i.
+            let (p, rms, peak) = wait_period(b, t.period(), last, i as u32)?;
+            last = Some(p);
+            let e = read_values(b, "err", t.points)?;
+            out.periods.push(p);
+            let r = learner.learn_measured(&e, rms, peak);
+            out.errors.push(e);
+            match r {
+                Ok(it) => progress(&it),
+                Err(stop) => {
+                    if let Some(it) = learner.history().last() {
+                        progress(it);
+                    }
+                    out.stopped = Some(stop);
+                    break;
+                }
+            }
+            if i == plan.iterations {
+                break;
+            }
+            use_correction(b, learner.correction())?;
+        }
+        b.request("table stop")?;
+        for _ in 0..200 {
+            if !table_status(b)?.playing {
+                break;
+            }
+            b.wait(t.period() / 20.0)?;
+        }
+        check_faults(b)?;
+        out.iterations = learner.history().to_vec();
+        out.correction = learner.best().to_vec();
+        if apply {
+            use_correction(b, &out.correction)?;
+        } else {
+            b.request("table corr off")?;
+        }
+        Ok(out)
+    })
+}
+
+/// The compensator's friction model's local stiffness along the table's path \[N·m/rad at
+/// each point\]: the change of its elastic force over the interval after each point per
+/// displacement (the blocks that stick: all of Σk just after a reversal, none once
+/// sliding), the model (`gms.*` and the reflected guideway) run over two periods of the
+/// reference at the position rate, the second kept.
+pub fn friction_stiffness(s: &gms_core::protocol::Settings, t: &Table) -> Vec<f64> {
+    use gms_core::{FrictionModel, Gms};
+    let ff = &s.ff;
+    let mut act = Gms::try_new(ff.actuator).ok();
+    let mut guide = ff.guideway.and_then(|g| Gms::try_new(g).ok());
+    let ratio = ff.ratio;
+    let sum_k = |g: &Option<Gms<6>>, r: f32| {
+        g.as_ref().map_or(0.0, |g| {
+            g.params()
+                .blocks
+                .iter()
+                .map(|b| f64::from(b.k * r * r))
+                .sum::<f64>()
+        })
+    };
+    let k_max = sum_k(&act, 1.0) + sum_k(&guide, ratio);
+    let n = t.points as usize;
+    let steps = t.steps as usize;
+    let dt = 1.0 / t.rate as f32;
+    let rpc = t.rad_per_count;
+    let elastic = |a: &Option<Gms<6>>, g: &Option<Gms<6>>| -> f64 {
+        let f = |m: &Option<Gms<6>>, r: f32| {
+            m.as_ref()
+                .map_or(0.0, |m| f64::from((m.force() - m.viscous_force()) * r))
+        };
+        f(a, 1.0) + f(g, ratio)
+    };
+    // The reference at every step: the points' Catmull-Rom cubic, as the device plays it.
+    let x_at = |i: usize| -> f64 {
+        let k = i / steps;
+        let s = (i % steps) as f64 / steps as f64;
+        let p = |j: usize| t.values[j % n];
+        let (p0, p1, p2, p3) = (p(k + n - 1), p(k), p(k + 1), p(k + 2));
+        let (m1, m2) = (0.5 * (p2 - p0), 0.5 * (p3 - p1));
+        let d = p2 - p1;
+        let a = 3.0 * d - 2.0 * m1 - m2;
+        let b = -2.0 * d + m1 + m2;
+        (p1 + s * (m1 + s * (a + s * b))) * rpc
+    };
+    let mut out = vec![0.0; n];
+    let mut x_prev = x_at(0);
+    let mut at_point = (elastic(&act, &guide), x_prev);
+    for round in 0..2 {
+        for i in 0..n * steps {
+            let x = x_at((i + 1) % (n * steps));
+            let dx = (x - x_prev) as f32;
+            x_prev = x;
+            if let Some(a) = &mut act {
+                a.advance(dx, dt);
+            }
+            if let Some(g) = &mut guide {
+                g.advance(ratio * dx, dt);
+            }
+            if (i + 1) % steps == 0 {
+                let now = (elastic(&act, &guide), x);
+                let k = (i + 1) / steps - 1;
+                let (df, ddx) = (now.0 - at_point.0, now.1 - at_point.1);
+                if round == 1 {
+                    out[k] = if ddx.abs() > 1e-12 {
+                        (df / ddx).clamp(0.0, k_max)
+                    } else {
+                        k_max
+                    };
+                }
+                at_point = now;
+            }
+        }
+    }
+    out
+}
+
+/// `iterations.csv`: `iteration,rms_counts,peak_counts`.
+pub fn iterations_csv(l: &Learned) -> String {
+    let mut s = String::from("iteration,rms_counts,peak_counts\n");
+    for it in &l.iterations {
+        s.push_str(&format!("{},{},{}\n", it.n, it.rms, it.peak));
+    }
+    s
+}
+
+/// `correction.csv`: `t_s,position_rad,correction_nm` at the table's points.
+pub fn correction_csv(l: &Learned) -> String {
+    let mut s = String::from("t_s,position_rad,correction_nm\n");
+    if let Some(t) = &l.table {
+        for (k, u) in l.correction.iter().enumerate() {
+            let x = (t.origin as f64 + t.values.get(k).copied().unwrap_or(0.0)) * t.rad_per_count;
+            s.push_str(&format!("{},{},{}\n", k as f64 * t.dt(), x, u));
+        }
+    }
+    s
+}

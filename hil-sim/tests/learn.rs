@@ -1,0 +1,288 @@
+//! Learning from repetition on the virtual device (issue 30): the paper's sine test played
+//! from the device's tables, the correction learned after each period
+//! (`gms_bench::learn`), against the simulated true position the device never sees. Run with
+//! `--nocapture --test-threads=1` for the curves.
+
+use gms_bench::learn::{self, LearnPlan, Learned, Path};
+use hil_sim::device::{LocalDevice, Truth};
+use hil_sim::scenario::Scenario;
+
+/// The device's figures and the truth's for each iteration: (device RMS, device peak, RMS of
+/// the device's error recomputed from the recording, RMS against the true position).
+fn curves(l: &Learned, truth: &[Truth]) -> Vec<(f64, f64, f64, f64)> {
+    let t = l.table.as_ref().unwrap();
+    let per = u64::from(t.points) * u64::from(t.steps);
+    l.iterations
+        .iter()
+        .zip(&l.periods)
+        .map(|(it, p)| {
+            let from = l.started + u64::from(*p) * per;
+            let rows: Vec<&Truth> = truth
+                .iter()
+                .filter(|r| r.steps >= from && r.steps < from + per)
+                .collect();
+            assert_eq!(rows.len() as u64, per, "the period's steps recorded");
+            let rms = |f: &dyn Fn(&Truth) -> f64| {
+                (rows.iter().map(|r| f(r).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
+            };
+            (
+                it.rms,
+                it.peak,
+                rms(&|r| r.device_error()),
+                rms(&|r| r.true_error()),
+            )
+        })
+        .collect()
+}
+
+fn print(name: &str, c: &[(f64, f64, f64, f64)]) {
+    eprintln!("{name}: iteration, RMS [counts], peak [counts], true RMS [counts]");
+    for (i, (rms, peak, _, truth)) in c.iter().enumerate() {
+        eprintln!("  {i:2} {rms:7.3} {peak:7.2} {truth:7.3}");
+    }
+}
+
+fn run(sc: &str, plan: &LearnPlan) -> (Vec<(f64, f64, f64, f64)>, Learned) {
+    let sc = Scenario::parse(sc, "learn").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    dev.record_truth();
+    let l = learn::learn(&mut dev, plan, |_| {}, false).unwrap();
+    let truth = dev.take_truth();
+    (curves(&l, &truth), l)
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let v: Vec<f64> = v.collect();
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+/// GMS + ILC on the default virtual device's sine test (the demo's 0.05 rad, 1 Hz sinusoid
+/// with its reversals; the plant's friction drawn within ±15 % of the model's, sense noise
+/// on): the device's per-period RMS is what the recording of every step gives; the learning
+/// lowers the error against both the reading and the true position.
+#[test]
+fn gms_and_ilc_on_the_paper_sine() {
+    let (c, l) = run("", &LearnPlan::default());
+    print("GMS + ILC", &c);
+    assert_eq!(l.iterations.len(), 11);
+    assert!(l.stopped.is_none());
+    for (rms, _, recomputed, _) in &c {
+        assert!(
+            (rms - recomputed).abs() < 1e-3 * rms,
+            "{rms} against {recomputed}"
+        );
+    }
+    let first = c[0];
+    let last3 = |k: usize| mean(c[8..].iter().map(|r| [r.0, r.1, r.2, r.3][k]));
+    eprintln!(
+        "first pass {:.3} counts RMS ({:.3} true), iterations 8-10 {:.3} ({:.3} true), peak {:.1} → {:.1}; the issue's target 0.5 counts",
+        first.0,
+        first.3,
+        last3(0),
+        last3(3),
+        first.1,
+        last3(1)
+    );
+    assert!(last3(0) < 0.8 * first.0, "{} → {}", first.0, last3(0));
+    assert!(last3(3) < 0.8 * first.3, "{} → {}", first.3, last3(3));
+    assert!(last3(1) < first.1, "peak {} → {}", first.1, last3(1));
+}
+
+/// What each part contributes: ILC alone (`ff.mode none`) starts from the uncompensated
+/// friction's error and learns most of it away, but GMS + ILC is lower at the first pass and
+/// after ten iterations.
+#[test]
+fn what_gms_and_ilc_each_contribute() {
+    let none = "[controller.ff]\nmode = \"none\"\n";
+    let (alone, _) = run(none, &LearnPlan::default());
+    let (both, _) = run("", &LearnPlan::default());
+    print("ILC alone", &alone);
+    print("GMS + ILC", &both);
+    let reach = alone.iter().position(|r| r.0 <= both[0].0);
+    eprintln!(
+        "ILC alone reaches GMS's first pass ({:.3}) at iteration {reach:?}",
+        both[0].0
+    );
+    let tail = |c: &[(f64, f64, f64, f64)]| mean(c[8..].iter().map(|r| r.0));
+    assert!(
+        alone[0].0 > 3.0 * both[0].0,
+        "first passes {} {}",
+        alone[0].0,
+        both[0].0
+    );
+    assert!(
+        tail(&alone) < 0.5 * alone[0].0,
+        "ILC alone {} → {}",
+        alone[0].0,
+        tail(&alone)
+    );
+    assert!(
+        tail(&both) < tail(&alone),
+        "{} against {}",
+        tail(&both),
+        tail(&alone)
+    );
+}
+
+/// Fifty iterations with twice the default sense noise: the period's RMS scatters, the learning
+/// neither diverges nor stops, and stays below the first pass.
+#[test]
+fn fifty_iterations_with_noise_do_not_diverge() {
+    let sc = "[plant]\nadc_noise = 0.3e-3\n";
+    let plan = LearnPlan {
+        iterations: 50,
+        ..LearnPlan::default()
+    };
+    let (c, l) = run(sc, &plan);
+    print("50 iterations, noise 0.3 mA", &c);
+    assert!(l.stopped.is_none(), "{:?}", l.stopped);
+    assert_eq!(c.len(), 51);
+    let tail = mean(c[40..].iter().map(|r| r.0));
+    let worst = c[1..].iter().map(|r| r.0).fold(0.0, f64::max);
+    eprintln!(
+        "first {:.3}, iterations 40-50 {tail:.3}, worst {worst:.3}",
+        c[0].0
+    );
+    assert!(tail < 0.85 * c[0].0);
+    assert!(worst < 1.2 * c[0].0);
+}
+
+/// The friction drifting up 10 % during the learning (a ramp over 20 s): the error stays
+/// bounded and the learning follows it.
+#[test]
+fn a_drifting_friction_stays_bounded() {
+    let sc = "[plant.drift]\nkind = \"ramp\"\namount = 0.1\ntime = 20.0\n";
+    let plan = LearnPlan {
+        iterations: 16,
+        ..LearnPlan::default()
+    };
+    let (c, l) = run(sc, &plan);
+    print("friction +10 % over 20 s", &c);
+    assert!(l.stopped.is_none());
+    let worst = c[1..].iter().map(|r| r.0).fold(0.0, f64::max);
+    let tail = mean(c[13..].iter().map(|r| r.0));
+    eprintln!(
+        "first {:.3}, worst after {worst:.3}, iterations 13-16 {tail:.3}",
+        c[0].0
+    );
+    assert!(worst < 1.2 * c[0].0);
+    assert!(tail < 0.85 * c[0].0);
+}
+
+/// A path beyond the soft limits, and one with a jump, are refused by the device when the
+/// table is set — before anything moves.
+#[test]
+fn a_path_beyond_the_limits_is_refused_before_anything_moves() {
+    let sc = Scenario::parse("", "learn").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    let theta0 = dev.plant().theta;
+    // 10 rad/s at most, to 60 rad: beyond the default ±50 rad.
+    let beyond = Path::Trajectory(vec![(0.0, 0.0), (3.0, 30.0), (6.0, 60.0), (12.0, 0.0)]);
+    let jump = Path::Trajectory(vec![
+        (0.0, 0.0),
+        (0.5, 0.0),
+        (0.5001, 0.5),
+        (0.9, 0.5),
+        (1.0, 0.0),
+    ]);
+    for (path, why) in [(beyond, "soft limits"), (jump, "jump")] {
+        let plan = LearnPlan {
+            path,
+            ..LearnPlan::default()
+        };
+        let e = learn::learn(&mut dev, &plan, |_| {}, false).unwrap_err();
+        assert!(e.to_string().contains(why), "{e}");
+        let moved = (dev.plant().theta - theta0).abs() / 3.8e-6;
+        assert!(moved < 2.0, "moved {moved} counts");
+        let st = gms_bench::status(&mut dev).unwrap();
+        assert!(!st.enabled, "the bridge off after the refusal");
+    }
+}
+
+fn ok(dev: &mut LocalDevice, line: &str) -> String {
+    let r = dev.ask(line);
+    assert!(r.lines().last().unwrap().starts_with("ok"), "{line}: {r}");
+    r
+}
+
+fn refused(dev: &mut LocalDevice, line: &str, why: &str) {
+    let r = dev.ask(line);
+    let last = r.lines().last().unwrap();
+    assert!(last.starts_with("err") && last.contains(why), "{line}: {r}");
+}
+
+fn state(dev: &mut LocalDevice) -> String {
+    let r = ok(dev, "table");
+    r.split_whitespace()
+        .find_map(|w| w.strip_prefix("state="))
+        .unwrap()
+        .to_string()
+}
+
+/// The table's commands on the device: bad input refused with its reason and nothing
+/// changed; a run only from the table's start with the loop holding; `disable` ends a run at
+/// once, a lost link at the period's end (holding at the table's start).
+#[test]
+fn table_commands_refuse_bad_input_and_end_safely() {
+    let sc = Scenario::parse("", "learn").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    refused(&mut dev, "table run 2", "no table set");
+    refused(&mut dev, "table corr 0 0", "no table set");
+    refused(&mut dev, "table ref 4 1", "from point 0");
+    refused(&mut dev, "table ref 0 1 nan", "a value is a number");
+    refused(&mut dev, "table ref 0 1 2 3 4 5 6 7 8 9", "at most 8");
+    // A 16-point triangle, 100 counts high, 100 steps between points.
+    let pts: Vec<String> = (0..16)
+        .map(|k| format!("{}", 100.0 - (12.5 * (k as f64 - 8.0)).abs()))
+        .collect();
+    for (i, c) in pts.chunks(8).enumerate() {
+        ok(&mut dev, &format!("table ref {} {}", i * 8, c.join(" ")));
+    }
+    refused(&mut dev, "table set 16 0 0", "POINTS from 4");
+    refused(&mut dev, "table set 17 100 0", "not written whole");
+    refused(&mut dev, "table set 16 100 999999999999", "soft limits");
+    ok(&mut dev, "table set 16 100 0");
+    assert_eq!(state(&mut dev), "ready");
+    refused(&mut dev, "table read err 0 4", "no period complete");
+    refused(&mut dev, "table run 2", "disabled");
+    ok(&mut dev, "enable");
+    // The table starts at 0 from count 0 (the power-up position): move away, refused.
+    ok(&mut dev, "move 0.01");
+    dev.run(0.5);
+    refused(&mut dev, "table run 2", "not at the table's start");
+    ok(&mut dev, "move 0");
+    dev.run(0.5);
+    // A correction beyond the drive's torque, out of order, or not whole.
+    refused(&mut dev, "table corr 0 1", "torque");
+    ok(&mut dev, "table corr 0 1e-6 2e-6");
+    refused(&mut dev, "table use", "not written whole");
+    ok(&mut dev, "table run 1000");
+    assert_eq!(state(&mut dev), "playing");
+    refused(&mut dev, "table ref 0 1", "playing");
+    refused(&mut dev, "table clear", "playing");
+    refused(&mut dev, "table run 2", "already playing");
+    dev.run(0.4);
+    ok(&mut dev, "table read err 0 16");
+    // `disable`: the run ends at once, the bridge off.
+    ok(&mut dev, "disable");
+    assert_eq!(state(&mut dev), "ready");
+    // A lost link: the run ends at the end of its period; the axis holds at the start.
+    ok(&mut dev, "enable");
+    ok(&mut dev, "move 0");
+    dev.run(0.5);
+    ok(&mut dev, "table run 1000");
+    dev.run(0.25);
+    dev.disconnect();
+    assert_eq!(state(&mut dev), "playing", "until the period's end");
+    dev.run(0.2);
+    assert_eq!(state(&mut dev), "ready");
+    let st = gms_bench::status(&mut dev).unwrap();
+    assert!(st.enabled && !st.moving);
+    assert!(
+        st.pos.abs() / 3.8e-6 < 3.0,
+        "holding at the start: {} rad",
+        st.pos
+    );
+    ok(&mut dev, "table clear");
+    assert_eq!(state(&mut dev), "empty");
+}
