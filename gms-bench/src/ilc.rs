@@ -15,7 +15,7 @@
 //! acts on the period's spectrum (`rustfft`).
 //!
 //! [`Learner`] keeps the iterations' figures, the best correction, and stops on divergence (the
-//! error's RMS, averaged over a set number of iterations, risen 20 % above its lowest: the
+//! error's RMS, averaged over a set number of iterations, risen 25 % above its lowest: the
 //! period's RMS scatters by several per cent from one period to the next on a real axis, so
 //! no single rise stops it, and a true divergence grows without bound).
 
@@ -193,8 +193,8 @@ pub struct Iteration {
 }
 
 /// How far the RMS's moving average may rise above its lowest before the learning stops
-/// (20 %).
-pub const DIVERGED: f64 = 0.2;
+/// (25 %).
+pub const DIVERGED: f64 = 0.25;
 
 /// Why learning stopped, if it did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

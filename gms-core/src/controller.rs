@@ -396,8 +396,6 @@ pub struct Controller<const N: usize> {
     /// The position map's sample at the reference: torque offset \[N·m\], friction scale [-]
     /// (0 and 1 without a map), set by the control loop before each position step.
     map_sample: (f32, f32),
-    /// The table motion's feedforward correction for the next step \[N·m\].
-    ff_corr: f32,
     out: PositionOutput,
 }
 
@@ -430,7 +428,6 @@ impl<const N: usize> Controller<N> {
             adapt,
             shaping,
             map_sample: (0.0, 1.0),
-            ff_corr: 0.0,
             rpc: p.rad_per_count(),
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
@@ -571,8 +568,6 @@ impl<const N: usize> Controller<N> {
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
         self.shaping.take_state_from(&old.shaping);
-        // The table's correction goes on (the loop sets it again before the next step).
-        self.ff_corr = old.ff_corr;
         // The map's sample is this controller's own (the loop sets it, for the new settings,
         // before the hand-over): a map switched on or off changes the feedforward, and the
         // integrator takes the difference over below.
@@ -587,8 +582,7 @@ impl<const N: usize> Controller<N> {
         let p_term = p.pid.kp * o.error;
         let d_term = p.pid.kd * self.d_filt;
         let (map_offset, map_scale) = self.map_sample;
-        let ff_fric =
-            p.ff.gain * ff_scale * self.friction_now() * map_scale + map_offset + self.ff_corr;
+        let ff_fric = p.ff.gain * ff_scale * self.friction_now() * map_scale + map_offset;
         let ff_inertia = p.motor.inertia * self.a_ref;
         let integ = before - (p_term + d_term + ff_fric + ff_inertia);
         self.integ = clamp(if integ.is_finite() { integ } else { 0.0 }, p.pid.i_limit);
@@ -691,8 +685,7 @@ impl<const N: usize> Controller<N> {
         // Conditional integration: the integrator stops when the command is saturated in the
         // direction the error would push it further.
         let integ_new = clamp(self.integ + pid.ki * error * self.dt_pos, pid.i_limit);
-        let offset = map_offset + self.ff_corr;
-        let torque = p_term + integ_new + d_term + ff_fric + offset + ff_inertia;
+        let torque = p_term + integ_new + d_term + ff_fric + map_offset + ff_inertia;
         // The loop-shaping filters act on the whole command (feedback and feedforward alike:
         // a resonance is excited by either); the limit comes after them.
         let i_unsat = self.shaping.run(torque / self.p.motor.k_m);
@@ -719,7 +712,7 @@ impl<const N: usize> Controller<N> {
             p: p_term,
             i: self.integ,
             d: d_term,
-            ff_friction: ff_fric + offset,
+            ff_friction: ff_fric + map_offset,
             ff_scale,
             ff_inertia,
             i_cmd,
@@ -730,15 +723,10 @@ impl<const N: usize> Controller<N> {
 
     /// The position map's sample for the next position step: the torque offset \[N·m\] added
     /// to the feedforward and the scale \[-\] on the friction feedforward (the control loop
-    /// sets it from its table at the reference; 0 and 1: no map).
+    /// sets it from its table at the reference, the table motion's correction added to the
+    /// offset; 0 and 1: neither).
     pub fn set_map_sample(&mut self, offset: f32, scale: f32) {
         self.map_sample = (offset, scale);
-    }
-
-    /// The table motion's feedforward correction for the next position step \[N·m\] (added
-    /// to the feedforward beside the map's offset; 0: none).
-    pub fn set_ff_correction(&mut self, torque: f32) {
-        self.ff_corr = torque;
     }
 
     /// Adds `amps` \[A\] to the current command of the last position step, within `i_max`:

@@ -510,3 +510,33 @@ impl fmt::Display for Num {
         write_f32(f, self.0)
     }
 }
+
+/// An integer for a reply, written digit by digit (core's 64-bit integer formatting is a
+/// large piece of a board's flash).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Int(pub i64);
+
+impl fmt::Display for Int {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut digits = [0u8; 20];
+        let mut n = self.0.unsigned_abs();
+        let mut at = digits.len();
+        loop {
+            at -= 1;
+            if let Some(d) = digits.get_mut(at) {
+                *d = b'0' + (n % 10) as u8;
+            }
+            n /= 10;
+            if n == 0 || at == 0 {
+                break;
+            }
+        }
+        if self.0 < 0 {
+            f.write_str("-")?;
+        }
+        for d in digits.iter().skip(at) {
+            f.write_char(char::from(*d))?;
+        }
+        Ok(())
+    }
+}

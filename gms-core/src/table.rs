@@ -183,10 +183,23 @@ pub enum TableRequest {
     Clear,
 }
 
-/// Offsets of the tables in the buffer.
+/// Offsets of the tables in the buffer: the reference, correction buffer `i`, error buffer `i`
+/// (a branch, not an array's index: nothing here can panic).
 const REF: usize = 0;
-const CORR: [usize; 2] = [TABLE_POINTS, 2 * TABLE_POINTS];
-const ERR: [usize; 2] = [3 * TABLE_POINTS, 4 * TABLE_POINTS];
+fn corr_at(i: u8) -> usize {
+    if i == 0 {
+        TABLE_POINTS
+    } else {
+        2 * TABLE_POINTS
+    }
+}
+fn err_at(i: u8) -> usize {
+    if i == 0 {
+        3 * TABLE_POINTS
+    } else {
+        4 * TABLE_POINTS
+    }
+}
 
 /// The table motion's player (the control loop's): where in the period it is, which buffers
 /// play and fill, the period's sums.
@@ -215,6 +228,14 @@ pub struct Player {
     generation_at_start: u32,
     done: Option<(PeriodError, u8)>,
     started: u64,
+    /// Cached for the steps: points and steps of the geometry, the origin \[1/65536 count\],
+    /// the velocity and acceleration per unit of the cubic's derivatives, counts per radian.
+    points: u32,
+    steps: u32,
+    origin_sub: i64,
+    vscale: f32,
+    ascale: f32,
+    counts_per_rad: f32,
 }
 
 /// The values at a step: the reference and the correction \[N·m\].
@@ -238,7 +259,8 @@ pub enum Recorded {
 }
 
 impl Player {
-    /// The report for the protocol side.
+    /// The report for the protocol side (one copy of it in the image).
+    #[inline(never)]
     pub fn report(&self) -> TableReport {
         TableReport {
             state: self.state,
@@ -252,9 +274,14 @@ impl Player {
         }
     }
 
-    /// Notes the position step a run just asked for starts at (the loop's count).
-    pub fn set_started(&mut self, step: u64) {
+    /// Notes what a run just asked for starts with: its first position step (the loop's
+    /// count), the encoder's `rpc` \[rad/count\] and the position rate `rate` \[Hz\].
+    pub fn set_started(&mut self, step: u64, rpc: f32, rate: f32) {
         self.started = step;
+        let per_s = rate * self.inv_steps;
+        self.vscale = rpc * per_s;
+        self.ascale = rpc * per_s * per_s;
+        self.counts_per_rad = if rpc > 0.0 { 1.0 / rpc } else { 0.0 };
     }
 
     /// True while playing.
@@ -288,7 +315,7 @@ impl Player {
                         self.done = None;
                         REF
                     }
-                    Which::Corr if self.pending.is_none() => CORR[usize::from(self.spare())],
+                    Which::Corr if self.pending.is_none() => corr_at(self.spare()),
                     _ => return,
                 };
                 let from = base + start as usize;
@@ -307,6 +334,9 @@ impl Player {
                         ..g
                     });
                     self.inv_steps = 1.0 / g.steps.max(1) as f32;
+                    self.points = g.points;
+                    self.steps = g.steps.max(1);
+                    self.origin_sub = g.origin.saturating_mul(SUB_PER_COUNT as i64);
                     self.state = TableState::Ready;
                     self.corr = None;
                     self.pending = None;
@@ -355,8 +385,8 @@ impl Player {
                 let points = self.geo.map_or(0, |g| g.points) as usize;
                 let base = match which {
                     Which::Ref => Some(REF),
-                    Which::Corr => self.corr.map(|c| CORR[usize::from(c)]),
-                    Which::Err => self.done.map(|d| ERR[usize::from(d.1)]),
+                    Which::Corr => self.corr.map(corr_at),
+                    Which::Err => self.done.map(|d| err_at(d.1)),
                 };
                 let Some(base) = base else { return };
                 let n = (max as usize)
@@ -408,16 +438,17 @@ impl Player {
         }
     }
 
-    /// The reference and the correction at this step (`rpc` \[rad/count\], `rate`
-    /// \[Hz\]: the position loop's). Only while playing.
-    pub fn sample(&self, t: &[f32], rpc: f32, rate: f32) -> TableSample {
-        let Some(g) = self.geo else {
-            return TableSample::default();
-        };
-        let n = g.points as usize;
+    /// The reference and the correction at this step (the encoder and the rate as the run
+    /// started with, [`Player::set_started`]). Only while playing.
+    pub fn sample(&self, t: &[f32]) -> TableSample {
+        let n = self.points as usize;
         let k = self.k as usize;
-        let at = |i: usize| t.get(REF + (i % n.max(1))).copied().unwrap_or(0.0);
-        let (p0, p1, p2, p3) = (at(k + n - 1), at(k), at(k + 1), at(k + 2));
+        // The neighbours, wrapping round the period (no division in the step).
+        let km1 = if k == 0 { n.saturating_sub(1) } else { k - 1 };
+        let kp1 = if k + 1 >= n { k + 1 - n } else { k + 1 };
+        let kp2 = if k + 2 >= n { k + 2 - n } else { k + 2 };
+        let at = |i: usize| t.get(REF + i).copied().unwrap_or(0.0);
+        let (p0, p1, p2, p3) = (at(km1), at(k), at(kp1), at(kp2));
         let s = self.j as f32 * self.inv_steps;
         // Catmull-Rom: tangents from the neighbours, in counts per point interval.
         let m1 = 0.5 * (p2 - p0);
@@ -428,33 +459,40 @@ impl Player {
         let pos = p1 + s * (m1 + s * (a + s * b));
         let dds = m1 + s * (2.0 * a + 3.0 * s * b);
         let d2ds2 = 2.0 * a + 6.0 * s * b;
-        let per_s = rate * self.inv_steps;
         let corr = match self.corr {
             Some(c) => {
-                let base = CORR[usize::from(c)];
+                let base = corr_at(c);
                 let c1 = t.get(base + k).copied().unwrap_or(0.0);
-                let c2 = t.get(base + (k + 1) % n.max(1)).copied().unwrap_or(0.0);
+                let c2 = t.get(base + kp1).copied().unwrap_or(0.0);
                 c1 + s * (c2 - c1)
             }
             None => 0.0,
         };
+        // In fixed point through 32-bit conversions (a float to a 64-bit integer is a library
+        // call on this core): the whole counts, then the fraction (|pos| < 2^24 counts).
+        let whole = pos as i32;
+        let frac = ((pos - whole as f32) * SUB_PER_COUNT) as i32;
         TableSample {
             r: RefSample {
-                pos: to_sub(g.origin, pos),
-                vel: dds * rpc * per_s,
-                acc: d2ds2 * rpc * per_s * per_s,
+                pos: self
+                    .origin_sub
+                    .wrapping_add(i64::from(whole) << 16)
+                    .wrapping_add(i64::from(frac)),
+                vel: dds * self.vscale,
+                acc: d2ds2 * self.ascale,
             },
             corr,
         }
     }
 
-    /// After the step played with [`Player::sample`]: its error `error` \[counts\] summed, the
-    /// phase advanced; at a period's end the error buffers swap, a correction waiting is
-    /// taken, and the run ends when it has played its periods (or was stopped).
-    pub fn record(&mut self, t: &mut [f32], error: f32) -> Recorded {
-        let Some(g) = self.geo.filter(|_| self.playing()) else {
+    /// After the step played with [`Player::sample`]: its error `error_rad` \[rad\] summed (in
+    /// counts), the phase advanced; at a period's end the error buffers swap, a correction
+    /// waiting is taken, and the run ends when it has played its periods (or was stopped).
+    pub fn record(&mut self, t: &mut [f32], error_rad: f32) -> Recorded {
+        if !self.playing() {
             return Recorded::Within;
-        };
+        }
+        let error = error_rad * self.counts_per_rad;
         self.acc += error;
         self.sumsq += error * error;
         let mag = if error < 0.0 { -error } else { error };
@@ -463,17 +501,17 @@ impl Player {
         }
         self.count += 1;
         self.j += 1;
-        if self.j < g.steps {
+        if self.j < self.steps {
             return Recorded::Within;
         }
         self.j = 0;
-        let bin = ERR[usize::from(self.fill)] + self.k as usize;
+        let bin = err_at(self.fill) + self.k as usize;
         if let Some(v) = t.get_mut(bin) {
             *v = self.acc * self.inv_steps;
         }
         self.acc = 0.0;
         self.k += 1;
-        if self.k < g.points {
+        if self.k < self.points {
             return Recorded::Within;
         }
         // The period's end.
@@ -483,7 +521,7 @@ impl Player {
             PeriodError {
                 period: self.period,
                 generation: self.generation_at_start,
-                rms: libm::sqrtf(self.sumsq / count),
+                rms: crate::math::sqrt(self.sumsq / count),
                 peak: self.peak,
             },
             self.fill,
@@ -500,7 +538,7 @@ impl Player {
         if self.stopping || self.period >= self.periods {
             self.state = TableState::Ready;
             self.stopping = false;
-            return Recorded::RunEnd(to_sub(g.origin, t.get(REF).copied().unwrap_or(0.0)));
+            return Recorded::RunEnd(self.start(t).unwrap_or(self.origin_sub));
         }
         Recorded::PeriodEnd
     }

@@ -164,3 +164,23 @@ fn log2_and_exp2_are_accurate() {
     // The top of exp's range is finite.
     assert!(math::exp(88.722_83).is_finite());
 }
+
+/// `math::sqrt` against f64's over twelve decades and at the edges.
+#[test]
+fn sqrt_within_two_ulp() {
+    let mut x = 1e-20f32;
+    while x < 1e20 {
+        for m in [1.0f32, 1.37, 2.0, 3.99, 7.1] {
+            let v = x * m;
+            let want = (v as f64).sqrt() as f32;
+            let got = gms_core::math::sqrt(v);
+            let ulp = (want.to_bits() as i64 - got.to_bits() as i64).abs();
+            assert!(ulp <= 2, "sqrt({v}) = {got}, want {want}");
+        }
+        x *= 10.0;
+    }
+    assert_eq!(gms_core::math::sqrt(0.0), 0.0);
+    assert!(gms_core::math::sqrt(-1.0).is_nan());
+    assert!(gms_core::math::sqrt(f32::NAN).is_nan());
+    assert_eq!(gms_core::math::sqrt(f32::INFINITY), f32::INFINITY);
+}

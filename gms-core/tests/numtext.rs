@@ -202,3 +202,24 @@ fn sweep_round_trips() {
         assert_eq!(parse_f32(&s).map(f32::to_bits), Some(bits), "{s}");
     }
 }
+
+/// `Int` writes what core's formatting writes, at the ends of the range too.
+#[test]
+fn int_writes_like_core() {
+    use gms_core::numtext::Int;
+    for v in [
+        0i64,
+        1,
+        -1,
+        9,
+        10,
+        -10,
+        12345,
+        -987654321,
+        i64::MAX,
+        i64::MIN,
+        1 << 40,
+    ] {
+        assert_eq!(Int(v).to_string(), v.to_string());
+    }
+}

@@ -53,7 +53,16 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     let l = match r {
         Ok(l) => l,
         Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
-        Err(e) => return Err(Fail::Device(format!("{e}; the bridge is off"))),
+        Err(e) => {
+            // Refused before anything moved, or stopped with the bridge off: the device says.
+            let on = gms_bench::status(link).is_ok_and(|s| s.enabled);
+            let state = if on {
+                "the axis holds where it was"
+            } else {
+                "the bridge is off"
+            };
+            return Err(Fail::Device(format!("{e}; {state}")));
+        }
     };
     if let Some(stop) = l.stopped {
         println!("stopped: {stop:?} (the error grew); the best correction kept");

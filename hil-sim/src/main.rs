@@ -104,6 +104,41 @@ enum Cmd {
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
     },
+    /// Learning from repetition on the virtual device in-process (what `gms-tune learn` does on
+    /// a board) over friction draws: prints, per iteration, the median and largest RMS error
+    /// over the draws, against the encoder and against the simulated true position.
+    Learn {
+        /// Scenario file for the plant (its reference is not used); default scenario without.
+        #[arg(long, value_name = "SCENARIO.toml")]
+        scenario: Option<PathBuf>,
+        /// Friction draws.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+        runs: u32,
+        /// First seed (draw i uses seed + i).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The sine's amplitude [rad] and frequency [Hz] (x = A (1 − cos 2πft)).
+        #[arg(long, num_args = 2, value_names = ["AMPLITUDE", "FREQ"], default_values_t = [0.05, 1.0])]
+        sine: Vec<f64>,
+        /// Learning updates after the first pass.
+        #[arg(long, default_value_t = 10)]
+        iterations: usize,
+        /// The learning gain γ [-].
+        #[arg(long, default_value_t = 0.3)]
+        gain: f64,
+        /// The Q filter's corner [Hz] (0: none).
+        #[arg(long = "q-filter", default_value_t = 100.0)]
+        q_filter: f64,
+        /// The lead λ [s].
+        #[arg(long, default_value_t = 0.0)]
+        lead: f64,
+        /// Where to write every run's figures as JSON.
+        #[arg(long, value_name = "OUT.json")]
+        json: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=256))]
+        threads: Option<u32>,
+    },
     /// Simulate an identification experiment of the paper on the friction in P.toml.
     Experiment {
         /// presliding, sliding, guideway or lag (frictional lag: speed swept in sliding).
@@ -380,6 +415,46 @@ fn main() -> ExitCode {
             );
             gms_ident::io::write_atomic(&out, text.as_bytes())?;
             println!("wrote {}", out.display());
+            Ok(())
+        })(),
+        Cmd::Learn {
+            scenario,
+            runs,
+            seed,
+            sine,
+            iterations,
+            gain,
+            q_filter,
+            lead,
+            json,
+            threads: t,
+        } => (|| {
+            let sc = load_scenario(scenario.as_deref())?;
+            let plan = gms_bench::learn::LearnPlan {
+                path: gms_bench::learn::Path::Sine {
+                    amplitude: sine.first().copied().unwrap_or(f64::NAN),
+                    freq: sine.get(1).copied().unwrap_or(f64::NAN),
+                },
+                iterations,
+                gain,
+                q_hz: q_filter,
+                lead_s: lead,
+                ..gms_bench::learn::LearnPlan::default()
+            };
+            plan.check().map_err(|e| e.to_string())?;
+            let rs = hil_sim::learn::learn_draws(&sc, runs as usize, seed, &plan, threads(t))?;
+            print!("{}", hil_sim::learn::table(&rs));
+            for r in rs.iter().filter(|r| r.stopped.is_some()) {
+                println!(
+                    "seed {}: stopped ({})",
+                    r.seed,
+                    r.stopped.as_deref().unwrap_or("")
+                );
+            }
+            if let Some(path) = json {
+                let text = serde_json::to_string_pretty(&rs).map_err(|e| e.to_string())?;
+                gms_ident::io::write_atomic(&path, text.as_bytes()).map_err(|e| e.to_string())?;
+            }
             Ok(())
         })(),
         Cmd::Demo { out, runs } => (|| {

@@ -3,36 +3,24 @@
 //! (`gms_bench::learn`), against the simulated true position the device never sees. Run with
 //! `--nocapture --test-threads=1` for the curves.
 
-use gms_bench::learn::{self, LearnPlan, Learned, Path};
-use hil_sim::device::{LocalDevice, Truth};
+use gms_bench::learn::{self, LearnPlan, Path};
+use hil_sim::device::LocalDevice;
+use hil_sim::learn::{IterationTruth, learn_once};
 use hil_sim::scenario::Scenario;
 
-/// The device's figures and the truth's for each iteration: (device RMS, device peak, RMS of
-/// the device's error recomputed from the recording, RMS against the true position).
-fn curves(l: &Learned, truth: &[Truth]) -> Vec<(f64, f64, f64, f64)> {
-    let t = l.table.as_ref().unwrap();
-    let per = u64::from(t.points) * u64::from(t.steps);
-    l.iterations
+type Curve = Vec<(f64, f64, f64, f64)>;
+
+/// Each iteration: (device RMS, device peak, the device's RMS recomputed from the recording
+/// of every step, RMS against the true position).
+fn run(sc: &str, plan: &LearnPlan) -> (Curve, hil_sim::learn::LearnRun) {
+    let sc = Scenario::parse(sc, "learn").unwrap();
+    let r = learn_once(&sc, sc.plant.seed, plan).unwrap();
+    let c = r
+        .iterations
         .iter()
-        .zip(&l.periods)
-        .map(|(it, p)| {
-            let from = l.started + u64::from(*p) * per;
-            let rows: Vec<&Truth> = truth
-                .iter()
-                .filter(|r| r.steps >= from && r.steps < from + per)
-                .collect();
-            assert_eq!(rows.len() as u64, per, "the period's steps recorded");
-            let rms = |f: &dyn Fn(&Truth) -> f64| {
-                (rows.iter().map(|r| f(r).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
-            };
-            (
-                it.rms,
-                it.peak,
-                rms(&|r| r.device_error()),
-                rms(&|r| r.true_error()),
-            )
-        })
-        .collect()
+        .map(|t: &IterationTruth| (t.rms, t.peak, t.rms_recorded, t.true_rms))
+        .collect();
+    (c, r)
 }
 
 fn print(name: &str, c: &[(f64, f64, f64, f64)]) {
@@ -42,24 +30,30 @@ fn print(name: &str, c: &[(f64, f64, f64, f64)]) {
     }
 }
 
-fn run(sc: &str, plan: &LearnPlan) -> (Vec<(f64, f64, f64, f64)>, Learned) {
-    let sc = Scenario::parse(sc, "learn").unwrap();
-    let mut dev = LocalDevice::new(&sc).unwrap();
-    dev.record_truth();
-    let l = learn::learn(&mut dev, plan, |_| {}, false).unwrap();
-    let truth = dev.take_truth();
-    (curves(&l, &truth), l)
-}
-
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let v: Vec<f64> = v.collect();
     v.iter().sum::<f64>() / v.len() as f64
 }
 
+/// The table played without learning (a gain of 1e-9: no correction to speak of) for ten
+/// periods after the first: the level the learning is held against, averaged over periods
+/// (one period's RMS scatters by ±15 % on this plant: its reversals' stick-slip is not the
+/// same twice). Returns the mean (device RMS, peak, true RMS).
+fn baseline(sc: &str) -> (f64, f64, f64) {
+    let plan = LearnPlan {
+        gain: 1e-9,
+        ..LearnPlan::default()
+    };
+    let (c, _) = run(sc, &plan);
+    let avg = |k: usize| mean(c[1..].iter().map(|r| [r.0, r.1, r.3][k]));
+    (avg(0), avg(1), avg(2))
+}
+
 /// GMS + ILC on the default virtual device's sine test (the demo's 0.05 rad, 1 Hz sinusoid
 /// with its reversals; the plant's friction drawn within ±15 % of the model's, sense noise
 /// on): the device's per-period RMS is what the recording of every step gives; the learning
-/// lowers the error against both the reading and the true position.
+/// lowers the error against both the reading and the true position, iterations 6-10 against
+/// ten periods of GMS alone.
 #[test]
 fn gms_and_ilc_on_the_paper_sine() {
     let (c, l) = run("", &LearnPlan::default());
@@ -72,20 +66,20 @@ fn gms_and_ilc_on_the_paper_sine() {
             "{rms} against {recomputed}"
         );
     }
-    let first = c[0];
-    let last3 = |k: usize| mean(c[8..].iter().map(|r| [r.0, r.1, r.2, r.3][k]));
+    let (rms0, peak0, true0) = baseline("");
+    let tail = |k: usize| mean(c[6..].iter().map(|r| [r.0, r.1, r.3][k]));
     eprintln!(
-        "first pass {:.3} counts RMS ({:.3} true), iterations 8-10 {:.3} ({:.3} true), peak {:.1} → {:.1}; the issue's target 0.5 counts",
-        first.0,
-        first.3,
-        last3(0),
-        last3(3),
-        first.1,
-        last3(1)
+        "GMS alone (10 periods): {rms0:.3} counts RMS ({true0:.3} true), peak {peak0:.1}; \
+         GMS + ILC iterations 6-10: {:.3} ({:.3} true), peak {:.1}; iteration 10: {:.3}; the \
+         issue's target 0.5 counts, peak 3",
+        tail(0),
+        tail(2),
+        tail(1),
+        c[10].0
     );
-    assert!(last3(0) < 0.8 * first.0, "{} → {}", first.0, last3(0));
-    assert!(last3(3) < 0.8 * first.3, "{} → {}", first.3, last3(3));
-    assert!(last3(1) < first.1, "peak {} → {}", first.1, last3(1));
+    assert!(tail(0) < 0.85 * rms0, "{rms0} → {}", tail(0));
+    assert!(tail(2) < 0.85 * true0, "{true0} → {}", tail(2));
+    assert!(tail(1) < peak0, "peak {peak0} → {}", tail(1));
 }
 
 /// What each part contributes: ILC alone (`ff.mode none`) starts from the uncompensated
@@ -103,7 +97,7 @@ fn what_gms_and_ilc_each_contribute() {
         "ILC alone reaches GMS's first pass ({:.3}) at iteration {reach:?}",
         both[0].0
     );
-    let tail = |c: &[(f64, f64, f64, f64)]| mean(c[8..].iter().map(|r| r.0));
+    let tail = |c: &Curve| mean(c[8..].iter().map(|r| r.0));
     assert!(
         alone[0].0 > 3.0 * both[0].0,
         "first passes {} {}",
@@ -125,7 +119,8 @@ fn what_gms_and_ilc_each_contribute() {
 }
 
 /// Fifty iterations with twice the default sense noise: the period's RMS scatters, the learning
-/// neither diverges nor stops, and stays below the first pass.
+/// neither diverges nor stops, and its last ten stay below GMS alone's level under the same
+/// noise.
 #[test]
 fn fifty_iterations_with_noise_do_not_diverge() {
     let sc = "[plant]\nadc_noise = 0.3e-3\n";
@@ -137,14 +132,12 @@ fn fifty_iterations_with_noise_do_not_diverge() {
     print("50 iterations, noise 0.3 mA", &c);
     assert!(l.stopped.is_none(), "{:?}", l.stopped);
     assert_eq!(c.len(), 51);
-    let tail = mean(c[40..].iter().map(|r| r.0));
+    let (rms0, _, _) = baseline(sc);
+    let tail = mean(c[41..].iter().map(|r| r.0));
     let worst = c[1..].iter().map(|r| r.0).fold(0.0, f64::max);
-    eprintln!(
-        "first {:.3}, iterations 40-50 {tail:.3}, worst {worst:.3}",
-        c[0].0
-    );
-    assert!(tail < 0.85 * c[0].0);
-    assert!(worst < 1.2 * c[0].0);
+    eprintln!("GMS alone {rms0:.3}; iterations 41-50 {tail:.3}, worst {worst:.3}");
+    assert!(tail < 0.85 * rms0);
+    assert!(worst < 1.3 * rms0);
 }
 
 /// The friction drifting up 10 % during the learning (a ramp over 20 s): the error stays
@@ -159,14 +152,14 @@ fn a_drifting_friction_stays_bounded() {
     let (c, l) = run(sc, &plan);
     print("friction +10 % over 20 s", &c);
     assert!(l.stopped.is_none());
+    let (rms0, _, _) = baseline(sc);
     let worst = c[1..].iter().map(|r| r.0).fold(0.0, f64::max);
-    let tail = mean(c[13..].iter().map(|r| r.0));
+    let tail = mean(c[12..].iter().map(|r| r.0));
     eprintln!(
-        "first {:.3}, worst after {worst:.3}, iterations 13-16 {tail:.3}",
-        c[0].0
+        "GMS alone {rms0:.3} (the drift's first 20 s); worst {worst:.3}, iterations 12-16 {tail:.3}"
     );
-    assert!(worst < 1.2 * c[0].0);
-    assert!(tail < 0.85 * c[0].0);
+    assert!(worst < 1.3 * rms0);
+    assert!(tail < 0.85 * rms0);
 }
 
 /// A path beyond the soft limits, and one with a jump, are refused by the device when the
@@ -195,7 +188,7 @@ fn a_path_beyond_the_limits_is_refused_before_anything_moves() {
         let moved = (dev.plant().theta - theta0).abs() / 3.8e-6;
         assert!(moved < 2.0, "moved {moved} counts");
         let st = gms_bench::status(&mut dev).unwrap();
-        assert!(!st.enabled, "the bridge off after the refusal");
+        assert!(!st.enabled, "the bridge as it was (off)");
     }
 }
 

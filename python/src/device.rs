@@ -314,6 +314,62 @@ impl Device {
         Ok(d)
     }
 
+    /// learn(amplitude=0.05, freq=1.0, trajectory=None, iterations=10, gain=0.3,
+    /// q_filter=100.0, lead=0.0, apply=False) -> dict: `gms-tune learn` — the sine
+    /// x = A (1 − cos 2πft) from where the axis holds, or `trajectory` (rows of (t [s],
+    /// x [rad]) over one period) played from the device's tables, the correction learned after
+    /// each period: {"rms", "peak": numpy arrays per iteration [counts], "errors": 2-D array
+    /// (iteration × point) [counts], "t": the points' times [s], "correction": the correction
+    /// kept [N·m], "stopped": None or why}; `apply` leaves the correction playing.
+    #[pyo3(signature = (amplitude = 0.05, freq = 1.0, trajectory = None, iterations = 10, gain = 0.3, q_filter = 100.0, lead = 0.0, apply = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn learn<'py>(
+        &mut self,
+        py: Python<'py>,
+        amplitude: f64,
+        freq: f64,
+        trajectory: Option<Vec<(f64, f64)>>,
+        iterations: usize,
+        gain: f64,
+        q_filter: f64,
+        lead: f64,
+        apply: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use gms_bench::learn::{LearnPlan, Path};
+        let plan = LearnPlan {
+            path: match trajectory {
+                Some(rows) => Path::Trajectory(rows),
+                None => Path::Sine { amplitude, freq },
+            },
+            iterations,
+            gain,
+            q_hz: q_filter,
+            lead_s: lead,
+            ..LearnPlan::default()
+        };
+        plan.check().map_err(err)?;
+        let l = self.job(|link, ctl| gms_tune::jobs::learn(link, &plan, None, apply, ctl, &mut |_| {}))?;
+        let d = PyDict::new(py);
+        d.set_item(
+            "rms",
+            PyArray1::from_vec(py, l.iterations.iter().map(|i| i.rms).collect()),
+        )?;
+        d.set_item(
+            "peak",
+            PyArray1::from_vec(py, l.iterations.iter().map(|i| i.peak).collect()),
+        )?;
+        let errors = numpy::PyArray2::from_vec2(py, &l.errors).map_err(err)?;
+        d.set_item("errors", errors)?;
+        let dt = l.table.as_ref().map_or(0.0, |t| t.dt());
+        d.set_item(
+            "t",
+            PyArray1::from_vec(py, (0..l.correction.len()).map(|k| k as f64 * dt).collect()),
+        )?;
+        d.set_item("correction", PyArray1::from_vec(py, l.correction.clone()))?;
+        d.set_item("stopped", l.stopped.map(|s| format!("{s:?}")))?;
+        Ok(d)
+    }
+
     /// map_read() -> (offset, scale): the device's table as numpy arrays (its `map.bins` bins;
     /// N·m and -).
     fn map_read<'py>(

@@ -132,7 +132,7 @@ mod sim;
 use device::Device;
 use ident::{fit_lag, fit_stribeck, fit_virgin, identify};
 use models::{Gms, LuGre, Model, StaticMap, friction};
-use sim::{compare, run};
+use sim::{compare, learn, run};
 
 /// The module.
 #[pymodule]
@@ -144,6 +144,7 @@ fn gms(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fit_lag, m)?)?;
     m.add_function(wrap_pyfunction!(run, m)?)?;
     m.add_function(wrap_pyfunction!(compare, m)?)?;
+    m.add_function(wrap_pyfunction!(learn, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_class::<Model>()?;
     m.add_class::<Gms>()?;

@@ -86,3 +86,69 @@ pub(crate) fn compare<'py>(
     let (cmp, _) = hil_sim::commands::compare(&sc, runs, seed, threads, false).map_err(err)?;
     debug_dict(py, &cmp)
 }
+
+/// learn(scenario=None, runs=1, seed=1, amplitude=0.05, freq=1.0, iterations=10, gain=0.3,
+/// q_filter=100.0, lead=0.0) -> dict
+///
+/// Learning from repetition on the virtual device in-process, as `hil-sim learn`, over `runs`
+/// friction draws (seeds seed … seed + runs − 1): {"rms", "peak", "true_rms", "true_peak":
+/// 2-D numpy arrays (run × iteration) [counts] — the device's figures and those against the
+/// simulated true position —, "seeds", "stopped": per run None or why}.
+#[pyfunction]
+#[pyo3(signature = (scenario = None, runs = 1, seed = 1, amplitude = 0.05, freq = 1.0, iterations = 10, gain = 0.3, q_filter = 100.0, lead = 0.0))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn learn<'py>(
+    py: Python<'py>,
+    scenario: Option<&Bound<'py, PyAny>>,
+    runs: usize,
+    seed: u64,
+    amplitude: f64,
+    freq: f64,
+    iterations: usize,
+    gain: f64,
+    q_filter: f64,
+    lead: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    if runs == 0 {
+        return Err(err("runs: at least 1"));
+    }
+    let sc = self::scenario(scenario)?;
+    let plan = gms_bench::learn::LearnPlan {
+        path: gms_bench::learn::Path::Sine { amplitude, freq },
+        iterations,
+        gain,
+        q_hz: q_filter,
+        lead_s: lead,
+        ..gms_bench::learn::LearnPlan::default()
+    };
+    plan.check().map_err(err)?;
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let rs = py
+        .allow_threads(|| hil_sim::learn::learn_draws(&sc, runs, seed, &plan, threads))
+        .map_err(err)?;
+    let out = PyDict::new(py);
+    let grid = |f: &dyn Fn(&hil_sim::learn::IterationTruth) -> f64| -> Vec<Vec<f64>> {
+        let n = rs.iter().map(|r| r.iterations.len()).max().unwrap_or(0);
+        rs.iter()
+            .map(|r| {
+                (0..n)
+                    .map(|i| r.iterations.get(i).map_or(f64::NAN, f))
+                    .collect()
+            })
+            .collect()
+    };
+    for (name, f) in [
+        ("rms", (|t| t.rms) as fn(&hil_sim::learn::IterationTruth) -> f64),
+        ("peak", |t| t.peak),
+        ("true_rms", |t| t.true_rms),
+        ("true_peak", |t| t.true_peak),
+    ] {
+        out.set_item(name, numpy::PyArray2::from_vec2(py, &grid(&f)).map_err(err)?)?;
+    }
+    out.set_item("seeds", rs.iter().map(|r| r.seed).collect::<Vec<_>>())?;
+    out.set_item(
+        "stopped",
+        rs.iter().map(|r| r.stopped.clone()).collect::<Vec<_>>(),
+    )?;
+    Ok(out)
+}

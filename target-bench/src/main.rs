@@ -103,8 +103,11 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
 ///
 /// `shaped`: with both notches and the low-pass on and a frequency-response measurement
 /// running (a sine at the current command, demodulated) — `device_period_frf`; `mapped`: with
-/// the position map acting (512 bins over a revolution) — `device_period_map`.
-fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
+/// the position map acting (512 bins over a revolution) — `device_period_map`; `table`: the
+/// table motion playing instead of the move (a sine of 0.05 rad, 100 points 10 steps apart:
+/// two periods' ends among the steps counted, with a correction, each period's error kept) —
+/// `device_period_table`.
+fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: bool) {
     // The F405 board as the firmware links it (gms-core's description: 16 conversions per
     // current sample, a 60 % step budget), its bridge driving at once on `enable`.
     let board = Board {
@@ -132,10 +135,11 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
     if mapped {
         settings.map.enable = 1.0;
     }
-    let name = match (shaped, mapped) {
-        (true, _) => "device_period_frf",
-        (false, true) => "device_period_map",
-        (false, false) => "device_period",
+    let name = match (shaped, mapped, table) {
+        (_, _, true) => "device_period_table",
+        (true, _, _) => "device_period_frf",
+        (false, true, _) => "device_period_map",
+        (false, false, _) => "device_period",
     };
     let Ok(a) = device::prepare(&settings, &board) else {
         return;
@@ -149,7 +153,21 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
     // SAFETY: the benchmark's references to the table, one per call, never alive together.
     let map = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
     gms_core::posmap::clear(map);
-    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture).with_map(map);
+    static mut TABLE: [f32; gms_core::table::TABLE_VALUES] = [0.0; gms_core::table::TABLE_VALUES];
+    // SAFETY: the benchmark's references to the table, one per call, never alive together.
+    let tb = unsafe { &mut *core::ptr::addr_of_mut!(TABLE) };
+    // The sine x = A (1 − cos), 0.05 rad, and a correction of 20 µN·m's sign of its speed,
+    // written where `Set` and `Use` find them (the reference, the first correction buffer).
+    let points = 100usize;
+    for k in 0..points {
+        let (s, c) =
+            gms_core::reference::sin_cos(core::f32::consts::TAU * k as f32 / points as f32);
+        tb[k] = 0.05 / rpc * (1.0 - c);
+        tb[gms_core::table::TABLE_POINTS + k] = if s >= 0.0 { 20e-6 } else { -20e-6 };
+    }
+    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture)
+        .with_map(map)
+        .with_table(tb);
     let mut mb = Mailbox::new();
     // About 0.02 A: the board's 16 conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
     let codes = board.sense_oversample * (2048 + 84);
@@ -180,6 +198,35 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
     )
     .ok()
     .filter(|_| shaped);
+    let ratio = lp.ratio();
+    if table {
+        use gms_core::table::{Geometry, TableRequest};
+        let g = Geometry {
+            points: points as u32,
+            steps: 10,
+            origin: 0,
+        };
+        for t in [
+            TableRequest::Set(g),
+            TableRequest::Use,
+            TableRequest::Run(1_000_000),
+        ] {
+            let mut r = Some(Requests {
+                table: Some(t),
+                ..Requests::default()
+            });
+            for _ in 0..ratio {
+                lp.step(
+                    Inputs {
+                        encoder: 0,
+                        current_codes: codes,
+                        since_last: 0,
+                    },
+                    |st, c| mb.exchange(st, c).or_else(|| r.take()),
+                );
+            }
+        }
+    }
     let mut mv = Some(Requests {
         motion: Some(MoveRequest {
             plan,
@@ -187,8 +234,8 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
         }),
         frf: frf.map(device::FrfRequest::Start),
         ..Requests::default()
-    });
-    let ratio = lp.ratio();
+    })
+    .filter(|_| !table);
     for _ in 0..ratio {
         lp.step(
             Inputs {
@@ -228,7 +275,11 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool) {
         },
     );
     let measuring = !shaped || mb.frf.state == gms_core::frf::FrfState::Measuring;
-    if lp.enabled() && lp.status().moving && measuring {
+    let playing = mb.table.state == gms_core::table::TableState::Playing
+        && mb.table.generation == 1
+        && mb.table.done.is_some();
+    let running = if table { playing } else { lp.status().moving };
+    if lp.enabled() && running && measuring {
         writeln!(out, "cost {name} {c} {CALLS}").ok();
     } else {
         // A fault switched the loop off, or the measurement is not running: the figure
@@ -377,9 +428,10 @@ fn main() -> ! {
         writeln!(out, "cost {name} {c} {CALLS}").ok();
     }
 
-    device_period(&mut out, false, false);
-    device_period(&mut out, true, false);
-    device_period(&mut out, false, true);
+    device_period(&mut out, false, false, false);
+    device_period(&mut out, true, false, false);
+    device_period(&mut out, false, true, false);
+    device_period(&mut out, false, false, true);
 
     {
         let xs = [0.3f32, 1.7, 0.05, 3.0];

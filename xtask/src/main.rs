@@ -80,13 +80,14 @@ const MAPS: [elf::BoardMap; 2] = [
 ];
 
 /// The budgets (instructions).
-const BUDGETS: [(&str, f64); 6] = [
+const BUDGETS: [(&str, f64); 7] = [
     ("gms6_step", 300.0),
     ("controller_step", 1500.0),
     ("controller_step_adaptive", 1500.0),
     ("device_period", 2000.0),
     ("device_period_frf", 2000.0),
     ("device_period_map", 2000.0),
+    ("device_period_table", 2000.0),
 ];
 
 fn main() -> ExitCode {

@@ -189,6 +189,10 @@ pub struct ControlLoop {
     table: Player,
     /// Its report for the protocol side, handed over at the next exchange.
     table_report: Option<TableReport>,
+    /// The table's correction in the last step \[N·m\] (0 when none plays).
+    table_corr: f32,
+    /// A chunk or a report waits for the next exchange (one test a step when none does).
+    fresh: bool,
 }
 
 /// The buffer of the table motion ([`crate::table::TABLE_VALUES`] values; the shell's: a
@@ -250,6 +254,8 @@ impl ControlLoop {
             table_buf: None,
             table: Player::default(),
             table_report: None,
+            table_corr: 0.0,
+            fresh: false,
         }
     }
 
@@ -265,8 +271,19 @@ impl ControlLoop {
     fn stop_table(&mut self) {
         if self.table.playing() {
             self.table.abort();
-            self.table_report = Some(self.table.report());
+            self.table_ended();
         }
+    }
+
+    /// A table run ended: its correction leaves the feedforward (the map's sample alone from
+    /// the next step; none without a map), its report goes over at the next exchange.
+    fn table_ended(&mut self) {
+        self.table_corr = 0.0;
+        if self.map_cursor.is_none() {
+            self.ctrl.set_map_sample(0.0, 1.0);
+        }
+        self.table_report = Some(self.table.report());
+        self.fresh = true;
     }
 
     /// The loop with a position map's table (`table`: [`crate::posmap::MAP_VALUES`] values,
@@ -326,6 +343,7 @@ impl ControlLoop {
             && f.stop()
         {
             self.frf_report = Some(f.report(rate));
+            self.fresh = true;
         }
     }
 
@@ -406,9 +424,12 @@ impl ControlLoop {
             // The new map's cursor, and its sample at the reference set before the hand-over,
             // so that switching the map on or off (or another table geometry) is bumpless.
             let mut cursor = self.map_cursor_for(next.params(), next.rad_per_count());
+            // A table's correction playing stays in the sample (bumpless too).
             if let (Some(c), Some(t)) = (&mut cursor, self.map_table.as_deref()) {
                 let (o, s) = c.sample(self.r.pos, t);
-                next.set_map_sample(o, s);
+                next.set_map_sample(o + self.table_corr, s);
+            } else if self.table.playing() {
+                next.set_map_sample(self.table_corr, 1.0);
             }
             next.take_state_from(&self.ctrl);
             let (old, new) = (self.ctrl.params(), next.params());
@@ -472,6 +493,7 @@ impl ControlLoop {
                     }
                 }
                 self.chunk = Some(c);
+                self.fresh = true;
             }
             Some(MapRequest::Clear) => {
                 if let Some(t) = self.map_table.as_deref_mut() {
@@ -498,6 +520,7 @@ impl ControlLoop {
             Some(CaptureRequest::Off) => self.capture.off(),
             Some(CaptureRequest::Read { start, max }) => {
                 self.chunk = Some(self.capture.read(start, max));
+                self.fresh = true;
             }
             None => {}
         }
@@ -546,6 +569,7 @@ impl ControlLoop {
                 if self.enabled && self.current_mode.is_none() {
                     let f = Frf::start(spec);
                     self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
+                    self.fresh = true;
                     self.frf = Some(f);
                 }
             }
@@ -599,15 +623,22 @@ impl ControlLoop {
         if self.phase == 0 {
             // Handed over by reference and then dropped: a chunk or a report is not copied
             // in a step that has none.
-            let h = Handover {
-                chunk: self.chunk.as_ref(),
-                frf: self.frf_report.as_ref(),
-                table: self.table_report.as_ref(),
+            let h = if self.fresh {
+                Handover {
+                    chunk: self.chunk.as_ref(),
+                    frf: self.frf_report.as_ref(),
+                    table: self.table_report.as_ref(),
+                }
+            } else {
+                Handover::default()
             };
             let req = exchange(self.status(), h);
-            self.chunk = None;
-            self.frf_report = None;
-            self.table_report = None;
+            if self.fresh {
+                self.chunk = None;
+                self.frf_report = None;
+                self.table_report = None;
+                self.fresh = false;
+            }
             if let Some(req) = req {
                 timing = self.take(req);
             }
@@ -632,19 +663,14 @@ impl ControlLoop {
                     self.ctrl.hold_current(amps);
                 }
             } else if self.enabled && self.wake_left == 0 {
-                let mut corr = 0.0;
-                match (self.table.playing(), self.table_buf.as_deref()) {
-                    (true, Some(t)) => {
-                        let p = self.ctrl.params();
-                        let ts = self
-                            .table
-                            .sample(t, self.ctrl.rad_per_count(), p.pos_rate_hz);
-                        self.r = ts.r;
-                        corr = ts.corr;
-                    }
-                    _ => self.r = self.motion.next(self.ctrl.dt_pos()),
-                }
-                self.ctrl.set_ff_correction(corr);
+                // The table's correction goes where the map's offset goes (one sample a step
+                // for both).
+                let corr = if self.table.playing() {
+                    self.table_sample()
+                } else {
+                    self.r = self.motion.next(self.ctrl.dt_pos());
+                    None
+                };
                 // One call of the position step whether a frequency response runs or not (the
                 // step inlined once).
                 let frf = self.frf_input();
@@ -654,22 +680,16 @@ impl ControlLoop {
                 };
                 if let (Some(c), Some(t)) = (&mut self.map_cursor, self.map_table.as_deref()) {
                     let (offset, scale) = c.sample(r.pos, t);
-                    self.ctrl.set_map_sample(offset, scale);
+                    self.ctrl.set_map_sample(offset + self.table_corr, scale);
+                } else if let Some(u) = corr {
+                    self.ctrl.set_map_sample(u, 1.0);
                 }
                 self.out = self.ctrl.position_step(pos, &r);
                 if let Some(f) = frf {
                     self.frf_output(f);
                 }
-                if let (true, Some(t)) = (self.table.playing(), self.table_buf.as_deref_mut()) {
-                    let counts = self.out.error / self.ctrl.rad_per_count();
-                    match self.table.record(t, counts) {
-                        Recorded::Within => {}
-                        Recorded::PeriodEnd => self.table_report = Some(self.table.report()),
-                        Recorded::RunEnd(at) => {
-                            self.motion.hold_at(at);
-                            self.table_report = Some(self.table.report());
-                        }
-                    }
+                if self.table.playing() {
+                    self.table_record();
                 }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
@@ -769,6 +789,38 @@ impl ControlLoop {
         false
     }
 
+    /// The table's reference into `self.r` and its correction, while it plays (out of the
+    /// step's line: the step without a table pays for one test).
+    #[inline(never)]
+    fn table_sample(&mut self) -> Option<f32> {
+        let t = self.table_buf.as_deref()?;
+        let ts = self.table.sample(t);
+        self.r = ts.r;
+        self.table_corr = ts.corr;
+        Some(ts.corr)
+    }
+
+    /// After a position step while the table plays: its error recorded, the period's and the
+    /// run's ends acted on.
+    #[inline(never)]
+    fn table_record(&mut self) {
+        let Some(t) = self.table_buf.as_deref_mut() else {
+            return;
+        };
+        match self.table.record(t, self.out.error) {
+            Recorded::Within => {}
+            Recorded::PeriodEnd => {
+                self.table_report = Some(self.table.report());
+                self.fresh = true;
+                self.fresh = true;
+            }
+            Recorded::RunEnd(at) => {
+                self.motion.hold_at(at);
+                self.table_ended();
+            }
+        }
+    }
+
     /// Acts on a table request: a read into the chunk; a run only with the position loop
     /// running and the reference at the table's start (within a count).
     fn take_table(&mut self, req: &crate::table::TableRequest) {
@@ -797,12 +849,21 @@ impl ControlLoop {
         };
         self.table.take(req, t, &mut c);
         match req {
-            TableRequest::Read { .. } => self.chunk = Some(c),
+            TableRequest::Read { .. } => {
+                self.chunk = Some(c);
+                self.fresh = true;
+                self.fresh = true;
+            }
             // The run's first step is the one this exchange starts.
-            TableRequest::Run(_) => self.table.set_started(self.steps.wrapping_add(1)),
+            TableRequest::Run(_) => self.table.set_started(
+                self.steps.wrapping_add(1),
+                self.ctrl.rad_per_count(),
+                self.ctrl.params().pos_rate_hz,
+            ),
             _ => {}
         }
         self.table_report = Some(self.table.report());
+        self.fresh = true;
     }
 
     /// The frequency-response measurement's sample now, if one runs: its injected value, its
@@ -846,6 +907,7 @@ impl ControlLoop {
             && f.step(&x, ph)
         {
             self.frf_report = Some(f.report(rate));
+            self.fresh = true;
         }
     }
 

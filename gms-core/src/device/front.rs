@@ -796,7 +796,9 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             write!(
                 out,
                 " points={} steps={} origin={}",
-                g.points, g.steps, g.origin
+                g.points,
+                g.steps,
+                crate::numtext::Int(g.origin)
             )?;
         }
         write!(
@@ -806,7 +808,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             t.periods,
             t.generation,
             u8::from(t.pending),
-            t.started
+            crate::numtext::Int(t.started as i64)
         )?;
         if let Some(d) = t.done {
             write!(

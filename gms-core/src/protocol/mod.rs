@@ -20,6 +20,8 @@
 //! | `frf current\|position F_HZ AMP PERIODS SETTLE` | `ok` or `err`: a frequency-response measurement (Hz, A or rad, periods) |
 //! | `frf` | `ok state=… inj=… f_hz=… amp=… groups=… in=RE,IM cmd=RE,IM cur=RE,IM pos=RE,IM coh=…` |
 //! | `frf off` | `ok`: the measurement stops |
+//! | `map read START COUNT`, `map write START OFFSET,SCALE …`, `map clear` | the position map's table |
+//! | `table …` | the table motion: `ref`/`corr START V …`, `corr off`, `set POINTS STEPS ORIGIN`, `use`, `run PERIODS`, `stop`, `read ref\|corr\|err START COUNT`, `clear`; `table`: `ok state=… period=… done=… rms=… peak=…` |
 //!
 //! - `reader`: [`LineReader`] (bytes to lines).
 //! - `command`: [`parse`] (a line to a [`Command`]), [`ErrorCode`].
