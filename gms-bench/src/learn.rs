@@ -367,7 +367,7 @@ pub fn read_values(b: &mut impl Bench, which: &str, n: u32) -> Result<Vec<f64>, 
 }
 
 /// What the learning gave.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Learned {
     /// The table played.
     pub table: Option<Table>,

@@ -133,6 +133,10 @@ fn main() {
             learn_writes_its_files_applies_and_refuses_bad_input,
         ),
         (
+            "the_window_shows_the_learning_and_applies_it",
+            the_window_shows_the_learning_and_applies_it,
+        ),
+        (
             "step_test_settles_and_tells_hunting_from_dither",
             step_test_settles_and_tells_hunting_from_dither,
         ),
@@ -1728,4 +1732,46 @@ fn learn_writes_its_files_applies_and_refuses_bad_input() {
         "{status} / {after}"
     );
     assert!(after.contains("enabled=1"), "as it was: {after}");
+}
+
+/// The window's Learning page: the iterations arrive one by one as the learning runs (each
+/// shown before the run ends), the error over the period after it; Apply leaves the best
+/// correction playing (the device's table says so).
+fn the_window_shows_the_learning_and_applies_it() {
+    use egui_kittest::kittest::Queryable;
+    use gms_tune::ui::worker::Outcome;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let srv = Server::start_at("tcp", &d.join("flash.img"), 20.0);
+    let mut h = window(&srv);
+    assert!(step_until(&mut h, 10.0, |a| !a.rows.is_empty()));
+    h.state_mut().tab = gms_tune::ui::app::Tab::Learn;
+    h.step();
+    replace_text(&mut h, "iterations", "3");
+    h.get_by_label("Learn").click();
+    h.step();
+    assert!(h.state().running.is_some());
+    // Iterations come while the run goes on.
+    let some = step_until(&mut h, 60.0, |a| !a.learn_points.is_empty());
+    assert!(some && h.state().running.is_some(), "{:?}", h.state().log);
+    let done = step_until(&mut h, 90.0, |a| a.outcome.is_some());
+    assert!(done, "{:?} {:?}", h.state().running, h.state().log);
+    let n = match h.state().outcome.clone().unwrap() {
+        Ok(Outcome::Learned(l)) => {
+            assert_eq!(l.iterations.len(), 4);
+            assert_eq!(h.state().learn_points, l.iterations);
+            l.correction.len()
+        }
+        other => panic!("{other:?}"),
+    };
+    assert_eq!(n, 1000);
+    h.step();
+    h.get_by_label("Apply the correction").click();
+    let applied = step_until(&mut h, 20.0, |a| {
+        a.log.iter().any(|l| l.contains("the correction plays"))
+    });
+    assert!(applied, "{:?}", h.state().log);
+    drop(h);
+    let t = tune(&srv, &["send", "table"], d).1;
+    assert!(!t.contains(" gen=0 "), "{t}");
 }

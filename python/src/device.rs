@@ -348,7 +348,8 @@ impl Device {
             ..LearnPlan::default()
         };
         plan.check().map_err(err)?;
-        let l = self.job(|link, ctl| gms_tune::jobs::learn(link, &plan, None, apply, ctl, &mut |_| {}))?;
+        let l = self
+            .job(|link, ctl| gms_tune::jobs::learn(link, &plan, None, apply, ctl, &mut |_| {}))?;
         let d = PyDict::new(py);
         d.set_item(
             "rms",

@@ -123,9 +123,7 @@ pub(crate) fn learn<'py>(
     };
     plan.check().map_err(err)?;
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let rs = py
-        .allow_threads(|| hil_sim::learn::learn_draws(&sc, runs, seed, &plan, threads))
-        .map_err(err)?;
+    let rs = hil_sim::learn::learn_draws(&sc, runs, seed, &plan, threads).map_err(err)?;
     let out = PyDict::new(py);
     let grid = |f: &dyn Fn(&hil_sim::learn::IterationTruth) -> f64| -> Vec<Vec<f64>> {
         let n = rs.iter().map(|r| r.iterations.len()).max().unwrap_or(0);
@@ -138,12 +136,18 @@ pub(crate) fn learn<'py>(
             .collect()
     };
     for (name, f) in [
-        ("rms", (|t| t.rms) as fn(&hil_sim::learn::IterationTruth) -> f64),
+        (
+            "rms",
+            (|t| t.rms) as fn(&hil_sim::learn::IterationTruth) -> f64,
+        ),
         ("peak", |t| t.peak),
         ("true_rms", |t| t.true_rms),
         ("true_peak", |t| t.true_peak),
     ] {
-        out.set_item(name, numpy::PyArray2::from_vec2(py, &grid(&f)).map_err(err)?)?;
+        out.set_item(
+            name,
+            numpy::PyArray2::from_vec2(py, &grid(&f)).map_err(err)?,
+        )?;
     }
     out.set_item("seeds", rs.iter().map(|r| r.seed).collect::<Vec<_>>())?;
     out.set_item(

@@ -334,3 +334,34 @@ def test_device_map_finds_the_ripple_and_round_trips_the_table(tmp_path):
     finally:
         p.kill()
         p.wait()
+
+
+def test_learn_in_the_simulator_lowers_the_error_against_the_truth():
+    # The learning on the virtual device in-process, one friction draw: the device's RMS and
+    # the one against the simulated true position, per iteration.
+    r = gms.learn(runs=1, seed=1, iterations=6)
+    assert r["rms"].shape == (1, 7) and r["true_rms"].shape == (1, 7)
+    assert r["stopped"] == [None]
+    # The encoder reads the floor of the angle: the true error is the device's within a count.
+    assert np.all(np.abs(r["rms"] - r["true_rms"]) < 0.3)
+    assert np.mean(r["rms"][0, 3:]) < r["rms"][0, 0]
+    with pytest.raises(gms.GmsError, match="gain"):
+        gms.learn(gain=5.0)
+
+
+def test_device_learn_returns_the_iterations_and_leaves_the_correction_on_request():
+    p, addr = serve("--speed", 20)
+    try:
+        d = gms.Device(tcp=addr, timeout=2.0)
+        r = d.learn(iterations=2)
+        assert len(r["rms"]) == 3 and len(r["peak"]) == 3
+        assert r["errors"].shape == (3, 1000)
+        assert len(r["correction"]) == 1000 and r["t"][1] == pytest.approx(1e-3)
+        assert "gen=0 " in d.request("table")
+        r = d.learn(iterations=1, apply=True)
+        assert "gen=0 " not in d.request("table")
+        with pytest.raises(gms.GmsError, match="soft limits"):
+            d.learn(trajectory=[(0.0, 0.0), (3.0, 30.0), (6.0, 60.0), (12.0, 0.0)])
+    finally:
+        p.kill()
+        p.wait()

@@ -62,6 +62,8 @@ pub enum Cmd {
     Apply(Box<gms_ident::paramfile::ParamFile>),
     /// Write a position map into the device and switch it on, then read `list` again.
     WriteMap(Box<gms_bench::posmap::PosMap>),
+    /// Leave a learned correction playing for the next runs of the device's table.
+    UseCorrection(Vec<f64>),
     /// A long run; [`Worker::stop`] ends it.
     Run(Job),
     /// End the worker.
@@ -91,6 +93,8 @@ pub enum Job {
     Frf(gms_bench::frf::Plan),
     /// `gms-tune map`.
     Map(gms_bench::posmap::MapPlan),
+    /// `gms-tune learn` (nothing left playing).
+    Learn(gms_bench::learn::LearnPlan),
 }
 
 /// What a long run gave.
@@ -123,6 +127,8 @@ pub enum Outcome {
         /// The map fitted.
         map: Box<gms_bench::posmap::PosMap>,
     },
+    /// Learning from repetition (the correction not left playing).
+    Learned(Box<gms_bench::learn::Learned>),
     /// A frequency response, and for the open loop the notch proposed (not applied).
     Frf {
         /// The sweep.
@@ -216,6 +222,8 @@ pub enum Event {
     FfPoint(f64, f64),
     /// A point of a frequency response as it is measured.
     FrfPoint(gms_bench::frf::Point),
+    /// An iteration of the learning as it comes.
+    LearnPoint(gms_bench::ilc::Iteration),
     /// A long run ended: what it gave, or why not (the bridge is off then).
     Done(Result<Outcome, String>),
 }
@@ -520,6 +528,15 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             });
             out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
         }
+        Cmd::UseCorrection(u) => {
+            let result = gms_bench::learn::use_correction(l, &u)
+                .map(|_| "the correction plays from the next table run".to_string())
+                .map_err(|e| e.to_string());
+            out.push(Event::Reply {
+                line: "table use".into(),
+                result,
+            });
+        }
         Cmd::Run(_) | Cmd::Quit => {}
     }
     Ok(out)
@@ -607,6 +624,14 @@ fn run_job(
                 data: Box::new(data),
                 map: Box::new(map),
             })
+        }
+        Job::Learn(plan) => {
+            let learned = crate::jobs::learn(l, &plan, None, false, &mut ctl, &mut |it| {
+                let _ = events.send(Event::LearnPoint(*it));
+                wake();
+            })
+            .map_err(|e| format!("{e}; the bridge is off"))?;
+            Ok(Outcome::Learned(Box::new(learned)))
         }
         Job::Frf(plan) => {
             let sweep = crate::jobs::frf(l, &plan, None, &mut ctl, &mut |_, p| {

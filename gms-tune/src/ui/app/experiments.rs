@@ -141,6 +141,9 @@ impl App {
             Some(Ok(Outcome::Map { .. })) => {
                 ui.label("The position map is on the Position map page.");
             }
+            Some(Ok(Outcome::Learned(_))) => {
+                ui.label("The learning is on the Learning page.");
+            }
             Some(Ok(Outcome::Identified {
                 report,
                 presliding,

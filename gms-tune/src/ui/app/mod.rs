@@ -13,6 +13,7 @@ use gms_core::model::FrictionModel;
 mod experiments;
 mod frf;
 mod friction;
+mod learn;
 mod live;
 mod map;
 mod motion;
@@ -61,6 +62,8 @@ pub enum Tab {
     Frf,
     /// The position map: measured, shown, applied; `map.enable`.
     Map,
+    /// Learning from repetition: the iterations as they converge, the correction applied.
+    Learn,
 }
 
 /// A long run under way.
@@ -178,6 +181,10 @@ pub struct App {
     pub frf_inputs: frf::FrfInputs,
     /// The position map page's inputs.
     pub map_inputs: map::MapInputs,
+    /// The learning page's inputs.
+    pub learn_inputs: learn::LearnInputs,
+    /// The learning's iterations so far.
+    pub learn_points: Vec<gms_bench::ilc::Iteration>,
     /// The last long run's result, or why it failed.
     pub outcome: Option<Result<Outcome, String>>,
 }
@@ -220,6 +227,8 @@ impl App {
             frf_points: Vec::new(),
             frf_inputs: frf::FrfInputs::default(),
             map_inputs: map::MapInputs::default(),
+            learn_inputs: learn::LearnInputs::default(),
+            learn_points: Vec::new(),
             outcome: None,
         }
     }
@@ -237,6 +246,7 @@ impl App {
         });
         self.ff_points.clear();
         self.frf_points.clear();
+        self.learn_points.clear();
         self.outcome = None;
         self.note(format!("{what}: started"));
         self.send(Cmd::Run(job));
@@ -332,6 +342,7 @@ impl App {
                     let rpc = self.rad_per_count();
                     self.ff_points.push([g, rms / rpc])
                 }
+                Event::LearnPoint(it) => self.learn_points.push(it),
                 Event::FrfPoint(p) => {
                     let at = self.frf_points.partition_point(|q| q.f_hz < p.f_hz);
                     self.frf_points.insert(at, p);
@@ -385,6 +396,7 @@ impl App {
                 ui.selectable_value(&mut self.tab, Tab::Experiments, "Experiments");
                 ui.selectable_value(&mut self.tab, Tab::Frf, "Frequency response");
                 ui.selectable_value(&mut self.tab, Tab::Map, "Position map");
+                ui.selectable_value(&mut self.tab, Tab::Learn, "Learning");
             });
             ui.separator();
             match self.tab {
@@ -394,6 +406,7 @@ impl App {
                 Tab::Experiments => self.experiments(ui),
                 Tab::Frf => self.frf(ui),
                 Tab::Map => self.map(ui),
+                Tab::Learn => self.learn(ui),
             }
         });
         // Telemetry arrives continuously: a smooth frame rate while the link is up.
