@@ -75,7 +75,7 @@ def run(scenario: Scenario = None) -> dict[str, Any]:
 def compare(scenario: Scenario = None, runs: int = 20, seed: int = 1) -> dict[str, Any]:
     """Every feedforward mode over `runs` friction draws, as `hil-sim compare` writes its JSON."""
 
-def learn(scenario: Scenario = None, runs: int = 1, seed: int = 1, amplitude: float = 0.05, freq: float = 1.0, iterations: int = 10, gain: float = 0.3, q_filter: float = 100.0, lead: float = 0.0) -> dict[str, Any]:
+def learn(scenario: Scenario = None, runs: int = 1, seed: int = 1, amplitude: float = 0.05, freq: float = 1.0, iterations: int = 10, gain: float = 0.15, q_filter: float = 300.0, lead: float = 0.0) -> dict[str, Any]:
     """Learning from repetition on the virtual device in-process over `runs` friction draws, as
     `hil-sim learn`: {"rms", "peak", "true_rms", "true_peak": arrays (run × iteration) [counts],
     "seeds", "stopped"}."""
@@ -102,6 +102,6 @@ class Device:
         """`gms-tune commission`: {"lines", "settings": {path: value}}; nothing applied."""
     def identify(self, report: Union[str, "PathLike[str]"] = "identify-report", blocks: int = 6) -> dict[str, Any]:
         """`gms-tune identify`: {"params", "report", "presliding", "sliding"}; nothing applied."""
-    def learn(self, amplitude: float = 0.05, freq: float = 1.0, trajectory: Optional[list[tuple[float, float]]] = None, iterations: int = 10, gain: float = 0.3, q_filter: float = 100.0, lead: float = 0.0, apply: bool = False) -> dict[str, Any]:
+    def learn(self, amplitude: float = 0.05, freq: float = 1.0, trajectory: Optional[list[tuple[float, float]]] = None, iterations: int = 10, gain: float = 0.15, q_filter: float = 300.0, lead: float = 0.0, apply: bool = False) -> dict[str, Any]:
         """`gms-tune learn`: {"rms", "peak" per iteration, "errors" (iteration × point), "t",
         "correction" [N·m], "stopped"}; `apply` leaves the correction playing."""

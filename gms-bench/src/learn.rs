@@ -5,14 +5,21 @@
 //!
 //! The design's choices (docs/learning.md):
 //!
-//! - **Learning filter** `L = γ C e^{jωλ}`: the device's own position controller `C` (its PID
-//!   and filters, read from the device, [`gms_ident::linear::PositionController`]). A
-//!   correction `γ C e` changes the next period's error by `−γ T e`, `T` the closed loop,
-//!   near 1 over its bandwidth: every frequency the loop follows is learned at the rate
-//!   `1 − γ`, whatever the gains. γ is dimensionless (default 0.5).
-//! - **Lead** λ (default 0): added to the half-bin shift of the device's error bins (each the
-//!   mean over the `steps` steps after its point).
-//! - **Q**: a zero-phase second-order Butterworth at `q_hz` (default 40 Hz) over the period.
+//! - **Learning filter** `L = γ (C + K(t)) e^{jωλ}`: the device's own position controller `C`
+//!   (its PID and filters, read from the device, [`gms_ident::linear::PositionController`]),
+//!   plus the friction's local stiffness `K(t)` along the path (the device's GMS model run
+//!   over the reference: all of Σk just after a reversal, nothing once sliding). A correction
+//!   `γ (C + K) e` changes the next period's error by about `−γ e` wherever the loop follows
+//!   (sliding, `T ≈ 1`) and where the axis sticks (the pre-sliding spring `K` carries it),
+//!   whatever the gains. γ is dimensionless; default 0.15: the period's error holds about 0.6
+//!   counts RMS that does not repeat (the reversals' stick-slip, the hunting at low speed), and
+//!   a small gain averages it out of the correction (γ 0.1-0.2 ends 5-10 % lower than 0.3, 1.0
+//!   diverges; docs/learning.md).
+//! - **Lead** λ (default 0; negative leads diverge, +0.5 ms is no better): added to the
+//!   half-bin shift of the device's error bins (each the mean over the `steps` steps after
+//!   its point).
+//! - **Q**: a zero-phase second-order Butterworth at `q_hz` (default 300 Hz: the error at a
+//!   reversal changes within a few milliseconds; 30-60 Hz leaves it unlearned) over the period.
 //! - **Stop**: the RMS averaged over the last `patience` iterations (default 5) risen 25 %
 //!   above its lowest such average; the best correction is then kept. The sine test's RMS
 //!   scatters by ±15 % from one period to the next on the default plant (its reversals'
@@ -68,8 +75,8 @@ impl Default for LearnPlan {
                 freq: 1.0,
             },
             iterations: 10,
-            gain: 0.3,
-            q_hz: 100.0,
+            gain: 0.15,
+            q_hz: 300.0,
             lead_s: 0.0,
             patience: 5,
             stiffness: true,

@@ -348,10 +348,10 @@ enum Cmd {
         #[arg(long, default_value_t = 10)]
         iterations: usize,
         /// The learning gain γ [-] on the loop's own controller (0 < γ ≤ 2).
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, default_value_t = 0.15)]
         gain: f64,
         /// The zero-phase Q filter's corner [Hz] (0: none).
-        #[arg(long = "q-filter", default_value_t = 100.0)]
+        #[arg(long = "q-filter", default_value_t = 300.0)]
         q_filter: f64,
         /// The lead λ [s] of the error on the correction.
         #[arg(long, default_value_t = 0.0)]

@@ -124,10 +124,10 @@ enum Cmd {
         #[arg(long, default_value_t = 10)]
         iterations: usize,
         /// The learning gain γ [-].
-        #[arg(long, default_value_t = 0.3)]
+        #[arg(long, default_value_t = 0.15)]
         gain: f64,
         /// The Q filter's corner [Hz] (0: none).
-        #[arg(long = "q-filter", default_value_t = 100.0)]
+        #[arg(long = "q-filter", default_value_t = 300.0)]
         q_filter: f64,
         /// The lead λ [s].
         #[arg(long, default_value_t = 0.0)]

@@ -314,14 +314,14 @@ impl Device {
         Ok(d)
     }
 
-    /// learn(amplitude=0.05, freq=1.0, trajectory=None, iterations=10, gain=0.3,
-    /// q_filter=100.0, lead=0.0, apply=False) -> dict: `gms-tune learn` — the sine
+    /// learn(amplitude=0.05, freq=1.0, trajectory=None, iterations=10, gain=0.15,
+    /// q_filter=300.0, lead=0.0, apply=False) -> dict: `gms-tune learn` — the sine
     /// x = A (1 − cos 2πft) from where the axis holds, or `trajectory` (rows of (t [s],
     /// x [rad]) over one period) played from the device's tables, the correction learned after
     /// each period: {"rms", "peak": numpy arrays per iteration [counts], "errors": 2-D array
     /// (iteration × point) [counts], "t": the points' times [s], "correction": the correction
     /// kept [N·m], "stopped": None or why}; `apply` leaves the correction playing.
-    #[pyo3(signature = (amplitude = 0.05, freq = 1.0, trajectory = None, iterations = 10, gain = 0.3, q_filter = 100.0, lead = 0.0, apply = false))]
+    #[pyo3(signature = (amplitude = 0.05, freq = 1.0, trajectory = None, iterations = 10, gain = 0.15, q_filter = 300.0, lead = 0.0, apply = false))]
     #[allow(clippy::too_many_arguments)]
     fn learn<'py>(
         &mut self,

@@ -87,15 +87,15 @@ pub(crate) fn compare<'py>(
     debug_dict(py, &cmp)
 }
 
-/// learn(scenario=None, runs=1, seed=1, amplitude=0.05, freq=1.0, iterations=10, gain=0.3,
-/// q_filter=100.0, lead=0.0) -> dict
+/// learn(scenario=None, runs=1, seed=1, amplitude=0.05, freq=1.0, iterations=10, gain=0.15,
+/// q_filter=300.0, lead=0.0) -> dict
 ///
 /// Learning from repetition on the virtual device in-process, as `hil-sim learn`, over `runs`
 /// friction draws (seeds seed … seed + runs − 1): {"rms", "peak", "true_rms", "true_peak":
 /// 2-D numpy arrays (run × iteration) [counts] — the device's figures and those against the
 /// simulated true position —, "seeds", "stopped": per run None or why}.
 #[pyfunction]
-#[pyo3(signature = (scenario = None, runs = 1, seed = 1, amplitude = 0.05, freq = 1.0, iterations = 10, gain = 0.3, q_filter = 100.0, lead = 0.0))]
+#[pyo3(signature = (scenario = None, runs = 1, seed = 1, amplitude = 0.05, freq = 1.0, iterations = 10, gain = 0.15, q_filter = 300.0, lead = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn learn<'py>(
     py: Python<'py>,
