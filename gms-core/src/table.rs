@@ -296,9 +296,14 @@ impl Player {
     }
 
     /// Acts on a request (between two position steps; nothing here loops over a table; a
-    /// read fills `chunk`). `Run` is taken only from `Ready` (the protocol side also checks
-    /// that the loop's reference is at the table's start).
-    pub fn take(&mut self, req: &TableRequest, t: &mut [f32], chunk: &mut crate::device::Chunk) {
+    /// read fills `chunk`, and does nothing without one). `Run` is taken only from `Ready` (the
+    /// protocol side also checks that the loop's reference is at the table's start).
+    pub fn take(
+        &mut self,
+        req: &TableRequest,
+        t: &mut [f32],
+        chunk: Option<&mut crate::device::Chunk>,
+    ) {
         match *req {
             TableRequest::Write {
                 which,
@@ -379,6 +384,7 @@ impl Player {
             }
             TableRequest::Stop => self.stopping = self.playing(),
             TableRequest::Read { which, start, max } => {
+                let Some(chunk) = chunk else { return };
                 chunk.start = start;
                 chunk.samples = 0;
                 chunk.nfields = 1;

@@ -36,7 +36,7 @@ fn player(values: &[f32], steps: u32, origin: i64) -> (Player, Vec<f32>) {
                 values: v,
             },
             &mut t,
-            &mut c,
+            Some(&mut c),
         );
     }
     p.take(
@@ -46,7 +46,7 @@ fn player(values: &[f32], steps: u32, origin: i64) -> (Player, Vec<f32>) {
             origin,
         }),
         &mut t,
-        &mut c,
+        Some(&mut c),
     );
     (p, t)
 }
@@ -64,10 +64,10 @@ fn write_corr(p: &mut Player, t: &mut [f32], values: &[f32]) {
                 values: v,
             },
             t,
-            &mut c,
+            Some(&mut c),
         );
     }
-    p.take(&TableRequest::Use, t, &mut c);
+    p.take(&TableRequest::Use, t, Some(&mut c));
 }
 
 /// A sine's table: between its points the reference is the periodic cubic through them — at
@@ -87,7 +87,7 @@ fn the_reference_between_points_follows_the_path() {
     let origin = 1_000_000i64;
     let (mut p, mut t) = player(&values, steps, origin);
     let mut c = chunk();
-    p.take(&TableRequest::Run(1), &mut t, &mut c);
+    p.take(&TableRequest::Run(1), &mut t, Some(&mut c));
     p.set_started(0, RPC, RATE);
     assert_eq!(p.report().state, TableState::Playing);
     let per_step = w / f64::from(steps);
@@ -136,7 +136,7 @@ fn periods_bins_and_the_correction_swap() {
     let corr1: Vec<f32> = (0..n).map(|k| 1e-6 * k as f32).collect();
     write_corr(&mut p, &mut t, &corr1);
     assert_eq!(p.report().generation, 1);
-    p.take(&TableRequest::Run(3), &mut t, &mut c);
+    p.take(&TableRequest::Run(3), &mut t, Some(&mut c));
     p.set_started(0, RPC, RATE);
     let err = |period: usize, i: usize| ((period * 1000 + i * 7) % 13) as f32 - 6.0;
     let period_steps = n * steps as usize;
@@ -188,7 +188,7 @@ fn periods_bins_and_the_correction_swap() {
                 max: 64,
             },
             &mut t,
-            &mut c,
+            Some(&mut c),
         );
         assert_eq!(c.samples as usize, n);
         for k in 0..n {
@@ -215,11 +215,11 @@ fn stop_abort_and_no_reference_write_while_playing() {
     let values: Vec<f32> = values.iter().chain(values.iter().rev()).copied().collect();
     let (mut p, mut t) = player(&values, 2, 0);
     let mut c = chunk();
-    p.take(&TableRequest::Run(100), &mut t, &mut c);
+    p.take(&TableRequest::Run(100), &mut t, Some(&mut c));
     for _ in 0..3 {
         p.record(&mut t, 0.0);
     }
-    p.take(&TableRequest::Stop, &mut t, &mut c);
+    p.take(&TableRequest::Stop, &mut t, Some(&mut c));
     let before = t[0];
     p.take(
         &TableRequest::Write {
@@ -229,7 +229,7 @@ fn stop_abort_and_no_reference_write_while_playing() {
             values: [99.0; 8],
         },
         &mut t,
-        &mut c,
+        Some(&mut c),
     );
     assert_eq!(t[0], before);
     let mut steps = 3;
@@ -240,7 +240,7 @@ fn stop_abort_and_no_reference_write_while_playing() {
     assert_eq!(steps, 32, "the period's end");
     assert_eq!(p.report().period, 1);
     // Abort.
-    p.take(&TableRequest::Run(100), &mut t, &mut c);
+    p.take(&TableRequest::Run(100), &mut t, Some(&mut c));
     write_corr(&mut p, &mut t, &[1e-6; 16]);
     assert!(p.report().pending);
     p.abort();

@@ -401,7 +401,9 @@ impl ControlLoop {
 
     /// Acts on the protocol side's requests (between two position steps). Returns a new PWM
     /// timer setting when the loop rates changed.
-    fn take(&mut self, req: Requests) -> Option<(u32, u32)> {
+    /// (By reference: the requests, 2 KB with a parameter set, are not copied again into the
+    /// control interrupt's frame.)
+    fn take(&mut self, req: &mut Requests) -> Option<(u32, u32)> {
         let mut timing = None;
         if req.reset_stats {
             self.stats = StepStats::new();
@@ -414,7 +416,7 @@ impl ControlLoop {
             self.faults = Faults::NONE;
         }
         self.faults.latch(req.latch);
-        if let Some(a) = req.apply {
+        if let Some(a) = req.apply.take() {
             let ratio = a.ctrl.params().ratio().max(1);
             let rates = self.ctrl.rates_differ(a.ctrl.params())
                 || (a.psc, a.arr, ratio) != (self.psc, self.arr, self.ratio);
@@ -639,8 +641,8 @@ impl ControlLoop {
                 self.table_report = None;
                 self.fresh = false;
             }
-            if let Some(req) = req {
-                timing = self.take(req);
+            if let Some(mut req) = req {
+                timing = self.take(&mut req);
             }
             self.steps = self.steps.wrapping_add(1);
             let pos = self.enc.count();
@@ -822,7 +824,9 @@ impl ControlLoop {
     }
 
     /// Acts on a table request: a read into the chunk; a run only with the position loop
-    /// running and the reference at the table's start (within a count).
+    /// running and the reference at the table's start (within a count). Out of the step's
+    /// line: its chunk would otherwise sit in the control interrupt's own frame.
+    #[inline(never)]
     fn take_table(&mut self, req: &crate::table::TableRequest) {
         use crate::table::TableRequest;
         let Some(t) = self.table_buf.as_deref_mut() else {
@@ -841,26 +845,26 @@ impl ControlLoop {
                 return;
             }
         }
-        let mut c = Chunk {
-            start: 0,
-            samples: 0,
-            nfields: 1,
-            values: [0.0; super::CHUNK_VALUES],
-        };
-        self.table.take(req, t, &mut c);
         match req {
-            TableRequest::Read { .. } => {
-                self.chunk = Some(c);
-                self.fresh = true;
+            TableRequest::Read { start, .. } => {
+                let c = self.chunk.insert(Chunk {
+                    start: *start,
+                    samples: 0,
+                    nfields: 1,
+                    values: [0.0; super::CHUNK_VALUES],
+                });
+                self.table.take(req, t, Some(c));
                 self.fresh = true;
             }
+            _ => self.table.take(req, t, None),
+        }
+        if let TableRequest::Run(_) = req {
             // The run's first step is the one this exchange starts.
-            TableRequest::Run(_) => self.table.set_started(
+            self.table.set_started(
                 self.steps.wrapping_add(1),
                 self.ctrl.rad_per_count(),
                 self.ctrl.params().pos_rate_hz,
-            ),
-            _ => {}
+            );
         }
         self.table_report = Some(self.table.report());
         self.fresh = true;
