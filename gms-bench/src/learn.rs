@@ -560,17 +560,13 @@ pub fn friction_stiffness(s: &gms_core::protocol::Settings, t: &Table) -> Vec<f6
         };
         f(a, 1.0) + f(g, ratio)
     };
-    // The reference at every step: the points' Catmull-Rom cubic, as the device plays it.
+    // The reference at every step, as the device plays it (its points in f32, its cubic).
     let x_at = |i: usize| -> f64 {
         let k = i / steps;
-        let s = (i % steps) as f64 / steps as f64;
-        let p = |j: usize| t.values[j % n];
-        let (p0, p1, p2, p3) = (p(k + n - 1), p(k), p(k + 1), p(k + 2));
-        let (m1, m2) = (0.5 * (p2 - p0), 0.5 * (p3 - p1));
-        let d = p2 - p1;
-        let a = 3.0 * d - 2.0 * m1 - m2;
-        let b = -2.0 * d + m1 + m2;
-        (p1 + s * (m1 + s * (a + s * b))) * rpc
+        let s = (i % steps) as f32 / steps as f32;
+        let p = |j: usize| t.values[j % n] as f32;
+        let (x, _, _) = gms_core::table::catmull_rom([p(k + n - 1), p(k), p(k + 1), p(k + 2)], s);
+        f64::from(x) * rpc
     };
     let mut out = vec![0.0; n];
     let mut x_prev = x_at(0);

@@ -454,17 +454,8 @@ impl Player {
         let kp1 = if k + 1 >= n { k + 1 - n } else { k + 1 };
         let kp2 = if k + 2 >= n { k + 2 - n } else { k + 2 };
         let at = |i: usize| t.get(REF + i).copied().unwrap_or(0.0);
-        let (p0, p1, p2, p3) = (at(km1), at(k), at(kp1), at(kp2));
         let s = self.j as f32 * self.inv_steps;
-        // Catmull-Rom: tangents from the neighbours, in counts per point interval.
-        let m1 = 0.5 * (p2 - p0);
-        let m2 = 0.5 * (p3 - p1);
-        let d = p2 - p1;
-        let a = 3.0 * d - 2.0 * m1 - m2;
-        let b = -2.0 * d + m1 + m2;
-        let pos = p1 + s * (m1 + s * (a + s * b));
-        let dds = m1 + s * (2.0 * a + 3.0 * s * b);
-        let d2ds2 = 2.0 * a + 6.0 * s * b;
+        let (pos, dds, d2ds2) = catmull_rom([at(km1), at(k), at(kp1), at(kp2)], s);
         let corr = match self.corr {
             Some(c) => {
                 let base = corr_at(c);
@@ -548,6 +539,26 @@ impl Player {
         }
         Recorded::PeriodEnd
     }
+}
+
+/// The reference between points `p[1]` and `p[2]` at `s` (0 … 1 of the interval), with `p[0]`
+/// and `p[3]` their neighbours: the Catmull-Rom cubic (tangents from the neighbours), its
+/// value and its first and second derivatives per interval. The device plays its table
+/// with it; a host that needs the reference at every step (the learning's friction model run
+/// along the path) calls it too.
+#[inline(always)]
+pub fn catmull_rom(p: [f32; 4], s: f32) -> (f32, f32, f32) {
+    let [p0, p1, p2, p3] = p;
+    let m1 = 0.5 * (p2 - p0);
+    let m2 = 0.5 * (p3 - p1);
+    let d = p2 - p1;
+    let a = 3.0 * d - 2.0 * m1 - m2;
+    let b = -2.0 * d + m1 + m2;
+    (
+        p1 + s * (m1 + s * (a + s * b)),
+        m1 + s * (2.0 * a + 3.0 * s * b),
+        2.0 * a + 6.0 * s * b,
+    )
 }
 
 /// The position `counts` from `origin` \[counts\] in 1/65536 count.
