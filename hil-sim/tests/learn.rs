@@ -278,4 +278,14 @@ fn table_commands_refuse_bad_input_and_end_safely() {
     );
     ok(&mut dev, "table clear");
     assert_eq!(state(&mut dev), "empty");
+    // Set again, then the position rate changes: the table (its steps and speeds checked for
+    // the old rate) is forgotten.
+    for (i, c) in pts.chunks(8).enumerate() {
+        ok(&mut dev, &format!("table ref {} {}", i * 8, c.join(" ")));
+    }
+    ok(&mut dev, "table set 16 100 0");
+    assert_eq!(state(&mut dev), "ready");
+    ok(&mut dev, "set rate.pos_hz 5000");
+    assert_eq!(state(&mut dev), "empty");
+    refused(&mut dev, "table run 1", "no table set");
 }

@@ -450,6 +450,13 @@ impl ControlLoop {
                 self.enc.rebase(directed(self.last_raw, new_enc_dir));
                 self.sense.amps_per_code = amps_per_code;
             }
+            if dirs || rates {
+                // A table's counts, steps and speeds were checked for the old encoder and
+                // rates: it is forgotten (the next run needs a new `table set`).
+                self.table = Player::default();
+                self.table_report = Some(self.table.report());
+                self.fresh = true;
+            }
             if rates {
                 // The bridge goes off for the change.
                 self.switch_off();
