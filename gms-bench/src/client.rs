@@ -139,16 +139,31 @@ pub fn capture_rows(b: &mut impl Bench) -> Result<Vec<Vec<f64>>, Error> {
             st.state
         )));
     }
-    let mut rows = Vec::with_capacity(st.samples as usize);
+    read_rows(b, st.samples, "capture", |start, count| {
+        Command::Capture(CaptureCmd::Read { start, count }).to_string()
+    })
+}
+
+/// Reads `n` rows of comma-separated numbers that the device answers in chunks (capture, map
+/// and table reads): `request(start, count)` the request line for rows `start`.. (at most
+/// [`gms_core::protocol::MAX_READ`] a request); `what` names them in an error.
+pub fn read_rows(
+    b: &mut impl Bench,
+    n: u32,
+    what: &str,
+    request: impl Fn(u32, u32) -> String,
+) -> Result<Vec<Vec<f64>>, Error> {
+    let mut rows = Vec::with_capacity(n as usize);
     let mut start = 0;
-    while start < st.samples {
-        let (lines, _) = b.send(Command::Capture(CaptureCmd::Read { start, count: 64 }))?;
+    while start < n {
+        let count = (n - start).min(gms_core::protocol::MAX_READ);
+        let (lines, _) = b.request(&request(start, count))?;
         if lines.is_empty() {
-            return Err(Error::Device(format!("capture read {start}: no samples")));
+            return Err(Error::Device(format!("{what} read {start}: nothing read")));
         }
         for l in &lines {
-            let row: Result<Vec<f64>, _> = l.split(',').map(str::parse).collect();
-            rows.push(row.map_err(|_| Error::Device(format!("bad capture line: {l}")))?);
+            let row: Result<Vec<f64>, _> = l.split(',').map(|v| v.trim().parse()).collect();
+            rows.push(row.map_err(|_| Error::Device(format!("bad {what} line: {l}")))?);
         }
         start += lines.len() as u32;
     }

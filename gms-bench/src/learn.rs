@@ -28,7 +28,7 @@
 use gms_ident::Error;
 use gms_ident::linear::PositionController;
 
-use crate::client::{Bench, DeviceInfo, check_faults, guarded, status};
+use crate::client::{Bench, check_faults, guarded, status};
 use crate::ilc::{Iteration, Learner, LearningFilter, QFilter, Stop};
 
 /// The periodic motion learned.
@@ -67,16 +67,35 @@ pub struct LearnPlan {
     pub stiffness: bool,
 }
 
+/// The default learning updates.
+pub const ITERATIONS: usize = 10;
+/// The default learning gain γ [-].
+pub const GAIN: f64 = 0.15;
+/// The default Q filter's corner \[Hz\].
+pub const Q_HZ: f64 = 300.0;
+/// The default sine: the paper's test, amplitude \[rad\] and frequency \[Hz\].
+pub const SINE: (f64, f64) = (0.05, 1.0);
+
+impl Path {
+    /// One period \[s\] (a trajectory's: its last row's time).
+    pub fn period_s(&self) -> f64 {
+        match self {
+            Path::Sine { freq, .. } => 1.0 / freq,
+            Path::Trajectory(rows) => rows.last().map_or(0.0, |r| r.0),
+        }
+    }
+}
+
 impl Default for LearnPlan {
     fn default() -> Self {
         LearnPlan {
             path: Path::Sine {
-                amplitude: 0.05,
-                freq: 1.0,
+                amplitude: SINE.0,
+                freq: SINE.1,
             },
-            iterations: 10,
-            gain: 0.15,
-            q_hz: 300.0,
+            iterations: ITERATIONS,
+            gain: GAIN,
+            q_hz: Q_HZ,
             lead_s: 0.0,
             patience: 5,
             stiffness: true,
@@ -205,10 +224,7 @@ pub const POINTS: u32 = gms_core::table::TABLE_POINTS as u32;
 /// \[rad/count\], a sine starting at `here` \[counts\]: as many points as the device holds at the
 /// fewest steps apart (a period of whole steps, rounded to whole points).
 pub fn plan_table(path: &Path, rate: f64, rpc: f64, here: f64) -> Result<Table, Error> {
-    let period_s = match path {
-        Path::Sine { freq, .. } => 1.0 / freq,
-        Path::Trajectory(rows) => rows.last().map_or(0.0, |r| r.0),
-    };
+    let period_s = path.period_s();
     let total = (period_s * rate).round();
     if !(total >= 4.0 && total <= 600.0 * rate) {
         return Err(Error::Device(format!(
@@ -354,23 +370,15 @@ pub fn use_correction(b: &mut impl Bench, u: &[f64]) -> Result<(), Error> {
 
 /// Reads `n` values of the device's table `which` (`ref`, `corr` or `err`).
 pub fn read_values(b: &mut impl Bench, which: &str, n: u32) -> Result<Vec<f64>, Error> {
-    let mut out = Vec::with_capacity(n as usize);
-    let max = gms_core::protocol::MAX_READ;
-    while (out.len() as u32) < n {
-        let at = out.len() as u32;
-        let (lines, _) = b.request(&format!("table read {which} {at} {}", (n - at).min(max)))?;
-        if lines.is_empty() {
-            return Err(Error::Device(format!("table read {which}: no values")));
-        }
-        for l in lines {
-            out.push(
-                l.trim()
-                    .parse::<f64>()
-                    .map_err(|_| Error::Device(format!("table read {which}: `{l}`")))?,
-            );
-        }
-    }
-    Ok(out)
+    let rows = crate::client::read_rows(b, n, "table", |start, count| {
+        format!("table read {which} {start} {count}")
+    })?;
+    rows.iter()
+        .map(|r| match r.as_slice() {
+            [v] => Ok(*v),
+            _ => Err(Error::Device(format!("bad table line: {r:?}"))),
+        })
+        .collect()
 }
 
 /// What the learning gave.
@@ -444,14 +452,14 @@ pub fn learn(
     plan.check()?;
     // The path first, checked whole by the device: a refusal changes nothing (the bridge
     // as it was, nothing moves).
-    let info = DeviceInfo::read(b)?;
     let settings = crate::settings::read(b)?;
     let ctrl = PositionController::new(&settings).map_err(Error::Device)?;
-    let rpc = info.rad_per_count;
+    let rpc = crate::client::rad_per_count(b)?;
+    let pos_hz = f64::from(settings.pos_rate_hz);
     let st = status(b)?;
     // Where the axis holds: its reference (the position plus the error) [counts].
     let held = |st: &gms_core::device::StatusReply| st.pos / rpc + f64::from(st.error_counts);
-    let t = plan_table(&plan.path, info.pos_hz, rpc, held(&st))?;
+    let t = plan_table(&plan.path, pos_hz, rpc, held(&st))?;
     set_table(b, &t)?;
     guarded(b, |b| {
         b.enable()?;
@@ -463,7 +471,7 @@ pub fn learn(
         let n = t.points as usize;
         let rate = 1.0 / t.dt();
         // The bins are centred (steps − 1)/2 position steps after their points.
-        let centre = (f64::from(t.steps) - 1.0) / 2.0 / info.pos_hz;
+        let centre = (f64::from(t.steps) - 1.0) / 2.0 / pos_hz;
         let l = LearningFilter::shaped(n, rate, plan.gain, plan.lead_s - centre, |f| {
             ctrl.torque(f) * rpc
         });

@@ -321,24 +321,15 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
 /// The device's table: `(offset [N·m], scale [-])` per bin of its `map.bins`.
 pub fn read(b: &mut impl Bench) -> Result<Vec<(f64, f64)>, Error> {
     let bins = get_param(b, "map.bins")? as u32;
-    let mut out = Vec::with_capacity(bins as usize);
-    let mut start = 0;
-    while start < bins {
-        let count = (bins - start).min(64);
-        let (lines, _) = b.request(&format!("map read {start} {count}"))?;
-        for l in &lines {
-            let (o, s) = l
-                .split_once(',')
-                .and_then(|(o, s)| Some((o.parse().ok()?, s.parse().ok()?)))
-                .ok_or_else(|| Error::Device(format!("bad map line: {l}")))?;
-            out.push((o, s));
-        }
-        if lines.is_empty() {
-            return Err(Error::Device(format!("map read {start}: no bins")));
-        }
-        start += lines.len() as u32;
-    }
-    Ok(out)
+    let rows = crate::client::read_rows(b, bins, "map", |start, count| {
+        format!("map read {start} {count}")
+    })?;
+    rows.iter()
+        .map(|r| match r.as_slice() {
+            [o, s] => Ok((*o, *s)),
+            _ => Err(Error::Device(format!("bad map line: {r:?}"))),
+        })
+        .collect()
 }
 
 /// The position error's RMS \[rad\] while the axis runs at `speed` \[rad/s\] for `seconds` (a

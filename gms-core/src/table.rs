@@ -351,24 +351,20 @@ impl Player {
                     self.periods = 0;
                 }
             }
+            // Either waits for the period's start while playing, or is taken at once.
             TableRequest::Use => {
                 if self.geo.is_some() && self.pending.is_none() {
-                    let s = self.spare();
+                    self.pending = Some(Some(self.spare()));
                     self.generation = self.generation.wrapping_add(1);
-                    if self.playing() {
-                        self.pending = Some(Some(s));
-                    } else {
-                        self.corr = Some(s);
-                    }
+                }
+                if !self.playing() {
+                    self.take_pending();
                 }
             }
             TableRequest::NoCorrection => {
-                if self.playing() {
-                    self.pending = Some(None);
-                } else {
-                    self.corr = None;
-                    self.pending = None;
-                    self.generation = 0;
+                self.pending = Some(None);
+                if !self.playing() {
+                    self.take_pending();
                 }
             }
             TableRequest::Run(periods) => {
@@ -421,6 +417,16 @@ impl Player {
         }
     }
 
+    /// The correction waiting (a buffer, or none) becomes the one played.
+    fn take_pending(&mut self) {
+        if let Some(p) = self.pending.take() {
+            self.corr = p;
+            if p.is_none() {
+                self.generation = 0;
+            }
+        }
+    }
+
     fn clear_sums(&mut self) {
         self.acc = 0.0;
         self.sumsq = 0.0;
@@ -435,12 +441,7 @@ impl Player {
             self.state = TableState::Ready;
             self.stopping = false;
             // A correction waiting is taken now: it was asked for.
-            if let Some(p) = self.pending.take() {
-                self.corr = p;
-                if p.is_none() {
-                    self.generation = 0;
-                }
-            }
+            self.take_pending();
         }
     }
 
@@ -525,12 +526,7 @@ impl Player {
         ));
         self.fill ^= 1;
         self.period = self.period.saturating_add(1);
-        if let Some(p) = self.pending.take() {
-            self.corr = p;
-            if p.is_none() {
-                self.generation = 0;
-            }
-        }
+        self.take_pending();
         self.clear_sums();
         if self.stopping || self.period >= self.periods {
             self.state = TableState::Ready;

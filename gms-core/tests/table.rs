@@ -2,7 +2,7 @@
 //! and figures, the correction's swap at a period's start, the run's end, and the checks of a
 //! table as it is written — each against an independent expectation.
 
-use gms_core::device::{CHUNK_VALUES, Chunk};
+use gms_core::device::Chunk;
 use gms_core::table::{
     Geometry, Player, Recorded, TABLE_POINTS, TABLE_VALUES, TableError, TableRequest, TableState,
     Upload, Which,
@@ -12,11 +12,21 @@ const RATE: f32 = 10_000.0;
 const RPC: f32 = 3.8e-6;
 
 fn chunk() -> Chunk {
-    Chunk {
-        start: 0,
-        samples: 0,
-        nfields: 1,
-        values: [0.0; CHUNK_VALUES],
+    Chunk::new(0, 1)
+}
+
+/// Writes `values` into the table `which` in blocks of eight, as the protocol side does.
+fn write(p: &mut Player, t: &mut [f32], which: Which, values: &[f32]) {
+    for (i, block) in values.chunks(8).enumerate() {
+        let mut v = [0.0; 8];
+        v[..block.len()].copy_from_slice(block);
+        let w = TableRequest::Write {
+            which,
+            start: (i * 8) as u32,
+            n: block.len() as u32,
+            values: v,
+        };
+        p.take(&w, t, None);
     }
 }
 
@@ -24,50 +34,20 @@ fn chunk() -> Chunk {
 fn player(values: &[f32], steps: u32, origin: i64) -> (Player, Vec<f32>) {
     let mut t = vec![0.0f32; TABLE_VALUES];
     let mut p = Player::default();
-    let mut c = chunk();
-    for (i, block) in values.chunks(8).enumerate() {
-        let mut v = [0.0; 8];
-        v[..block.len()].copy_from_slice(block);
-        p.take(
-            &TableRequest::Write {
-                which: Which::Ref,
-                start: (i * 8) as u32,
-                n: block.len() as u32,
-                values: v,
-            },
-            &mut t,
-            Some(&mut c),
-        );
-    }
-    p.take(
-        &TableRequest::Set(Geometry {
-            points: values.len() as u32,
-            steps,
-            origin,
-        }),
-        &mut t,
-        Some(&mut c),
-    );
+    write(&mut p, &mut t, Which::Ref, values);
+    let g = Geometry {
+        points: values.len() as u32,
+        steps,
+        origin,
+    };
+    p.take(&TableRequest::Set(g), &mut t, None);
     (p, t)
 }
 
+/// Writes a correction and has it played.
 fn write_corr(p: &mut Player, t: &mut [f32], values: &[f32]) {
-    let mut c = chunk();
-    for (i, block) in values.chunks(8).enumerate() {
-        let mut v = [0.0; 8];
-        v[..block.len()].copy_from_slice(block);
-        p.take(
-            &TableRequest::Write {
-                which: Which::Corr,
-                start: (i * 8) as u32,
-                n: block.len() as u32,
-                values: v,
-            },
-            t,
-            Some(&mut c),
-        );
-    }
-    p.take(&TableRequest::Use, t, Some(&mut c));
+    write(p, t, Which::Corr, values);
+    p.take(&TableRequest::Use, t, None);
 }
 
 /// A sine's table: between its points the reference is the periodic cubic through them — at

@@ -57,6 +57,15 @@ pub struct Commissioning {
     pub text: String,
 }
 
+/// Creates the output directory `out`, if one is given.
+fn make_dir(out: Option<&Path>) -> Result<(), Error> {
+    match out {
+        Some(dir) => std::fs::create_dir_all(dir)
+            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display()))),
+        None => Ok(()),
+    }
+}
+
 /// The device's identification plans for `ranges`: what [`identify`] runs (a caller shows
 /// them first).
 pub fn identify_plans(link: &mut Link, ranges: &Ranges) -> Result<(DeviceInfo, Plans), Error> {
@@ -106,10 +115,7 @@ pub fn tune_ff(
     point: &mut dyn FnMut(usize, f64, f64),
 ) -> Result<TuneFf, Error> {
     plan.check()?;
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
-    }
+    make_dir(out)?;
     let (_, seconds) = plan.tests();
     let mut b = ctl.bench(link);
     b.stage("tune-ff", seconds);
@@ -194,10 +200,7 @@ pub fn frf(
     ctl: &mut Control<'_>,
     point: &mut dyn FnMut(usize, &gms_bench::frf::Point),
 ) -> Result<gms_bench::frf::Sweep, Error> {
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
-    }
+    make_dir(out)?;
     let mut b = ctl.bench(link);
     b.stage(&format!("frf {}", plan.lp.name()), plan.device_seconds());
     let mut pts = Vec::new();
@@ -403,16 +406,12 @@ pub fn learn(
     each: &mut dyn FnMut(&gms_bench::ilc::Iteration),
 ) -> Result<gms_bench::learn::Learned, Error> {
     plan.check()?;
-    if let Some(dir) = out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::Io(format!("{}: cannot create: {e}", dir.display())))?;
-    }
-    let period = match &plan.path {
-        gms_bench::learn::Path::Sine { freq, .. } => 1.0 / freq,
-        gms_bench::learn::Path::Trajectory(rows) => rows.last().map_or(0.0, |r| r.0),
-    };
+    make_dir(out)?;
     let mut b = ctl.bench(link);
-    b.stage("learn", period * (2 * plan.iterations + 3) as f64);
+    b.stage(
+        "learn",
+        plan.path.period_s() * (2 * plan.iterations + 3) as f64,
+    );
     let l = gms_bench::learn::learn(&mut b, plan, each, apply)?;
     if let Some(dir) = out {
         write_learned(&l, dir)?;

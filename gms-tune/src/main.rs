@@ -345,13 +345,13 @@ enum Cmd {
         #[arg(long, value_name = "FILE.csv")]
         trajectory: Option<PathBuf>,
         /// Learning updates after the first pass.
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, default_value_t = gms_bench::learn::ITERATIONS)]
         iterations: usize,
         /// The learning gain γ [-] on the loop's own controller (0 < γ ≤ 2).
-        #[arg(long, default_value_t = 0.15)]
+        #[arg(long, default_value_t = gms_bench::learn::GAIN)]
         gain: f64,
         /// The zero-phase Q filter's corner [Hz] (0: none).
-        #[arg(long = "q-filter", default_value_t = 300.0)]
+        #[arg(long = "q-filter", default_value_t = gms_bench::learn::Q_HZ)]
         q_filter: f64,
         /// The lead λ [s] of the error on the correction.
         #[arg(long, default_value_t = 0.0)]

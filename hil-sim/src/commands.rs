@@ -128,6 +128,39 @@ pub struct Comparison {
     pub oracle: Option<BTreeMap<String, Summary>>,
 }
 
+/// `f(0)`, …, `f(n − 1)` on `threads` threads (each takes the next index as it comes free),
+/// in index order; `done` after each. An index whose run did not finish is `None`; a run that
+/// panicked is an error.
+pub fn par_map<T: Send>(
+    n: usize,
+    threads: usize,
+    f: impl Fn(usize) -> T + Sync,
+    done: impl Fn() + Sync,
+) -> Result<Vec<Option<T>>, String> {
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<T>>> = Mutex::new((0..n).map(|_| None).collect());
+    std::thread::scope(|s| {
+        for _ in 0..threads.max(1) {
+            s.spawn(|| {
+                loop {
+                    let j = next.fetch_add(1, Ordering::Relaxed);
+                    if j >= n {
+                        break;
+                    }
+                    let r = f(j);
+                    if let Ok(mut g) = results.lock() {
+                        g[j] = Some(r);
+                    }
+                    done();
+                }
+            });
+        }
+    });
+    results
+        .into_inner()
+        .map_err(|_| "a run panicked".to_string())
+}
+
 /// `hil-sim compare`: every mode over `runs` friction draws (seeds `seed`, `seed+1`, …),
 /// on `threads` threads, with a progress bar when `progress`. Returns the comparison and the
 /// traces of the first draw (for the plot).
@@ -156,37 +189,26 @@ pub fn compare(
     } else {
         ProgressBar::hidden()
     };
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<JobResult>>> = Mutex::new(vec![None; jobs.len()]);
-    std::thread::scope(|s| {
-        for _ in 0..threads.max(1) {
-            s.spawn(|| {
-                loop {
-                    let j = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(&(r, m)) = jobs.get(j) else { break };
-                    let seed = seed.wrapping_add(r as u64);
-                    let res = match FfMode::ALL.get(m) {
-                        Some(&mode) => sim::run(sc, mode, seed),
-                        None => sim::run_oracle(sc, seed),
-                    }
-                    .map(|res| {
-                        // The plot shows the modes' first draw; the oracle has no trace there.
-                        let keep = r == 0 && m < FfMode::ALL.len();
-                        (res.metrics, keep.then_some(res.trace))
-                    })
-                    .map_err(String::from);
-                    if let Ok(mut g) = results.lock() {
-                        g[j] = Some(res);
-                    }
-                    bar.inc(1);
-                }
-            });
-        }
-    });
+    let results: Vec<Option<JobResult>> = par_map(
+        jobs.len(),
+        threads,
+        |j| {
+            let (r, m) = jobs[j];
+            let seed = seed.wrapping_add(r as u64);
+            match FfMode::ALL.get(m) {
+                Some(&mode) => sim::run(sc, mode, seed),
+                None => sim::run_oracle(sc, seed),
+            }
+            .map(|res| {
+                // The plot shows the modes' first draw; the oracle has no trace there.
+                let keep = r == 0 && m < FfMode::ALL.len();
+                (res.metrics, keep.then_some(res.trace))
+            })
+            .map_err(String::from)
+        },
+        || bar.inc(1),
+    )?;
     bar.finish_and_clear();
-    let results = results
-        .into_inner()
-        .map_err(|_| "a run panicked".to_string())?;
     let mut per_mode: Vec<Vec<Metrics>> = vec![Vec::new(); columns];
     let mut traces: Vec<Vec<TraceRow>> = vec![Vec::new(); FfMode::ALL.len()];
     for (j, res) in results.into_iter().enumerate() {

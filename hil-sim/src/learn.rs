@@ -3,9 +3,6 @@
 //! draws, with the error against the simulated true position beside the device's — the truth
 //! the device never sees.
 
-use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use gms_bench::learn::{LearnPlan, Learned};
 
 use crate::Error;
@@ -55,10 +52,10 @@ pub fn iteration_truths(l: &Learned, truth: &[Truth]) -> Result<Vec<IterationTru
         .zip(&l.periods)
         .map(|(it, p)| {
             let from = l.started + u64::from(*p) * per;
-            let rows: Vec<&Truth> = truth
-                .iter()
-                .filter(|r| r.steps >= from && r.steps < from + per)
-                .collect();
+            // The recording is in step order: the period's rows by two searches.
+            let lo = truth.partition_point(|r| r.steps < from);
+            let hi = truth.partition_point(|r| r.steps < from + per);
+            let rows: Vec<&Truth> = truth[lo..hi].iter().collect();
             if rows.len() as u64 != per {
                 return Err(Error::Run(format!(
                     "period {p}: {} steps recorded of {per}",
@@ -111,30 +108,16 @@ pub fn learn_draws(
     plan: &LearnPlan,
     threads: usize,
 ) -> Result<Vec<LearnRun>, Error> {
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<Result<LearnRun, Error>>>> = Mutex::new(vec![None; runs]);
-    std::thread::scope(|s| {
-        for _ in 0..threads.max(1) {
-            s.spawn(|| {
-                loop {
-                    let j = next.fetch_add(1, Ordering::Relaxed);
-                    if j >= runs {
-                        break;
-                    }
-                    let r = learn_once(sc, seed.wrapping_add(j as u64), plan);
-                    if let Ok(mut g) = results.lock() {
-                        g[j] = Some(r);
-                    }
-                }
-            });
-        }
-    });
-    results
-        .into_inner()
-        .map_err(|_| Error::Run("a run panicked".into()))?
-        .into_iter()
-        .map(|r| r.unwrap_or_else(|| Err(Error::Run("a run did not finish".into()))))
-        .collect()
+    crate::commands::par_map(
+        runs,
+        threads,
+        |j| learn_once(sc, seed.wrapping_add(j as u64), plan),
+        || {},
+    )
+    .map_err(Error::Run)?
+    .into_iter()
+    .map(|r| r.unwrap_or_else(|| Err(Error::Run("a run did not finish".into()))))
+    .collect()
 }
 
 /// A markdown table: per iteration, the median and the largest over the draws of the RMS

@@ -118,16 +118,16 @@ enum Cmd {
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// The sine's amplitude [rad] and frequency [Hz] (x = A (1 − cos 2πft)).
-        #[arg(long, num_args = 2, value_names = ["AMPLITUDE", "FREQ"], default_values_t = [0.05, 1.0])]
+        #[arg(long, num_args = 2, value_names = ["AMPLITUDE", "FREQ"], default_values_t = [gms_bench::learn::SINE.0, gms_bench::learn::SINE.1])]
         sine: Vec<f64>,
         /// Learning updates after the first pass.
-        #[arg(long, default_value_t = 10)]
+        #[arg(long, default_value_t = gms_bench::learn::ITERATIONS)]
         iterations: usize,
         /// The learning gain γ [-].
-        #[arg(long, default_value_t = 0.15)]
+        #[arg(long, default_value_t = gms_bench::learn::GAIN)]
         gain: f64,
         /// The Q filter's corner [Hz] (0: none).
-        #[arg(long = "q-filter", default_value_t = 300.0)]
+        #[arg(long = "q-filter", default_value_t = gms_bench::learn::Q_HZ)]
         q_filter: f64,
         /// The lead λ [s].
         #[arg(long, default_value_t = 0.0)]

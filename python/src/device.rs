@@ -321,7 +321,7 @@ impl Device {
     /// each period: {"rms", "peak": numpy arrays per iteration [counts], "errors": 2-D array
     /// (iteration × point) [counts], "t": the points' times [s], "correction": the correction
     /// kept [N·m], "stopped": None or why}; `apply` leaves the correction playing.
-    #[pyo3(signature = (amplitude = 0.05, freq = 1.0, trajectory = None, iterations = 10, gain = 0.15, q_filter = 300.0, lead = 0.0, apply = false))]
+    #[pyo3(signature = (amplitude = gms_bench::learn::SINE.0, freq = gms_bench::learn::SINE.1, trajectory = None, iterations = gms_bench::learn::ITERATIONS, gain = gms_bench::learn::GAIN, q_filter = gms_bench::learn::Q_HZ, lead = 0.0, apply = false))]
     #[allow(clippy::too_many_arguments)]
     fn learn<'py>(
         &mut self,

@@ -95,7 +95,7 @@ pub(crate) fn compare<'py>(
 /// 2-D numpy arrays (run × iteration) [counts] — the device's figures and those against the
 /// simulated true position —, "seeds", "stopped": per run None or why}.
 #[pyfunction]
-#[pyo3(signature = (scenario = None, runs = 1, seed = 1, amplitude = 0.05, freq = 1.0, iterations = 10, gain = 0.15, q_filter = 300.0, lead = 0.0))]
+#[pyo3(signature = (scenario = None, runs = 1, seed = 1, amplitude = gms_bench::learn::SINE.0, freq = gms_bench::learn::SINE.1, iterations = gms_bench::learn::ITERATIONS, gain = gms_bench::learn::GAIN, q_filter = gms_bench::learn::Q_HZ, lead = 0.0))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn learn<'py>(
     py: Python<'py>,

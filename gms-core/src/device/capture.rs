@@ -114,14 +114,21 @@ pub struct Chunk {
     pub values: [f32; CHUNK_VALUES],
 }
 
-impl Default for Chunk {
-    fn default() -> Chunk {
+impl Chunk {
+    /// An empty chunk of rows from `start`, `nfields` values a row.
+    pub const fn new(start: u32, nfields: u8) -> Chunk {
         Chunk {
-            start: 0,
+            start,
             samples: 0,
-            nfields: 0,
+            nfields,
             values: [0.0; CHUNK_VALUES],
         }
+    }
+}
+
+impl Default for Chunk {
+    fn default() -> Chunk {
+        Chunk::new(0, 0)
     }
 }
 
@@ -276,10 +283,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let per_chunk = CHUNK_VALUES.checked_div(n).unwrap_or(0) as u32;
         let samples = avail.min(max).min(per_chunk);
         let mut c = Chunk {
-            start,
             samples,
-            nfields: n as u8,
-            ..Chunk::default()
+            ..Chunk::new(start, n as u8)
         };
         let from = start as usize * n;
         let len = samples as usize * n;

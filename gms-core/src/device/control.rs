@@ -483,12 +483,7 @@ impl ControlLoop {
                 }
             }
             Some(MapRequest::Read { start, max }) => {
-                let mut c = Chunk {
-                    start,
-                    samples: 0,
-                    nfields: 2,
-                    values: [0.0; super::CHUNK_VALUES],
-                };
+                let mut c = Chunk::new(start, 2);
                 if let Some(t) = self.map_table.as_deref() {
                     let n = (max as usize)
                         .min(super::CHUNK_VALUES / 2)
@@ -854,12 +849,7 @@ impl ControlLoop {
         }
         match req {
             TableRequest::Read { start, .. } => {
-                let c = self.chunk.insert(Chunk {
-                    start: *start,
-                    samples: 0,
-                    nfields: 1,
-                    values: [0.0; super::CHUNK_VALUES],
-                });
+                let c = self.chunk.insert(Chunk::new(*start, 1));
                 self.table.take(req, t, Some(c));
                 self.fresh = true;
             }

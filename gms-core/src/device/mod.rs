@@ -448,12 +448,7 @@ impl Mailbox {
             },
             taken_at: 0,
             posted: false,
-            chunk: Chunk {
-                start: 0,
-                samples: 0,
-                nfields: 0,
-                values: [0.0; CHUNK_VALUES],
-            },
+            chunk: Chunk::new(0, 0),
             frf: crate::frf::FrfReport {
                 state: crate::frf::FrfState::Idle,
                 injection: None,

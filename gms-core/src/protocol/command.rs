@@ -115,30 +115,10 @@ pub enum TableCmd<'a> {
     Clear,
 }
 
-/// A decimal `i64` (an optional sign, then digits), without core's parser.
-fn parse_i64(s: &str) -> Option<i64> {
-    let (neg, digits) = match s.as_bytes().first() {
-        Some(b'-') => (true, s.get(1..)?),
-        Some(b'+') => (false, s.get(1..)?),
-        _ => (false, s),
-    };
-    if digits.is_empty() || digits.len() > 18 {
-        return None;
-    }
-    let mut v: i64 = 0;
-    for b in digits.bytes() {
-        if !b.is_ascii_digit() {
-            return None;
-        }
-        v = v * 10 + i64::from(b - b'0');
-    }
-    Some(if neg { -v } else { v })
-}
-
-/// A decimal `u32` (digits only), without core's parser (whose error path the no-panic link
-/// check cannot see through).
-fn parse_u32(s: &str) -> Option<u32> {
-    if s.is_empty() || s.len() > 10 {
+/// Up to `max` decimal digits (digits only) as a `u64`, without core's parser (whose error
+/// path the no-panic link check cannot see through).
+fn parse_digits(s: &str, max: usize) -> Option<u64> {
+    if s.is_empty() || s.len() > max {
         return None;
     }
     let mut v: u64 = 0;
@@ -148,7 +128,34 @@ fn parse_u32(s: &str) -> Option<u32> {
         }
         v = v * 10 + u64::from(b - b'0');
     }
-    u32::try_from(v).ok()
+    Some(v)
+}
+
+/// A decimal `i64` (an optional sign, then up to 18 digits).
+fn parse_i64(s: &str) -> Option<i64> {
+    let (neg, digits) = match s.as_bytes().first() {
+        Some(b'-') => (true, s.get(1..)?),
+        Some(b'+') => (false, s.get(1..)?),
+        _ => (false, s),
+    };
+    let v = parse_digits(digits, 18)? as i64;
+    Some(if neg { -v } else { v })
+}
+
+/// A decimal `u32` (digits only).
+fn parse_u32(s: &str) -> Option<u32> {
+    u32::try_from(parse_digits(s, 10)?).ok()
+}
+
+/// What follows the first `n` words of `line`, trimmed (a command's free-form tail: the map's
+/// pairs, the table's values).
+fn after_words(line: &str, n: usize) -> &str {
+    let mut rest = line.trim_start();
+    for _ in 0..n {
+        let w = rest.split_ascii_whitespace().next().unwrap_or("");
+        rest = rest.strip_prefix(w).unwrap_or("").trim_start();
+    }
+    rest.trim_end()
 }
 
 /// The most samples one `capture read` returns (a reply stays under the firmware's 4 KiB).
@@ -534,15 +541,7 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                 Some("write") => {
                     let start = int(arg())?;
                     // The rest of the line: the pairs (checked by the device).
-                    let rest = line
-                        .trim_start()
-                        .strip_prefix("map")
-                        .map(str::trim_start)
-                        .and_then(|r| r.strip_prefix("write"))
-                        .map(str::trim_start)
-                        .and_then(|r| r.strip_prefix(r.split_ascii_whitespace().next()?))
-                        .map(str::trim)
-                        .unwrap_or("");
+                    let rest = after_words(line, 3);
                     if rest.is_empty() {
                         return Err(bad(usage));
                     }
@@ -568,15 +567,7 @@ table read ref|corr|err START COUNT | table clear";
                     let which = if w == "ref" { Which::Ref } else { Which::Corr };
                     let start = int(arg())?;
                     // The rest of the line: the values (checked by the device).
-                    let rest = line
-                        .trim_start()
-                        .strip_prefix("table")
-                        .map(str::trim_start)
-                        .and_then(|r| r.strip_prefix(w))
-                        .map(str::trim_start)
-                        .and_then(|r| r.strip_prefix(r.split_ascii_whitespace().next()?))
-                        .map(str::trim)
-                        .unwrap_or("");
+                    let rest = after_words(line, 3);
                     if rest.is_empty() {
                         return Err(bad(usage));
                     }

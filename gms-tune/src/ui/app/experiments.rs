@@ -29,11 +29,6 @@ impl App {
         ui.separator();
         let inp = &mut self.inputs;
         let mut start: Option<(&str, Result<Job, String>)> = None;
-        let field = |ui: &mut egui::Ui, label: &str, v: &mut String, w: f32| {
-            let l = ui.label(label);
-            ui.add(egui::TextEdit::singleline(v).desired_width(w))
-                .labelled_by(l.id);
-        };
         ui.horizontal(|ui| {
             field(ui, "speed [rad/s]", &mut inp.speed, 50.0);
             field(ui, "motor file", &mut inp.motor, 120.0);

@@ -92,16 +92,11 @@ impl App {
             ] {
                 ui.selectable_value(&mut inp.lp, lp, name);
             }
-            let field = |ui: &mut egui::Ui, label: &str, v: &mut String| {
-                let l = ui.label(label);
-                ui.add(egui::TextEdit::singleline(v).desired_width(50.0))
-                    .labelled_by(l.id);
-            };
-            field(ui, "from [Hz]", &mut inp.from);
-            field(ui, "to [Hz]", &mut inp.to);
-            field(ui, "points", &mut inp.points);
-            field(ui, "amplitude", &mut inp.amplitude);
-            field(ui, "speed [rad/s]", &mut inp.velocity);
+            field(ui, "from [Hz]", &mut inp.from, 50.0);
+            field(ui, "to [Hz]", &mut inp.to, 50.0);
+            field(ui, "points", &mut inp.points, 50.0);
+            field(ui, "amplitude", &mut inp.amplitude, 50.0);
+            field(ui, "speed [rad/s]", &mut inp.velocity, 50.0);
             if ui.add_enabled(idle, egui::Button::new("Measure")).clicked() {
                 start = Some(());
             }

@@ -44,16 +44,11 @@ impl App {
         let mut start = None;
         ui.horizontal(|ui| {
             let inp = &mut self.learn_inputs;
-            let field = |ui: &mut egui::Ui, label: &str, v: &mut String| {
-                let l = ui.label(label);
-                ui.add(egui::TextEdit::singleline(v).desired_width(50.0))
-                    .labelled_by(l.id);
-            };
-            field(ui, "amplitude [rad]", &mut inp.amplitude);
-            field(ui, "frequency [Hz]", &mut inp.freq);
-            field(ui, "iterations", &mut inp.iterations);
-            field(ui, "gain", &mut inp.gain);
-            field(ui, "Q [Hz]", &mut inp.q_hz);
+            field(ui, "amplitude [rad]", &mut inp.amplitude, 50.0);
+            field(ui, "frequency [Hz]", &mut inp.freq, 50.0);
+            field(ui, "iterations", &mut inp.iterations, 50.0);
+            field(ui, "gain", &mut inp.gain, 50.0);
+            field(ui, "Q [Hz]", &mut inp.q_hz, 50.0);
             if ui.add_enabled(idle, egui::Button::new("Learn")).clicked() {
                 start = Some((|| {
                     let plan = LearnPlan {

@@ -33,14 +33,9 @@ impl App {
         let mut start = None;
         ui.horizontal(|ui| {
             let inp = &mut self.map_inputs;
-            let field = |ui: &mut egui::Ui, label: &str, v: &mut String| {
-                let l = ui.label(label);
-                ui.add(egui::TextEdit::singleline(v).desired_width(50.0))
-                    .labelled_by(l.id);
-            };
-            field(ui, "speed [rad/s]", &mut inp.speed);
-            field(ui, "revolutions", &mut inp.revs);
-            field(ui, "bins", &mut inp.bins);
+            field(ui, "speed [rad/s]", &mut inp.speed, 50.0);
+            field(ui, "revolutions", &mut inp.revs, 50.0);
+            field(ui, "bins", &mut inp.bins, 50.0);
             if ui
                 .add_enabled(idle, egui::Button::new("Measure the map"))
                 .clicked()

@@ -485,6 +485,14 @@ impl App {
 }
 
 /// A typed number, or a one-line error naming the field.
+/// A labelled text field of `width` points (the label names it for a screen reader and
+/// for the window's tests).
+fn field(ui: &mut egui::Ui, label: &str, v: &mut String, width: f32) {
+    let l = ui.label(label);
+    ui.add(egui::TextEdit::singleline(v).desired_width(width))
+        .labelled_by(l.id);
+}
+
 fn num(text: &str, what: &str) -> Result<f64, String> {
     text.trim()
         .parse::<f64>()
