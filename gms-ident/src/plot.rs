@@ -30,6 +30,20 @@ fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// The series' legend in the chart's corner, on a light background with a frame.
+fn legend<'a, DB, X, Y>(c: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged,
+    Y: Ranged,
+{
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|x| x.to_string())
+}
+
 /// What a trace's `friction` column is, for the legend.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FrictionSource {
@@ -85,11 +99,7 @@ pub fn run_plot(
     .map_err(|x| e(&x))?
     .label("encoder")
     .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLUE));
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    legend(&mut c)?;
 
     let (lo, hi) = range(trace.iter().map(|r| r.error / rad_per_count));
     let mut c = ChartBuilder::on(&panels[1])
@@ -141,11 +151,7 @@ pub fn run_plot(
     .map_err(|x| e(&x))?
     .label("feedforward")
     .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], GREEN));
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    legend(&mut c)?;
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
@@ -204,11 +210,7 @@ pub fn compare_plot(
             .label(*name)
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col));
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|x| e(&x))?;
+        legend(&mut c)?;
     }
     root.present().map_err(|x| e(&x))?;
     Ok(())
@@ -252,11 +254,7 @@ pub fn fit_plot(
         .map_err(|x| e(&x))?
         .label("identified model")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED));
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    legend(&mut c)?;
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
@@ -407,11 +405,7 @@ pub fn learn_plot(
         c.draw_series(pts.iter().map(|&p| Circle::new(p, 3, col.filled())))
             .map_err(|x| e(&x))?;
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    legend(&mut c)?;
     let (t0, t1) = range(errors.iter().flat_map(|(_, v)| v.iter().map(|p| p.0)));
     let (lo, hi) = range(errors.iter().flat_map(|(_, v)| v.iter().map(|p| p.1)));
     let mut c = ChartBuilder::on(&panels[1])
@@ -433,11 +427,7 @@ pub fn learn_plot(
             .label(*name)
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col));
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|x| e(&x))?;
+    legend(&mut c)?;
     root.present().map_err(|x| e(&x))?;
     Ok(())
 }
