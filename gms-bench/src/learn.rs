@@ -472,8 +472,11 @@ pub fn learn(
         let rate = 1.0 / t.dt();
         // The bins are centred (steps − 1)/2 position steps after their points.
         let centre = (f64::from(t.steps) - 1.0) / 2.0 / pos_hz;
+        // The inverse of the process sensitivity P / (1 + P C): C plus the rigid plant's
+        // 1/P = J s² (−J ω² on the jω axis); K(t) comes below, pointwise.
+        let inertia = f64::from(settings.motor.inertia);
         let l = LearningFilter::shaped(n, rate, plan.gain, plan.lead_s - centre, |f| {
-            ctrl.torque(f) * rpc
+            (ctrl.torque(f) - inertia * (std::f64::consts::TAU * f).powi(2)) * rpc
         });
         let l = if plan.stiffness {
             let k = friction_stiffness(&settings, &t);
