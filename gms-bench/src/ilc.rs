@@ -6,9 +6,11 @@
 //! a standard robust ILC. The learning filter `L` ([`LearningFilter`]) is a gain γ, a lead λ
 //! that matches the loop's delay from the correction to the position (the error a correction
 //! at `t` shows up in is the one `λ` later: `e(t + λ)`), and optionally a shape `F(f)`: with
-//! the loop's own controller `C` as `F`, a correction `γ C e` changes the next period's error
-//! by `−γ T e` (`T` the loop's complementary sensitivity, near 1 over its bandwidth), so every
-//! frequency the loop follows is learned at the same rate `1 − γ`. Q is a zero-phase low-pass
+//! the inverse of the process sensitivity as `F` — the loop's own controller `C` plus the
+//! plant's `1/P` (`C + J s²` for a rigid axis) — a correction `γ F e` changes the next
+//! period's error by `−γ e`, so every frequency is learned at the same rate `1 − γ` (with `C`
+//! alone, by `−γ T e`: `T` the loop's complementary sensitivity, near 1 over its bandwidth
+//! only). Q is a zero-phase low-pass
 //! (a second-order Butterworth run forwards and backwards over the periodic signal) that keeps
 //! the learning from building up noise and the high frequencies where the loop's phase makes
 //! it diverge. The signals are periodic: shifts and filters wrap around the period, and `L`

@@ -5,16 +5,16 @@
 //!
 //! The design's choices (docs/learning.md):
 //!
-//! - **Learning filter** `L = γ (C + K(t)) e^{jωλ}`: the device's own position controller `C`
-//!   (its PID and filters, read from the device, [`gms_ident::linear::PositionController`]),
-//!   plus the friction's local stiffness `K(t)` along the path (the device's GMS model run
-//!   over the reference: all of Σk just after a reversal, nothing once sliding). A correction
-//!   `γ (C + K) e` changes the next period's error by about `−γ e` wherever the loop follows
-//!   (sliding, `T ≈ 1`) and where the axis sticks (the pre-sliding spring `K` carries it),
-//!   whatever the gains. γ is dimensionless; default 0.15: the period's error holds about 0.6
-//!   counts RMS that does not repeat (the reversals' stick-slip, the hunting at low speed), and
-//!   a small gain averages it out of the correction (γ 0.1-0.2 ends 5-10 % lower than 0.3, 1.0
-//!   diverges; docs/learning.md).
+//! - **Learning filter** `L = γ (C + J s² + K(t)) e^{jωλ}`, the inverse of the process
+//!   sensitivity `P / (1 + P C)`: the device's own position controller `C` (its PID and
+//!   filters, read from the device, [`gms_ident::linear::PositionController`]), the rigid
+//!   axis's `1/P = J s²` (`motor.inertia`), plus the friction's local stiffness `K(t)` along
+//!   the path (the device's GMS model run over the reference: all of Σk just after a reversal,
+//!   nothing once sliding). A correction `L e` changes the next period's error by about `−γ e`
+//!   whether the axis slides or sticks, whatever the gains. γ is dimensionless; default 0.15:
+//!   the period's error on the default loop holds about 0.6 counts RMS that does not repeat
+//!   (the encoder's quantisation answered by the loop, the hunting near the reversals), and a
+//!   small gain averages it out of the correction (docs/learning.md).
 //! - **Lead** λ (default 0; negative leads diverge, +0.5 ms is no better): added to the
 //!   half-bin shift of the device's error bins (each the mean over the `steps` steps after
 //!   its point).
