@@ -78,7 +78,9 @@ def compare(scenario: Scenario = None, runs: int = 20, seed: int = 1) -> dict[st
 def learn(scenario: Scenario = None, runs: int = 1, seed: int = 1, amplitude: float = 0.05, freq: float = 1.0, iterations: int = 10, gain: float = 0.15, q_filter: float = 300.0, lead: float = 0.0) -> dict[str, Any]:
     """Learning from repetition on the virtual device in-process over `runs` friction draws, as
     `hil-sim learn`: {"rms", "peak", "true_rms", "true_peak": arrays (run × iteration) [counts],
-    "seeds", "stopped"}."""
+    "scatter_rms", "repeating", "not_repeating", "true_repeating", "true_not_repeating": arrays
+    (one per run) [counts] — the best correction played 5 periods more, what of its error
+    repeats and what does not —, "seeds", "stopped"}."""
 
 class Device:
     """A board (serial port) or the virtual device (TCP) speaking the protocol, as gms-tune."""

@@ -36,8 +36,116 @@ pub struct LearnRun {
     pub stopped: Option<String>,
     /// The correction kept \[N·m at the table's points\].
     pub correction: Vec<f64>,
+    /// The best correction played [`SCATTER_PERIODS`] more periods after the learning: what
+    /// of the error repeats and what does not.
+    pub scatter: Scatter,
     /// Device time the run took \[s\].
     pub seconds: f64,
+}
+
+/// Periods the best correction is played after the learning, for [`Scatter`] (after one
+/// more from rest).
+pub const SCATTER_PERIODS: u32 = 5;
+
+/// What of a repeated motion's error repeats from period to period and what does not
+/// \[counts\], from consecutive periods of the same correction: the part that repeats is what
+/// a learning can still take; the rest is its floor.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+pub struct Scatter {
+    /// Periods it is taken over.
+    pub periods: usize,
+    /// The device's RMS error over all of them.
+    pub rms: f64,
+    /// The RMS of the error's mean over the periods, step by step, less the share of the
+    /// scatter that mean still carries (see [`decompose`]).
+    pub repeating: f64,
+    /// The RMS of each step's scatter about that mean (the unbiased standard deviation over
+    /// the periods, pooled over the steps).
+    pub not_repeating: f64,
+    /// [`Scatter::repeating`] against the true position.
+    pub true_repeating: f64,
+    /// [`Scatter::not_repeating`] against the true position.
+    pub true_not_repeating: f64,
+}
+
+/// Splits periods of an error (each the same length, at least two) into the part that
+/// repeats and the part that does not: `(rms, repeating, not_repeating)`. With `m` the mean
+/// over the `P` periods at each step and `s²` the unbiased variance about it pooled over the
+/// steps, `not_repeating = s` and `repeating² = mean(m²) − s²/P` (the mean of `P` periods
+/// still carries `s²/P` of the scatter), so that a repeating signal plus independent noise
+/// of standard deviation σ gives back the signal's RMS and σ; and `repeating² +
+/// not_repeating² = rms²` exactly (unless the noise's share leaves `repeating²` below 0,
+/// where it is 0).
+pub fn decompose(periods: &[Vec<f64>]) -> Option<(f64, f64, f64)> {
+    let p = periods.len();
+    let n = periods.first()?.len();
+    if p < 2 || n == 0 || periods.iter().any(|e| e.len() != n) {
+        return None;
+    }
+    let (mut ms, mut mean_sq, mut var) = (0.0, 0.0, 0.0);
+    for k in 0..n {
+        let m = periods.iter().map(|e| e[k]).sum::<f64>() / p as f64;
+        mean_sq += m * m;
+        for e in periods {
+            ms += e[k] * e[k];
+            var += (e[k] - m).powi(2);
+        }
+    }
+    let ms = ms / (n * p) as f64;
+    let s2 = var / (n * (p - 1)) as f64;
+    let rep2 = mean_sq / n as f64 - s2 / p as f64;
+    Some((ms.sqrt(), rep2.max(0.0).sqrt(), s2.sqrt()))
+}
+
+/// The best correction (left set by the learning) played [`SCATTER_PERIODS`] periods after
+/// one from the table's start at rest (the learning's periodic state, as its first pass),
+/// every step recorded, split by [`decompose`].
+fn scatter(dev: &mut LocalDevice, per: u64, period_s: f64) -> Result<Scatter, Error> {
+    use gms_bench::Bench;
+    let run = |e: gms_ident::Error| Error::Run(format!("scatter: {e}"));
+    dev.record_truth();
+    let periods = SCATTER_PERIODS + 1;
+    dev.request(&format!("table run {periods}")).map_err(run)?;
+    let st = gms_bench::learn::table_status(dev).map_err(run)?;
+    dev.wait(f64::from(periods) * period_s + 0.05)
+        .map_err(run)?;
+    let end = gms_bench::learn::table_status(dev).map_err(run)?;
+    if end.playing || end.period < periods {
+        return Err(Error::Run(format!(
+            "scatter: {} periods of {periods} played",
+            end.period
+        )));
+    }
+    let truth = dev.take_truth();
+    let rows = |p: u64| -> Result<&[Truth], Error> {
+        let from = st.started + p * per;
+        let lo = truth.partition_point(|r| r.steps < from);
+        let hi = truth.partition_point(|r| r.steps < from + per);
+        if (hi - lo) as u64 != per {
+            return Err(Error::Run(format!(
+                "scatter: period {p} not recorded whole"
+            )));
+        }
+        Ok(&truth[lo..hi])
+    };
+    let mut dev_e = Vec::new();
+    let mut true_e = Vec::new();
+    for p in 1..=u64::from(SCATTER_PERIODS) {
+        let r = rows(p)?;
+        dev_e.push(r.iter().map(Truth::device_error).collect::<Vec<_>>());
+        true_e.push(r.iter().map(Truth::true_error).collect::<Vec<_>>());
+    }
+    let bad = || Error::Run("scatter: no periods".into());
+    let (rms, repeating, not_repeating) = decompose(&dev_e).ok_or_else(bad)?;
+    let (_, true_repeating, true_not_repeating) = decompose(&true_e).ok_or_else(bad)?;
+    Ok(Scatter {
+        periods: dev_e.len(),
+        rms,
+        repeating,
+        not_repeating,
+        true_repeating,
+        true_not_repeating,
+    })
 }
 
 /// The figures of each iteration of `l` from the recording `truth`.
@@ -87,15 +195,23 @@ pub fn learn_once(sc: &Scenario, seed: u64, plan: &LearnPlan) -> Result<LearnRun
     let mut dev = LocalDevice::new(&sc)?;
     dev.record_truth();
     let t0 = dev.plant().t;
-    let l = gms_bench::learn::learn(&mut dev, plan, |_| {}, false)
+    // `apply`: the best correction stays set, for the scatter's periods after.
+    let l = gms_bench::learn::learn(&mut dev, plan, |_| {}, true)
         .map_err(|e| Error::Run(format!("seed {seed}: {e}")))?;
     let seconds = dev.plant().t - t0;
     let truth = dev.take_truth();
+    let iterations = iteration_truths(&l, &truth)?;
+    let per = l
+        .table
+        .as_ref()
+        .map_or(0, |t| u64::from(t.points) * u64::from(t.steps));
+    let scatter = scatter(&mut dev, per, plan.path.period_s())?;
     Ok(LearnRun {
         seed,
-        iterations: iteration_truths(&l, &truth)?,
+        iterations,
         stopped: l.stopped.map(|s| format!("{s:?}")),
         correction: l.correction,
+        scatter,
         seconds,
     })
 }
@@ -148,4 +264,73 @@ pub fn table(runs: &[LearnRun]) -> String {
         ));
     }
     s
+}
+
+/// One line: the draws' medians of [`LearnRun::scatter`] \[counts\].
+pub fn scatter_line(runs: &[LearnRun]) -> String {
+    let median = |f: &dyn Fn(&Scatter) -> f64| -> f64 {
+        let mut v: Vec<f64> = runs.iter().map(|r| f(&r.scatter)).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    format!(
+        "the best correction played {SCATTER_PERIODS} periods more (medians): RMS {:.3} counts, \
+         repeating {:.3}, not repeating {:.3}; against the true position repeating {:.3}, not \
+         repeating {:.3}",
+        median(&|s| s.rms),
+        median(&|s| s.repeating),
+        median(&|s| s.not_repeating),
+        median(&|s| s.true_repeating),
+        median(&|s| s.true_not_repeating),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::decompose;
+
+    /// A repeating signal plus independent noise of a known standard deviation comes back
+    /// apart: the signal's RMS and the noise's σ, and the parts' squares add up to the
+    /// whole's less the share the mean carries.
+    #[test]
+    fn a_repeating_signal_and_noise_come_apart() {
+        // A 64-bit LCG's uniform noise in [−0.5, 0.5): σ = 1/√12.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let n = 20_000;
+        let signal: Vec<f64> = (0..n)
+            .map(|k| 0.7 * (std::f64::consts::TAU * k as f64 / n as f64).sin())
+            .collect();
+        let periods: Vec<Vec<f64>> = (0..5)
+            .map(|_| signal.iter().map(|s| s + uniform()).collect())
+            .collect();
+        let (rms, rep, nonrep) = decompose(&periods).unwrap();
+        let sigma = 1.0 / 12f64.sqrt();
+        let signal_rms = 0.7 / 2f64.sqrt();
+        assert!(
+            (nonrep / sigma - 1.0).abs() < 0.01,
+            "{nonrep} against {sigma}"
+        );
+        assert!(
+            (rep / signal_rms - 1.0).abs() < 0.01,
+            "{rep} against {signal_rms}"
+        );
+        let whole = (signal_rms.powi(2) + sigma.powi(2)).sqrt();
+        assert!((rms / whole - 1.0).abs() < 0.01, "{rms} against {whole}");
+        assert!((rep * rep + nonrep * nonrep - rms * rms).abs() < 1e-12 * rms * rms);
+        // Noise alone: nothing repeats (to the estimate's own scatter).
+        let noise: Vec<Vec<f64>> = (0..5)
+            .map(|_| (0..n).map(|_| uniform()).collect())
+            .collect();
+        let (_, rep, nonrep) = decompose(&noise).unwrap();
+        assert!(rep < 0.1 * nonrep, "{rep} of {nonrep}");
+        // Too few periods, or periods of unequal length: none.
+        assert!(decompose(&periods[..1]).is_none());
+        assert!(decompose(&[vec![1.0, 2.0], vec![1.0]]).is_none());
+    }
 }

@@ -444,6 +444,7 @@ fn main() -> ExitCode {
             plan.check().map_err(|e| e.to_string())?;
             let rs = hil_sim::learn::learn_draws(&sc, runs as usize, seed, &plan, threads(t))?;
             print!("{}", hil_sim::learn::table(&rs));
+            println!("{}", hil_sim::learn::scatter_line(&rs));
             for r in rs.iter().filter(|r| r.stopped.is_some()) {
                 println!(
                     "seed {}: stopped ({})",

@@ -149,6 +149,21 @@ pub(crate) fn learn<'py>(
             numpy::PyArray2::from_vec2(py, &grid(&f)).map_err(err)?,
         )?;
     }
+    // After the learning, the best correction played more periods: what repeats and what
+    // does not, one value per run (hil_sim::learn::Scatter).
+    for (name, f) in [
+        (
+            "scatter_rms",
+            (|s| s.rms) as fn(&hil_sim::learn::Scatter) -> f64,
+        ),
+        ("repeating", |s| s.repeating),
+        ("not_repeating", |s| s.not_repeating),
+        ("true_repeating", |s| s.true_repeating),
+        ("true_not_repeating", |s| s.true_not_repeating),
+    ] {
+        let v: Vec<f64> = rs.iter().map(|r| f(&r.scatter)).collect();
+        out.set_item(name, numpy::PyArray1::from_vec(py, v))?;
+    }
     out.set_item("seeds", rs.iter().map(|r| r.seed).collect::<Vec<_>>())?;
     out.set_item(
         "stopped",

@@ -345,6 +345,12 @@ def test_learn_in_the_simulator_lowers_the_error_against_the_truth():
     # The encoder reads the floor of the angle: the true error is the device's within a count.
     assert np.all(np.abs(r["rms"] - r["true_rms"]) < 0.3)
     assert np.mean(r["rms"][0, 3:]) < r["rms"][0, 0]
+    # After it, what repeats and what does not: their squares make the whole, against the
+    # reading; against the truth less scatters (no quantisation).
+    rep, nonrep, whole = r["repeating"][0], r["not_repeating"][0], r["scatter_rms"][0]
+    assert 0.0 < rep < whole and 0.0 < nonrep < whole
+    assert abs(rep**2 + nonrep**2 - whole**2) < 1e-9 * whole**2
+    assert 0.0 < r["true_not_repeating"][0] < nonrep
     with pytest.raises(gms.GmsError, match="gain"):
         gms.learn(gain=5.0)
 
