@@ -106,4 +106,5 @@ class Device:
         """`gms-tune identify`: {"params", "report", "presliding", "sliding"}; nothing applied."""
     def learn(self, amplitude: float = 0.05, freq: float = 1.0, trajectory: Optional[list[tuple[float, float]]] = None, iterations: int = 10, gain: float = 0.15, q_filter: float = 300.0, lead: float = 0.0, apply: bool = False) -> dict[str, Any]:
         """`gms-tune learn`: {"rms", "peak" per iteration, "errors" (iteration × point), "t",
-        "correction" [N·m], "stopped"}; `apply` leaves the correction playing."""
+        "correction" [N·m], "repeating", "not_repeating" (over the last 5 iterations, counts;
+        None with fewer than 3), "stopped"}; `apply` leaves the correction playing."""

@@ -290,6 +290,35 @@ impl Learner {
     }
 }
 
+/// Splits periods of an error (each the same length, at least two) into the part that
+/// repeats and the part that does not: `(rms, repeating, not_repeating)`. With `m` the mean
+/// over the `P` periods at each step and `s²` the unbiased variance about it pooled over the
+/// steps, `not_repeating = s` and `repeating² = mean(m²) − s²/P` (the mean of `P` periods
+/// still carries `s²/P` of the scatter), so that a repeating signal plus independent noise
+/// of standard deviation σ gives back the signal's RMS and σ; and `repeating² +
+/// not_repeating² = rms²` exactly (unless the noise's share leaves `repeating²` below 0,
+/// where it is 0).
+pub fn decompose(periods: &[Vec<f64>]) -> Option<(f64, f64, f64)> {
+    let p = periods.len();
+    let n = periods.first()?.len();
+    if p < 2 || n == 0 || periods.iter().any(|e| e.len() != n) {
+        return None;
+    }
+    let (mut ms, mut mean_sq, mut var) = (0.0, 0.0, 0.0);
+    for k in 0..n {
+        let m = periods.iter().map(|e| e[k]).sum::<f64>() / p as f64;
+        mean_sq += m * m;
+        for e in periods {
+            ms += e[k] * e[k];
+            var += (e[k] - m).powi(2);
+        }
+    }
+    let ms = ms / (n * p) as f64;
+    let s2 = var / (n * (p - 1)) as f64;
+    let rep2 = mean_sq / n as f64 - s2 / p as f64;
+    Some((ms.sqrt(), rep2.max(0.0).sqrt(), s2.sqrt()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -417,5 +446,50 @@ mod tests {
         }
         assert!(stopped);
         assert!(bad.correction().iter().all(|v| *v == 0.0));
+    }
+
+    /// A repeating signal plus independent noise of a known standard deviation comes back
+    /// apart: the signal's RMS and the noise's σ, and the parts' squares add up to the
+    /// whole's less the share the mean carries.
+    #[test]
+    fn a_repeating_signal_and_noise_come_apart() {
+        // A 64-bit LCG's uniform noise in [−0.5, 0.5): σ = 1/√12.
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let n = 20_000;
+        let signal: Vec<f64> = (0..n)
+            .map(|k| 0.7 * (std::f64::consts::TAU * k as f64 / n as f64).sin())
+            .collect();
+        let periods: Vec<Vec<f64>> = (0..5)
+            .map(|_| signal.iter().map(|s| s + uniform()).collect())
+            .collect();
+        let (rms, rep, nonrep) = decompose(&periods).unwrap();
+        let sigma = 1.0 / 12f64.sqrt();
+        let signal_rms = 0.7 / 2f64.sqrt();
+        assert!(
+            (nonrep / sigma - 1.0).abs() < 0.01,
+            "{nonrep} against {sigma}"
+        );
+        assert!(
+            (rep / signal_rms - 1.0).abs() < 0.01,
+            "{rep} against {signal_rms}"
+        );
+        let whole = (signal_rms.powi(2) + sigma.powi(2)).sqrt();
+        assert!((rms / whole - 1.0).abs() < 0.01, "{rms} against {whole}");
+        assert!((rep * rep + nonrep * nonrep - rms * rms).abs() < 1e-12 * rms * rms);
+        // Noise alone: nothing repeats (to the estimate's own scatter).
+        let noise: Vec<Vec<f64>> = (0..5)
+            .map(|_| (0..n).map(|_| uniform()).collect())
+            .collect();
+        let (_, rep, nonrep) = decompose(&noise).unwrap();
+        assert!(rep < 0.1 * nonrep, "{rep} of {nonrep}");
+        // Too few periods, or periods of unequal length: none.
+        assert!(decompose(&periods[..1]).is_none());
+        assert!(decompose(&[vec![1.0, 2.0], vec![1.0]]).is_none());
     }
 }

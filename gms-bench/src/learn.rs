@@ -402,6 +402,66 @@ pub struct Learned {
     pub started: u64,
 }
 
+/// Iterations the repeatability is taken over (the last ones).
+pub const REPEAT_ITERATIONS: usize = 5;
+
+/// What of the error repeats over the learning's last iterations and what does not
+/// \[counts\]: the part that repeats is what more learning could still take, the rest its
+/// floor. From the device's figures alone: the error at the points (each the mean over its
+/// bin's steps) split by [`crate::ilc::decompose`] into its mean over the iterations and the
+/// scatter about it; the part that does not repeat step by step is what of the periods'
+/// mean square (their RMS over every step) the repeating part leaves, since within a bin the
+/// reading's quantisation and the loop's answer to it average out of the points. The
+/// corrections differ from one of these iterations to the next by γ of an error that
+/// mostly does not repeat, a share of about γ² of its square: negligible.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Repeat {
+    /// Iterations it is taken over.
+    pub iterations: usize,
+    /// The RMS over every step of them.
+    pub rms: f64,
+    /// What repeats (at the points).
+    pub repeating: f64,
+    /// What does not: `sqrt(rms² − repeating²)`.
+    pub not_repeating: f64,
+}
+
+impl Repeat {
+    /// One line for the command line and the window.
+    pub fn line(&self) -> String {
+        format!(
+            "over the last {} iterations: {:.3} counts RMS, {:.3} of it repeating (what more \
+             learning could take), {:.3} not (its floor)",
+            self.iterations, self.rms, self.repeating, self.not_repeating
+        )
+    }
+}
+
+impl Learned {
+    /// What of the error repeats over the last [`REPEAT_ITERATIONS`] iterations (or as many
+    /// as there are, at least 3); `None` with fewer.
+    pub fn repeat(&self) -> Option<Repeat> {
+        let n = self.errors.len().min(self.iterations.len());
+        let k = n.min(REPEAT_ITERATIONS);
+        if k < 3 {
+            return None;
+        }
+        let (_, repeating, _) = crate::ilc::decompose(&self.errors[n - k..n])?;
+        let ms = self.iterations[n - k..n]
+            .iter()
+            .map(|it| it.rms * it.rms)
+            .sum::<f64>()
+            / k as f64;
+        let repeating = repeating.min(ms.sqrt());
+        Some(Repeat {
+            iterations: k,
+            rms: ms.sqrt(),
+            repeating,
+            not_repeating: (ms - repeating * repeating).max(0.0).sqrt(),
+        })
+    }
+}
+
 /// Waits until the device has completed a period after `after` played with the correction
 /// `generation`; returns its figures. Fails when the run has stopped or faulted.
 fn wait_period(

@@ -79,6 +79,9 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
             first.rms, last.rms, best.rms, best.n, first.peak, last.peak
         );
     }
+    if let Some(r) = l.repeat() {
+        println!("{}", r.line());
+    }
     println!(
         "wrote {}/iterations.csv, correction.csv, learning.svg",
         a.out.display()

@@ -1667,6 +1667,25 @@ fn learn_writes_its_files_applies_and_refuses_bad_input() {
         .collect();
     assert_eq!(rows.len(), 4, "{out}");
     assert!(rows.iter().all(|(_, r, p)| *r > 0.0 && p >= r), "{out}");
+    // What repeats over the last iterations (4 of them here) and what does not: the parts'
+    // squares make the iterations' mean square.
+    let repeat = out
+        .lines()
+        .find(|l| l.starts_with("over the last 4 iterations: "))
+        .unwrap_or_else(|| panic!("{out}"));
+    let nums: Vec<f64> = repeat
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let [_, rms, rep, nonrep] = nums[..] else {
+        panic!("{repeat}")
+    };
+    let ms = rows.iter().map(|(_, r, _)| r * r).sum::<f64>() / 4.0;
+    assert!((rms * rms - ms).abs() < 0.01 * ms, "{repeat}: {ms}");
+    assert!(
+        (rep * rep + nonrep * nonrep - ms).abs() < 0.01 * ms,
+        "{repeat}"
+    );
     let csv = std::fs::read_to_string(d.join("ln/iterations.csv")).unwrap();
     assert_eq!(csv.lines().next(), Some("iteration,rms_counts,peak_counts"));
     assert_eq!(csv.lines().count(), 5);

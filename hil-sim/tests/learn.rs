@@ -160,6 +160,33 @@ fn the_targets_with_the_position_loop_at_the_current_loops_rate() {
     assert!(peak <= 3.0, "{peaks:?}");
 }
 
+/// What the bench reports as not repeating (from the device's figures over the last five
+/// iterations: the error at the points and the periods' RMS) against what the recording of
+/// every step shows when the best correction is played five periods more: within the
+/// bench's known bias, which counts what repeats finer than a point (1 ms) as scatter.
+#[test]
+fn the_bench_sees_what_does_not_repeat() {
+    let sc = Scenario::parse("", "learn").unwrap();
+    let runs = hil_sim::learn::learn_draws(&sc, 4, 1, &LearnPlan::default(), 2).unwrap();
+    for r in &runs {
+        let (rep, nonrep) = r.bench_repeat.unwrap();
+        let s = r.scatter;
+        eprintln!(
+            "seed {}: bench repeating {rep:.3}, not {nonrep:.3}; the steps of 5 periods \
+             repeating {:.3}, not {:.3} (true {:.3}, {:.3})",
+            r.seed, s.repeating, s.not_repeating, s.true_repeating, s.true_not_repeating
+        );
+        let ratio = nonrep / s.not_repeating;
+        assert!((0.9..1.35).contains(&ratio), "seed {}: {ratio}", r.seed);
+        assert!(rep <= s.repeating + 0.15, "seed {}: {rep}", r.seed);
+        // The parts' squares make the whole; the truth scatters less than the reading by
+        // about its quantisation.
+        let whole = s.repeating.powi(2) + s.not_repeating.powi(2);
+        assert!((whole - s.rms.powi(2)).abs() < 1e-9 * whole);
+        assert!(s.true_not_repeating < s.not_repeating);
+    }
+}
+
 /// Fifty iterations with twice the default sense noise: the period's RMS scatters, the learning
 /// neither diverges nor stops, and its last ten stay below GMS alone's level under the same
 /// noise.

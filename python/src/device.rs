@@ -367,6 +367,9 @@ impl Device {
             PyArray1::from_vec(py, (0..l.correction.len()).map(|k| k as f64 * dt).collect()),
         )?;
         d.set_item("correction", PyArray1::from_vec(py, l.correction.clone()))?;
+        let r = l.repeat();
+        d.set_item("repeating", r.map(|r| r.repeating))?;
+        d.set_item("not_repeating", r.map(|r| r.not_repeating))?;
         d.set_item("stopped", l.stopped.map(|s| format!("{s:?}")))?;
         Ok(d)
     }

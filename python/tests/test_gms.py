@@ -363,8 +363,12 @@ def test_device_learn_returns_the_iterations_and_leaves_the_correction_on_reques
         assert len(r["rms"]) == 3 and len(r["peak"]) == 3
         assert r["errors"].shape == (3, 1000)
         assert len(r["correction"]) == 1000 and r["t"][1] == pytest.approx(1e-3)
+        # Over the three iterations, what repeats and what does not make the mean square.
+        ms = np.mean(r["rms"] ** 2)
+        assert r["repeating"] ** 2 + r["not_repeating"] ** 2 == pytest.approx(ms, rel=1e-9)
         assert "gen=0 " in d.request("table")
         r = d.learn(iterations=1, apply=True)
+        assert r["not_repeating"] is None
         assert "gen=0 " not in d.request("table")
         with pytest.raises(gms.GmsError, match="soft limits"):
             d.learn(trajectory=[(0.0, 0.0), (3.0, 30.0), (6.0, 60.0), (12.0, 0.0)])

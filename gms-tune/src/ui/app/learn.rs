@@ -116,6 +116,9 @@ impl App {
                         "stopped: {s:?} (the error grew); the best correction kept"
                     ));
                 }
+                if let Some(r) = l.repeat() {
+                    ui.label(r.line());
+                }
                 if ui.button("Apply the correction").clicked() {
                     apply = Some(l.correction.clone());
                 }
