@@ -12,7 +12,7 @@
 //!   the path (the device's GMS model run over the reference: all of Σk just after a reversal,
 //!   nothing once sliding). A correction `L e` changes the next period's error by about `−γ e`
 //!   whether the axis slides or sticks, whatever the gains. γ is dimensionless; default 0.15:
-//!   the period's error on the default loop holds about 0.6 counts RMS that does not repeat
+//!   the period's error on the default loop holds about 0.75 counts RMS that does not repeat
 //!   (the encoder's quantisation answered by the loop, the hunting near the reversals), and a
 //!   small gain averages it out of the correction (docs/learning.md).
 //! - **Lead** λ (default 0; negative leads diverge, +0.5 ms is no better): added to the
