@@ -91,21 +91,11 @@ fn scatter(dev: &mut LocalDevice, per: u64, period_s: f64) -> Result<Scatter, Er
         )));
     }
     let truth = dev.take_truth();
-    let rows = |p: u64| -> Result<&[Truth], Error> {
-        let from = st.started + p * per;
-        let lo = truth.partition_point(|r| r.steps < from);
-        let hi = truth.partition_point(|r| r.steps < from + per);
-        if (hi - lo) as u64 != per {
-            return Err(Error::Run(format!(
-                "scatter: period {p} not recorded whole"
-            )));
-        }
-        Ok(&truth[lo..hi])
-    };
     let mut dev_e = Vec::new();
     let mut true_e = Vec::new();
     for p in 1..=u64::from(SCATTER_PERIODS) {
-        let r = rows(p)?;
+        let r = period_rows(&truth, st.started + p * per, per)
+            .map_err(|e| Error::Run(format!("scatter: period {p}: {e}")))?;
         dev_e.push(r.iter().map(Truth::device_error).collect::<Vec<_>>());
         true_e.push(r.iter().map(Truth::true_error).collect::<Vec<_>>());
     }
@@ -123,6 +113,17 @@ fn scatter(dev: &mut LocalDevice, per: u64, period_s: f64) -> Result<Scatter, Er
     })
 }
 
+/// The `per` steps of `truth` (in step order) from the step `from`; an error unless all of
+/// them are there.
+fn period_rows(truth: &[Truth], from: u64, per: u64) -> Result<&[Truth], Error> {
+    let lo = truth.partition_point(|r| r.steps < from);
+    let hi = truth.partition_point(|r| r.steps < from + per);
+    if (hi - lo) as u64 != per {
+        return Err(Error::Run(format!("{} steps recorded of {per}", hi - lo)));
+    }
+    Ok(&truth[lo..hi])
+}
+
 /// The figures of each iteration of `l` from the recording `truth`.
 pub fn iteration_truths(l: &Learned, truth: &[Truth]) -> Result<Vec<IterationTruth>, Error> {
     let t = l
@@ -134,17 +135,8 @@ pub fn iteration_truths(l: &Learned, truth: &[Truth]) -> Result<Vec<IterationTru
         .iter()
         .zip(&l.periods)
         .map(|(it, p)| {
-            let from = l.started + u64::from(*p) * per;
-            // The recording is in step order: the period's rows by two searches.
-            let lo = truth.partition_point(|r| r.steps < from);
-            let hi = truth.partition_point(|r| r.steps < from + per);
-            let rows: Vec<&Truth> = truth[lo..hi].iter().collect();
-            if rows.len() as u64 != per {
-                return Err(Error::Run(format!(
-                    "period {p}: {} steps recorded of {per}",
-                    rows.len()
-                )));
-            }
+            let rows = period_rows(truth, l.started + u64::from(*p) * per, per)
+                .map_err(|e| Error::Run(format!("period {p}: {e}")))?;
             let rms = |f: &dyn Fn(&Truth) -> f64| {
                 (rows.iter().map(|r| f(r).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
             };
