@@ -2,6 +2,9 @@
 
 use super::*;
 
+/// Two numpy arrays of f64 (the position map's offset and scale).
+type ArrayPair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
 /// A device over a serial port or TCP, speaking the protocol as `gms-tune` does.
 #[pyclass(module = "gms", unsendable)]
 pub(crate) struct Device {
@@ -376,10 +379,7 @@ impl Device {
 
     /// map_read() -> (offset, scale): the device's table as numpy arrays (its `map.bins` bins;
     /// N·m and -).
-    fn map_read<'py>(
-        &mut self,
-        py: Python<'py>,
-    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    fn map_read<'py>(&mut self, py: Python<'py>) -> PyResult<ArrayPair<'py>> {
         let t = gms_bench::posmap::read(&mut self.link).map_err(err)?;
         let (o, s): (Vec<f64>, Vec<f64>) = t.into_iter().unzip();
         Ok((PyArray1::from_vec(py, o), PyArray1::from_vec(py, s)))
