@@ -462,6 +462,36 @@ impl Learned {
     }
 }
 
+/// The next complete period after `after` played with the correction `generation`: its
+/// number, RMS and peak \[counts\] and its error at the points, all of the same period. The
+/// error is read in several requests while the device plays on: when a period ends during
+/// them (the device refuses the request that sees it, [`gms_core::table::READ_RACED`], or
+/// the status after the read shows a later period), the read is thrown away and done again
+/// on the next period of the same correction (none other plays before the host uploads one).
+fn read_period(
+    b: &mut impl Bench,
+    t: &Table,
+    mut after: Option<u32>,
+    generation: u32,
+) -> Result<(u32, f64, f64, Vec<f64>), Error> {
+    for _ in 0..5 {
+        let (p, rms, peak) = wait_period(b, t.period(), after, generation)?;
+        match read_values(b, "err", t.points) {
+            Ok(e) => {
+                if table_status(b)?.done.map(|d| d.0) == Some(p) {
+                    return Ok((p, rms, peak, e));
+                }
+            }
+            Err(Error::Refused(r)) if r.reason == gms_core::table::READ_RACED => {}
+            Err(e) => return Err(e),
+        }
+        after = Some(p);
+    }
+    Err(Error::Device(
+        "five periods ended while their error was read: the link is slower than a period".into(),
+    ))
+}
+
 /// Waits until the device has completed a period after `after` played with the correction
 /// `generation`; returns its figures. Fails when the run has stopped or faulted.
 fn wait_period(
@@ -559,9 +589,8 @@ pub fn learn(
         let mut last = Some(0);
         for i in 0..=plan.iterations {
             // The correction learned after iteration i − 1 is generation i.
-            let (p, rms, peak) = wait_period(b, t.period(), last, i as u32)?;
+            let (p, rms, peak, e) = read_period(b, &t, last, i as u32)?;
             last = Some(p);
-            let e = read_values(b, "err", t.points)?;
             out.periods.push(p);
             let r = learner.learn_measured(&e, rms, peak);
             out.errors.push(e);

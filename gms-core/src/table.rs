@@ -38,6 +38,9 @@ pub const TABLE_MAX_PERIODS: u32 = 1_000_000;
 pub const TABLE_MAX_PERIOD_S: f32 = 600.0;
 /// The largest reference value, either way \[counts from the origin\].
 pub const TABLE_MAX_COUNTS: f32 = 16_777_216.0;
+/// The refusal of a `table read err` during which a period ended (its values would mix two
+/// periods): the host reads again, after the next period.
+pub const READ_RACED: &str = "a period ended during the read (read again)";
 
 /// One of the tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -187,6 +187,75 @@ fn the_bench_sees_what_does_not_repeat() {
     }
 }
 
+/// A link slower than a period: every other time the host reads the error table, a whole
+/// period passes between its first request and its second.
+struct SlowLink<'a> {
+    dev: &'a mut LocalDevice,
+    reads: u32,
+}
+
+impl gms_bench::Bench for SlowLink<'_> {
+    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        if line.starts_with("table read err 64 ") {
+            self.reads += 1;
+            if self.reads % 2 == 1 {
+                self.dev.run(1.0);
+            }
+        }
+        self.dev.request(line)
+    }
+
+    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+        self.dev.wait(seconds)
+    }
+}
+
+/// The error the host learns from is one period's, whatever the link's speed: with a period
+/// ending in the middle of every other read, each iteration's error at the points is the mean
+/// over its bins of the steps recorded in the period the host names (and that period was
+/// played with the iteration's correction: the host waits for its generation).
+#[test]
+fn a_period_ending_during_the_read_is_read_again() {
+    use gms_bench::Bench;
+    let sc = Scenario::parse("", "learn").unwrap();
+    let mut dev = LocalDevice::new(&sc).unwrap();
+    dev.record_truth();
+    let plan = LearnPlan {
+        iterations: 3,
+        ..LearnPlan::default()
+    };
+    let mut link = SlowLink {
+        dev: &mut dev,
+        reads: 0,
+    };
+    let l = learn::learn(&mut link, &plan, |_| {}, false).unwrap();
+    assert!(link.reads >= 4, "{}", link.reads);
+    link.wait(0.0).unwrap();
+    let truth = dev.take_truth();
+    let t = l.table.as_ref().unwrap();
+    let (points, steps) = (t.points as usize, t.steps as u64);
+    assert_eq!(l.errors.len(), 4);
+    // Periods skipped: a slow read costs one.
+    assert!(
+        l.periods.windows(2).any(|w| w[1] > w[0] + 2),
+        "{:?}",
+        l.periods
+    );
+    for (e, p) in l.errors.iter().zip(&l.periods) {
+        let from = l.started + u64::from(*p) * points as u64 * steps;
+        let lo = truth.partition_point(|r| r.steps < from);
+        for k in 0..points {
+            let bin = &truth[lo + k * steps as usize..lo + (k + 1) * steps as usize];
+            let mean = bin.iter().map(|r| r.device_error()).sum::<f64>() / steps as f64;
+            assert!(
+                (e[k] - mean).abs() < 1e-3,
+                "period {p} point {k}: {} against {mean}",
+                e[k]
+            );
+        }
+    }
+}
+
 /// Fifty iterations with twice the default sense noise: the period's RMS scatters, the learning
 /// neither diverges nor stops, and its last ten stay below GMS alone's level under the same
 /// noise.

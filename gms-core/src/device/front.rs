@@ -958,7 +958,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
                     out,
                 )?;
                 if which == Which::Err && self.table_report().done != t.done {
-                    return Err("a period ended during the read (read again)");
+                    return Err(crate::table::READ_RACED);
                 }
                 Ok(())
             }
