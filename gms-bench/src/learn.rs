@@ -500,7 +500,6 @@ fn wait_period(
     after: Option<u32>,
     generation: u32,
 ) -> Result<(u32, f64, f64), Error> {
-    // Three periods at most: the one under way, the one the correction waits for, its own.
     // Ten periods at most (the one under way, the one the correction waits for, its own, and
     // the host's own slowness).
     let tries = 250;

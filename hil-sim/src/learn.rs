@@ -3,7 +3,7 @@
 //! draws, with the error against the simulated true position beside the device's — the truth
 //! the device never sees.
 
-use gms_bench::learn::{LearnPlan, Learned};
+use gms_bench::learn::{LearnPlan, Learned, Table};
 
 use crate::Error;
 use crate::device::{LocalDevice, Truth};
@@ -74,14 +74,15 @@ pub struct Scatter {
 /// The best correction (left set by the learning) played [`SCATTER_PERIODS`] periods after
 /// one from the table's start at rest (the learning's periodic state, as its first pass),
 /// every step recorded, split by [`gms_bench::ilc::decompose`].
-fn scatter(dev: &mut LocalDevice, per: u64, period_s: f64) -> Result<Scatter, Error> {
+fn scatter(dev: &mut LocalDevice, t: &Table) -> Result<Scatter, Error> {
     use gms_bench::Bench;
+    let per = u64::from(t.points) * u64::from(t.steps);
     let run = |e: gms_ident::Error| Error::Run(format!("scatter: {e}"));
     dev.record_truth();
     let periods = SCATTER_PERIODS + 1;
     dev.request(&format!("table run {periods}")).map_err(run)?;
     let st = gms_bench::learn::table_status(dev).map_err(run)?;
-    dev.wait(f64::from(periods) * period_s + 0.05)
+    dev.wait(f64::from(periods) * t.period() + 0.05)
         .map_err(run)?;
     let end = gms_bench::learn::table_status(dev).map_err(run)?;
     if end.playing || end.period < periods {
@@ -168,11 +169,11 @@ pub fn learn_once(sc: &Scenario, seed: u64, plan: &LearnPlan) -> Result<LearnRun
     let seconds = dev.plant().t - t0;
     let truth = dev.take_truth();
     let iterations = iteration_truths(&l, &truth)?;
-    let per = l
+    let t = l
         .table
         .as_ref()
-        .map_or(0, |t| u64::from(t.points) * u64::from(t.steps));
-    let scatter = scatter(&mut dev, per, plan.path.period_s())?;
+        .ok_or_else(|| Error::Run("no table".into()))?;
+    let scatter = scatter(&mut dev, t)?;
     let bench_repeat = l.repeat().map(|r| (r.repeating, r.not_repeating));
     Ok(LearnRun {
         seed,
@@ -205,6 +206,11 @@ pub fn learn_draws(
     .collect()
 }
 
+/// The median of sorted values (the upper one of an even count; NaN of none).
+fn median(sorted: &[f64]) -> f64 {
+    sorted.get(sorted.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
 /// A markdown table: per iteration, the median and the largest over the draws of the RMS
 /// (device and true) and the median peak \[counts\].
 pub fn table(runs: &[LearnRun]) -> String {
@@ -222,7 +228,6 @@ pub fn table(runs: &[LearnRun]) -> String {
             v.sort_by(f64::total_cmp);
             v
         };
-        let median = |v: &[f64]| v.get(v.len() / 2).copied().unwrap_or(f64::NAN);
         let rms = col(&|t| t.rms);
         s.push_str(&format!(
             "| {i} | {:.3} | {:.3} | {:.3} | {:.2} |\n",
@@ -237,19 +242,19 @@ pub fn table(runs: &[LearnRun]) -> String {
 
 /// One line: the draws' medians of [`LearnRun::scatter`] \[counts\].
 pub fn scatter_line(runs: &[LearnRun]) -> String {
-    let median = |f: &dyn Fn(&Scatter) -> f64| -> f64 {
+    let of = |f: &dyn Fn(&Scatter) -> f64| -> f64 {
         let mut v: Vec<f64> = runs.iter().map(|r| f(&r.scatter)).collect();
         v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        median(&v)
     };
     format!(
         "the best correction played {SCATTER_PERIODS} periods more (medians): RMS {:.3} counts, \
          repeating {:.3}, not repeating {:.3}; against the true position repeating {:.3}, not \
          repeating {:.3}",
-        median(&|s| s.rms),
-        median(&|s| s.repeating),
-        median(&|s| s.not_repeating),
-        median(&|s| s.true_repeating),
-        median(&|s| s.true_not_repeating),
+        of(&|s| s.rms),
+        of(&|s| s.repeating),
+        of(&|s| s.not_repeating),
+        of(&|s| s.true_repeating),
+        of(&|s| s.true_not_repeating),
     )
 }

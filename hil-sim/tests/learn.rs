@@ -15,12 +15,15 @@ type Curve = Vec<(f64, f64, f64, f64)>;
 fn run(sc: &str, plan: &LearnPlan) -> (Curve, hil_sim::learn::LearnRun) {
     let sc = Scenario::parse(sc, "learn").unwrap();
     let r = learn_once(&sc, sc.plant.seed, plan).unwrap();
-    let c = r
-        .iterations
+    (curve(&r), r)
+}
+
+/// The run's iterations as a [`Curve`].
+fn curve(r: &hil_sim::learn::LearnRun) -> Curve {
+    r.iterations
         .iter()
         .map(|t: &IterationTruth| (t.rms, t.peak, t.rms_recorded, t.true_rms))
-        .collect();
-    (c, r)
+        .collect()
 }
 
 fn print(name: &str, c: &[(f64, f64, f64, f64)]) {
@@ -142,11 +145,7 @@ fn the_targets_with_the_position_loop_at_the_current_loops_rate() {
     let runs = hil_sim::learn::learn_draws(&sc, 4, 1, &plan, 2).unwrap();
     let mut peaks = Vec::new();
     for r in &runs {
-        let c: Curve = r
-            .iterations
-            .iter()
-            .map(|t| (t.rms, t.peak, t.rms_recorded, t.true_rms))
-            .collect();
+        let c = curve(r);
         print(&format!("seed {}", r.seed), &c);
         assert!(r.stopped.is_none(), "{:?}", r.stopped);
         let tail = |k: usize| mean(c[8..].iter().map(|r| [r.0, r.1, r.3][k]));
