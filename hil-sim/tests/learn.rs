@@ -215,7 +215,6 @@ impl gms_bench::Bench for SlowLink<'_> {
 /// played with the iteration's correction: the host waits for its generation).
 #[test]
 fn a_period_ending_during_the_read_is_read_again() {
-    use gms_bench::Bench;
     let sc = Scenario::parse("", "learn").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     dev.record_truth();
@@ -229,7 +228,6 @@ fn a_period_ending_during_the_read_is_read_again() {
     };
     let l = learn::learn(&mut link, &plan, |_| {}, false).unwrap();
     assert!(link.reads >= 4, "{}", link.reads);
-    link.wait(0.0).unwrap();
     let truth = dev.take_truth();
     let t = l.table.as_ref().unwrap();
     let (points, steps) = (t.points as usize, t.steps as u64);
