@@ -209,9 +209,14 @@ fn a_timed_current_ends_on_the_device() {
             ..Requests::default()
         }),
     );
-    // (Requests are taken at a position step: every other call.)
-    step(&mut lp, period, None);
-    // 0.1 A for 25 position steps (2.5 ms at 10 kHz; two PWM periods per step).
+    // PWM periods (calls) per position step: the current loop's rate over the position's.
+    let s = default_settings();
+    let per = (s.cur_rate_hz / s.pos_rate_hz).round() as usize;
+    // (Requests are taken at a position step: every `per`-th call.)
+    for _ in 1..per {
+        step(&mut lp, period, None);
+    }
+    // 0.1 A for 25 position steps.
     step(
         &mut lp,
         period,
@@ -233,10 +238,13 @@ fn a_timed_current_ends_on_the_device() {
             _ => f32::NAN,
         })
         .collect();
-    // Two PWM periods (calls) per position step: 25 steps are 50 calls at 0.1 A.
+    // 25 steps are 25 × `per` calls at 0.1 A (give or take the step the request lands in).
     let on = held.iter().filter(|a| **a == 0.1).count();
-    assert!((48..=52).contains(&on), "{on} periods at 0.1 A: {held:?}");
-    assert!(held[60..].iter().all(|a| *a == 0.0), "{held:?}");
+    assert!(
+        (25 * per - per..=25 * per + per).contains(&on),
+        "{on} periods at 0.1 A: {held:?}"
+    );
+    assert!(held[25 * per + 10..].iter().all(|a| *a == 0.0), "{held:?}");
     assert!(lp.enabled());
 }
 
@@ -343,8 +351,10 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
     let l = b.limits(&s);
     assert!((l.i_trip - 0.75).abs() < 1e-6, "{}", l.i_trip);
     assert!((l.max_error - 64.0 * std::f32::consts::TAU / 2000.0).abs() < 1e-6);
-    // 100 rad/s over a 0.1 ms position period: 0.01 rad = 3.18 counts of 3.14 mrad, so 4.
-    assert_eq!(l.max_step_counts, 4);
+    // 100 rad/s over a position period: at 20 kHz 5 mrad = 1.59 counts of 3.14 mrad, so 2
+    // (at 10 kHz 3.18, so 4).
+    let per_step = 100.0 / f64::from(s.pos_rate_hz) / (std::f64::consts::TAU / 2000.0);
+    assert_eq!(l.max_step_counts, per_step.ceil() as i64);
 }
 
 #[test]

@@ -369,7 +369,7 @@ fn pwm_timer_settings() {
 
 #[test]
 fn limits_from_settings_and_board() {
-    let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count, 10/20 kHz
+    let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count
     s.pos_min = -38.0;
     s.pos_max = 19.0;
     let b = gms_core::boards::f405::BOARD.limits; // 1.5 × i_max, 10 mrad, 100 rad/s, 168 MHz, 60 %
@@ -377,8 +377,10 @@ fn limits_from_settings_and_board() {
     // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
     assert!((l.i_trip - 0.456).abs() < 1e-6);
     assert_eq!(l.max_error, 0.01);
-    // 100 rad/s over 0.1 ms is 0.01 rad = 2631.6 counts: 2632.
-    assert_eq!(l.max_step_counts, 2632);
+    // 100 rad/s over a position period: at 20 kHz 5 mrad = 1315.8 counts, so 1316 (at
+    // 10 kHz 2631.6, so 2632).
+    let per_step = 100.0 / f64::from(s.pos_rate_hz) / f64::from(s.rad_per_count());
+    assert_eq!(l.max_step_counts, per_step.ceil() as i64);
     // 38 rad / 3.8 urad = 1e7 counts, 19 rad 5e6 (f32 rounding of 3.8e-6 allows ±1).
     assert!((l.pos_min + 10_000_000).abs() <= 1, "{}", l.pos_min);
     assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);

@@ -235,7 +235,7 @@ fn list_help_and_device_commands() {
     assert_eq!(ask(&mut d, "save"), "ok\n");
     assert_eq!(ask(&mut d, "set pos.kp 0.3"), "ok\n");
     assert_eq!(ask(&mut d, "load"), "ok\n");
-    assert_eq!(d.s.pid.kp, 0.2);
+    assert_eq!(d.s.pid.kp, gms_core::device::default_settings().pid.kp);
     assert_eq!(ask(&mut d, "enable"), "ok\n");
     assert!(ask(&mut d, "save").starts_with("err 8 disable first"));
     assert_eq!(ask(&mut d, "status"), "ok enabled=true\n");
@@ -253,7 +253,8 @@ fn list_help_and_device_commands() {
     assert!(ask(&mut d, "frobnicate").starts_with("err 1 "));
     assert_eq!(ask(&mut d, ""), "");
     assert_eq!(ask(&mut d, "   "), "");
-    assert_eq!(ask(&mut d, "get pos.kp\r"), "ok 0.2\n");
+    let kp = gms_core::device::default_settings().pid.kp;
+    assert_eq!(ask(&mut d, "get pos.kp\r"), format!("ok {kp}\n"));
 }
 
 #[test]

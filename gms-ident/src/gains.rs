@@ -3,8 +3,9 @@
 //! stability limit, each with its margin (docs/commissioning.md).
 //!
 //! The rules reproduce the device's defaults for the default motor (R 10 Ω, L 0.24 mH,
-//! J 6e-8 kg·m², 20 kHz current loop, 10 kHz position loop): cur.kp 1.5, cur.ki 6e4 (1 kHz),
-//! pos.kp 0.2, pos.ki about 100; the derivative gain between them as the default 2.5e-4 is.
+//! J 6e-8 kg·m², current and position loops both at 20 kHz, the derivative filter at 8 kHz):
+//! cur.kp 1.5, cur.ki 6e4 (1 kHz), pos.kp 0.7, pos.ki about 600; the derivative gain between
+//! its bounds as the default 2.7e-4 is.
 
 use gms_core::controller::{Controller, ControllerParams, FfMode};
 use gms_core::reference::RefSample;
@@ -14,8 +15,10 @@ use gms_core::reference::RefSample;
 pub const CURRENT_BW_FRACTION: f64 = 0.05;
 
 /// The position loop's natural frequency as a fraction of the current loop's bandwidth
-/// \[-\]: 0.29 (290 Hz under a 1 kHz current loop, the default tune's sqrt(kp / J)).
-pub const POS_NATURAL_FRACTION: f64 = 0.29;
+/// \[-\]: 0.5436 (544 Hz under a 1 kHz current loop, the default tune's sqrt(kp / J) with
+/// kp 0.7: the stiff loop the learning's accuracy needs, docs/learning.md; 0.29, kp 0.2, was
+/// the earlier default).
+pub const POS_NATURAL_FRACTION: f64 = 0.5436;
 
 /// The current loop's PI for a bandwidth of [`CURRENT_BW_FRACTION`] of `cur_hz` \[Hz\] on a
 /// winding of `r` \[ohm\] and `l` \[H\]: `(kp [V/A], ki [V/(A·s)])` = (ω L, ω R), the PI's
@@ -101,8 +104,8 @@ pub const COUNT_SHARE: (f64, f64) = (0.1, 0.25);
 
 impl Axis {
     /// The default motor and loops — R 10 Ω, L 0.24 mH (what the default `cur.kp` 1.5 is
-    /// designed for), k 6.6 mN·m/A, J 6e-8 kg·m², the current PI of [`current_pi`], 20 kHz
-    /// and 10 kHz, the derivative filter at 2 kHz, 12 V — with Table 1's pre-sliding
+    /// designed for), k 6.6 mN·m/A, J 6e-8 kg·m², the current PI of [`current_pi`], both
+    /// loops at 20 kHz, the derivative filter at 8 kHz, 12 V — with Table 1's pre-sliding
     /// stiffness (1.2501 N·m/rad).
     pub fn default_motor() -> Axis {
         Axis {
@@ -112,8 +115,8 @@ impl Axis {
             inertia: 6e-8,
             cur_pi: current_pi(10.0, 0.24e-3, 20e3),
             cur_hz: 20e3,
-            pos_hz: 10e3,
-            d_filter_hz: 2000.0,
+            pos_hz: 20e3,
+            d_filter_hz: 8000.0,
             v_supply: 12.0,
             k_presliding: 1.2501,
             rad_per_count: 3.8e-6,
@@ -289,10 +292,10 @@ mod tests {
     fn the_default_motor_gets_the_default_tune() {
         let g = position_gains(&Axis::default_motor(), &SlidingCurve::TABLE1).unwrap();
         eprintln!("{g:?}");
-        // The defaults: kp 0.2, ki 100 (here 91: ki = kp ω_n / 4), kd 2.5e-4.
-        assert!((g.kp / 0.2 - 1.0).abs() < 0.01, "kp {}", g.kp);
-        assert!((g.ki / 100.0 - 1.0).abs() < 0.1, "ki {}", g.ki);
-        assert!((g.kd / 2.5e-4 - 1.0).abs() < 0.05, "kd {}", g.kd);
+        // The defaults: kp 0.7, ki 600 (here 598: ki = kp ω_n / 4), kd 2.7e-4.
+        assert!((g.kp / 0.7 - 1.0).abs() < 0.01, "kp {}", g.kp);
+        assert!((g.ki / 600.0 - 1.0).abs() < 0.1, "ki {}", g.ki);
+        assert!((g.kd / 2.7e-4 - 1.0).abs() < 0.05, "kd {}", g.kd);
         // Table 1's slope at Vs: (Fs - Fc) δ / (e Vs) - σ.
         let slope = 95e-6 * 0.9 / (std::f64::consts::E * 0.2) - 10.5e-6;
         assert!((g.kd_min / slope - 1.0).abs() < 1e-12);

@@ -169,7 +169,7 @@ fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
         f0: 0.2,
         f1: 20.0,
         seconds: 4.0,
-        every: 10,
+        every: (gms_core::device::default_settings().pos_rate_hz / 1000.0).round() as u32,
     };
     let (t, x, f) = lag(&mut dev, &plan).unwrap();
     assert_eq!(t.len(), 4000);

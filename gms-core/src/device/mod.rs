@@ -513,7 +513,7 @@ pub fn default_settings() -> Settings {
         ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
     };
     ControllerParams {
-        pos_rate_hz: 10_000.0,
+        pos_rate_hz: 20_000.0,
         cur_rate_hz: 20_000.0,
         // The paper's encoder: 2π / 3.8 µrad in single precision (1653469.75), whose radians
         // per count are 3.8e-6 exactly again (`ControllerParams::rad_per_count`).
@@ -521,10 +521,10 @@ pub fn default_settings() -> Settings {
         // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (gms-core/src/boards/power_stage.rs).
         sense_v_per_a: 3.4,
         pid: PidParams {
-            kp: 0.2,
-            ki: 100.0,
-            kd: 2.5e-4,
-            d_filter_hz: 2000.0,
+            kp: 0.7,
+            ki: 600.0,
+            kd: 2.7e-4,
+            d_filter_hz: 8000.0,
             i_limit: 1e-3,
         },
         shaping: crate::shaping::ShapingParams::OFF,
