@@ -6,7 +6,7 @@ use crate::client::{
     Bench, DeviceInfo, VELOCITY_ACC, capture_now, capture_rows, capture_wait, check_faults,
     guarded, move_to, narrow_limits, position, primitive, timed_run,
 };
-use crate::client::{capture_status, velocity};
+use crate::client::{capture_status, get_param, velocity};
 use crate::commission::slide;
 use crate::settings::restoring;
 use gms_core::drive::Faults;
@@ -94,7 +94,9 @@ impl SlidingPlan {
 /// torque (current × k_M, the loop's own torque constant, at constant speed the whole of the
 /// motor torque) and the measured speed (the encoder over the window). Pushes `(v, f)` pairs
 /// as `hil-sim experiment sliding` writes them onto `out` as they are measured (so that a run
-/// cut short keeps them), and ends holding. Fails (the bridge off) when the axis does not
+/// cut short keeps them). Runs in the measuring loop ([`measuring`]: the tracking loop's speed
+/// ripple reads the friction high at low speed) and ends with the device's settings put back
+/// and the bridge off. Fails (the bridge off) when the axis does not
 /// follow the speed (measured below half of it, or the other way) or the device latches a
 /// fault.
 pub fn sliding(
@@ -102,6 +104,36 @@ pub fn sliding(
     plan: &SlidingPlan,
     out: &mut Vec<(f64, f64)>,
 ) -> Result<(), Error> {
+    measuring(b, |b| sweep(b, plan, out))
+}
+
+/// Runs `f` with the position loop set to the measuring loop
+/// ([`gms_ident::gains::measuring_loop`]: the device's `pos.kd` kept, `pos.kp`, `pos.ki` and
+/// `pos.d_filter_hz` for an overdamped velocity loop on its `ff.inertia`), the device's
+/// settings put back after (and the bridge off), however `f` ended.
+pub(crate) fn measuring<B: Bench, T>(
+    b: &mut B,
+    f: impl FnOnce(&mut B) -> Result<T, Error>,
+) -> Result<T, Error> {
+    restoring(b, |b| {
+        let kd = get_param(b, "pos.kd")?;
+        let inertia = get_param(b, "ff.inertia")?;
+        let pos_hz = get_param(b, "rate.pos_hz")?;
+        let m = gms_ident::gains::measuring_loop(kd, inertia, pos_hz).ok_or_else(|| {
+            Error::Params(format!(
+                "pos.kd {kd}, ff.inertia {inertia}: the friction is measured with a loop built \
+                 on both, and neither may be 0 (`gms-tune commission` sets them)"
+            ))
+        })?;
+        b.set("pos.kp", m.kp)?;
+        b.set("pos.ki", m.ki)?;
+        b.set("pos.d_filter_hz", m.d_filter_hz)?;
+        f(b)
+    })
+}
+
+/// The sweep of [`sliding`], in the loop set by it.
+fn sweep(b: &mut impl Bench, plan: &SlidingPlan, out: &mut Vec<(f64, f64)>) -> Result<(), Error> {
     guarded(b, |b| {
         let dev = DeviceInfo::read(b)?;
         let dt = dev.dt();
@@ -112,13 +144,16 @@ pub fn sliding(
                 // A timed run (`velocity V 0 1 1 SECONDS`: no swing, then a ramp to rest that
                 // the device makes by itself, so the stroke never depends on the link's
                 // timing: a late stop over a slow link, or on a virtual device faster than
-                // real time, would overrun the window), captured whole.
+                // real time, would overrun the window), captured whole — the current as the
+                // mean over each decimated sample's steps (`current_mean`): the loop's current
+                // ripples at the encoder's count rate, and single steps every N alias it into
+                // the window's mean (up to ±2 % of the friction at 20 kHz).
                 let t_acc = v.abs() / VELOCITY_ACC;
                 timed_run(
                     b,
                     v,
                     plan.settle(v) + plan.window(v, dt) + 0.02,
-                    "t,pos,current",
+                    "t,pos,current_mean",
                     dt,
                 )?;
                 let all = capture_rows(b)?;
@@ -288,8 +323,9 @@ pub fn presliding(
     plan: &PreslidingPlan,
     out: &mut Vec<(f64, f64)>,
 ) -> Result<(), Error> {
-    // The device's own guard: its stroke limits narrowed around the start, put back after.
-    restoring(b, |b| {
+    // The device's own guard: its stroke limits narrowed around the start, put back after
+    // (with the measuring loop's gains, which the erase moves in).
+    measuring(b, |b| {
         narrow_limits(b, plan.guard)?;
         guarded(b, |b| staircase(b, plan, out))
     })

@@ -139,6 +139,10 @@ fn capture_field_lists() {
     assert_eq!(capture_fields("t,pos,current"), Ok(([0, 1, 5, 0], 3)));
     assert_eq!(capture_fields("friction"), Ok(([6, 0, 0, 0], 1)));
     assert_eq!(capture_fields("t,ref,error,ff"), Ok(([0, 2, 3, 4], 4)));
+    assert_eq!(
+        capture_fields("current,current_mean"),
+        Ok(([5, 8, 0, 0], 2))
+    );
     for bad in ["", "t,", ",t", "t,,pos", "speed", "t,pos,ref,error,ff", "T"] {
         assert!(capture_fields(bad).is_err(), "{bad:?}");
     }
@@ -192,6 +196,57 @@ fn a_capture_records_what_the_loop_saw() {
     let c = chunk.expect("a chunk");
     assert_eq!((c.start, c.samples, c.nfields), (0, 10, 2));
     assert!(c.values[..20].iter().all(|v| *v == 0.0));
+}
+
+/// `current_mean` is the boxcar over the steps a decimated sample stands for (every step
+/// counted once), `current` the sampled step's alone: a current alternating +1/−1 A from step
+/// to step, recorded every 4th step, reads +1 (the sampled step's sign) against a mean of 0;
+/// a ramp reads its block's mean.
+#[test]
+fn current_mean_is_the_boxcar_of_the_decimated_steps() {
+    use gms_core::device::{Capture, CaptureSpec, StepValues};
+    let mut cap = Capture::new(vec![0.0f32; 64]);
+    cap.arm(CaptureSpec {
+        fields: [5, 8, 0, 0],
+        nfields: 2,
+        every: 4,
+        samples: 8,
+        on_next: false,
+    });
+    // Steps 0..16 alternate, then 16..32 ramp 0, 1, 2, …
+    let current = |k: u64| {
+        if k < 16 {
+            if k % 2 == 0 { 1.0 } else { -1.0 }
+        } else {
+            (k - 16) as f32
+        }
+    };
+    for k in 0..40u64 {
+        cap.step(&StepValues {
+            steps: k,
+            dt: 5e-5,
+            rad_per_count: 3.8e-6,
+            current: current(k),
+            ..StepValues::default()
+        });
+    }
+    let c = cap.read(0, 8);
+    assert_eq!(c.samples, 8);
+    // Sample 0 is the trigger's step alone; sample j > 0 is step 4j, standing for steps
+    // 4j-3 ..= 4j.
+    assert_eq!((c.values[0], c.values[1]), (1.0, 1.0));
+    for j in 1..8usize {
+        let k = 4 * j as u64;
+        let mean = (k - 3..=k).map(current).sum::<f32>() / 4.0;
+        assert_eq!(c.values[2 * j], current(k), "sample {j}");
+        assert!(
+            (c.values[2 * j + 1] - mean).abs() < 1e-6,
+            "sample {j}: {}",
+            c.values[2 * j + 1]
+        );
+    }
+    // The alternating part: sampled +1 (even steps), its mean 0.
+    assert_eq!((c.values[2], c.values[3]), (1.0, 0.0));
 }
 
 /// `current AMPS SECONDS`: the current held for so many position steps, then 0 A, still in

@@ -28,6 +28,52 @@ pub fn current_pi(r: f64, l: f64, cur_hz: f64) -> (f64, f64) {
     (w * l, w * r)
 }
 
+/// The measuring loop's damping ratio \[-\]: the position loop the friction is measured with
+/// ([`measuring_loop`]) is overdamped this much, a velocity loop (the derivative gain) with a
+/// weak position correction.
+pub const MEASURE_DAMPING: f64 = 1.5;
+
+/// The position loop's gains the sliding friction is measured with (`pos.kd` kept).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuringLoop {
+    /// `pos.kp` [N·m/rad].
+    pub kp: f64,
+    /// `pos.ki` [N·m/(rad·s)].
+    pub ki: f64,
+    /// `pos.d_filter_hz` \[Hz\].
+    pub d_filter_hz: f64,
+}
+
+/// The loop the friction is measured with, for a derivative gain `kd` [N·m·s/rad] (the
+/// user's, kept: it holds the Stribeck curve's negative damping) on an inertia `inertia`
+/// [kg·m²], the position loop at `pos_hz` \[Hz\]; `None` when the figures are not positive
+/// and finite.
+///
+/// At constant speed a tracking loop answers the encoder's quantisation: the count rate beats
+/// against the sampling at frequencies up to the Nyquist limit, the loop follows the beats,
+/// and the speed ripples. Averaged over the Stribeck curve, convex below Vs, the ripple reads
+/// the friction high at the lowest speeds — on the paper's encoder +3 to +5 % between Vs/10
+/// and Vs/2 with the default 20 kHz loop (kp 0.7), and the fitted δ +12 %. This loop is a
+/// velocity loop of bandwidth ω_d = kd / J (the derivative gain alone), its derivative
+/// filtered at that bandwidth (the beats above it do not reach the motor), and a position
+/// correction weak enough to leave it overdamped, damping ratio [`MEASURE_DAMPING`]: ω_n =
+/// ω_d / (2 ζ), kp = J ω_n², ki = kp ω_n / 4 (the integral's corner two octaves below, as in
+/// [`position_gains`]). The filter is kept below 0.45 of the position rate.
+pub fn measuring_loop(kd: f64, inertia: f64, pos_hz: f64) -> Option<MeasuringLoop> {
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    if !(ok(kd) && ok(inertia) && ok(pos_hz)) {
+        return None;
+    }
+    let w_d = kd / inertia;
+    let w_n = w_d / (2.0 * MEASURE_DAMPING);
+    let kp = inertia * w_n * w_n;
+    Some(MeasuringLoop {
+        kp,
+        ki: kp * w_n / 4.0,
+        d_filter_hz: (w_d / (2.0 * std::f64::consts::PI)).min(0.45 * pos_hz),
+    })
+}
+
 /// The friction's Stribeck curve as the compensator holds it (SI).
 #[derive(Debug, Clone, Copy)]
 pub struct SlidingCurve {
@@ -287,6 +333,31 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The default tune's kd 2.7e-4 on 6e-8 kg·m²: ω_d 4500 rad/s (716 Hz), ω_n 1500 rad/s,
+    /// kp 0.135, ki 50.6; the loop's characteristic polynomial J s² + kd s + kp (the
+    /// integral aside) has the damping ratio asked for.
+    #[test]
+    fn the_measuring_loop_is_overdamped_and_filtered_at_its_bandwidth() {
+        let m = measuring_loop(2.7e-4, 6e-8, 20e3).unwrap();
+        assert!((m.kp - 0.135).abs() < 1e-9, "{m:?}");
+        assert!((m.ki - 0.135 * 1500.0 / 4.0).abs() < 1e-6, "{m:?}");
+        assert!((m.d_filter_hz - 4500.0 / std::f64::consts::TAU).abs() < 1e-9);
+        let zeta = 2.7e-4 / (2.0 * (m.kp * 6e-8).sqrt());
+        assert!((zeta - MEASURE_DAMPING).abs() < 1e-9, "{zeta}");
+        // A light rotor: the filter held below the Nyquist limit.
+        assert_eq!(
+            measuring_loop(2.7e-4, 6e-9, 10e3).unwrap().d_filter_hz,
+            4500.0
+        );
+        for bad in [
+            (0.0, 6e-8, 2e4),
+            (2.7e-4, -1.0, 2e4),
+            (2.7e-4, 6e-8, f64::NAN),
+        ] {
+            assert_eq!(measuring_loop(bad.0, bad.1, bad.2), None);
+        }
+    }
 
     #[test]
     fn the_default_motor_gets_the_default_tune() {

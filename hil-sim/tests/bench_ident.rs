@@ -188,7 +188,7 @@ fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
 }
 
 /// The sine test is repeatable (the same RMS twice on the same device and set) and sees the
-/// compensation: without the feedforward the error is several times larger.
+/// compensation: without the feedforward the error is clearly larger.
 #[test]
 fn the_sine_test_repeats_and_sees_the_compensation() {
     use gms_bench::{Bench, sine_test};
@@ -206,7 +206,9 @@ fn the_sine_test_repeats_and_sees_the_compensation() {
         none / rpc
     );
     assert!((a - b).abs() < 0.1 * a, "{a} vs {b}");
-    assert!(none > 2.0 * a, "{none} vs {a}");
+    // Measured: 0.482 and 0.487 counts with, 0.832 without (the default 20 kHz loop is stiff
+    // enough that friction costs it less than twice the compensated error here).
+    assert!(none > 1.5 * a, "{none} vs {a}");
 }
 
 /// The hidden actuator friction of a property case: Table 1 with its parameters scaled.
@@ -307,7 +309,9 @@ fn a_bench_identification_compensates_as_well_as_the_true_set() {
     use gms_bench::{load_params, sine_test};
     let (acc, mut dev, spec) = identify_hidden(&Hidden::TABLE1);
     // The bounds (Fs, Fc 3 %; Vs, delta, sigma 10 %; C 15 %) but the virgin curve's:
-    // measured 2.24 % of Fs against the 2 % aimed at (see the staircase test above).
+    // measured 2.39 % of Fs against the 2 % aimed at (see the staircase test above). Measured:
+    // Fs 1.2 %, Fc 0.2 %, Vs 0.4 %, delta 3.9 %, sigma 0.7 %, C 2.7 %; the identified set's
+    // sine RMS 0.476 counts against the true set's 0.490.
     assert!(within(&acc, 0.03, 0.10, 0.15, 0.03), "{acc:?}");
     // The device's compensator starts with Table 1, the hidden friction itself: the true set.
     let truth = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
@@ -369,21 +373,22 @@ proptest! {
         let damping = 2.0 * (k0 * 6e-8).sqrt();
         prop_assume!((h.fs - h.fc) / h.vs < damping);
         let (acc, _, _) = identify_hidden(&h);
-        // Over these ten cases (seed 17): Fs 1.3-3.9 % high, Fc <= 0.6 %, Vs <= 4.3 %, delta
-        // 3.0-9.3 %, sigma <= 2.4 %, C 7.9-12.6 %, the virgin curve 0.60-4.56 % of Fs. The
-        // issue's bounds but for Fs (3 %: the lowest speeds read a few % high, the loop's speed
-        // ripple of a few counts per step averaged over a convex Stribeck curve) and the virgin
+        // Over these ten cases (seed 17), the sliding sweep and the erase in the measuring
+        // loop (gms_ident::gains::measuring_loop): Fs 0.6-2.6 % high, Fc <= 0.2 %, Vs 0.5-2.7 %,
+        // delta 1.1-5.0 %, sigma <= 0.7 %, C 0.2-5.8 %, the virgin curve 0.59-3.66 % of Fs.
+        // (In the 20 kHz tracking loop instead: Fs up to 7.4 %, Vs 14 %; in the earlier 10 kHz
+        // kp 0.2 one: Fs 3.9 %, delta 9.3 %, C 12.6 %.) The bounds but for the virgin
         // curve (2 %: early breakaway), docs/identification.md.
-        prop_assert!(within(&acc, 0.045, 0.10, 0.17, 0.05), "{acc:?}");
+        prop_assert!(within(&acc, 0.03, 0.10, 0.15, 0.05), "{acc:?}");
     }
 }
 
 /// The default plant (the guideway present, its friction reflected to the motor through the
 /// lead screw): the bench sees the sum of the two sources at the motor; the identified set
 /// stands for both, so loading it while the device also compensates the guideway counts the
-/// guideway twice. Measured: identified Fs 230.3 µN·m (actuator alone 220: +4.7 %; the sum
-/// 236.3: -2.5 %), Fc 136.7 (125: +9.3 %; the sum 138.6: -1.4 %); sine RMS error 0.835 counts
-/// with the true sets, 0.882 with the identified one and the guideway compensated again.
+/// guideway twice. Measured: identified Fs 227.2 µN·m (actuator alone 220: +3.3 %; the sum
+/// 236.3: -3.9 %), Fc 136.8 (125: +9.4 %; the sum 138.6: -1.3 %); sine RMS error 0.484 counts
+/// with the true sets, 0.465 with the identified one and the guideway compensated again.
 #[test]
 fn on_the_default_plant_the_bench_sees_both_sources() {
     use gms_bench::{DeviceInfo, Plans, Ranges, identify_on, load_params, sine_test};

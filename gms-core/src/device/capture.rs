@@ -12,9 +12,19 @@ pub const CHUNK_VALUES: usize = 128;
 /// The fields a capture may record (the telemetry's, without the simulator's truth): time
 /// since the trigger \[s\], position and reference since the trigger \[rad\], error \[rad\],
 /// feedforward and estimated friction [N·m], current \[A\], the bridge voltage commanded
-/// (duty × supply) \[V\].
-pub const CAPTURE_NAMES: [&str; 8] = [
-    "t", "pos", "ref", "error", "ff", "current", "friction", "volts",
+/// (duty × supply) \[V\], and the current's mean over the `every` steps a sample stands for
+/// \[A\] (`current` is that step's alone: decimated, a current that ripples at the encoder's
+/// count rate aliases into its mean; `current_mean` is the boxcar's, every step counted).
+pub const CAPTURE_NAMES: [&str; 9] = [
+    "t",
+    "pos",
+    "ref",
+    "error",
+    "ff",
+    "current",
+    "friction",
+    "volts",
+    "current_mean",
 ];
 
 /// The index in [`CAPTURE_NAMES`] of the field `name`.
@@ -30,6 +40,7 @@ pub fn capture_field(name: &str) -> Option<u8> {
         "current" => Some(5),
         "friction" => Some(6),
         "volts" => Some(7),
+        "current_mean" => Some(8),
         _ => None,
     }
 }
@@ -47,8 +58,9 @@ pub fn capture_fields(list: &str) -> Result<([u8; CAPTURE_FIELDS], u8), &'static
         let end_of_name = at == bytes.len() || bytes.get(at) == Some(&b',');
         if end_of_name {
             let name = list.get(start..at).unwrap_or("");
-            let i = capture_field(name)
-                .ok_or("unknown field (t, pos, ref, error, ff, current, friction, volts)")?;
+            let i = capture_field(name).ok_or(
+                "unknown field (t, pos, ref, error, ff, current, friction, volts, current_mean)",
+            )?;
             let slot = idx.get_mut(n).ok_or("at most 4 fields")?;
             *slot = i;
             n += 1;
@@ -168,6 +180,8 @@ pub struct Capture<B: AsRef<[f32]> + AsMut<[f32]>> {
     skip: u32,
     t0: u64,
     pos0: i64,
+    /// The current summed over the steps since the last sample \[A\], and their number.
+    sum: (f32, u32),
 }
 
 impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
@@ -181,6 +195,7 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             skip: 0,
             t0: 0,
             pos0: 0,
+            sum: (0.0, 0),
         }
     }
 
@@ -240,10 +255,12 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             self.t0 = v.steps;
             self.pos0 = v.pos;
             self.skip = 0;
+            self.sum = (0.0, 0);
         }
         if self.state != CaptureState::Recording {
             return;
         }
+        self.sum = (self.sum.0 + v.current, self.sum.1.saturating_add(1));
         if self.skip > 0 {
             self.skip -= 1;
             return;
@@ -254,6 +271,9 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let n = self.spec.nfields as usize;
         let at = self.count as usize * n;
         let (fields, t0, pos0) = (self.spec.fields, self.t0, self.pos0);
+        // At least this step is in the sum.
+        let mean = self.sum.0 / self.sum.1.max(1) as f32;
+        self.sum = (0.0, 0);
         let buf = self.buf.as_mut();
         for (k, &f) in fields.iter().take(n).enumerate() {
             let x = match f {
@@ -264,7 +284,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
                 4 => v.ff,
                 5 => v.current,
                 6 => v.friction,
-                _ => v.volts,
+                7 => v.volts,
+                _ => mean,
             };
             if let Some(slot) = buf.get_mut(at + k) {
                 *slot = x;
