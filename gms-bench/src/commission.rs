@@ -63,11 +63,14 @@ impl Commissioned {
             ("cur.ki", self.cur_pi.1),
         ]
         .into_iter()
-        .chain(
-            self.pos
-                .iter()
-                .flat_map(|g| [("pos.kp", g.kp), ("pos.ki", g.ki), ("pos.kd", g.kd)]),
-        )
+        .chain(self.pos.iter().flat_map(|g| {
+            [
+                ("pos.kp", g.kp),
+                ("pos.ki", g.ki),
+                ("pos.kd", g.kd),
+                ("pos.d_filter_hz", g.d_filter_hz),
+            ]
+        }))
         .chain(self.friction_scaled.iter().copied())
         .collect()
     }
@@ -329,11 +332,15 @@ pub(crate) fn commission_steps(
     ));
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
     //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
-    //    use a softer position loop (kp / 4, ki / 8, kd / 2; `commission` puts the gains
-    //    back), which tracks a constant speed well enough.
+    //    use a softer position loop (kp / 4, ki / 8, kd / 2, the derivative's filter at a
+    //    quarter of its corner; `commission` puts them back), which tracks a constant speed
+    //    well enough. (With the filter left at the default 8 kHz, a coarse encoder's count
+    //    steps drive the bridge voltage in spikes, and k_e on the gear motor read 12 % low.)
+    let d_filter = get_param(b, "pos.d_filter_hz")?;
     b.set("pos.kd", kd / 2.0)?;
     b.set("pos.kp", kp / 4.0)?;
     b.set("pos.ki", ki / 8.0)?;
+    b.set("pos.d_filter_hz", d_filter / 4.0)?;
     b.hold()?;
     let mut pts = Vec::new();
     for k in 1..=3 {
@@ -495,6 +502,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
             ("pos.kp".to_string(), format!("{}", g.kp)),
             ("pos.ki".to_string(), format!("{}", g.ki)),
             ("pos.kd".to_string(), format!("{}", g.kd)),
+            ("pos.d_filter_hz".to_string(), format!("{}", g.d_filter_hz)),
         ]);
         // The model first, from the settings as they will be (nothing sent yet: an axis that
         // is not measured is left exactly as it was).
@@ -508,6 +516,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
         s.pid.kp = g.kp as f32;
         s.pid.ki = g.ki as f32;
         s.pid.kd = g.kd as f32;
+        s.pid.d_filter_hz = g.d_filter_hz as f32;
         let model = modelled_margins(c, &s, scale, (plan.from_hz, plan.to_hz), plan.amplitude);
         if let Some((_, counts)) = model
             && counts < 3.0
@@ -644,11 +653,12 @@ pub(crate) fn position_gains_for(
         ))
     })?;
     c.lines.push(format!(
-        "position loop: pos.kp {} N·m/rad, pos.ki {} N·m/(rad·s), pos.kd {} N·m·s/rad \
-         (natural frequency {:.0} Hz)",
+        "position loop: pos.kp {} N·m/rad, pos.ki {} N·m/(rad·s), pos.kd {} N·m·s/rad, \
+         pos.d_filter_hz {} Hz (natural frequency {:.0} Hz)",
         num4(g.kp),
         num4(g.ki),
         num4(g.kd),
+        num4(g.d_filter_hz),
         (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
     ));
     if g.count_limited {

@@ -109,25 +109,26 @@ pub fn sliding(
 
 /// Runs `f` with the position loop set to the measuring loop
 /// ([`gms_ident::gains::measuring_loop`]: the device's `pos.kd` kept, `pos.kp`, `pos.ki` and
-/// `pos.d_filter_hz` for an overdamped velocity loop on its `ff.inertia`), the device's
-/// settings put back after (and the bridge off), however `f` ended.
+/// `pos.d_filter_hz` softened for an overdamped velocity loop on its `ff.inertia`; the loop
+/// as it is where none can be built on it), the device's settings put back after (and the
+/// bridge off), however `f` ended.
 pub(crate) fn measuring<B: Bench, T>(
     b: &mut B,
     f: impl FnOnce(&mut B) -> Result<T, Error>,
 ) -> Result<T, Error> {
     restoring(b, |b| {
-        let kd = get_param(b, "pos.kd")?;
-        let inertia = get_param(b, "ff.inertia")?;
-        let pos_hz = get_param(b, "rate.pos_hz")?;
-        let m = gms_ident::gains::measuring_loop(kd, inertia, pos_hz).ok_or_else(|| {
-            Error::Params(format!(
-                "pos.kd {kd}, ff.inertia {inertia}: the friction is measured with a loop built \
-                 on both, and neither may be 0 (`gms-tune commission` sets them)"
-            ))
-        })?;
-        b.set("pos.kp", m.kp)?;
-        b.set("pos.ki", m.ki)?;
-        b.set("pos.d_filter_hz", m.d_filter_hz)?;
+        let m = gms_ident::gains::measuring_loop(
+            get_param(b, "pos.kp")?,
+            get_param(b, "pos.kd")?,
+            get_param(b, "pos.d_filter_hz")?,
+            get_param(b, "ff.inertia")?,
+            get_param(b, "rate.pos_hz")?,
+        );
+        if let Some(m) = m {
+            b.set("pos.kp", m.kp)?;
+            b.set("pos.ki", m.ki)?;
+            b.set("pos.d_filter_hz", m.d_filter_hz)?;
+        }
         f(b)
     })
 }
