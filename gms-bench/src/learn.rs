@@ -11,14 +11,16 @@
 //!   axis's `1/P = J s²` (`motor.inertia`), plus the friction's local stiffness `K(t)` along
 //!   the path (the device's GMS model run over the reference: all of Σk just after a reversal,
 //!   nothing once sliding). A correction `L e` changes the next period's error by about `−γ e`
-//!   whether the axis slides or sticks, whatever the gains. γ is dimensionless; default 0.15:
-//!   the period's error on the default loop holds about 0.75 counts RMS that does not repeat
-//!   (the encoder's quantisation answered by the loop, the hunting near the reversals), and a
-//!   small gain averages it out of the correction (docs/learning.md).
+//!   whether the axis slides or sticks, whatever the gains. γ is dimensionless; default 0.3:
+//!   the period's error on the default loop holds about 0.4 counts RMS that does not repeat
+//!   (the encoder's quantisation answered by the loop), which a small gain averages out of
+//!   the correction, while the reversals' peaks want a quick one (docs/learning.md: on the
+//!   default 20 kHz loop γ 0.3 and Q 400 Hz reach a peak of 2.3 counts after ten iterations,
+//!   γ 0.15 and Q 300 Hz 3.4).
 //! - **Lead** λ (default 0; negative leads diverge, +0.5 ms is no better): added to the
 //!   half-bin shift of the device's error bins (each the mean over the `steps` steps after
 //!   its point).
-//! - **Q**: a zero-phase second-order Butterworth at `q_hz` (default 300 Hz: the error at a
+//! - **Q**: a zero-phase second-order Butterworth at `q_hz` (default 400 Hz: the error at a
 //!   reversal changes within a few milliseconds; 30-60 Hz leaves it unlearned) over the period.
 //! - **Stop**: the RMS averaged over the last `patience` iterations (default 5) risen 25 %
 //!   above its lowest such average; the best correction is then kept. The sine test's RMS
@@ -70,9 +72,9 @@ pub struct LearnPlan {
 /// The default learning updates.
 pub const ITERATIONS: usize = 10;
 /// The default learning gain γ [-].
-pub const GAIN: f64 = 0.15;
+pub const GAIN: f64 = 0.3;
 /// The default Q filter's corner \[Hz\].
-pub const Q_HZ: f64 = 300.0;
+pub const Q_HZ: f64 = 400.0;
 /// The default sine: the paper's test, amplitude \[rad\] and frequency \[Hz\].
 pub const SINE: (f64, f64) = (0.05, 1.0);
 

@@ -101,8 +101,11 @@ fn what_gms_and_ilc_each_contribute() {
         both[0].0
     );
     let tail = |c: &Curve| mean(c[8..].iter().map(|r| r.0));
+    // Measured (seed 1): first passes 1.509 and 0.535 counts (the stiff 20 kHz loop holds
+    // the uncompensated friction to 2.8 times the compensated error; the earlier 10 kHz loop
+    // to 5.7 times); ILC alone reaches GMS's first pass at iteration 6.
     assert!(
-        alone[0].0 > 3.0 * both[0].0,
+        alone[0].0 > 2.5 * both[0].0,
         "first passes {} {}",
         alone[0].0,
         both[0].0
@@ -121,27 +124,16 @@ fn what_gms_and_ilc_each_contribute() {
     );
 }
 
-/// The issue's targets (0.5 counts RMS, 3 counts peak after ten iterations) on the virtual
-/// device with its position loop at the current loop's rate (20 kHz) and the gains the
-/// commissioning rule gives there for a natural frequency of 0.54 × the current loop's
-/// bandwidth (kp 0.7, ki 600, kd 2.7e-4, the derivative's filter at 8 kHz), learning with
-/// γ 0.3 and Q at 400 Hz: on four friction draws every draw's RMS over iterations 8-10 is
-/// within the target, against the reading and the true position, and so is the peak averaged
-/// over them. The default loop's floor (0.84 counts: docs/learning.md) is the encoder's
-/// quantisation through a loop half as fast.
+/// The issue's targets (0.5 counts RMS, 3 counts peak after ten iterations) on the default
+/// virtual device (its position loop at the current loop's rate, 20 kHz, kp 0.7, ki 600,
+/// kd 2.7e-4, the derivative's filter at 8 kHz) with the default learning (γ 0.3, Q at
+/// 400 Hz): on four friction draws every draw's RMS over iterations 8-10 is within the
+/// target, against the reading and the true position, and so is the peak averaged over them.
+/// (The earlier 10 kHz loop, kp 0.2, stopped at 0.84 counts: docs/learning.md.)
 #[test]
-fn the_targets_with_the_position_loop_at_the_current_loops_rate() {
-    let sc = Scenario::parse(
-        "[controller.rate]\npos_hz = 20000.0\n[controller.pos]\nkp = 0.7\nki = 600.0\n\
-         kd = 2.7e-4\nd_filter_hz = 8000.0\n",
-        "learn",
-    )
-    .unwrap();
-    let plan = LearnPlan {
-        gain: 0.3,
-        q_hz: 400.0,
-        ..LearnPlan::default()
-    };
+fn the_targets_on_the_default_virtual_device() {
+    let sc = Scenario::parse("", "learn").unwrap();
+    let plan = LearnPlan::default();
     let runs = hil_sim::learn::learn_draws(&sc, 4, 1, &plan, 2).unwrap();
     let mut peaks = Vec::new();
     for r in &runs {

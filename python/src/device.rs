@@ -317,8 +317,8 @@ impl Device {
         Ok(d)
     }
 
-    /// learn(amplitude=0.05, freq=1.0, trajectory=None, iterations=10, gain=0.15,
-    /// q_filter=300.0, lead=0.0, apply=False) -> dict: `gms-tune learn` — the sine
+    /// learn(amplitude=0.05, freq=1.0, trajectory=None, iterations=10, gain=0.3,
+    /// q_filter=400.0, lead=0.0, apply=False) -> dict: `gms-tune learn` — the sine
     /// x = A (1 − cos 2πft) from where the axis holds, or `trajectory` (rows of (t [s],
     /// x [rad]) over one period) played from the device's tables, the correction learned after
     /// each period: {"rms", "peak": numpy arrays per iteration [counts], "errors": 2-D array

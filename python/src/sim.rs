@@ -87,8 +87,8 @@ pub(crate) fn compare<'py>(
     debug_dict(py, &cmp)
 }
 
-/// learn(scenario=None, runs=1, seed=1, amplitude=0.05, freq=1.0, iterations=10, gain=0.15,
-/// q_filter=300.0, lead=0.0) -> dict
+/// learn(scenario=None, runs=1, seed=1, amplitude=0.05, freq=1.0, iterations=10, gain=0.3,
+/// q_filter=400.0, lead=0.0) -> dict
 ///
 /// Learning from repetition on the virtual device in-process, as `hil-sim learn`, over `runs`
 /// friction draws (seeds seed … seed + runs − 1): {"rms", "peak", "true_rms", "true_peak":
