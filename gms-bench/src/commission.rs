@@ -364,6 +364,8 @@ pub(crate) fn commission_steps(
             pts.push((w, m[3] - c.r * m[2]));
         }
     }
+    // The derivative's filter back: the position gains' rule below starts from it.
+    b.set("pos.d_filter_hz", d_filter)?;
     let (w, e): (Vec<f64>, Vec<f64>) = pts.iter().copied().unzip();
     c.k_e = match ls_slope(&w, &e, f64::MIN_POSITIVE) {
         Some(k) if w.iter().any(|x| *x != w[0]) => k,

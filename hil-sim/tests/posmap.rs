@@ -86,7 +86,10 @@ fn the_map_finds_the_hidden_cogging_and_the_screws_friction() {
 /// The map cancels the ripple: the position error's RMS at constant speed with the measured
 /// map acting against without it — at 3 rad/s (the cogging at 5.7 Hz, where the loop's
 /// integral action no longer hides it) and 0.5 rad/s; on a plant without ripple the map
-/// measured there does no harm. The table read back is the one written.
+/// measured there does no harm. The table read back is the one written. The default 20 kHz
+/// loop holds the ripple's error near the encoder's quantisation, so the ripple's part is
+/// taken in quadrature over the ripple-free plant's error at the same speed (measured: 0.44
+/// counts against 0.35 at 3 rad/s, a ripple part of 0.27 counts; with the map 0.35-0.36).
 #[test]
 fn the_map_cancels_the_ripple_and_does_no_harm_without_it() {
     let quiet = RIPPLE
@@ -96,7 +99,8 @@ fn the_map_cancels_the_ripple_and_does_no_harm_without_it() {
             "harmonics = []",
         )
         .replace("screw_friction = 0.1", "screw_friction = 0.0");
-    for (name, text) in [("ripple", RIPPLE), ("no ripple", quiet.as_str())] {
+    let mut floor: Vec<f64> = Vec::new();
+    for (name, text) in [("no ripple", quiet.as_str()), ("ripple", RIPPLE)] {
         let sc = Scenario::parse(text, name).unwrap();
         let mut dev = LocalDevice::new(&sc).unwrap();
         let s = settings::read(&mut dev).unwrap();
@@ -128,14 +132,19 @@ fn the_map_cancels_the_ripple_and_does_no_harm_without_it() {
             off[0], off[1], off[2], off[3], on[0], on[1], on[2], on[3], off[4], on[4]
         );
         if name == "ripple" {
-            assert!(
-                on[0] * 2.0 <= off[0] && on[1] * 2.0 <= off[1],
-                "{off:?} {on:?}"
-            );
+            // The ripple's part of the error at ±3 rad/s, over the ripple-free plant's.
+            let part = |x: f64, f: f64| (x * x - f * f).max(0.0).sqrt();
+            for k in 0..2 {
+                let (without, with) = (part(off[k], floor[k]), part(on[k], floor[k]));
+                println!("ripple's part at ±3 rad/s: {without:.3} → {with:.3} counts");
+                assert!(without > 0.15, "{off:?} over {floor:?}");
+                assert!(with <= 0.5 * without, "{off:?} {on:?} over {floor:?}");
+            }
         } else {
             for (a, b) in off.iter().zip(on) {
                 assert!(*b <= 1.1 * a + 0.05, "{off:?} {on:?}");
             }
+            floor = off.to_vec();
         }
     }
 }
