@@ -10,7 +10,7 @@ use crate::client::{capture_status, get_param, velocity};
 use crate::commission::slide;
 use crate::settings::restoring;
 use gms_core::drive::Faults;
-use gms_core::protocol::Command;
+use gms_core::protocol::{Command, ErrorCode};
 use gms_ident::Error;
 
 /// The sliding experiment's settings.
@@ -117,13 +117,25 @@ pub(crate) fn measuring<B: Bench, T>(
     f: impl FnOnce(&mut B) -> Result<T, Error>,
 ) -> Result<T, Error> {
     restoring(b, |b| {
-        let m = gms_ident::gains::measuring_loop(
-            get_param(b, "pos.kp")?,
-            get_param(b, "pos.kd")?,
-            get_param(b, "pos.d_filter_hz")?,
-            get_param(b, "ff.inertia")?,
-            get_param(b, "rate.pos_hz")?,
-        );
+        // A firmware that does not know one of them (an older one): the loop as it is.
+        let mut read = |path: &str| match get_param(b, path) {
+            Ok(v) => Ok(Some(v)),
+            Err(e) if e.refused_with(ErrorCode::UnknownPath) => Ok(None),
+            Err(e) => Err(e),
+        };
+        let figures = [
+            read("pos.kp")?,
+            read("pos.kd")?,
+            read("pos.d_filter_hz")?,
+            read("ff.inertia")?,
+            read("rate.pos_hz")?,
+        ];
+        let m = match figures {
+            [Some(kp), Some(kd), Some(f), Some(j), Some(hz)] => {
+                gms_ident::gains::measuring_loop(kp, kd, f, j, hz)
+            }
+            _ => None,
+        };
         if let Some(m) = m {
             b.set("pos.kp", m.kp)?;
             b.set("pos.ki", m.ki)?;

@@ -407,7 +407,7 @@ pub fn step_summary(
 }
 
 /// `gms-tune frf`'s readable result: the points above the noise, the margins (and a
-/// warning under 30°), the pre-sliding stiffness beside the device's model, the notch
+/// warning under `gms_bench::commission::MIN_PHASE_MARGIN`), the pre-sliding stiffness beside the device's model, the notch
 /// proposed and the margins it would give.
 pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
     let mut out = Vec::new();
@@ -431,10 +431,11 @@ pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
             m.peak_sensitivity_db,
             m.peak_sensitivity_hz
         ));
-        if m.phase_margin_deg < 30.0 {
+        let least = gms_bench::commission::MIN_PHASE_MARGIN;
+        if m.phase_margin_deg < least {
             out.push(format!(
-                "warning: the phase margin {:.1}° is under 30°: the loop rings (--suggest \
-                 proposes a notch; or lower pos.kp/pos.kd)",
+                "warning: the phase margin {:.1}° is under {least}° (what commissioning leaves): \
+                 the loop rings (--suggest proposes a notch; or lower pos.kp/pos.kd)",
                 m.phase_margin_deg
             ));
         }

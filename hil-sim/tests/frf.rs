@@ -341,6 +341,3 @@ fn disable_and_a_lost_link_end_a_measurement() {
     let e = dev.request("frf current 100 0.003 8 2").unwrap_err();
     assert!(e.to_string().contains("current mode"), "{e}");
 }
-
-
-

@@ -307,16 +307,6 @@ fn commission_then_identify_tracks_like_the_true_parameters() {
     )
     .unwrap();
     let rms = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
-    if std::env::var("PROBE").is_ok() {
-        for l in c.lines.iter().chain(&id.report) {
-            eprintln!("  {l}");
-        }
-        for k in ["pos.kp", "pos.ki", "pos.kd", "pos.d_filter_hz"] {
-            let v = get_param(&mut dev, k).unwrap();
-            truth.request(&format!("set {k} {v}")).unwrap();
-        }
-        eprintln!("PROBE truth with the commissioned gains {:.3}", sine_test(&mut truth, 2e-3, 1.0, 3.0).unwrap() / 3.8e-6);
-    }
     let rpc = 3.8e-6;
     eprintln!(
         "sine RMS error: true parameters {:.3} counts, told nothing {:.3}, after commission and \
@@ -344,7 +334,8 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
     let pos_hz = gms_bench::get_param(&mut d, "rate.pos_hz").unwrap();
     let every = (pos_hz / 5e3).round().max(1.0);
     let n = (seconds * pos_hz / every) as u32;
-    d.request(&format!("capture error {every} {n} next")).unwrap();
+    d.request(&format!("capture error {every} {n} next"))
+        .unwrap();
     match speed {
         Some(v) => d.request(&format!("velocity {v} 0 1 1 {seconds}")).unwrap(),
         None => d.request("move 7.6e-5").unwrap(),
@@ -391,4 +382,3 @@ fn the_position_gains_bounds_hold_on_the_simulated_axis() {
     assert!(low > 2.5 * ok, "{low} vs {ok}");
     assert!(unstable > 10.0 * stable, "{unstable} vs {stable}");
 }
-
