@@ -105,20 +105,16 @@ fn a_compliant_stage_is_identified_within_the_bench_bounds() {
 }
 
 /// The same with a heavy load on the slide (20 kg: 11 % of the inertia at the motor; the
-/// resonance at 740 Hz shows at the encoder): within the bench bounds but for the Stribeck
-/// shape factor delta, 12.0 % off (bound 10 %; the rigid and the light stages: 4.7-7.3 %).
-/// Why is not established (a guess to check: the slide swinging on the compliance while the
-/// speed loop holds the motor's speed disturbs the low-speed runs delta is fitted to).
-/// Asserted at 15 % so that a change for the worse shows; docs/results.md has the figures.
+/// resonance at 740 Hz shows at the encoder): within the bench bounds too. Its Stribeck shape
+/// factor delta came out 12.0 % off (bound 10 %) while the sliding runs went in the tracking
+/// loop, whose speed ripple the slide's swing added to; in the measuring loop
+/// (`gms_ident::gains::measuring_loop`) 4.3 %.
 #[test]
-fn a_compliant_stage_with_a_heavy_slide_is_identified_but_delta_is_off() {
+fn a_compliant_stage_with_a_heavy_slide_is_identified_within_the_bench_bounds() {
     let text =
         format!("{QUIET}\n[plant.compliance]\nf_hz = 700.0\nzeta = 0.03\nslide_mass = 20.0\n");
     let (e, _, _) = identify(&text, 6, "compliant stage 700 Hz, 20 kg slide");
-    let mut others = e;
-    others[3] = 0.0;
-    assert!(within_bench_bounds(&others), "{e:?}");
-    assert!(e[3] < 0.15, "delta {:.1} % off", e[3] * 100.0);
+    assert!(within_bench_bounds(&e), "{e:?}");
 }
 
 /// A parameter file with `[friction.negative]` (an asymmetric fit) is refused by the device's
