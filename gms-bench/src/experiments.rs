@@ -94,11 +94,11 @@ impl SlidingPlan {
 /// torque (current × k_M, the loop's own torque constant, at constant speed the whole of the
 /// motor torque) and the measured speed (the encoder over the window). Pushes `(v, f)` pairs
 /// as `hil-sim experiment sliding` writes them onto `out` as they are measured (so that a run
-/// cut short keeps them). Runs in the measuring loop ([`measuring`]: the tracking loop's speed
-/// ripple reads the friction high at low speed) and ends with the device's settings put back
-/// and the bridge off. Fails (the bridge off) when the axis does not
-/// follow the speed (measured below half of it, or the other way) or the device latches a
-/// fault.
+/// cut short keeps them). Runs in the measuring loop
+/// ([`gms_ident::gains::measuring_loop`]: the tracking loop's speed ripple reads the friction
+/// high at low speed) and ends with the device's settings put back and the bridge off. Fails
+/// (the bridge off) when the axis does not follow the speed (measured below half of it, or
+/// the other way) or the device latches a fault.
 pub fn sliding(
     b: &mut impl Bench,
     plan: &SlidingPlan,
