@@ -658,9 +658,6 @@ pub(crate) fn position_gains_for(
         delta: get_param(b, "gms.delta")?,
         sigma: scale * get_param(b, "gms.sigma")?,
     };
-    if std::env::var("GMS_DEBUG_AXIS").is_ok() {
-        eprintln!("AXIS {axis:?} {s:?}");
-    }
     let g = position_gains(&axis, &s).ok_or_else(|| {
         Error::Device(format!(
             "no position-loop gains for the measured motor ({axis:?}): the loop model does not \
