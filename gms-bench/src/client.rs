@@ -191,6 +191,16 @@ pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
         .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
 }
 
+/// A numeric parameter of the device, `None` when the device does not know the path (a
+/// firmware older than the parameter).
+pub fn get_param_if_known(b: &mut impl Bench, path: &str) -> Result<Option<f64>, Error> {
+    match get_param(b, path) {
+        Ok(v) => Ok(Some(v)),
+        Err(e) if e.refused_with(ErrorCode::UnknownPath) => Ok(None),
+        Err(e) => Err(e),
+    }
+}
+
 /// The encoder of a firmware older than `enc.counts_per_rev` \[rad/count\]: the paper's
 /// 3.8 µrad, then a constant of the device.
 pub const PAPER_RAD_PER_COUNT: f64 = 3.8e-6;
@@ -199,13 +209,9 @@ pub const PAPER_RAD_PER_COUNT: f64 = 3.8e-6;
 /// counts (the device's own, never an assumed encoder; [`PAPER_RAD_PER_COUNT`] on a firmware
 /// that predates the parameter).
 pub fn rad_per_count(b: &mut impl Bench) -> Result<f64, Error> {
-    let counts = match get_param(b, "enc.counts_per_rev") {
-        Ok(c) => c,
-        // A firmware from before the resolution was a parameter ran the paper's encoder.
-        Err(e) if e.refused_with(ErrorCode::UnknownPath) => {
-            return Ok(PAPER_RAD_PER_COUNT);
-        }
-        Err(e) => return Err(e),
+    // A firmware from before the resolution was a parameter ran the paper's encoder.
+    let Some(counts) = get_param_if_known(b, "enc.counts_per_rev")? else {
+        return Ok(PAPER_RAD_PER_COUNT);
     };
     if !(counts.is_finite() && counts > 0.0) {
         return Err(Error::Device(format!(

@@ -6,11 +6,11 @@ use crate::client::{
     Bench, DeviceInfo, VELOCITY_ACC, capture_now, capture_rows, capture_wait, check_faults,
     guarded, move_to, narrow_limits, position, primitive, timed_run,
 };
-use crate::client::{capture_status, get_param, velocity};
+use crate::client::{capture_status, get_param_if_known, velocity};
 use crate::commission::slide;
 use crate::settings::restoring;
 use gms_core::drive::Faults;
-use gms_core::protocol::{Command, ErrorCode};
+use gms_core::protocol::Command;
 use gms_ident::Error;
 
 /// The sliding experiment's settings.
@@ -118,11 +118,7 @@ pub(crate) fn measuring<B: Bench, T>(
 ) -> Result<T, Error> {
     restoring(b, |b| {
         // A firmware that does not know one of them (an older one): the loop as it is.
-        let mut read = |path: &str| match get_param(b, path) {
-            Ok(v) => Ok(Some(v)),
-            Err(e) if e.refused_with(ErrorCode::UnknownPath) => Ok(None),
-            Err(e) => Err(e),
-        };
+        let mut read = |path: &str| get_param_if_known(b, path);
         let figures = [
             read("pos.kp")?,
             read("pos.kd")?,
