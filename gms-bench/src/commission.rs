@@ -63,14 +63,7 @@ impl Commissioned {
             ("cur.ki", self.cur_pi.1),
         ]
         .into_iter()
-        .chain(self.pos.iter().flat_map(|g| {
-            [
-                ("pos.kp", g.kp),
-                ("pos.ki", g.ki),
-                ("pos.kd", g.kd),
-                ("pos.d_filter_hz", g.d_filter_hz),
-            ]
-        }))
+        .chain(self.pos.iter().flat_map(|g| g.sets()))
         .chain(self.friction_scaled.iter().copied())
         .collect()
     }
@@ -507,12 +500,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
             .filter(|(k, _)| !k.starts_with("pos."))
             .map(|(k, v)| (k.to_string(), format!("{v}")))
             .collect();
-        sets.extend([
-            ("pos.kp".to_string(), format!("{}", g.kp)),
-            ("pos.ki".to_string(), format!("{}", g.ki)),
-            ("pos.kd".to_string(), format!("{}", g.kd)),
-            ("pos.d_filter_hz".to_string(), format!("{}", g.d_filter_hz)),
-        ]);
+        sets.extend(g.sets().map(|(k, v)| (k.to_string(), format!("{v}"))));
         // The model first, from the settings as they will be (nothing sent yet: an axis that
         // is not measured is left exactly as it was).
         let mut s = crate::settings::read(b)?;

@@ -236,6 +236,16 @@ pub struct PositionGains {
 }
 
 impl PositionGains {
+    /// The device's parameters these set, by their protocol paths (SI).
+    pub fn sets(&self) -> [(&'static str, f64); 4] {
+        [
+            ("pos.kp", self.kp),
+            ("pos.ki", self.ki),
+            ("pos.kd", self.kd),
+            ("pos.d_filter_hz", self.d_filter_hz),
+        ]
+    }
+
     /// kd over its lower bound \[-\] (below 1: the friction can drive a limit cycle).
     pub fn margin_low(&self) -> f64 {
         self.kd / self.kd_min
