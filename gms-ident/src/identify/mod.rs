@@ -11,7 +11,7 @@ mod virgin;
 pub use lag::{LagFit, fit_lag};
 pub use report::write_report;
 pub use stribeck::{StribeckFit, fit_stribeck};
-pub use virgin::{VirginFit, fit_virgin};
+pub use virgin::{VirginFit, blocks_held, fit_virgin};
 
 /// Reads a CSV with a header; returns the named columns (missing optional ones as `None`).
 fn read_columns(
@@ -280,7 +280,7 @@ fn identify_data_inner(inp: &Data<'_>) -> Result<Identified, String> {
             // A coarse encoder resolves the virgin curve in few distinct positions: as many
             // blocks as they hold (two points a block, and two more), at least one, with a
             // warning, rather than no result after the whole run.
-            let fitted = blocks.min(xa.len().saturating_sub(2) / 2).max(1);
+            let fitted = blocks.min(blocks_held(xa.len())).max(1);
             if fitted < blocks {
                 report.push(format!(
                     "warning: {} distinct pre-sliding positions hold {fitted} of the {blocks} \

@@ -30,6 +30,12 @@ fn chord_sse(x: &[f64], f: &[f64], a: usize, b: usize) -> f64 {
         .sum()
 }
 
+/// The most blocks [`fit_virgin`] fits to `points` measured points: two points a block, and
+/// two more.
+pub fn blocks_held(points: usize) -> usize {
+    points.saturating_sub(2) / 2
+}
+
 /// Fits `n` Maxwell-slip blocks to a measured virgin curve: `x` increasing from rest (the
 /// origin is added), `f` the friction at each `x`, up to breakaway. The breakpoints are
 /// chosen by dynamic programming over the sample positions: least squares of the chord
@@ -53,7 +59,7 @@ fn fit_virgin_inner(x: &[f64], f: &[f64], n: usize) -> Result<VirginFit, String>
             crate::paramfile::MAX_BLOCKS
         ));
     }
-    if x.len() < 2 * n + 2 {
+    if n > blocks_held(x.len()) {
         return Err(format!(
             "{} pre-sliding points are too few for {n} blocks (need {})",
             x.len(),
