@@ -407,8 +407,8 @@ pub fn step_summary(
 }
 
 /// `gms-tune frf`'s readable result: the points above the noise, the margins (and a
-/// warning under `gms_bench::commission::MIN_PHASE_MARGIN`), the pre-sliding stiffness beside the device's model, the notch
-/// proposed and the margins it would give.
+/// warning under `gms_bench::commission::MIN_PHASE_MARGIN`), the pre-sliding stiffness
+/// beside the device's model, the notch proposed and the margins it would give.
 pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
     let mut out = Vec::new();
     let good = s
