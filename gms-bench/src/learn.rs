@@ -296,6 +296,9 @@ pub struct TableStatus {
     /// The last complete period: its number, its correction's generation, RMS and peak
     /// \[counts\].
     pub done: Option<(u32, u32, f64, f64)>,
+    /// That period is held: the periods after it do not replace it until `table next` or a
+    /// new correction.
+    pub held: bool,
 }
 
 /// Reads the device's `table` status.
@@ -324,6 +327,7 @@ pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
             "done_gen" => done.1 = int(),
             "rms" => done.2 = v.parse::<f64>().ok(),
             "peak" => done.3 = v.parse::<f64>().ok(),
+            "held" => s.held = v == "1",
             _ => {}
         }
     }
@@ -464,51 +468,48 @@ impl Learned {
     }
 }
 
-/// The next complete period after `after` played with the correction `generation`: its
-/// number, RMS and peak \[counts\] and its error at the points, all of the same period. The
-/// error is read in several requests while the device plays on: when a period ends during
-/// them (the device refuses the request that sees it, [`gms_core::table::READ_RACED`], or
-/// the status after the read shows a later period), the read is thrown away and done again
-/// on the next period of the same correction (none other plays before the host uploads one).
+/// The first complete period after `after` played wholly with the correction `generation`:
+/// its number, RMS and peak \[counts\] and its error at the points, all of the same period.
+/// The device holds that period until the host asks for the next one (`table next`) or sends
+/// a new correction: the periods that end while the host reads, however slow the link, play
+/// on without replacing it.
 fn read_period(
     b: &mut impl Bench,
     t: &Table,
-    mut after: Option<u32>,
+    after: Option<u32>,
     generation: u32,
 ) -> Result<(u32, f64, f64, Vec<f64>), Error> {
-    for _ in 0..5 {
-        let (p, rms, peak) = wait_period(b, t.period(), after, generation)?;
-        match read_values(b, "err", t.points) {
-            Ok(e) => {
-                if table_status(b)?.done.map(|d| d.0) == Some(p) {
-                    return Ok((p, rms, peak, e));
-                }
-            }
-            Err(Error::Refused(r)) if r.reason == gms_core::table::READ_RACED => {}
-            Err(e) => return Err(e),
-        }
-        after = Some(p);
+    let (p, rms, peak) = wait_period(b, t.period(), after, generation)?;
+    let e = read_values(b, "err", t.points)?;
+    // Held: nothing but this host's own requests replaces it (checked all the same).
+    if table_status(b)?.done.map(|d| d.0) != Some(p) {
+        return Err(Error::Device(format!(
+            "period {p}'s error was replaced while it was read (another client?)"
+        )));
     }
-    Err(Error::Device(
-        "five periods ended while their error was read: the link is slower than a period".into(),
-    ))
+    Ok((p, rms, peak, e))
 }
 
-/// Waits until the device has completed a period after `after` played with the correction
-/// `generation`; returns its figures. Fails when the run has stopped or faulted.
+/// Periods the device may complete while the host waits for the one it wants: the one under
+/// way when a correction is sent, the one the correction waits for, its own, and room.
+const WAIT_PERIODS: u32 = 10;
+
+/// Waits until the device holds a complete period after `after` played with the correction
+/// `generation`; returns its figures. Fails when the run has stopped or faulted, or when the
+/// device has completed [`WAIT_PERIODS`] periods without one (counted by the device: the
+/// bound is in the device's time, whatever the host's or the link's speed).
 fn wait_period(
     b: &mut impl Bench,
     period_s: f64,
     after: Option<u32>,
     generation: u32,
 ) -> Result<(u32, f64, f64), Error> {
-    // Ten periods at most (the one under way, the one the correction waits for, its own, and
-    // the host's own slowness).
-    let tries = 250;
-    for _ in 0..tries {
+    let mut first = None;
+    loop {
         let s = table_status(b)?;
         if let Some((p, g, rms, peak)) = s.done
             && g == generation
+            && s.held
             && after.is_none_or(|a| p > a)
         {
             return Ok((p, rms, peak));
@@ -519,12 +520,16 @@ fn wait_period(
                 "the table run ended before the period came (bridge off?)".into(),
             ));
         }
+        let from = *first.get_or_insert(s.period);
+        if s.period > from + WAIT_PERIODS {
+            check_faults(b)?;
+            return Err(Error::Device(format!(
+                "no period of correction {generation} held after {WAIT_PERIODS} periods"
+            )));
+        }
+        // A twenty-fifth of a period of device time between looks.
         b.wait(period_s / 25.0)?;
     }
-    check_faults(b)?;
-    Err(Error::Device(
-        "no period completed in 10 periods' time".into(),
-    ))
 }
 
 /// Runs the learning on the device: the table set (the device refuses a path beyond its
@@ -585,9 +590,11 @@ pub fn learn(
         // costs periods, not the run); a lost link ends it at its period's end.
         b.request(&format!("table run {}", gms_core::table::TABLE_MAX_PERIODS))?;
         out.started = table_status(b)?.started;
-        // The first period starts from rest: the first pass is the second, in the periodic
-        // state the learning works on.
-        let mut last = Some(0);
+        // The first period starts from rest: the first pass is the next one held, in the
+        // periodic state the learning works on.
+        let (first, _, _) = wait_period(b, t.period(), None, 0)?;
+        b.request("table next")?;
+        let mut last = Some(first);
         for i in 0..=plan.iterations {
             // The correction learned after iteration i − 1 is generation i.
             let (p, rms, peak, e) = read_period(b, &t, last, i as u32)?;

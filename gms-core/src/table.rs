@@ -23,6 +23,11 @@
 //!   point), and the period's RMS and peak over every step; at the period's end the buffer
 //!   filled becomes the complete one, tagged with the period and the correction's generation
 //!   it was played with.
+//! - **Held until read**: a complete period played wholly with the newest correction (none
+//!   waiting for the period's start) is *held*: the periods after it play on and are counted,
+//!   but do not replace it, until the host asks for the next one (`table next`, or a new
+//!   correction with `table use` / `table corr off`). However slow the link, the host reads
+//!   one whole period, the first of its correction, and never a mix of two.
 
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 
@@ -38,8 +43,8 @@ pub const TABLE_MAX_PERIODS: u32 = 1_000_000;
 pub const TABLE_MAX_PERIOD_S: f32 = 600.0;
 /// The largest reference value, either way \[counts from the origin\].
 pub const TABLE_MAX_COUNTS: f32 = 16_777_216.0;
-/// The refusal of a `table read err` during which a period ended (its values would mix two
-/// periods): the host reads again, after the next period.
+/// The refusal of a `table read err` during which the period read was replaced (its values
+/// would mix two periods; only a `table next` or a new correction sent meanwhile does that).
 pub const READ_RACED: &str = "a period ended during the read (read again)";
 
 /// One of the tables.
@@ -142,6 +147,9 @@ pub struct TableReport {
     pub pending: bool,
     /// The last complete period, if any.
     pub done: Option<PeriodError>,
+    /// The last complete period is held: later periods do not replace it until `table next`
+    /// (or a new correction).
+    pub held: bool,
     /// The position step the run (or the last run) started at: its first step played (to
     /// align a capture or telemetry with the periods).
     pub started: u64,
@@ -184,6 +192,9 @@ pub enum TableRequest {
     },
     /// Forget the reference and the correction (not while playing).
     Clear,
+    /// Release the period held: the next complete period of the correction played replaces
+    /// it (and is held in turn).
+    Next,
 }
 
 /// Offsets of the tables in the buffer: the reference, correction buffer `i`, error buffer `i`
@@ -230,6 +241,8 @@ pub struct Player {
     count: u32,
     generation_at_start: u32,
     done: Option<(PeriodError, u8)>,
+    /// `done` is held (the periods ending do not replace it).
+    held: bool,
     started: u64,
     /// Cached for the steps: points and steps of the geometry, the origin \[1/65536 count\],
     /// the velocity and acceleration per unit of the cubic's derivatives, counts per radian.
@@ -273,6 +286,7 @@ impl Player {
             generation: self.generation,
             pending: self.pending.is_some(),
             done: self.done.map(|d| d.0),
+            held: self.held,
             started: self.started,
         }
     }
@@ -321,6 +335,7 @@ impl Player {
                         self.corr = None;
                         self.pending = None;
                         self.done = None;
+                        self.held = false;
                         REF
                     }
                     Which::Corr if self.pending.is_none() => corr_at(self.spare()),
@@ -349,6 +364,7 @@ impl Player {
                     self.corr = None;
                     self.pending = None;
                     self.done = None;
+                    self.held = false;
                     self.generation = 0;
                     self.period = 0;
                     self.periods = 0;
@@ -359,6 +375,7 @@ impl Player {
                 if self.geo.is_some() && self.pending.is_none() {
                     self.pending = Some(Some(self.spare()));
                     self.generation = self.generation.wrapping_add(1);
+                    self.held = false;
                 }
                 if !self.playing() {
                     self.take_pending();
@@ -366,6 +383,7 @@ impl Player {
             }
             TableRequest::NoCorrection => {
                 self.pending = Some(None);
+                self.held = false;
                 if !self.playing() {
                     self.take_pending();
                 }
@@ -378,6 +396,7 @@ impl Player {
                     self.periods = periods;
                     self.stopping = false;
                     self.done = None;
+                    self.held = false;
                     self.clear_sums();
                 }
             }
@@ -409,6 +428,7 @@ impl Player {
                     *self = Player::default();
                 }
             }
+            TableRequest::Next => self.held = false,
         }
     }
 
@@ -515,19 +535,23 @@ impl Player {
         if self.k < self.points {
             return Recorded::Within;
         }
-        // The period's end.
+        // The period's end: kept unless one is held (then the buffer filled is filled again);
+        // held when it was played wholly with the newest correction (none waiting).
         self.k = 0;
-        let count = self.count.max(1) as f32;
-        self.done = Some((
-            PeriodError {
-                period: self.period,
-                generation: self.generation_at_start,
-                rms: crate::math::sqrt(self.sumsq / count),
-                peak: self.peak,
-            },
-            self.fill,
-        ));
-        self.fill ^= 1;
+        if !self.held {
+            let count = self.count.max(1) as f32;
+            self.done = Some((
+                PeriodError {
+                    period: self.period,
+                    generation: self.generation_at_start,
+                    rms: crate::math::sqrt(self.sumsq / count),
+                    peak: self.peak,
+                },
+                self.fill,
+            ));
+            self.fill ^= 1;
+            self.held = self.pending.is_none();
+        }
         self.period = self.period.saturating_add(1);
         self.take_pending();
         self.clear_sums();

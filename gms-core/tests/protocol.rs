@@ -507,7 +507,7 @@ fn block_count_is_staged_and_applied_with_the_blocks() {
 /// A command a host may send, within what `parse` accepts.
 fn any_command() -> impl Strategy<Value = (u8, String, String, f32, f32, u32, u32, bool)> {
     (
-        0u8..34,
+        0u8..35,
         "[a-z][a-z_.]{0,15}",
         "[a-z0-9_,.-]{1,12}",
         prop::num::f32::NORMAL | prop::num::f32::ZERO,
@@ -584,6 +584,7 @@ proptest! {
                 count,
             }),
             32 => Command::Table(TableCmd::Clear),
+            33 => Command::Table(TableCmd::Next),
             _ => Command::Empty,
         };
         let line = c.to_string();

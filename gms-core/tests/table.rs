@@ -187,6 +187,95 @@ fn periods_bins_and_the_correction_swap() {
     assert!(!p.report().pending);
 }
 
+/// The first complete period of a correction is held: the periods after it play on (and are
+/// counted) without replacing its figures or its bins, until `Next` (then the next complete
+/// period is held) or a new correction (the period under way when it is asked for is kept but
+/// not held — it was not played wholly with it —, the first of the new one is held).
+#[test]
+fn a_period_is_held_until_the_host_asks_for_the_next() {
+    let n = 8usize;
+    let steps = 3u32;
+    let values: Vec<f32> = (0..n).map(|k| k as f32 * 0.5).collect();
+    let (mut p, mut t) = player(&values, steps, 0);
+    let mut c = chunk();
+    p.take(&TableRequest::Run(1000), &mut t, Some(&mut c));
+    p.set_started(0, RPC, RATE);
+    let per = n * steps as usize;
+    // Period q's error: q everywhere (its bins and RMS say which period they are).
+    let play = |p: &mut Player, t: &mut Vec<f32>, q: usize| {
+        for _ in 0..per {
+            p.sample(t);
+            p.record(t, q as f32 * RPC);
+        }
+    };
+    let bins = |p: &mut Player, t: &mut Vec<f32>, c: &mut Chunk| {
+        let read = TableRequest::Read {
+            which: Which::Err,
+            start: 0,
+            max: 64,
+        };
+        p.take(&read, t, Some(c));
+        c.values[..n].to_vec()
+    };
+    for q in 0..4 {
+        play(&mut p, &mut t, q);
+    }
+    let r = p.report();
+    assert_eq!(r.period, 4, "every period counted");
+    let d = r.done.unwrap();
+    assert!(r.held);
+    assert_eq!((d.period, d.generation), (0, 0));
+    assert!(d.rms.abs() < 1e-4, "{d:?}");
+    assert!(bins(&mut p, &mut t, &mut c).iter().all(|v| v.abs() < 1e-4));
+    // Next: the period under way (4) is the next complete one, and is held.
+    p.take(&TableRequest::Next, &mut t, None);
+    assert!(!p.report().held);
+    for q in 4..6 {
+        play(&mut p, &mut t, q);
+    }
+    let d = p.report().done.unwrap();
+    assert!(p.report().held);
+    assert_eq!(d.period, 4);
+    assert!((d.rms - 4.0).abs() < 1e-3, "{d:?}");
+    assert!(
+        bins(&mut p, &mut t, &mut c)
+            .iter()
+            .all(|v| (v - 4.0).abs() < 1e-3)
+    );
+    // Period 6 passes; a correction asked for within period 7 releases the one held: period 7
+    // is kept but not held (not played wholly with it); period 8, its first, is held.
+    play(&mut p, &mut t, 6);
+    let corr: Vec<f32> = vec![1e-6; n];
+    for _ in 0..per / 2 {
+        p.sample(&t);
+        p.record(&mut t, 7.0 * RPC);
+    }
+    write_corr(&mut p, &mut t, &corr);
+    assert!(!p.report().held && p.report().pending);
+    for _ in 0..per / 2 {
+        p.sample(&t);
+        p.record(&mut t, 7.0 * RPC);
+    }
+    let (d, r) = (p.report().done.unwrap(), p.report());
+    assert_eq!((d.period, d.generation, r.held), (7, 0, false));
+    for q in 8..11 {
+        play(&mut p, &mut t, q);
+    }
+    let (d, r) = (p.report().done.unwrap(), p.report());
+    assert_eq!((d.period, d.generation, r.held), (8, 1, true));
+    assert!(
+        bins(&mut p, &mut t, &mut c)
+            .iter()
+            .all(|v| (v - 8.0).abs() < 1e-3)
+    );
+    // A new run starts with nothing held.
+    p.take(&TableRequest::Stop, &mut t, None);
+    play(&mut p, &mut t, 11);
+    assert_eq!(p.report().state, TableState::Ready);
+    p.take(&TableRequest::Run(10), &mut t, Some(&mut c));
+    assert!(!p.report().held && p.report().done.is_none());
+}
+
 /// `Stop` ends the run at the end of the period under way; `abort` at once, taking a
 /// correction that waits; a reference written while playing is ignored.
 #[test]

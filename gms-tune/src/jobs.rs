@@ -135,9 +135,9 @@ pub fn commission(
     out: Option<&Path>,
     ctl: &mut Control<'_>,
 ) -> Result<Commissioning, Error> {
-    let before = gms_bench::paramfile::dump(link)?;
     let mut b = ctl.bench(link);
     b.stage("commission", 5.0);
+    let before = gms_bench::paramfile::dump(&mut b)?;
     let commissioned = gms_bench::commission(&mut b, speed)?;
     let (file, text) = commissioned_file(&commissioned, before);
     if let Some(out) = out {
@@ -328,10 +328,11 @@ pub fn map(
     ctl: &mut Control<'_>,
 ) -> Result<(gms_bench::posmap::MapData, gms_bench::posmap::PosMap), Error> {
     plan.check()?;
-    let settings = gms_bench::settings::read(link)?;
-    let sliding = gms_bench::posmap::model_sliding_friction(&settings, plan.speed);
+    // Every request through the stoppable bench: a Stop ends the job at its next request.
     let mut b = ctl.bench(link);
     b.stage("map", plan.device_seconds());
+    let settings = gms_bench::settings::read(&mut b)?;
+    let sliding = gms_bench::posmap::model_sliding_friction(&settings, plan.speed);
     let data = gms_bench::posmap::measure(&mut b, plan)?;
     let map = gms_bench::posmap::fit(&data, plan, sliding)?;
     if let Some(path) = out {

@@ -26,6 +26,11 @@ pub struct Link {
     /// Device seconds per wall second, as last seen by [`Link::wait_device`] (1 on a board,
     /// F on `hil-sim serve --speed F`).
     pub speed: f64,
+    /// Replies owed to requests that timed out: when they come late they are read and
+    /// dropped, so that a later request never takes an earlier one's reply.
+    owed: usize,
+    /// When the last byte arrived.
+    last_rx: Instant,
 }
 
 /// What went wrong talking to the device.
@@ -94,6 +99,8 @@ impl Link {
             timeout,
             telemetry: Vec::new(),
             speed: 1.0,
+            owed: 0,
+            last_rx: Instant::now(),
         };
         // Whatever that provokes (an `err` for the half line) is not ours: discard it.
         let _ = link.listen(Duration::from_millis(30));
@@ -129,7 +136,10 @@ impl Link {
             }
             match self.io.read(&mut buf) {
                 Ok(0) => return Err(LinkError::Io("the device closed the connection".into())),
-                Ok(n) => self.pending.extend_from_slice(&buf[..n]),
+                Ok(n) => {
+                    self.pending.extend_from_slice(&buf[..n]);
+                    self.last_rx = Instant::now();
+                }
                 // A signal (Ctrl-C, whose handler decides what to do) is not a link failure.
                 Err(e)
                     if matches!(
@@ -142,28 +152,57 @@ impl Link {
     }
 
     /// Sends `line` and returns the reply's lines before `ok` and the text after `ok`. A
-    /// `save` gets at least [`gms_core::protocol::SAVE_REPLY_MS`] (a board erases flash).
+    /// `save` gets at least [`gms_core::protocol::SAVE_REPLY_MS`] (a board erases flash); on a
+    /// device slower than real time ([`Link::speed`] below 1) every request gets the timeout
+    /// stretched by its pace. A reply that misses its timeout is owed: read and dropped when
+    /// it comes, before the next request's.
     pub fn request(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
-        let wait = if line.split_whitespace().next() == Some("save") {
+        let base = if line.split_whitespace().next() == Some("save") {
             self.timeout.max(Duration::from_millis(
                 gms_core::protocol::SAVE_REPLY_MS as u64,
             ))
         } else {
             self.timeout
         };
+        let wait = base.mul_f64(1.0 / self.speed.clamp(0.01, 1.0));
         let deadline = Instant::now() + wait;
         let mut body = Vec::new();
         loop {
-            match self.next_line(deadline)? {
-                None => return Err(LinkError::Timeout(wait)),
-                Some(l) if l == "ok" || l.starts_with("ok ") => {
-                    return Ok((body, l.get(3..).unwrap_or("").to_string()));
+            let Some(l) = self.next_line(deadline)? else {
+                if self.owed > 0 {
+                    // Two requests in a row unanswered: the device is gone, or the replies
+                    // are out of step; either way the link must be opened again.
+                    return Err(LinkError::Io(format!(
+                        "no reply to two requests in a row (the last within {} ms)",
+                        wait.as_millis()
+                    )));
                 }
-                Some(l) if l.starts_with("err") => return Err(LinkError::Device(l)),
-                Some(l) => body.push(l),
+                self.owed += 1;
+                return Err(LinkError::Timeout(wait));
+            };
+            let end = l == "ok" || l.starts_with("ok ") || l.starts_with("err");
+            if self.owed > 0 {
+                // An earlier request's late reply (its lines, then its end): not ours.
+                if end {
+                    self.owed -= 1;
+                    body.clear();
+                }
+                continue;
             }
+            if l.starts_with("err") {
+                return Err(LinkError::Device(l));
+            }
+            if end {
+                return Ok((body, l.get(3..).unwrap_or("").to_string()));
+            }
+            body.push(l);
         }
+    }
+
+    /// How long since the device last sent anything (a reply or telemetry).
+    pub fn silent_for(&self) -> Duration {
+        self.last_rx.elapsed()
     }
 
     /// Sends a typed request (its line is the one the device's parser reads back as the same
@@ -201,6 +240,17 @@ impl Link {
     /// board that is wall time, on a faster virtual device less (its speed is learnt as it
     /// goes, [`Link::speed`]). Sleeps at most 50 ms between looks.
     pub fn wait_device(&mut self, seconds: f64) -> Result<(), LinkError> {
+        self.wait_device_with(seconds, &mut |_| true)
+    }
+
+    /// [`Link::wait_device`], telling `on` of the device time passed at each look (the
+    /// seconds since the last); `on` returning false ends the wait early (a Stop), with
+    /// `Ok`: the caller knows why.
+    pub fn wait_device_with(
+        &mut self,
+        seconds: f64,
+        on: &mut dyn FnMut(f64) -> bool,
+    ) -> Result<(), LinkError> {
         if !(seconds.is_finite() && seconds > 0.0) {
             return Ok(());
         }
@@ -219,7 +269,11 @@ impl Link {
                 // Smoothed, and kept within what `hil-sim serve --speed` allows.
                 self.speed = (0.5 * self.speed + 0.5 * (now - dev) / el).clamp(0.01, 1000.0);
             }
+            let passed = (now - dev).clamp(0.0, left);
             (wall, dev) = (Instant::now(), now);
+            if !on(passed) {
+                return Ok(());
+            }
         }
     }
 

@@ -71,12 +71,18 @@ impl Bench for RunBench<'_, '_> {
         Bench::request(&mut *self.link, line)
     }
 
+    /// Waits in device time, the progress told as it passes and the stop flag looked at
+    /// between looks at the device's clock (a Stop ends a long wait within 50 ms, whatever
+    /// the device's pace).
     fn wait(&mut self, seconds: f64) -> Result<(), Error> {
         self.stopped()?;
-        Bench::wait(&mut *self.link, seconds)?;
-        if seconds.is_finite() && seconds > 0.0 {
-            self.hooks.waited(seconds);
-        }
+        let (stop, hooks) = (&self.stop, &mut *self.hooks);
+        self.link
+            .wait_device_with(seconds, &mut |passed| {
+                hooks.waited(passed);
+                !stop.load(Ordering::SeqCst)
+            })
+            .map_err(crate::LinkError::into_bench)?;
         self.stopped()
     }
 }

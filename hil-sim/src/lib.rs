@@ -13,6 +13,7 @@ pub mod commands;
 pub mod device;
 pub mod experiment;
 pub mod friction_cmd;
+pub mod harness;
 pub mod learn;
 pub mod plant;
 pub mod scenario;

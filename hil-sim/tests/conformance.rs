@@ -71,7 +71,7 @@ struct Tcp {
 impl Tcp {
     fn start(args: Vec<String>, store: PathBuf) -> Tcp {
         let a: Vec<&str> = args.iter().map(String::as_str).collect();
-        let srv = Server::start(&a, &store);
+        let srv = common::serve(&a, &store);
         let s = TcpStream::connect(&srv.addr).unwrap();
         s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
         Tcp {

@@ -178,21 +178,18 @@ fn the_bench_sees_what_does_not_repeat() {
     }
 }
 
-/// A link slower than a period: every other time the host reads the error table, a whole
-/// period passes between its first request and its second.
+/// A slow link: every request costs `delay` seconds of device time before the device sees it
+/// (a UART, a loaded host, the image on emulated silicon). With 20 ms a request, reading a
+/// period's error (16 requests) takes a third of a second and uploading a correction (126)
+/// two and a half: several periods of a 1 Hz sine, fifty of a 20 Hz one.
 struct SlowLink<'a> {
     dev: &'a mut LocalDevice,
-    reads: u32,
+    delay: f64,
 }
 
 impl gms_bench::Bench for SlowLink<'_> {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        if line.starts_with("table read err 64 ") {
-            self.reads += 1;
-            if self.reads % 2 == 1 {
-                self.dev.run(1.0);
-            }
-        }
+        self.dev.run(self.delay);
         self.dev.request(line)
     }
 
@@ -201,40 +198,31 @@ impl gms_bench::Bench for SlowLink<'_> {
     }
 }
 
-/// The error the host learns from is one period's, whatever the link's speed: with a period
-/// ending in the middle of every other read, each iteration's error at the points is the mean
-/// over its bins of the steps recorded in the period the host names (and that period was
-/// played with the iteration's correction: the host waits for its generation).
-#[test]
-fn a_period_ending_during_the_read_is_read_again() {
-    let sc = Scenario::parse("", "learn").unwrap();
+/// Learns `plan` over a link that adds `delay` \[s\] of device time to every request, every
+/// step recorded; checks that each iteration's error at the points is the mean over its bins
+/// of the steps recorded in the one period the host names (and that its RMS is that period's,
+/// from every step), whatever the periods that passed while the host read and uploaded.
+/// Returns the learning.
+fn learn_over_a_slow_link(sc: &str, plan: &LearnPlan, delay: f64) -> learn::Learned {
+    let sc = Scenario::parse(sc, "learn").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     dev.record_truth();
-    let plan = LearnPlan {
-        iterations: 3,
-        ..LearnPlan::default()
-    };
     let mut link = SlowLink {
         dev: &mut dev,
-        reads: 0,
+        delay,
     };
-    let l = learn::learn(&mut link, &plan, |_| {}, false).unwrap();
-    assert!(link.reads >= 4, "{}", link.reads);
+    let l = learn::learn(&mut link, plan, |_| {}, false).unwrap();
     let truth = dev.take_truth();
     let t = l.table.as_ref().unwrap();
     let (points, steps) = (t.points as usize, t.steps as u64);
-    assert_eq!(l.errors.len(), 4);
-    // Periods skipped: a slow read costs one.
-    assert!(
-        l.periods.windows(2).any(|w| w[1] > w[0] + 2),
-        "{:?}",
-        l.periods
-    );
-    for (e, p) in l.errors.iter().zip(&l.periods) {
+    assert_eq!(l.errors.len(), plan.iterations + 1);
+    for ((e, p), it) in l.errors.iter().zip(&l.periods).zip(&l.iterations) {
         let from = l.started + u64::from(*p) * points as u64 * steps;
         let lo = truth.partition_point(|r| r.steps < from);
+        let period = &truth[lo..lo + points * steps as usize];
+        assert_eq!(period[0].steps, from);
         for k in 0..points {
-            let bin = &truth[lo + k * steps as usize..lo + (k + 1) * steps as usize];
+            let bin = &period[k * steps as usize..(k + 1) * steps as usize];
             let mean = bin.iter().map(|r| r.device_error()).sum::<f64>() / steps as f64;
             assert!(
                 (e[k] - mean).abs() < 1e-3,
@@ -242,7 +230,61 @@ fn a_period_ending_during_the_read_is_read_again() {
                 e[k]
             );
         }
+        let ms = period.iter().map(|r| r.device_error().powi(2)).sum::<f64>() / period.len() as f64;
+        assert!(
+            (it.rms - ms.sqrt()).abs() < 1e-3 * it.rms,
+            "period {p}: RMS {} against {}",
+            it.rms,
+            ms.sqrt()
+        );
     }
+    l
+}
+
+/// The error the host learns from is one whole period's, the first played with each
+/// correction, however slow the link: with 20 ms a request the 1 Hz sine loses periods while
+/// the host reads and uploads (the device holds the period until the host has it), and each
+/// iteration's error and RMS are those of the period the host names.
+#[test]
+fn the_period_is_held_until_a_slow_link_has_read_it() {
+    let plan = LearnPlan {
+        iterations: 3,
+        ..LearnPlan::default()
+    };
+    let l = learn_over_a_slow_link("", &plan, 0.02);
+    eprintln!("periods learned from: {:?}", l.periods);
+    // Periods passed while the host read and uploaded (a fast link learns from every other).
+    assert!(
+        l.periods.windows(2).all(|w| w[1] > w[0] + 2),
+        "{:?}",
+        l.periods
+    );
+}
+
+/// A fast scan, a 20 Hz sine (50 ms periods: some eighty pass while a correction goes up a
+/// 20 ms link), learnt by ILC alone (no friction feedforward: an error that repeats): the
+/// learning completes, learns from one whole period each time, and takes the error down.
+#[test]
+fn a_20_hz_sine_learns_over_a_slow_link() {
+    let plan = LearnPlan {
+        path: Path::Sine {
+            amplitude: 0.02,
+            freq: 20.0,
+        },
+        iterations: 6,
+        ..LearnPlan::default()
+    };
+    let l = learn_over_a_slow_link("[controller.ff]\nmode = \"none\"\n", &plan, 0.02);
+    let rms: Vec<f64> = l.iterations.iter().map(|i| i.rms).collect();
+    eprintln!("20 Hz: periods {:?}, RMS {rms:.3?}", l.periods);
+    assert!(l.stopped.is_none(), "{:?}", l.stopped);
+    assert!(
+        l.periods.windows(2).all(|w| w[1] > w[0] + 20),
+        "{:?}",
+        l.periods
+    );
+    let tail = mean(rms[4..].iter().copied());
+    assert!(tail < 0.4 * rms[0], "{rms:?}");
 }
 
 /// Fifty iterations with twice the default sense noise: the period's RMS scatters, the learning
@@ -383,6 +425,19 @@ fn table_commands_refuse_bad_input_and_end_safely() {
     refused(&mut dev, "table run 2", "already playing");
     dev.run(0.4);
     ok(&mut dev, "table read err 0 16");
+    // Five periods of 80 ms played: the first is held (`held=1`), until `table next`.
+    let field = |t: &str, k: &str| -> u32 {
+        t.split_whitespace()
+            .find_map(|w| w.strip_prefix(k)?.parse().ok())
+            .unwrap_or_else(|| panic!("{k} in {t}"))
+    };
+    let t = ok(&mut dev, "table");
+    assert!(field(&t, "period=") >= 4, "{t}");
+    assert_eq!((field(&t, "done="), field(&t, "held=")), (0, 1), "{t}");
+    ok(&mut dev, "table next");
+    dev.run(0.2);
+    let t = ok(&mut dev, "table");
+    assert!(field(&t, "done=") >= 5 && field(&t, "held=") == 1, "{t}");
     // `disable`: the run ends at once, the bridge off.
     ok(&mut dev, "disable");
     assert_eq!(state(&mut dev), "ready");

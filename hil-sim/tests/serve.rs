@@ -65,7 +65,7 @@ fn set_save_restart_and_read_back() {
     let dir = tempfile::tempdir().unwrap();
     let store = dir.path().join("flash.img");
     {
-        let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+        let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);
         let mut c = connect(&srv);
         assert_eq!(c.ask("get pos.kp"), "ok 0.7");
         assert_eq!(c.ask("set pos.kp 0.31"), "ok");
@@ -80,7 +80,7 @@ fn set_save_restart_and_read_back() {
         assert_eq!(c.ask("save"), "ok");
         assert_eq!(c.ask("set pos.kp 0.5"), "ok");
     }
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);
     let mut c = connect(&srv);
     assert_eq!(c.ask("get pos.kp"), "ok 0.31");
     assert_eq!(c.ask("get ff.mode"), "ok static");
@@ -106,7 +106,7 @@ fn a_corrupt_record_means_defaults_and_a_fault() {
         let mut st = gms_core::store::FlashStore::new(flash);
         st.save(&rec).unwrap();
     }
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &store);
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);
     let mut c = connect(&srv);
     assert_eq!(c.ask("get pos.kp"), "ok 0.7");
     let st = c.ask("status");
@@ -150,7 +150,7 @@ fn default_settings() -> gms_core::protocol::Settings {
 #[test]
 fn garbage_floods_and_dropped_clients_leave_the_device_running() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
     let mut c = connect(&srv);
     c.s.write_all(b"\x00\x01\xfe\xff\x1b[2J\n").unwrap();
     assert!(c.reply().pop().unwrap().starts_with("err 4 "));
@@ -178,7 +178,7 @@ fn garbage_floods_and_dropped_clients_leave_the_device_running() {
 #[test]
 fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
     let mut c = connect(&srv);
     assert_eq!(c.ask("enable"), "ok");
     assert_eq!(c.ask("stream t,error,ff 200"), "ok");
@@ -204,7 +204,7 @@ fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
 #[test]
 fn the_adaptive_scale_is_read_kept_across_sets_and_read_only() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.toml"));
     let mut c = connect(&srv);
     assert_eq!(c.ask("get ff.adapt.scale"), "ok 1");
     assert_eq!(c.ask("set ff.mode gms-adaptive"), "ok");
@@ -244,7 +244,7 @@ fn device_time(c: &mut Client) -> f64 {
 #[test]
 fn serve_faster_than_real_time() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(
+    let srv = common::serve(
         &["--tcp", "127.0.0.1:0", "--speed", "5"],
         &dir.path().join("flash.img"),
     );
@@ -270,7 +270,7 @@ fn serve_faster_than_real_time() {
 #[test]
 fn a_second_client_is_refused_with_one_line_and_the_first_is_undisturbed() {
     let dir = tempfile::tempdir().unwrap();
-    let srv = Server::start(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.img"));
+    let srv = common::serve(&["--tcp", "127.0.0.1:0"], &dir.path().join("flash.img"));
     let mut first = connect(&srv);
     assert_eq!(first.ask("set pos.ki 120"), "ok");
     let mut second = connect(&srv);

@@ -7,7 +7,7 @@ use std::net::TcpStream;
 use std::time::Duration;
 
 mod common;
-use common::{Server, hil};
+use common::hil;
 use hil_sim::scenario::Scenario;
 
 /// A short reference (a sine with reversals, then a step) for the CLI runs.
@@ -144,7 +144,7 @@ fn serve_takes_a_lugre_plant_and_is_not_told_its_friction() {
     let d = tempfile::tempdir().unwrap();
     let scenario = d.path().join("s.toml");
     std::fs::write(&scenario, LUGRE).unwrap();
-    let srv = Server::start(
+    let srv = common::serve(
         &[
             "--tcp",
             "127.0.0.1:0",

@@ -813,11 +813,12 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         if let Some(d) = t.done {
             write!(
                 out,
-                " done={} done_gen={} rms={} peak={}",
+                " done={} done_gen={} rms={} peak={} held={}",
                 d.period,
                 d.generation,
                 Num(d.rms),
-                Num(d.peak)
+                Num(d.peak),
+                u8::from(t.held)
             )?;
         }
         Ok(())
@@ -936,6 +937,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
                 Ok(())
             }
             TableCmd::Stop => self.post(|r| r.table = Some(TableRequest::Stop)),
+            TableCmd::Next => self.post(|r| r.table = Some(TableRequest::Next)),
             TableCmd::Read {
                 which,
                 start,

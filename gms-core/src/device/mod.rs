@@ -465,6 +465,7 @@ impl Mailbox {
                 generation: 0,
                 pending: false,
                 done: None,
+                held: false,
                 started: 0,
             },
         }

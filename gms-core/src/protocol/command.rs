@@ -113,6 +113,9 @@ pub enum TableCmd<'a> {
     },
     /// `table clear`: forget the reference and the correction.
     Clear,
+    /// `table next`: release the period held; the next complete period of the correction
+    /// played is held in its place.
+    Next,
 }
 
 /// Up to `max` decimal digits (digits only) as a `u64`, without core's parser (whose error
@@ -366,6 +369,7 @@ impl core::fmt::Display for Command<'_> {
                         count,
                     } => write!(f, "table read {} {start} {count}", name(which)),
                     TableCmd::Clear => f.write_str("table clear"),
+                    TableCmd::Next => f.write_str("table next"),
                 }
             }
             Command::Frf(FrfCmd::Status) => f.write_str("frf"),
@@ -555,7 +559,7 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
             use crate::table::Which;
             let usage = "usage: table | table ref|corr START V ... | table corr off | \
 table set POINTS STEPS ORIGIN | table use | table run PERIODS | table stop | \
-table read ref|corr|err START COUNT | table clear";
+table read ref|corr|err START COUNT | table next | table clear";
             let int = |w: Option<&str>| w.and_then(parse_u32).ok_or(bad(usage));
             match arg() {
                 None => Command::Table(TableCmd::Status),
@@ -610,6 +614,7 @@ table read ref|corr|err START COUNT | table clear";
                     })
                 }
                 Some("clear") => Command::Table(TableCmd::Clear),
+                Some("next") => Command::Table(TableCmd::Next),
                 _ => return Err(bad(usage)),
             }
         }

@@ -186,6 +186,9 @@ pub enum Event {
     Connected,
     /// The link is lost (the message says how); the worker retries every second.
     Lost(String),
+    /// A reply came late (the message says how late); the link is kept: the device is slow,
+    /// not gone, and its late reply is dropped when it comes.
+    Late(String),
     /// `list`, parsed.
     Listed(Vec<Listed>),
     /// A `set`'s outcome: `Err` with the device's `err` line; `value` is the device's value
@@ -290,6 +293,7 @@ fn run(
     let mut link: Option<Link> = None;
     let mut next_try = Instant::now();
     let mut next_status = Instant::now();
+    let mut pace = Pace::new(1.0);
     let send = |e: Event| events.send(e).is_ok();
     loop {
         let Some(l) = link.as_mut() else {
@@ -307,11 +311,15 @@ fn run(
             }
             if Instant::now() >= next_try {
                 next_try = Instant::now() + Duration::from_secs(1);
+                let speed = pace.speed;
                 match endpoint.open(timeout).and_then(|mut l| {
+                    // The pace learnt before the link was lost (a device does not change it).
+                    l.speed = speed;
                     start_session(&mut l).map_err(|e| e.to_string())?;
                     Ok(l)
                 }) {
                     Ok(mut l) => {
+                        pace = Pace::new(l.speed);
                         let listed = params::list(&mut l);
                         link = Some(l);
                         send(Event::Connected);
@@ -383,7 +391,20 @@ fn run(
             next_status = Instant::now() + STATUS_PERIOD;
             match l.status() {
                 Ok(st) => {
+                    if let Some(rate) = pace.seen(st.t, l) {
+                        // The device's pace changed: the stream at a rate the link carries.
+                        if let Err(e) = stream(l, rate)
+                            && gone(&e)
+                        {
+                            lost = Some(e.to_string());
+                        }
+                    }
                     send(Event::Status(st));
+                    any = true;
+                }
+                // Late, not gone: the device still talks (or has not been silent long).
+                Err(e @ LinkError::Timeout(_)) if l.silent_for() < SILENT_LOST => {
+                    send(Event::Late(e.to_string()));
                     any = true;
                 }
                 Err(e) => lost = Some(e.to_string()),
@@ -415,13 +436,82 @@ fn run(
     }
 }
 
-/// A new session: the telemetry stream at 1 kHz.
+/// The telemetry's rate \[Hz of device time\] on a device that runs in real time.
+const STREAM_HZ: f64 = 1000.0;
+
+/// A device silent this long (no reply, no telemetry) is taken as lost.
+const SILENT_LOST: Duration = Duration::from_secs(5);
+
+/// A new session: the telemetry stream at the rate for the device's pace.
 fn start_session(l: &mut Link) -> Result<(), LinkError> {
+    stream(l, Pace::rate(l.speed))
+}
+
+/// The telemetry stream at `rate_hz` \[Hz of device time\].
+fn stream(l: &mut Link, rate_hz: f64) -> Result<(), LinkError> {
     l.ask(Command::Stream {
         fields: FIELDS,
-        rate_hz: 1000.0,
+        rate_hz: rate_hz as f32,
     })?;
     Ok(())
+}
+
+/// The device's pace (device seconds per wall second: 1 on a board, about F on `hil-sim serve
+/// --speed F`, less on a host that cannot keep up), from the clock in its `status` replies.
+/// The telemetry's rate follows it, so that the stream stays within what the link and the
+/// window carry (about [`STREAM_HZ`] lines a wall second): on a virtual device twenty times
+/// faster than real time a stream of 1 kHz of device time would be 20 000 lines a second,
+/// and every reply would queue behind them.
+struct Pace {
+    last: Option<(f64, Instant)>,
+    /// The pace last learnt.
+    speed: f64,
+    /// The rate the stream was set to \[Hz of device time\].
+    streamed: f64,
+}
+
+impl Pace {
+    /// At the pace `speed`, the stream at its rate.
+    fn new(speed: f64) -> Pace {
+        Pace {
+            last: None,
+            speed,
+            streamed: Pace::rate(speed),
+        }
+    }
+
+    /// The stream's rate \[Hz of device time\] at the pace `speed`.
+    fn rate(speed: f64) -> f64 {
+        (STREAM_HZ / speed.max(1.0)).max(10.0)
+    }
+
+    /// The device's clock `t` \[s\] read now: the pace learnt (into [`Link::speed`], which
+    /// also stretches the replies' timeout on a slow device); a new stream rate when it has
+    /// moved by more than half.
+    fn seen(&mut self, t: f64, l: &mut Link) -> Option<f64> {
+        let now = Instant::now();
+        let Some((t0, w0)) = self.last else {
+            self.last = Some((t, now));
+            return None;
+        };
+        let wall = now.duration_since(w0).as_secs_f64();
+        if wall < 0.5 {
+            return None;
+        }
+        self.last = Some((t, now));
+        if t <= t0 {
+            // The device restarted (its clock from 0) or stood still: nothing learnt.
+            return None;
+        }
+        l.speed = ((t - t0) / wall).clamp(0.01, 1000.0);
+        self.speed = l.speed;
+        let want = Pace::rate(l.speed);
+        if !(0.5..=2.0).contains(&(want / self.streamed)) {
+            self.streamed = want;
+            return Some(want);
+        }
+        None
+    }
 }
 
 /// The report for a command that could not run.

@@ -102,6 +102,47 @@ fn serve_client<C: Read + Write>(
     dev.disconnected();
 }
 
+/// The simulation's longest run of steps without a pause \[wall time\].
+const SLICE: Duration = Duration::from_millis(4);
+/// The pause after each slice \[wall time\]: the protocol side's turn.
+const PAUSE: Duration = Duration::from_millis(1);
+/// The most the simulated clock may lag the wall clock (scaled) before it slips \[s of wall
+/// time\].
+const MAX_LAG: f64 = 0.05;
+
+/// The virtual device's clock: simulated time due at `speed` × the wall time since an anchor,
+/// the anchor moved on when the simulation falls more than [`MAX_LAG`] behind (the device then
+/// runs slower than `speed`, as a board's clock never would, but its replies do not wait for
+/// a backlog).
+struct Pacer {
+    speed: f64,
+    wall: Instant,
+    sim: f64,
+}
+
+impl Pacer {
+    fn new(speed: f64) -> Pacer {
+        Pacer {
+            speed,
+            wall: Instant::now(),
+            sim: 0.0,
+        }
+    }
+
+    /// The simulated time due now \[s\].
+    fn due(&self) -> f64 {
+        self.sim + self.wall.elapsed().as_secs_f64() * self.speed
+    }
+
+    /// After a slice: the clock slips if the simulation at `t` \[s\] is too far behind.
+    fn behind(&mut self, t: f64) {
+        if self.due() - t > MAX_LAG * self.speed {
+            self.wall = Instant::now();
+            self.sim = t;
+        }
+    }
+}
+
 /// Where the device listens.
 pub enum Endpoint {
     /// TCP: clients connect one after another.
@@ -162,27 +203,20 @@ fn serve_inner(
     });
     let rt = Arc::clone(&shared);
     std::thread::spawn(move || {
-        // Advance by as many position periods as (scaled) wall time allows.
-        let start = Instant::now();
+        // Advance by as many position periods as (scaled) wall time allows, in slices of at
+        // most SLICE of wall time with a pause after each, so that the protocol side always
+        // has the processor when a request comes. A host that cannot keep up slows the
+        // device's clock (the lag is forgiven: the clock slips) rather than its replies.
+        let mut clock = Pacer::new(speed);
         loop {
             let dt = sim.core.controller().dt_pos() as f64;
-            let due = start.elapsed().as_secs_f64() * speed;
-            let mut n = 0;
-            while sim.t + dt <= due && n < 200 {
+            let due = clock.due();
+            let slice = Instant::now();
+            while sim.t + dt <= due && slice.elapsed() < SLICE {
                 sim.tick(|st, c| rt.mailbox().exchange(st, c), &rt.telemetry, true);
-                n += 1;
             }
-            if n == 200 {
-                if speed == 1.0 {
-                    // Real time and cannot keep up: skip ahead rather than fall ever further
-                    // behind.
-                    sim.t = due;
-                } else {
-                    // Faster than real time: never skip simulated time, just run on.
-                    continue;
-                }
-            }
-            std::thread::sleep(Duration::from_millis(1));
+            clock.behind(sim.t);
+            std::thread::sleep(PAUSE);
         }
     });
     let link = HostLink {

@@ -83,7 +83,8 @@ impl App {
     pub(super) fn frf(&mut self, ui: &mut egui::Ui) {
         let idle = self.running.is_none();
         let mut start = None;
-        ui.horizontal(|ui| {
+        // Wrapped: on a narrow window the buttons go to a second row rather than off its edge.
+        ui.horizontal_wrapped(|ui| {
             let inp = &mut self.frf_inputs;
             for (lp, name) in [
                 (Loop::Plant, "plant"),

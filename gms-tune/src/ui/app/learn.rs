@@ -42,7 +42,7 @@ impl App {
     pub(super) fn learn(&mut self, ui: &mut egui::Ui) {
         let idle = self.running.is_none();
         let mut start = None;
-        ui.horizontal(|ui| {
+        ui.horizontal_wrapped(|ui| {
             let inp = &mut self.learn_inputs;
             field(ui, "amplitude [rad]", &mut inp.amplitude, 50.0);
             field(ui, "frequency [Hz]", &mut inp.freq, 50.0);

@@ -31,7 +31,7 @@ impl App {
     pub(super) fn map(&mut self, ui: &mut egui::Ui) {
         let idle = self.running.is_none();
         let mut start = None;
-        ui.horizontal(|ui| {
+        ui.horizontal_wrapped(|ui| {
             let inp = &mut self.map_inputs;
             field(ui, "speed [rad/s]", &mut inp.speed, 50.0);
             field(ui, "revolutions", &mut inp.revs, 50.0);

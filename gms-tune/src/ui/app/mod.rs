@@ -144,6 +144,8 @@ pub struct App {
     pub rows: Vec<Row>,
     /// The last `status` text.
     pub status: Option<StatusReply>,
+    /// A reply came late since the last `status` (logged once).
+    late: bool,
     /// Received samples (the newest last).
     pub samples: VecDeque<TelemetrySample>,
     /// Samples received since the window opened.
@@ -206,6 +208,7 @@ impl App {
             link: LinkState::Connecting,
             rows: Vec::new(),
             status: None,
+            late: false,
             samples: VecDeque::new(),
             received: 0,
             paused: false,
@@ -298,6 +301,13 @@ impl App {
                     }
                     self.link = LinkState::Lost(why);
                 }
+                Event::Late(why) => {
+                    // Once per episode: a run of late replies is one line in the log.
+                    if !self.late {
+                        self.note(format!("device slow: {why} (the link is kept)"));
+                    }
+                    self.late = true;
+                }
                 Event::Listed(v) => {
                     self.rows = v
                         .into_iter()
@@ -332,7 +342,10 @@ impl App {
                     Ok(t) => self.note(format!("{line}: {t}")),
                     Err(e) => self.note(format!("{line}: {e}")),
                 },
-                Event::Status(s) => self.status = Some(s),
+                Event::Status(s) => {
+                    self.late = false;
+                    self.status = Some(s)
+                }
                 Event::Progress { stage, done, total } => {
                     if let Some(r) = &mut self.running {
                         (r.stage, r.done, r.total) = (stage, done, total);
