@@ -123,3 +123,33 @@ fn learn_writes_its_files_applies_and_refuses_bad_input() {
     );
     assert!(after.contains("enabled=1"), "as it was: {after}");
 }
+
+/// The paper's sine learnt for ten iterations against a device twenty and fifty times faster
+/// than real time (the periods race the link: until the device held each period until it
+/// was read, the learning gave up now and then at 20 and often at 50): it completes, and the
+/// last three iterations are within the learning's target of 0.5 counts RMS.
+#[test]
+fn learn_completes_against_a_device_20_and_50_times_real_time() {
+    let _one = support::one_at_a_time();
+    for speed in [20.0, 50.0] {
+        let dir = tempfile::tempdir().unwrap();
+        let srv = Server::child("tcp", &dir.path().join("flash.img"), speed, None);
+        let d = dir.path();
+        let (code, out, err) = tune(&srv, &["learn", "--iterations", "10", "--out", "ln"], d);
+        assert_eq!(code, 0, "--speed {speed}: {out}\n{err}");
+        let rms: Vec<f64> = out
+            .lines()
+            .filter_map(|l| {
+                let w: Vec<&str> = l.split_whitespace().collect();
+                match w.as_slice() {
+                    [n, r, _] => n.parse::<usize>().ok().and(r.parse().ok()),
+                    _ => None,
+                }
+            })
+            .collect();
+        eprintln!("--speed {speed}: RMS {rms:.3?}");
+        assert_eq!(rms.len(), 11, "{out}");
+        let tail = rms[8..].iter().sum::<f64>() / 3.0;
+        assert!(tail <= 0.5, "--speed {speed}: {out}");
+    }
+}

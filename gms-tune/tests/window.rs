@@ -397,6 +397,10 @@ fn the_window_shows_the_learning_and_applies_it() {
     };
     assert_eq!(n, 1000);
     h.step();
+    // The iterations' legend: "RMS" and "peak" once each (the lines and their points share
+    // an entry).
+    assert_eq!(h.query_all_by_label("RMS").count(), 1);
+    assert_eq!(h.query_all_by_label("peak").count(), 1);
     h.get_by_label("Apply the correction").click();
     let applied = step_until(&mut h, srv.wall(0.5, 5.0), |a| {
         a.log.iter().any(|l| l.contains("the correction plays"))

@@ -99,8 +99,9 @@ enum Cmd {
         /// Scenario file for the plant (its reference is not used); default scenario without.
         #[arg(long, value_name = "SCENARIO.toml")]
         scenario: Option<PathBuf>,
-        /// Run the simulated axis this many times faster than the wall clock (0.01 to 1000;
-        /// above 1 for experiments in CI: it never skips simulated time).
+        /// Run the simulated axis this many times faster than the wall clock (0.01 to 1000).
+        /// It never skips simulated time: on a host that cannot keep up the device's clock
+        /// slows (its replies do not wait for a backlog of steps).
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
     },

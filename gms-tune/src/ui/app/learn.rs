@@ -104,10 +104,23 @@ impl App {
             .x_axis_label("iteration")
             .y_axis_label("error [counts]")
             .show(ui, |p| {
-                p.line(Line::new("RMS", PlotPoints::from(rms.clone())));
-                p.points(Points::new("RMS ", PlotPoints::from(rms)).radius(3.0));
-                p.line(Line::new("peak", PlotPoints::from(peak.clone())));
-                p.points(Points::new("peak ", PlotPoints::from(peak)).radius(3.0));
+                // Each series' line and points under one name and colour: one legend entry.
+                let (c_rms, c_peak) = (
+                    Color32::from_rgb(30, 90, 200),
+                    Color32::from_rgb(220, 120, 30),
+                );
+                p.line(Line::new("RMS", PlotPoints::from(rms.clone())).color(c_rms));
+                p.points(
+                    Points::new("RMS", PlotPoints::from(rms))
+                        .radius(3.0)
+                        .color(c_rms),
+                );
+                p.line(Line::new("peak", PlotPoints::from(peak.clone())).color(c_peak));
+                p.points(
+                    Points::new("peak", PlotPoints::from(peak))
+                        .radius(3.0)
+                        .color(c_peak),
+                );
             });
         match &self.outcome {
             Some(Ok(Outcome::Learned(l))) => {
