@@ -320,8 +320,10 @@ impl Link {
     pub fn listen(&mut self, d: Duration) -> Result<(), LinkError> {
         let deadline = Instant::now() + d;
         while let Some(l) = self.next_line(deadline)? {
-            // A stray reply line while listening: ignore it.
-            let _ = l;
+            // A reply while listening: one owed (a late one) is paid; any other is stray.
+            if self.owed > 0 && (l == "ok" || l.starts_with("ok ") || l.starts_with("err")) {
+                self.owed -= 1;
+            }
         }
         Ok(())
     }
@@ -348,4 +350,61 @@ pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
             Some((k.to_string(), v.parse().ok()?))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::{BufRead, BufReader};
+
+    /// A device on loopback TCP that answers each line `L` with `ok L` after the delay
+    /// `delay(L)` \[ms\] (`None`: never), in order.
+    fn device(delay: fn(&str) -> Option<u64>) -> String {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let addr = l.local_addr().unwrap().to_string();
+        std::thread::spawn(move || {
+            let (s, _) = l.accept().unwrap();
+            let mut w = s.try_clone().unwrap();
+            for line in BufReader::new(s).lines() {
+                let Ok(line) = line else { return };
+                if line.is_empty() {
+                    continue;
+                }
+                match delay(&line) {
+                    Some(ms) => std::thread::sleep(Duration::from_millis(ms)),
+                    None => continue,
+                }
+                if w.write_all(format!("ok {line}\n").as_bytes()).is_err() {
+                    return;
+                }
+            }
+        });
+        addr
+    }
+
+    /// A reply that misses its timeout is owed: when it comes it is dropped, and the next
+    /// request gets its own reply, whether the late one came during that request or while
+    /// the link was listening.
+    #[test]
+    fn a_late_reply_is_never_taken_for_the_next_ones() {
+        // A device answers in order: "get b" comes right after the late "slow 1" (at 300 ms),
+        // within its own timeout (from 200 ms to 400 ms).
+        let addr = device(|l| Some(if l.starts_with("slow") { 300 } else { 0 }));
+        let mut link = Link::tcp(&addr, Duration::from_millis(200)).unwrap();
+        assert!(matches!(link.request("slow 1"), Err(LinkError::Timeout(_))));
+        assert_eq!(link.request("get b").unwrap().1, "get b");
+        assert!(matches!(link.request("slow 2"), Err(LinkError::Timeout(_))));
+        link.listen(Duration::from_millis(600)).unwrap();
+        assert_eq!(link.request("get c").unwrap().1, "get c");
+    }
+
+    /// Two requests in a row unanswered: the link is out of step or the device gone, an I/O
+    /// error (the window then opens the link again) rather than a second timeout.
+    #[test]
+    fn two_unanswered_requests_are_a_lost_link() {
+        let addr = device(|l| (!l.starts_with("lost")).then_some(0));
+        let mut link = Link::tcp(&addr, Duration::from_millis(50)).unwrap();
+        assert!(matches!(link.request("lost 1"), Err(LinkError::Timeout(_))));
+        assert!(matches!(link.request("lost 2"), Err(LinkError::Io(_))));
+    }
 }
