@@ -497,11 +497,13 @@ fn a_bench_identification_stays_within_its_planned_stroke() {
 struct Stalling {
     dev: LocalDevice,
     stall: f64,
+    /// The request that stalls.
+    on: &'static str,
 }
 
 impl gms_bench::Bench for Stalling {
     fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        if line == "status" {
+        if line == self.on {
             self.dev.wait(self.stall)?;
         }
         self.dev.request(line)
@@ -523,6 +525,7 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
         let mut b = Stalling {
             dev: LocalDevice::new(&sc).unwrap(),
             stall: 0.2,
+            on: "status",
         };
         let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
         plan.guard = guard;
@@ -556,4 +559,34 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
     // the guard reached is not recorded, though its dwell may have come before breakaway).
     assert!(n2 == n || n2 == n + 1, "{n2} vs {n}");
     assert!(x2 > 1.0, "x {x2}");
+}
+
+/// A host late with the hold after it saw the breakaway (1 s of device time: a loaded host
+/// against `hil-sim serve --speed 20`, as once in CI): the axis, still under the staircase's
+/// current, runs on to the guard, the hold is refused (the bridge is off) — the staircase's
+/// end, as when the guard is reached during a step: its data kept, the fault cleared.
+#[test]
+fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
+    use gms_bench::{Bench, position, presliding};
+    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let mut b = Stalling {
+        dev: LocalDevice::new(&sc).unwrap(),
+        stall: 2.0,
+        on: "hold",
+    };
+    // The identification's own staircase (the erase first, the measuring loop, its guard).
+    let info = gms_bench::DeviceInfo::read(&mut b).unwrap();
+    let plan = gms_bench::Plans::new(&info, &gms_bench::Ranges::default())
+        .unwrap()
+        .presliding;
+    let mut pre = Vec::new();
+    let r = presliding(&mut b, &plan, &mut pre);
+    b.dev.wait(0.5).unwrap();
+    let x = position(&mut b).unwrap();
+    let (_, st) = b.dev.request("status").unwrap();
+    eprintln!("{} steps, stopped at {x:.3} rad; {st}", pre.len());
+    r.unwrap();
+    assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());
+    assert!(x > 0.5 && x < 0.6, "x {x}");
+    assert!(st.contains("faults=0") && st.contains("enabled=0"), "{st}");
 }
