@@ -502,9 +502,12 @@ proptest! {
         }
         // Pre-sliding only: never beyond the largest breakpoint.
         prop_assert!(xmax < dmax(&p), "x reached {xmax:e}, breakpoint {:e}", dmax(&p));
-        // The same position at the same phase from the third cycle on.
+        // The same position at the same phase from the third cycle on, within the model's f32
+        // round-off: a creeping model moves by a good part of the amplitude per cycle; f32
+        // state near breakaway (0.78 Fs) left 8.8e-5 of it over the nine cycles once (CI, the
+        // case in gms_properties.proptest-regressions), beyond the 1e-5 this asked before.
         let drift = (at_phase[at_phase.len() - 1] - at_phase[2]).abs();
-        prop_assert!(drift < 1e-5 * xmax, "drift {drift:e} over 9 cycles, amplitude {xmax:e}");
+        prop_assert!(drift < 1e-3 * xmax, "drift {drift:e} over 9 cycles, amplitude {xmax:e}");
     }
 }
 
