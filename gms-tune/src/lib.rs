@@ -181,7 +181,7 @@ impl Link {
                 self.owed += 1;
                 return Err(LinkError::Timeout(wait));
             };
-            let end = l == "ok" || l.starts_with("ok ") || l.starts_with("err");
+            let end = is_reply_end(&l);
             if self.owed > 0 {
                 // An earlier request's late reply (its lines, then its end): not ours.
                 if end {
@@ -321,7 +321,7 @@ impl Link {
         let deadline = Instant::now() + d;
         while let Some(l) = self.next_line(deadline)? {
             // A reply while listening: one owed (a late one) is paid; any other is stray.
-            if self.owed > 0 && (l == "ok" || l.starts_with("ok ") || l.starts_with("err")) {
+            if self.owed > 0 && is_reply_end(&l) {
                 self.owed -= 1;
             }
         }
@@ -340,6 +340,11 @@ impl gms_bench::Bench for Link {
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
         self.wait_device(seconds).map_err(LinkError::into_bench)
     }
+}
+
+/// Whether `line` ends a reply (`ok`, `ok …` or `err …`): the lines before it are its body.
+fn is_reply_end(line: &str) -> bool {
+    line == "ok" || line.starts_with("ok ") || line.starts_with("err")
 }
 
 /// Parses a telemetry line `name=value name=value …`.
