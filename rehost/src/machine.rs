@@ -1,0 +1,1308 @@
+//! The emulated STM32F4: unicorn's Cortex-M4F with the memory map, the core's exception
+//! model and the peripherals, its bridge, sense and encoder closed on hil-sim's plant.
+//!
+//! Exceptions are taken by this model, not unicorn's (its M-profile NVIC is stubbed out):
+//! between runs of the engine the highest-priority pending exception whose group priority is
+//! above the execution priority (the active exceptions', BASEPRI's, PRIMASK's: ARMv7-M ARM
+//! B1.5.4) is entered — the basic frame, or the extended one with S0-S15 and FPSCR when
+//! CONTROL.FPCA is set (B1.5.6-7), aligned to 8 bytes (xPSR bit 9), LR = EXC_RETURN. The
+//! engine runs handlers as thread-mode code; their `bx lr` to EXC_RETURN fetches from
+//! 0xFFFFFFxx, which is not mapped: that stop is the exception return (B1.5.8), done here.
+//!
+//! Time is the core's cycles at 168 MHz: each instruction counts `cpi` cycles (the flash's
+//! wait states and the pipeline make the M4 take 1.3-2.1 per instruction from flash at 5 wait
+//! states with the accelerator on); WFI sleeps to the next event.
+
+use std::collections::HashMap;
+
+use hil_sim::plant::Plant;
+use hil_sim::scenario::Scenario;
+use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot, uc_error};
+use unicorn_engine::{RegisterARM as R, Unicorn};
+
+use crate::core_regs::{CoreRegs, exc};
+use crate::periph::{Periphs, base, irq, tim, usart};
+use crate::rtt;
+
+/// The board an image is built for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Board {
+    /// NUCLEO-F446RE (USART2 to the host).
+    NucleoF446,
+    /// The F405 board (USB; the link is not modelled).
+    F405,
+}
+
+impl Board {
+    /// Its flash size \[bytes\].
+    pub fn flash_size(self) -> u32 {
+        match self {
+            Board::NucleoF446 => 512 * 1024,
+            Board::F405 => 1024 * 1024,
+        }
+    }
+
+    /// DBGMCU_IDCODE: REV_ID in 31:16, DEV_ID in 11:0 (0x421 F446 rev A, RM0390 §33.6.1;
+    /// 0x413 F405 rev Z = 0x1001, RM0090 §38.6.1).
+    pub fn idcode(self) -> u32 {
+        match self {
+            Board::NucleoF446 => 0x1000_6421,
+            Board::F405 => 0x1001_6413,
+        }
+    }
+
+    /// Parses `nucleo-f446` or `f405`.
+    pub fn parse(s: &str) -> Result<Board, String> {
+        match s {
+            "nucleo-f446" => Ok(Board::NucleoF446),
+            "f405" => Ok(Board::F405),
+            _ => Err(format!("unknown board {s:?}: nucleo-f446 or f405")),
+        }
+    }
+}
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Cycles per instruction \[cycles\] (the time model; 1.5 by default).
+    pub cpi: f64,
+    /// The plant's scenario (hil-sim's defaults when `None`).
+    pub scenario: Option<Scenario>,
+    /// Print log lines as they come.
+    pub echo_log: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            cpi: 1.5,
+            scenario: None,
+            echo_log: false,
+        }
+    }
+}
+
+/// The core clock \[Hz\].
+pub const HZ: u64 = 168_000_000;
+const FLASH: u64 = 0x0800_0000;
+const SRAM: u64 = 0x2000_0000;
+const SRAM_LEN: u64 = 128 * 1024;
+const CCM: u64 = 0x1000_0000;
+const SYSMEM: u64 = 0x1FFF_0000;
+
+/// One exception handled: which, and what it cost.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Handled {
+    /// Its exception number (16 + IRQ).
+    pub exc: u32,
+    /// Instructions it executed itself (not counting those it was preempted by).
+    pub instructions: u64,
+    /// When it was entered \[cycles\].
+    pub at: u64,
+}
+
+/// Why the run stopped short.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Stop {
+    /// An exception that cannot be taken at the current priority (lockup), or the engine's
+    /// error.
+    Lockup(String),
+}
+
+/// One active exception.
+#[derive(Debug, Clone, Copy)]
+struct Active {
+    exc: u32,
+    instructions: u64,
+    at: u64,
+}
+
+/// The state the engine's hooks reach.
+pub struct Chip {
+    /// The core's registers.
+    pub core: CoreRegs,
+    /// The peripherals.
+    pub p: Periphs,
+    /// Time \[cycles\].
+    pub cycles: u64,
+    /// Instructions executed.
+    pub instructions: u64,
+    cycle_frac: f64,
+    cpi: f64,
+    /// Stop the engine at or after this time \[cycles\].
+    next_stop: u64,
+    /// Instruction counts of the blocks seen (by address and size), and whether the block
+    /// ends with a WFE or WFI (the engine runs WFE as a no-op).
+    block_len: HashMap<(u64, u32), (u32, bool)>,
+    /// The block just run ended with WFE/WFI: the core sleeps unless the event register is
+    /// set (or an interrupt is pending, for WFI).
+    pub slept: bool,
+    /// The event register (B1.5.18): set by exception entry and return and by SEV.
+    event: bool,
+    /// The end of the last block executed.
+    last_block_end: u64,
+    /// The encoder's count from the plant, and TIM2's offset to it.
+    enc_counts: i64,
+    enc_offset: u32,
+    /// The active exceptions, innermost last.
+    active: Vec<Active>,
+    /// Instructions in thread mode.
+    pub thread_instructions: u64,
+    /// The lowest SP seen, and where (the exceptions active then).
+    pub sp_min: u32,
+    /// The exceptions active at the lowest SP.
+    pub sp_min_context: Vec<u32>,
+    /// The stack guard's range, once the MPU is on.
+    guard: Option<(u32, u32)>,
+    /// The SP that entered the guard.
+    pub guard_hit: Option<u32>,
+    /// PRIMASK set since this many instructions, and the longest run \[instructions\].
+    primask_since: Option<u64>,
+    /// The longest time PRIMASK was held \[instructions\].
+    pub primask_max: u64,
+    /// A write to flash outside a programming sequence (address).
+    pub bad_flash_write: Option<u32>,
+    /// Stop before the next block: a pending exception may now be taken.
+    check_pending: bool,
+}
+
+impl Chip {
+    fn now(&self) -> u64 {
+        self.cycles
+    }
+
+    fn add_instructions(&mut self, n: u32) {
+        self.instructions += n as u64;
+        let c = n as f64 * self.cpi + self.cycle_frac;
+        let whole = c.floor();
+        self.cycle_frac = c - whole;
+        self.cycles += whole as u64;
+        match self.active.last_mut() {
+            Some(a) => a.instructions += n as u64,
+            None => self.thread_instructions += n as u64,
+        }
+    }
+
+    fn stop_soon(&mut self) {
+        self.next_stop = 0;
+    }
+}
+
+/// The emulated board.
+pub struct Machine {
+    uc: Unicorn<'static, Chip>,
+    board: Board,
+    image: Vec<u8>,
+    /// (address, bytes) of the image's loadable segments.
+    segments: Vec<(u64, Vec<u8>)>,
+    vector_table: u32,
+    rtt_cb: Option<u32>,
+    log: Option<rtt::Log>,
+    echo_log: bool,
+    /// The plant.
+    pub plant: Plant,
+    supply: f64,
+    last_bottom: u64,
+    /// Every exception handled, in order.
+    pub handled: Vec<Handled>,
+    /// Resets so far (watchdog or software).
+    pub resets: u32,
+    /// Log lines so far.
+    pub log_lines: Vec<rtt::Line>,
+}
+
+/// Counts Thumb-2 instructions in `code` (a 32-bit one starts with 0b11101, 0b11110 or
+/// 0b11111 in its first halfword's top bits: ARMv7-M ARM A5.1).
+pub fn thumb_instructions(code: &[u8]) -> u32 {
+    let mut i = 0;
+    let mut n = 0;
+    while i + 1 < code.len() {
+        let hw = u16::from_le_bytes([code[i], code[i + 1]]);
+        i += if hw >> 11 >= 0b11101 { 4 } else { 2 };
+        n += 1;
+    }
+    n
+}
+
+/// Whether the Thumb code `code` ends with WFE (0xBF20) or WFI (0xBF30) as its last
+/// instruction.
+pub fn ends_with_wait(code: &[u8]) -> bool {
+    let mut i = 0;
+    let mut last = None;
+    while i + 1 < code.len() {
+        let hw = u16::from_le_bytes([code[i], code[i + 1]]);
+        last = Some(hw);
+        i += if hw >> 11 >= 0b11101 { 4 } else { 2 };
+    }
+    matches!(last, Some(0xBF20) | Some(0xBF30))
+}
+
+fn err(e: uc_error) -> String {
+    format!("unicorn: {e:?}")
+}
+
+impl Machine {
+    /// Loads `elf` for `board`: its segments into flash and RAM, the plant, reset.
+    pub fn new(elf: &[u8], board: Board, opts: Options) -> Result<Machine, String> {
+        use object::{Object, ObjectSegment, ObjectSymbol};
+        let file = object::File::parse(elf).map_err(|e| format!("the image: {e}"))?;
+        let mut segments = Vec::new();
+        for seg in file.segments() {
+            let data = seg.data().map_err(|e| format!("the image: {e}"))?;
+            if data.is_empty() {
+                continue;
+            }
+            // Load at the physical address (LMA): .data's initial values sit in flash.
+            let (addr, _) = seg.file_range();
+            let _ = addr;
+            segments.push((seg.address(), data.to_vec()));
+        }
+        // Physical addresses from the program headers (object gives the virtual ones).
+        let phys = program_header_paddrs(elf)?;
+        let segments: Vec<(u64, Vec<u8>)> = segments
+            .into_iter()
+            .map(|(vaddr, data)| {
+                let p = phys
+                    .iter()
+                    .find(|(v, _)| *v == vaddr)
+                    .map(|(_, p)| *p)
+                    .unwrap_or(vaddr);
+                (p, data)
+            })
+            .collect();
+        let rtt_cb = file
+            .symbols()
+            .find(|s| s.name() == Ok("_SEGGER_RTT"))
+            .map(|s| s.address() as u32);
+        let vector_table = FLASH as u32;
+        let log = rtt::Log::new(elf)?;
+        let scenario = match opts.scenario {
+            Some(s) => s,
+            None => Scenario::parse("", "defaults").map_err(|e| e.to_string())?,
+        };
+        let plant = Plant::new(&scenario.plant, scenario.plant.seed).map_err(|e| e.to_string())?;
+
+        let chip = Chip {
+            core: CoreRegs::new(board.idcode()),
+            p: Periphs::new(board.flash_size(), HZ),
+            cycles: 0,
+            instructions: 0,
+            cycle_frac: 0.0,
+            cpi: opts.cpi,
+            next_stop: u64::MAX,
+            block_len: HashMap::new(),
+            last_block_end: 0,
+            enc_counts: plant.encoder(),
+            enc_offset: 0,
+            active: Vec::new(),
+            thread_instructions: 0,
+            sp_min: u32::MAX,
+            sp_min_context: Vec::new(),
+            guard: None,
+            guard_hit: None,
+            primask_since: None,
+            primask_max: 0,
+            bad_flash_write: None,
+            check_pending: false,
+            slept: false,
+            event: false,
+        };
+        let mut uc =
+            Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, chip).map_err(err)?;
+        uc.ctl_set_cpu_model(unicorn_engine::ArmCpuModel::CORTEX_M4 as i32)
+            .map_err(err)?;
+        uc.mem_map(FLASH, board.flash_size() as u64, Prot::READ | Prot::EXEC)
+            .map_err(err)?;
+        uc.mem_map(SRAM, SRAM_LEN, Prot::ALL).map_err(err)?;
+        if board == Board::F405 {
+            uc.mem_map(CCM, 64 * 1024, Prot::READ | Prot::WRITE)
+                .map_err(err)?;
+        }
+        // System memory and OTP: the unique ID (0x1FFF7A10) and the flash size (0x1FFF7A22).
+        uc.mem_map(SYSMEM, 0x1_0000, Prot::READ).map_err(err)?;
+        let mut sys = vec![0u8; 0x1_0000];
+        sys[0x7A10..0x7A1C].copy_from_slice(b"GMS-REHOST-1");
+        let kib = (board.flash_size() / 1024) as u16;
+        sys[0x7A22..0x7A24].copy_from_slice(&kib.to_le_bytes());
+        uc.mem_write(SYSMEM, &sys).map_err(err)?;
+        // Flash erased.
+        uc.mem_write(FLASH, &vec![0xFF; board.flash_size() as usize])
+            .map_err(err)?;
+
+        uc.mmio_map(
+            0x4000_0000,
+            0x8_0000,
+            Some(|uc: &mut Unicorn<'_, Chip>, off: u64, size: usize| {
+                periph_read(uc, 0x4000_0000 + off as u32, size) as u64
+            }),
+            Some(
+                |uc: &mut Unicorn<'_, Chip>, off: u64, size: usize, v: u64| {
+                    periph_write(uc, 0x4000_0000 + off as u32, size, v as u32)
+                },
+            ),
+        )
+        .map_err(err)?;
+        // USB OTG FS (the F405's link) reads as zero: the image's USB stays unattached.
+        uc.mmio_map(
+            0x5000_0000,
+            0x4_0000,
+            Some(|_: &mut Unicorn<'_, Chip>, _: u64, _: usize| 0u64),
+            Some(|_: &mut Unicorn<'_, Chip>, _: u64, _: usize, _: u64| {}),
+        )
+        .map_err(err)?;
+        uc.mmio_map(
+            0xE000_0000,
+            0x10_0000,
+            Some(|uc: &mut Unicorn<'_, Chip>, off: u64, _size: usize| {
+                let c = uc.get_data();
+                c.core.read(0xE000_0000 + off as u32, c.now()) as u64
+            }),
+            Some(
+                |uc: &mut Unicorn<'_, Chip>, off: u64, size: usize, v: u64| {
+                    let addr = 0xE000_0000 + off as u32;
+                    let c = uc.get_data_mut();
+                    let now = c.now();
+                    c.core.write(addr, size, v as u32, now);
+                    if (0xE000_ED94..=0xE000_EDB8).contains(&addr) {
+                        c.guard = c.core.mpu_guards().next();
+                    }
+                    if (0xE000_E100..0xE000_E500).contains(&addr)
+                        || addr == 0xE000_ED04
+                        || addr == 0xE000_ED0C
+                        || addr == 0xE000_EF00
+                    {
+                        c.stop_soon();
+                    }
+                },
+            ),
+        )
+        .map_err(err)?;
+
+        // Flash written outside programming: PGSERR (the store still lands, as unicorn's
+        // hook lets it; the firmware's driver never does it).
+        uc.add_mem_hook(
+            HookType::MEM_WRITE_PROT,
+            FLASH,
+            FLASH + board.flash_size() as u64 - 1,
+            |uc: &mut Unicorn<'_, Chip>, _t: MemType, addr: u64, _size: usize, _v: i64| {
+                let c = uc.get_data_mut();
+                if !c.p.flash.programming() {
+                    c.p.flash.bad_write();
+                    c.bad_flash_write.get_or_insert(addr as u32);
+                }
+                true
+            },
+        )
+        .map_err(err)?;
+
+        uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, Chip>, addr: u64, size: u32| {
+            let (n, sleeps) = match uc.get_data().block_len.get(&(addr, size)) {
+                Some(&v) => v,
+                None => {
+                    let mut code = vec![0u8; size as usize];
+                    let v = if uc.mem_read(addr, &mut code).is_ok() {
+                        (thumb_instructions(&code), ends_with_wait(&code))
+                    } else {
+                        (1, false)
+                    };
+                    uc.get_data_mut().block_len.insert((addr, size), v);
+                    v
+                }
+            };
+            let sp = uc.reg_read(R::SP).unwrap_or(0) as u32;
+            let primask = uc.reg_read(R::PRIMASK).unwrap_or(0) & 1 != 0;
+            let c = uc.get_data_mut();
+            c.add_instructions(n);
+            c.last_block_end = addr + size as u64;
+            if sp < c.sp_min {
+                c.sp_min = sp;
+                c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
+            }
+            match (primask, c.primask_since) {
+                (true, None) => c.primask_since = Some(c.instructions),
+                (false, Some(s)) => {
+                    c.primask_max = c.primask_max.max(c.instructions - s);
+                    c.primask_since = None;
+                }
+                _ => {}
+            }
+            let mut stop = c.cycles >= c.next_stop || c.check_pending;
+            if sleeps {
+                c.slept = true;
+                stop = true;
+            }
+            if let Some((g, len)) = c.guard
+                && sp >= g
+                && sp < g + len
+                && c.guard_hit.is_none()
+            {
+                c.guard_hit = Some(sp);
+                stop = true;
+            }
+            if stop {
+                let _ = uc.emu_stop();
+            }
+        })
+        .map_err(err)?;
+
+        let mut m = Machine {
+            uc,
+            board,
+            image: elf.to_vec(),
+            segments,
+            vector_table,
+            rtt_cb,
+            log,
+            echo_log: opts.echo_log,
+            supply: scenario.plant.supply_v,
+            plant,
+            last_bottom: 0,
+            handled: Vec::new(),
+            resets: 0,
+            log_lines: Vec::new(),
+        };
+        m.load()?;
+        m.reset_core()?;
+        Ok(m)
+    }
+
+    /// The board.
+    pub fn board(&self) -> Board {
+        self.board
+    }
+
+    /// The image's bytes.
+    pub fn image(&self) -> &[u8] {
+        &self.image
+    }
+
+    /// The exceptions active now, outermost first.
+    pub fn active_exceptions(&self) -> Vec<u32> {
+        self.chip().active.iter().map(|a| a.exc).collect()
+    }
+
+    /// The chip's state.
+    pub fn chip(&self) -> &Chip {
+        self.uc.get_data()
+    }
+
+    /// The chip's state, to change (faults, the line).
+    pub fn chip_mut(&mut self) -> &mut Chip {
+        self.uc.get_data_mut()
+    }
+
+    /// Time \[s\].
+    pub fn seconds(&self) -> f64 {
+        self.chip().cycles as f64 / HZ as f64
+    }
+
+    fn load(&mut self) -> Result<(), String> {
+        for (addr, data) in &self.segments {
+            self.uc.mem_write(*addr, data).map_err(err)?;
+        }
+        Ok(())
+    }
+
+    fn read_u32(&self, addr: u32) -> Result<u32, String> {
+        let mut b = [0u8; 4];
+        self.uc.mem_read(addr as u64, &mut b).map_err(err)?;
+        Ok(u32::from_le_bytes(b))
+    }
+
+    fn write_u32(&mut self, addr: u32, v: u32) -> Result<(), String> {
+        self.uc
+            .mem_write(addr as u64, &v.to_le_bytes())
+            .map_err(err)
+    }
+
+    /// The core from reset: SP and PC from the vector table, CONTROL, PRIMASK, BASEPRI 0.
+    fn reset_core(&mut self) -> Result<(), String> {
+        let sp = self.read_u32(self.vector_table)?;
+        let pc = self.read_u32(self.vector_table + 4)?;
+        for r in [
+            R::R0,
+            R::R1,
+            R::R2,
+            R::R3,
+            R::R4,
+            R::R5,
+            R::R6,
+            R::R7,
+            R::R8,
+            R::R9,
+            R::R10,
+            R::R11,
+            R::R12,
+        ] {
+            self.uc.reg_write(r, 0).map_err(err)?;
+        }
+        self.uc.reg_write(R::PRIMASK, 0).map_err(err)?;
+        self.uc.reg_write(R::BASEPRI, 0).map_err(err)?;
+        self.uc.reg_write(R::CONTROL, 0).map_err(err)?;
+        self.uc.reg_write(R::MSP, sp as u64).map_err(err)?;
+        self.uc.reg_write(R::SP, sp as u64).map_err(err)?;
+        self.uc.reg_write(R::LR, 0xFFFF_FFFF).map_err(err)?;
+        self.uc.reg_write(R::PC, (pc & !1) as u64).map_err(err)?;
+        let c = self.uc.get_data_mut();
+        c.active.clear();
+        c.guard = None;
+        c.primask_since = None;
+        Ok(())
+    }
+
+    /// A system reset of cause `rcc_flag` (RCC_CSR): the peripherals and the core back to
+    /// reset, RAM and flash kept, the image started again.
+    fn system_reset(&mut self, rcc_flag: u32) -> Result<(), String> {
+        let c = self.uc.get_data_mut();
+        let mut rcc = c.p.rcc.clone();
+        rcc.reset(rcc_flag);
+        let size = self.board.flash_size();
+        c.p = Periphs::new(size, HZ);
+        c.p.rcc = rcc;
+        c.core = CoreRegs::new(self.board.idcode());
+        self.resets += 1;
+        self.reset_core()
+    }
+
+    fn reg(&self, r: R) -> u32 {
+        self.uc.reg_read(r).unwrap_or(0) as u32
+    }
+
+    /// The execution priority (B1.5.4): the most urgent of the active exceptions', BASEPRI
+    /// and PRIMASK (0).
+    fn execution_priority(&self) -> i32 {
+        let c = self.chip();
+        let mut p = 256;
+        for a in &c.active {
+            p = p.min(c.core.group_priority(a.exc));
+        }
+        let basepri = self.reg(R::BASEPRI) & 0xFF;
+        if basepri != 0 {
+            p = p.min(basepri as i32);
+        }
+        if self.reg(R::PRIMASK) & 1 != 0 {
+            p = p.min(0);
+        }
+        p
+    }
+
+    /// The pending exception to take now, if any: enabled, the most urgent, above the
+    /// execution priority (ties to the lower number).
+    fn exception_to_take(&self) -> Option<u32> {
+        let c = self.chip();
+        let exec = self.execution_priority();
+        let mut best: Option<(i32, u32)> = None;
+        for n in 2..c.core.pending.len() as u32 {
+            if !c.core.pending[n as usize] {
+                continue;
+            }
+            if n >= exc::IRQ0 && !c.core.enabled[(n - exc::IRQ0) as usize] {
+                continue;
+            }
+            let p = c.core.group_priority(n);
+            if p < exec && best.is_none_or(|(bp, _)| p < bp) {
+                best = Some((p, n));
+            }
+        }
+        best.map(|(_, n)| n)
+    }
+
+    /// Whether any pending, enabled interrupt would wake a WFI (PRIMASK ignored).
+    fn wakes(&self) -> bool {
+        let c = self.chip();
+        let mut exec = 256;
+        for a in &c.active {
+            exec = exec.min(c.core.group_priority(a.exc));
+        }
+        let basepri = self.reg(R::BASEPRI) & 0xFF;
+        if basepri != 0 {
+            exec = exec.min(basepri as i32);
+        }
+        (2..c.core.pending.len() as u32).any(|n| {
+            c.core.pending[n as usize]
+                && (n < exc::IRQ0 || c.core.enabled[(n - exc::IRQ0) as usize])
+                && c.core.group_priority(n) < exec
+        })
+    }
+
+    /// Enters exception `n` at the current instruction boundary (`ret` the return address).
+    fn enter(&mut self, n: u32, ret: u32) -> Result<(), String> {
+        let control = self.reg(R::CONTROL);
+        let fpca = control & 4 != 0;
+        let sp = self.reg(R::SP);
+        let frame: u32 = if fpca { 0x68 } else { 0x20 };
+        let realign = (sp - frame) & 4 != 0;
+        let new_sp = (sp - frame) & !7;
+        let xpsr = self.reg(R::XPSR);
+        let regs = [
+            self.reg(R::R0),
+            self.reg(R::R1),
+            self.reg(R::R2),
+            self.reg(R::R3),
+            self.reg(R::R12),
+            self.reg(R::LR),
+            ret,
+            (xpsr & !0x1FF & !(1 << 9)) | if realign { 1 << 9 } else { 0 } | (1 << 24),
+        ];
+        let mut bytes = Vec::with_capacity(frame as usize);
+        for r in regs {
+            bytes.extend_from_slice(&r.to_le_bytes());
+        }
+        if fpca {
+            for k in 0..16 {
+                let s = self.uc.reg_read(reg_s(k)).map_err(err)? as u32;
+                bytes.extend_from_slice(&s.to_le_bytes());
+            }
+            let fpscr = self.reg(R::FPSCR);
+            bytes.extend_from_slice(&fpscr.to_le_bytes());
+            bytes.extend_from_slice(&0u32.to_le_bytes());
+        }
+        let c = self.uc.get_data();
+        // A frame pushed into the guard: MemManage (MSTKERR) instead.
+        let into_guard = c
+            .guard
+            .is_some_and(|(g, len)| new_sp < g + len && new_sp + frame > g);
+        let to_thread = c.active.is_empty();
+        if into_guard {
+            let c = self.uc.get_data_mut();
+            c.guard_hit.get_or_insert(new_sp);
+            c.core.cfsr |= 1 << 4; // MSTKERR
+        }
+        if self.uc.mem_write(new_sp as u64, &bytes).is_err() {
+            return Err(format!(
+                "exception {n}: stacking at {new_sp:#010x} outside RAM (SP {sp:#010x})"
+            ));
+        }
+        let exc_return: u32 =
+            0xFFFF_FFE1 | if fpca { 0 } else { 0x10 } | if to_thread { 8 } else { 0 };
+        // VTOR 0 at reset: the boot alias of flash at 0 (BOOT0 low, RM0090 §2.4).
+        let vtor = self.chip().core.vtor;
+        let vtor = if vtor < FLASH as u32 {
+            vtor + FLASH as u32
+        } else {
+            vtor
+        };
+        let handler = self.read_u32(vtor + 4 * n)?;
+        self.uc.reg_write(R::SP, new_sp as u64).map_err(err)?;
+        self.uc.reg_write(R::LR, exc_return as u64).map_err(err)?;
+        // Clear the IT bits, keep the flags; T set.
+        self.uc
+            .reg_write(R::XPSR, ((xpsr & 0xF80F_0000) | (1 << 24)) as u64)
+            .map_err(err)?;
+        if fpca {
+            self.uc
+                .reg_write(R::CONTROL, (control & !4) as u64)
+                .map_err(err)?;
+        }
+        self.uc
+            .reg_write(R::PC, (handler & !1) as u64)
+            .map_err(err)?;
+        let c = self.uc.get_data_mut();
+        c.core.pending[n as usize] = false;
+        let at = c.cycles;
+        c.active.push(Active {
+            exc: n,
+            instructions: 0,
+            at,
+        });
+        c.core.vect_active = n;
+        c.event = true;
+        // Exception entry: 12 cycles (PM0214 §2.3.7), 29 with the FP frame... counted as
+        // instructions' time.
+        c.cycles += if fpca { 29 } else { 12 };
+        Ok(())
+    }
+
+    /// Returns from the active exception with `exc_return` (B1.5.8).
+    fn exception_return(&mut self, exc_return: u32) -> Result<(), String> {
+        let Some(done) = self.uc.get_data_mut().active.pop() else {
+            return Err(format!(
+                "exception return ({exc_return:#010x}) with no exception active"
+            ));
+        };
+        let fp = exc_return & 0x10 == 0;
+        let sp = self.reg(R::SP);
+        let frame: u32 = if fp { 0x68 } else { 0x20 };
+        let mut bytes = vec![0u8; frame as usize];
+        self.uc.mem_read(sp as u64, &mut bytes).map_err(err)?;
+        let w = |k: usize| u32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap());
+        for (k, r) in [R::R0, R::R1, R::R2, R::R3, R::R12, R::LR]
+            .into_iter()
+            .enumerate()
+        {
+            self.uc.reg_write(r, w(k) as u64).map_err(err)?;
+        }
+        let pc = w(6);
+        let xpsr = w(7);
+        if fp {
+            for k in 0..16 {
+                self.uc.reg_write(reg_s(k), w(8 + k) as u64).map_err(err)?;
+            }
+            self.uc.reg_write(R::FPSCR, w(24) as u64).map_err(err)?;
+        }
+        let control = self.reg(R::CONTROL);
+        let control = if fp { control | 4 } else { control & !4 };
+        self.uc.reg_write(R::CONTROL, control as u64).map_err(err)?;
+        let new_sp = sp + frame + if xpsr & (1 << 9) != 0 { 4 } else { 0 };
+        self.uc.reg_write(R::SP, new_sp as u64).map_err(err)?;
+        self.uc
+            .reg_write(R::XPSR, ((xpsr & !0x1FF & !(1 << 9)) | (1 << 24)) as u64)
+            .map_err(err)?;
+        self.uc.reg_write(R::PC, (pc & !1) as u64).map_err(err)?;
+        let c = self.uc.get_data_mut();
+        c.core.vect_active = c.active.last().map_or(0, |a| a.exc);
+        c.event = true;
+        c.cycles += 10;
+        self.handled.push(Handled {
+            exc: done.exc,
+            instructions: done.instructions,
+            at: done.at,
+        });
+        Ok(())
+    }
+
+    /// A synchronous fault at `pc`: MemManage/BusFault/UsageFault when enabled and above
+    /// the execution priority, else HardFault (escalation, B1.5.5); a HardFault that cannot
+    /// be taken is a lockup.
+    fn fault(&mut self, kind: u32, pc: u32, why: &str) -> Result<(), Stop> {
+        let exec = self.execution_priority();
+        let c = self.chip();
+        let n = if c.core.fault_enabled(kind) && c.core.group_priority(kind) < exec {
+            kind
+        } else {
+            exc::HARD_FAULT
+        };
+        if n == exc::HARD_FAULT {
+            if exec <= -1 {
+                return Err(Stop::Lockup(format!("lockup at {pc:#010x}: {why}")));
+            }
+            self.chip_mut().core.hfsr |= 1 << 30; // FORCED
+        }
+        self.enter(n, pc).map_err(Stop::Lockup)
+    }
+
+    /// Runs until `until` \[cycles\] or a lockup; `each` is called at every stop of the
+    /// engine (a point to exchange data with the host).
+    pub fn run_until(&mut self, until: u64) -> Result<(), Stop> {
+        while self.chip().cycles < until {
+            self.step_once(until)?;
+        }
+        Ok(())
+    }
+
+    /// Runs for `seconds` of device time.
+    pub fn run_for(&mut self, seconds: f64) -> Result<(), Stop> {
+        let until = self.chip().cycles + (seconds * HZ as f64) as u64;
+        self.run_until(until)
+    }
+
+    /// One stretch of the engine: exceptions taken, the engine run to the next event, the
+    /// events fired.
+    fn step_once(&mut self, until: u64) -> Result<(), Stop> {
+        self.raise_lines();
+        if let Some(n) = self.exception_to_take() {
+            let pc = self.reg(R::PC);
+            self.enter(n, pc).map_err(Stop::Lockup)?;
+        }
+        let next = self.next_event().min(until);
+        let c = self.uc.get_data_mut();
+        c.next_stop = next;
+        c.check_pending = false;
+        let pc = self.reg(R::PC);
+        let r = self.uc.emu_start((pc | 1) as u64, 0, 0, 0);
+        let pc = self.reg(R::PC);
+        match r {
+            Ok(()) => {
+                // WFE/WFI: sleep to the next event unless the event register is set (WFE) or
+                // something already wakes the core.
+                if std::mem::take(&mut self.uc.get_data_mut().slept) {
+                    let event = std::mem::take(&mut self.uc.get_data_mut().event);
+                    self.raise_lines();
+                    if !event && !self.wakes() {
+                        self.fire_events();
+                        let t = self.next_event().min(until);
+                        let c = self.uc.get_data_mut();
+                        if t > c.cycles {
+                            c.cycles = t;
+                        }
+                    }
+                }
+            }
+            Err(uc_error::FETCH_UNMAPPED) if pc >= 0xFFFF_FF00 => {
+                self.exception_return(pc | 1).map_err(Stop::Lockup)?;
+            }
+            Err(e) => {
+                let kind = match e {
+                    uc_error::READ_UNMAPPED
+                    | uc_error::WRITE_UNMAPPED
+                    | uc_error::FETCH_UNMAPPED => exc::BUS_FAULT,
+                    _ => exc::USAGE_FAULT,
+                };
+                let why = format!("{e:?} at pc {pc:#010x}");
+                self.fault(kind, pc, &why)?;
+            }
+        }
+        if let Some(sp) = self.chip().guard_hit
+            && !self
+                .chip()
+                .active
+                .iter()
+                .any(|a| a.exc == exc::MEM_MANAGE || a.exc == exc::HARD_FAULT)
+            && self.chip().core.cfsr & 0x80 == 0
+        {
+            // The stack entered the guard: MemManage, data access violation at SP.
+            let c = self.chip_mut();
+            c.core.cfsr |= 0x82; // MMARVALID | DACCVIOL
+            c.core.mmfar = sp;
+            let pc = self.reg(R::PC);
+            self.fault(exc::MEM_MANAGE, pc, "the stack entered the MPU guard")?;
+        }
+        self.fire_events();
+        self.read_log();
+        let c = self.chip();
+        if c.core.reset_requested {
+            self.system_reset(crate::periph::clock::CSR_SFTRSTF)
+                .map_err(Stop::Lockup)?;
+        }
+        if let Some(t) = self.chip().p.iwdg.expires
+            && self.chip().cycles >= t
+        {
+            self.system_reset(crate::periph::clock::CSR_IWDGRSTF)
+                .map_err(Stop::Lockup)?;
+        }
+        Ok(())
+    }
+
+    /// The peripherals' asserted lines made pending (level-sensitive: pending again after
+    /// the handler returns while the line is still high), unless the exception is active.
+    fn raise_lines(&mut self) {
+        let lines = self.chip().p.irq_lines();
+        let c = self.chip_mut();
+        for l in lines {
+            let n = exc::IRQ0 + l as u32;
+            if !c.active.iter().any(|a| a.exc == n) {
+                c.core.set_irq_pending(l);
+            }
+        }
+    }
+
+    /// The next peripheral event \[cycles\].
+    fn next_event(&self) -> u64 {
+        let p = &self.chip().p;
+        [
+            p.tim8.next_event(),
+            p.tim4.next_event(),
+            p.adc.next_event(),
+            p.usart2.next_event(),
+            p.iwdg.expires,
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(u64::MAX)
+    }
+
+    /// Fires every peripheral event due by now, in time order.
+    fn fire_events(&mut self) {
+        loop {
+            let now = self.chip().cycles;
+            let p = &self.chip().p;
+            let cands = [
+                (0, p.tim8.next_event()),
+                (1, p.tim4.next_event()),
+                (2, p.adc.next_event()),
+                (3, p.usart2.next_event()),
+            ];
+            let Some((which, t)) = cands
+                .into_iter()
+                .filter_map(|(w, t)| t.map(|t| (w, t)))
+                .filter(|&(_, t)| t <= now)
+                .min_by_key(|&(_, t)| t)
+            else {
+                break;
+            };
+            match which {
+                0 => self.fire_tim8(t),
+                1 => {
+                    let c = self.chip_mut();
+                    c.p.tim4.fire(t);
+                    c.p.tim4.take_events();
+                }
+                2 => self.fire_adc(t),
+                _ => self.fire_usart(t),
+            }
+        }
+        // A DMA transmit waiting for the line.
+        self.kick_tx();
+    }
+
+    fn fire_tim8(&mut self, t: u64) {
+        let c = self.chip_mut();
+        c.p.tim8.fire(t);
+        let events = c.p.tim8.take_events();
+        for e in events {
+            match e {
+                tim::Event::Update { bottom: true } => self.plant_period(t),
+                tim::Event::Trigger => {
+                    let c = self.chip_mut();
+                    if c.p.adc.on_tim8_trgo() {
+                        c.p.adc.trigger(t);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// The plant over the PWM period that ended at `t`, at the bridge's voltage.
+    fn plant_period(&mut self, t: u64) {
+        let dt = (t - self.last_bottom) as f64 / HZ as f64;
+        self.last_bottom = t;
+        let duty = self.bridge_duty();
+        self.plant.voltage = duty * self.supply;
+        if dt > 0.0 && dt < 0.01 {
+            let n = 10;
+            for _ in 0..n {
+                self.plant.step(dt / n as f64);
+            }
+        }
+        let counts = self.plant.encoder();
+        self.chip_mut().enc_counts = counts;
+    }
+
+    /// The bridge's mean duty over a period \[−1, 1\]: IN1's high fraction minus IN2's
+    /// (PWM mode 1, centre-aligned: high while CNT < CCR), 0 when the outputs are off (MOE
+    /// clear, or the pins taken from the timer as GPIO outputs).
+    pub fn bridge_duty(&self) -> f64 {
+        let p = &self.chip().p;
+        let moe = p.tim8.reg(0x44 / 4) & (1 << 15) != 0;
+        let moder = p.plain.get(&base::GPIOC).copied().unwrap_or(0);
+        let af = (moder >> 12) & 3 == 2 && (moder >> 14) & 3 == 2;
+        if !moe || !af {
+            return 0.0;
+        }
+        let arr = p.tim8.arr().max(1) as f64;
+        let f = |c: u32| (c as f64).min(arr) / arr;
+        f(p.tim8.ccr(0)) - f(p.tim8.ccr(1))
+    }
+
+    /// Whether the bridge drives (MOE set and both pins on the timer).
+    pub fn bridge_on(&self) -> bool {
+        let p = &self.chip().p;
+        let moe = p.tim8.reg(0x44 / 4) & (1 << 15) != 0;
+        let moder = p.plain.get(&base::GPIOC).copied().unwrap_or(0);
+        moe && (moder >> 12) & 3 == 2 && (moder >> 14) & 3 == 2
+    }
+
+    fn fire_adc(&mut self, t: u64) {
+        // The current at the sampling instant through the board's sense chain: 3.4 V/A
+        // around 1.65 V, 4095 codes over 3.3 V (power_stage.rs).
+        let amps = self.plant.adc() as f64;
+        let code = (2048.0 + amps * 3.4 * 4095.0 / 3.3)
+            .round()
+            .clamp(0.0, 4095.0) as u32;
+        let c = self.chip_mut();
+        if c.p.adc.take_conversion(t, code) {
+            // DMA2 stream 0, channel 0 (ADC1): a halfword into memory.
+            if let Some(addr) = c.p.dma2.next_address(0) {
+                let v = c.p.adc.dma_read();
+                let size = c.p.dma2.streams[0].msize() as usize;
+                let bytes = v.to_le_bytes();
+                if self.uc.mem_write(addr as u64, &bytes[..size]).is_ok() {
+                    self.chip_mut().p.dma2.transferred(0);
+                } else {
+                    self.chip_mut().p.dma2.error(0);
+                }
+            }
+        }
+    }
+
+    fn fire_usart(&mut self, t: u64) {
+        let c = self.chip_mut();
+        match c.p.usart2.fire(t) {
+            usart::LineEvent::Received(b) => {
+                if c.p.usart2.dma_rx() {
+                    if let Some(addr) = c.p.dma1.next_address(5) {
+                        if self.uc.mem_write(addr as u64, &[b]).is_ok() {
+                            self.chip_mut().p.dma1.transferred(5);
+                        } else {
+                            self.chip_mut().p.dma1.error(5);
+                        }
+                    } else {
+                        // Nobody took it: an overrun.
+                        self.chip_mut().p.usart2.write(0, !0, t);
+                    }
+                }
+                let c = self.chip_mut();
+                c.p.usart2.poll_host(t);
+            }
+            usart::LineEvent::TxFree => self.kick_tx(),
+            usart::LineEvent::None => {}
+        }
+    }
+
+    /// The DMA gives the transmitter its next byte when the line is free.
+    fn kick_tx(&mut self) {
+        let c = self.chip();
+        if !c.p.usart2.dma_tx() || !c.p.usart2.tx_free() {
+            return;
+        }
+        let Some(addr) = c.p.dma1.next_address(6) else {
+            return;
+        };
+        let mut b = [0u8; 1];
+        if self.uc.mem_read(addr as u64, &mut b).is_err() {
+            self.chip_mut().p.dma1.error(6);
+            return;
+        }
+        let c = self.chip_mut();
+        let now = c.cycles;
+        c.p.usart2.send(b[0], now);
+        c.p.dma1.transferred(6);
+    }
+
+    /// Reads the RTT channel as a probe would and decodes the new lines.
+    fn read_log(&mut self) {
+        let (Some(cb), Some(_)) = (self.rtt_cb, self.log.as_ref()) else {
+            return;
+        };
+        let ch = rtt::Channel::up0(cb);
+        let (Ok(buf), Ok(size), Ok(wr), Ok(rd)) = (
+            self.read_u32(ch.buffer),
+            self.read_u32(ch.size),
+            self.read_u32(ch.write),
+            self.read_u32(ch.read),
+        ) else {
+            return;
+        };
+        if size == 0 || wr == rd || wr >= size || rd >= size {
+            return;
+        }
+        let mut bytes = Vec::new();
+        let mut r = rd;
+        while r != wr {
+            let end = if wr > r { wr } else { size };
+            let mut chunk = vec![0u8; (end - r) as usize];
+            if self.uc.mem_read((buf + r) as u64, &mut chunk).is_err() {
+                return;
+            }
+            bytes.extend_from_slice(&chunk);
+            r = if end == size { 0 } else { end };
+        }
+        let _ = self.write_u32(ch.read, wr);
+        let t = self.seconds();
+        if let Some(log) = self.log.as_mut() {
+            for line in log.feed(&bytes) {
+                if self.echo_log {
+                    eprintln!("{t:10.6} {line}");
+                }
+                self.log_lines.push(line);
+            }
+        }
+    }
+
+    /// Bytes for the image's link (USART2's receive line).
+    pub fn send_to_image(&mut self, bytes: &[u8]) {
+        let c = self.chip_mut();
+        c.p.usart2.from_host.extend(bytes);
+        let now = c.cycles;
+        c.p.usart2.poll_host(now);
+    }
+
+    /// Bytes the image sent on its link since the last call.
+    pub fn take_from_image(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.chip_mut().p.usart2.to_host)
+    }
+
+    /// Whether a log line containing `text` has come.
+    pub fn logged(&self, text: &str) -> bool {
+        self.log_lines.iter().any(|l| l.text.contains(text))
+    }
+
+    /// The deepest stack so far \[bytes\] below the top of RAM.
+    pub fn stack_depth(&self) -> u32 {
+        let top = self.read_u32(self.vector_table).unwrap_or(0);
+        top.saturating_sub(self.chip().sp_min)
+    }
+}
+
+fn reg_s(k: usize) -> R {
+    const S: [R; 16] = [
+        R::S0,
+        R::S1,
+        R::S2,
+        R::S3,
+        R::S4,
+        R::S5,
+        R::S6,
+        R::S7,
+        R::S8,
+        R::S9,
+        R::S10,
+        R::S11,
+        R::S12,
+        R::S13,
+        R::S14,
+        R::S15,
+    ];
+    S[k]
+}
+
+/// The physical (load) address of each loadable segment, by its virtual address, from the
+/// ELF32 program headers.
+fn program_header_paddrs(elf: &[u8]) -> Result<Vec<(u64, u64)>, String> {
+    let u16_at = |o: usize| elf.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+    let u32_at = |o: usize| {
+        elf.get(o..o + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let bad = || "the image: not a little-endian ELF32".to_string();
+    if elf.get(0..6) != Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]) {
+        return Err(bad());
+    }
+    let phoff = u32_at(0x1C).ok_or_else(bad)? as usize;
+    let phentsize = u16_at(0x2A).ok_or_else(bad)? as usize;
+    let phnum = u16_at(0x2C).ok_or_else(bad)? as usize;
+    let mut out = Vec::new();
+    for k in 0..phnum {
+        let h = phoff + k * phentsize;
+        let (Some(ptype), Some(vaddr), Some(paddr)) = (u32_at(h), u32_at(h + 8), u32_at(h + 12))
+        else {
+            return Err(bad());
+        };
+        if ptype == 1 {
+            out.push((vaddr as u64, paddr as u64));
+        }
+    }
+    Ok(out)
+}
+
+/// A read of the peripheral space.
+fn periph_read(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize) -> u32 {
+    let c = uc.get_data_mut();
+    let now = c.cycles;
+    let word = addr & !3;
+    let off = |b: u32| word - b;
+    let v = match word {
+        a if (base::TIM2..base::TIM2 + 0x400).contains(&a) => {
+            if off(base::TIM2) == 0x24 {
+                (c.enc_counts as u32).wrapping_add(c.enc_offset)
+            } else {
+                c.p.tim2.read(off(base::TIM2), now)
+            }
+        }
+        a if (base::TIM4..base::TIM4 + 0x400).contains(&a) => c.p.tim4.read(off(base::TIM4), now),
+        a if (base::USART2..base::USART2 + 0x400).contains(&a) => {
+            c.p.usart2.read(off(base::USART2))
+        }
+        a if (base::IWDG..base::IWDG + 0x400).contains(&a) => c.p.iwdg.read(off(base::IWDG)),
+        a if (base::PWR..base::PWR + 0x400).contains(&a) => c.p.pwr.read(off(base::PWR)),
+        a if (base::TIM8..base::TIM8 + 0x400).contains(&a) => c.p.tim8.read(off(base::TIM8), now),
+        a if (base::ADC1..base::ADC1 + 0x400).contains(&a) => c.p.adc.read(off(base::ADC1)),
+        a if (base::RCC..base::RCC + 0x400).contains(&a) => c.p.rcc.read(off(base::RCC)),
+        a if (base::FLASH..base::FLASH + 0x400).contains(&a) => c.p.flash.read(off(base::FLASH)),
+        a if (base::DMA1..base::DMA1 + 0x400).contains(&a) => c.p.dma1.read(off(base::DMA1)),
+        a if (base::DMA2..base::DMA2 + 0x400).contains(&a) => c.p.dma2.read(off(base::DMA2)),
+        _ => c.p.plain.get(&word).copied().unwrap_or(0),
+    };
+    let shift = (addr & 3) * 8;
+    let v = v >> shift;
+    match size {
+        1 => v & 0xFF,
+        2 => v & 0xFFFF,
+        _ => v,
+    }
+}
+
+/// A write to the peripheral space.
+fn periph_write(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize, value: u32) {
+    let word = addr & !3;
+    let shift = (addr & 3) * 8;
+    // Sub-word writes merge into the register's current value (the F4's peripherals take
+    // byte and halfword writes on most registers).
+    let value = if size < 4 {
+        let old = periph_read(uc, word, 4);
+        let mask = if size == 1 { 0xFF } else { 0xFFFF } << shift;
+        (old & !mask) | ((value << shift) & mask)
+    } else {
+        value
+    };
+    let mut erase = None;
+    {
+        let c = uc.get_data_mut();
+        let now = c.cycles;
+        let off = |b: u32| word - b;
+        let mut stop = false;
+        match word {
+            a if (base::TIM2..base::TIM2 + 0x400).contains(&a) => {
+                if off(base::TIM2) == 0x24 {
+                    c.enc_offset = value.wrapping_sub(c.enc_counts as u32);
+                } else {
+                    c.p.tim2.write(off(base::TIM2), value, now);
+                }
+            }
+            a if (base::TIM4..base::TIM4 + 0x400).contains(&a) => {
+                c.p.tim4.write(off(base::TIM4), value, now);
+                stop = true;
+            }
+            a if (base::USART2..base::USART2 + 0x400).contains(&a) => {
+                c.p.usart2.write(off(base::USART2), value, now);
+                stop = true;
+            }
+            a if (base::IWDG..base::IWDG + 0x400).contains(&a) => {
+                c.p.iwdg.write(off(base::IWDG), value, now)
+            }
+            a if (base::PWR..base::PWR + 0x400).contains(&a) => {
+                c.p.pwr.write(off(base::PWR), value)
+            }
+            a if (base::TIM8..base::TIM8 + 0x400).contains(&a) => {
+                let o = off(base::TIM8);
+                c.p.tim8.write(o, value, now);
+                // The compare values need no stop; the counter's set-up does.
+                stop = !(0x34..=0x40).contains(&o);
+            }
+            a if (base::ADC1..base::ADC1 + 0x400).contains(&a) => {
+                c.p.adc.write(off(base::ADC1), value, now);
+                stop = true;
+            }
+            a if (base::RCC..base::RCC + 0x400).contains(&a) => {
+                c.p.rcc.write(off(base::RCC), value)
+            }
+            a if (base::FLASH..base::FLASH + 0x400).contains(&a) => {
+                erase = c.p.flash.write(off(base::FLASH), value);
+            }
+            a if (base::DMA1..base::DMA1 + 0x400).contains(&a) => {
+                c.p.dma1.write(off(base::DMA1), value);
+                stop = true;
+            }
+            a if (base::DMA2..base::DMA2 + 0x400).contains(&a) => {
+                c.p.dma2.write(off(base::DMA2), value);
+                stop = true;
+            }
+            _ => {
+                c.p.plain.insert(word, value);
+            }
+        }
+        if stop {
+            c.stop_soon();
+        }
+    }
+    if let Some(e) = erase {
+        let _ = uc.mem_write(e.addr as u64, &vec![0xFF; e.len as usize]);
+    }
+    let _ = irq::ADC;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thumb_instruction_lengths_follow_the_first_halfword() {
+        // movs r0, #1 (16-bit); bl (32-bit: 0xF000 0xF800); bx lr (16-bit).
+        let code = [0x01, 0x20, 0x00, 0xF0, 0x00, 0xF8, 0x70, 0x47];
+        assert_eq!(thumb_instructions(&code), 3);
+        // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
+        assert_eq!(thumb_instructions(&[0xD1, 0xF8, 0x00, 0x00]), 1);
+    }
+}

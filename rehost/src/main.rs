@@ -1,0 +1,106 @@
+//! `rehost`: the shipped firmware image on an emulated STM32F4 (see the crate's docs).
+//!
+//! - `rehost boot ELF --board nucleo-f446 --seconds 1`: runs the image from reset and prints
+//!   its decoded log and the figures of the run.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use rehost::{Board, Machine, Options};
+
+#[derive(Parser)]
+#[command(about = "The firmware image on an emulated STM32F4, its loop closed on hil-sim's plant")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Runs the image from reset for a while and prints its log and figures.
+    Boot {
+        /// The firmware ELF (`cargo fw-f446` builds target/thumbv7em-none-eabihf/release/firmware).
+        elf: std::path::PathBuf,
+        /// The board it was built for: nucleo-f446 or f405.
+        #[arg(long, default_value = "nucleo-f446")]
+        board: String,
+        /// Device time to run \[s\].
+        #[arg(long, default_value_t = 0.5)]
+        seconds: f64,
+        /// Cycles per instruction (the time model).
+        #[arg(long, default_value_t = 1.5)]
+        cpi: f64,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("rehost: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.cmd {
+        Cmd::Boot {
+            elf,
+            board,
+            seconds,
+            cpi,
+        } => {
+            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+            let board = Board::parse(&board)?;
+            let mut m = Machine::new(
+                &image,
+                board,
+                Options {
+                    cpi,
+                    echo_log: true,
+                    ..Options::default()
+                },
+            )?;
+            let wall = std::time::Instant::now();
+            let r = m.run_for(seconds);
+            let w = wall.elapsed().as_secs_f64();
+            let c = m.chip();
+            println!(
+                "ran {:.3} s of device time in {:.2} s ({:.1} M instructions, {:.1} M/s); resets {}",
+                m.seconds(),
+                w,
+                c.instructions as f64 / 1e6,
+                c.instructions as f64 / 1e6 / w,
+                m.resets
+            );
+            println!(
+                "deepest stack {} B (exceptions active there: {:?}); guard hit at {:?}; CFSR {:#x}; active now {:?}",
+                m.stack_depth(),
+                c.sp_min_context,
+                c.guard_hit,
+                c.core.cfsr,
+                m.active_exceptions()
+            );
+            let mut by: std::collections::BTreeMap<u32, (u64, u64, u64)> = Default::default();
+            for h in &m.handled {
+                let e = by.entry(h.exc).or_insert((0, 0, 0));
+                e.0 += 1;
+                e.1 += h.instructions;
+                e.2 = e.2.max(h.instructions);
+            }
+            for (exc, (n, sum, max)) in by {
+                println!(
+                    "exception {exc:3}: {n:7} times, {:8.1} instructions mean, {max:6} max",
+                    sum as f64 / n as f64
+                );
+            }
+            println!("PRIMASK held at most {} instructions", c.primask_max);
+            if let Err(e) = r {
+                return Err(format!("{e:?}"));
+            }
+            Ok(())
+        }
+    }
+}

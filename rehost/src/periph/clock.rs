@@ -1,0 +1,171 @@
+//! RCC, PWR and the flash interface's access control as far as the clock set-up needs them:
+//! the ready flags follow their enables, the system clock switch status follows the switch
+//! (RM0090 §7.3.1-7.3.3, RM0390 §6.3.1-6.3.3; PWR: RM0090 §5.4, RM0390 §5.4 for the F446's
+//! over-drive), the reset flags in RCC_CSR.
+
+/// The RCC's registers (offsets from 0x40023800).
+#[derive(Debug, Clone)]
+pub struct Rcc {
+    regs: [u32; 0x90 / 4],
+}
+
+/// RCC_CSR.IWDGRSTF (RM0090 §7.3.21).
+pub const CSR_IWDGRSTF: u32 = 1 << 29;
+/// RCC_CSR.PORRSTF.
+pub const CSR_PORRSTF: u32 = 1 << 27;
+/// RCC_CSR.PINRSTF.
+pub const CSR_PINRSTF: u32 = 1 << 26;
+/// RCC_CSR.SFTRSTF.
+pub const CSR_SFTRSTF: u32 = 1 << 28;
+
+impl Rcc {
+    /// The registers at a power-on reset (CR: HSION, HSIRDY; CSR: PORRSTF, PINRSTF).
+    pub fn new() -> Rcc {
+        let mut regs = [0; 0x90 / 4];
+        regs[0] = 0x0000_0083;
+        regs[1] = 0x2400_3010; // PLLCFGR (0x04)
+        regs[0x74 / 4] = CSR_PORRSTF | CSR_PINRSTF;
+        Rcc { regs }
+    }
+
+    /// The state after a system reset of cause `flag` (RCC_CSR's flags are kept until RMVF;
+    /// the other registers go back to their reset values).
+    pub fn reset(&mut self, flag: u32) {
+        let csr = self.regs[0x74 / 4] | flag | CSR_PINRSTF;
+        *self = Rcc::new();
+        self.regs[0x74 / 4] = csr;
+    }
+
+    /// Reads the register at `off`.
+    pub fn read(&self, off: u32) -> u32 {
+        self.regs.get(off as usize / 4).copied().unwrap_or(0)
+    }
+
+    /// Writes the register at `off`.
+    pub fn write(&mut self, off: u32, value: u32) {
+        match off {
+            // CR: HSIRDY (1) follows HSION (0), HSERDY (17) HSEON (16), PLLRDY (25) PLLON (24),
+            // PLLI2SRDY (27) PLLI2SON (26), PLLSAIRDY (29) PLLSAION (28).
+            0x00 => {
+                let mut v = value
+                    & 0x15FF_FFF9
+                    & !((1 << 1) | (1 << 17) | (1 << 25) | (1 << 27) | (1 << 29));
+                for (on, rdy) in [(0, 1), (16, 17), (24, 25), (26, 27), (28, 29)] {
+                    if value & (1 << on) != 0 {
+                        v |= 1 << rdy;
+                    }
+                }
+                // HSEBYP (18) and CSSON (19) kept as written.
+                v |= value & ((1 << 18) | (1 << 19));
+                self.regs[0] = v;
+            }
+            // CFGR: SWS (bits 3:2) follows SW (bits 1:0).
+            0x08 => self.regs[2] = (value & !0xC) | ((value & 3) << 2),
+            // CIR: the ready-interrupt flags are cleared by their clear bits; the CSS flag too.
+            0x0C => self.regs[3] = value & 0x0000_FF00,
+            // CSR: RMVF (24) clears the reset flags; LSIRDY (1) follows LSION (0).
+            0x74 => {
+                let flags = if value & (1 << 24) != 0 {
+                    0
+                } else {
+                    self.regs[0x74 / 4] & 0xFE00_0000
+                };
+                let lsi = if value & 1 != 0 { 3 } else { 0 };
+                self.regs[0x74 / 4] = flags | lsi;
+            }
+            // BDCR: LSERDY (1) follows LSEON (0).
+            0x70 => self.regs[0x70 / 4] = value | ((value & 1) << 1),
+            _ => {
+                if let Some(r) = self.regs.get_mut(off as usize / 4) {
+                    *r = value;
+                }
+            }
+        }
+    }
+
+    /// RCC_CSR (the reset flags).
+    pub fn csr(&self) -> u32 {
+        self.regs[0x74 / 4]
+    }
+}
+
+impl Default for Rcc {
+    fn default() -> Self {
+        Rcc::new()
+    }
+}
+
+/// PWR (offsets from 0x40007000): CR and CSR; VOSRDY set, and on the F446 ODRDY following ODEN
+/// and ODSWRDY following ODSWEN (RM0390 §5.4.1-5.4.2).
+#[derive(Debug, Clone, Default)]
+pub struct Pwr {
+    cr: u32,
+}
+
+impl Pwr {
+    /// Reads CR (0) or CSR (4).
+    pub fn read(&self, off: u32) -> u32 {
+        match off {
+            0 => self.cr,
+            4 => {
+                let mut csr = 1 << 14; // VOSRDY
+                if self.cr & (1 << 16) != 0 {
+                    csr |= 1 << 16; // ODRDY
+                }
+                if self.cr & (1 << 17) != 0 {
+                    csr |= 1 << 17; // ODSWRDY
+                }
+                csr
+            }
+            _ => 0,
+        }
+    }
+
+    /// Writes CR (0); CSR's writable bits are not used by the firmware.
+    pub fn write(&mut self, off: u32, value: u32) {
+        if off == 0 {
+            self.cr = value;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ready_flags_follow_their_enables_and_sws_follows_sw() {
+        let mut r = Rcc::new();
+        assert_eq!(r.read(0) & 3, 3, "HSION and HSIRDY at reset");
+        r.write(0, 0x83 | (1 << 16) | (1 << 18));
+        assert_ne!(r.read(0) & (1 << 17), 0, "HSERDY");
+        assert_ne!(r.read(0) & (1 << 18), 0, "HSEBYP kept");
+        r.write(0, r.read(0) | (1 << 24));
+        assert_ne!(r.read(0) & (1 << 25), 0, "PLLRDY");
+        r.write(0, r.read(0) & !(1 << 16));
+        assert_eq!(r.read(0) & (1 << 17), 0, "HSERDY off with HSEON");
+        r.write(8, 2);
+        assert_eq!((r.read(8) >> 2) & 3, 2, "SWS = PLL");
+    }
+
+    #[test]
+    fn reset_flags_are_kept_across_a_reset_until_rmvf() {
+        let mut r = Rcc::new();
+        r.write(0x74, 1 << 24);
+        assert_eq!(r.csr() & 0xFE00_0000, 0);
+        r.reset(CSR_IWDGRSTF);
+        assert_ne!(r.csr() & CSR_IWDGRSTF, 0);
+        r.write(0x74, 1 << 24);
+        assert_eq!(r.csr() & CSR_IWDGRSTF, 0);
+    }
+
+    #[test]
+    fn pwr_over_drive_flags_follow_their_enables() {
+        let mut p = Pwr::default();
+        assert_eq!(p.read(4), 1 << 14);
+        p.write(0, 1 << 16);
+        assert_eq!(p.read(4), (1 << 14) | (1 << 16));
+        p.write(0, (1 << 16) | (1 << 17));
+        assert_eq!(p.read(4), (1 << 14) | (1 << 16) | (1 << 17));
+    }
+}
