@@ -93,7 +93,7 @@ pub const DTR_POLL_MS: u64 = 50;
 const REPLY: usize = 4096;
 
 /// Serves the protocol to one host after another, forever.
-pub async fn serve<P: Port>(mut port: P, mut dev: Dev, mut telemetry: TelemetryRx) -> ! {
+pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, mut telemetry: TelemetryRx) -> ! {
     let mut reply = Buf::<REPLY>::new();
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];
@@ -132,7 +132,7 @@ pub async fn serve<P: Port>(mut port: P, mut dev: Dev, mut telemetry: TelemetryR
                         };
                         // One reply per request line, sent before the next line is read.
                         reply.clear();
-                        if protocol::execute(&mut dev, line, &mut reply).is_err() {
+                        if protocol::execute(&mut *dev, line, &mut reply).is_err() {
                             // The buffer overflowed: say so instead of a cut reply.
                             reply.clear();
                             let _ = writeln!(reply, "err 8 reply too long");

@@ -122,13 +122,22 @@ impl Loop {
         }
     }
 
-    /// Hands the loop to the interrupt (call before [`crate::board::start_control`]), once:
-    /// a second loop is dropped here (the cell holds the first).
-    pub fn hand_over(self) {
+    /// Puts the loop in its static (once; `None` on a second call), where the caller
+    /// finishes it in place (the map's and the table's buffers) before [`Loop::hand_over`]:
+    /// the 3 KiB loop is not copied through the stack again.
+    pub fn install(self) -> Option<&'static mut Loop> {
         static CELL: StaticCell<Loop> = StaticCell::new();
-        if let Some(l) = CELL.try_init(self) {
-            HANDOFF.lock(|h| *h.borrow_mut() = Some(l));
-        }
+        CELL.try_init(self)
+    }
+
+    /// The loop's core, to finish in place before the hand-over.
+    pub fn core_mut(&mut self) -> &mut ControlLoop {
+        &mut self.core
+    }
+
+    /// Hands the installed loop to the interrupt (before [`crate::board::start_control`]).
+    pub fn hand_over(l: &'static mut Loop) {
+        HANDOFF.lock(|h| *h.borrow_mut() = Some(l));
     }
 
     /// One PWM period.

@@ -35,7 +35,7 @@ use embassy_stm32::{gpio::Output, peripherals::IWDG};
 use embassy_time::Timer;
 use gms_core::device::{self, ControlLoop, ParamStore as _, SenseTrouble};
 use gms_core::drive::{self, Faults, Stall};
-use static_cell::ConstStaticCell;
+use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::control::Loop;
 
@@ -164,11 +164,14 @@ async fn main(spawner: Spawner) {
     // The table motion's buffer (reference, two corrections, two period errors: 20 KiB).
     static TABLE: ConstStaticCell<[f32; gms_core::table::TABLE_VALUES]> =
         ConstStaticCell::new([0.0; gms_core::table::TABLE_VALUES]);
-    let core = ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture)
-        .with_map(table)
-        .with_table(TABLE.take());
     let (telemetry_tx, telemetry_rx) = control::telemetry();
-    Loop::new(hw, core, telemetry_tx).hand_over();
+    install_loop(
+        hw,
+        ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture),
+        telemetry_tx,
+        table,
+        TABLE.take(),
+    );
     // The stack guard: an MPU region with no access at the bottom of the stack, before
     // anything runs above thread mode.
     match board::stack_guard() {
@@ -180,19 +183,21 @@ async fn main(spawner: Spawner) {
         ),
         None => warn!("no room for the stack guard: running without it"),
     }
-    board::start_control();
-    info!("control loop running");
-
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
-    let dev = comms::Dev::new(
-        comms::IrqLink,
-        store,
-        board::BOARD,
-        start.settings,
-        defaults,
-    )
-    .with_configured(start.configured, false)
-    .with_table();
+    // The device front lives in a static (its task holds a reference: the task's future, built
+    // on the stack by the spawn, stays small).
+    static DEV: StaticCell<comms::Dev> = StaticCell::new();
+    let dev = DEV.init(
+        comms::Dev::new(
+            comms::IrqLink,
+            store,
+            board::BOARD,
+            start.settings,
+            defaults,
+        )
+        .with_configured(start.configured, false)
+        .with_table(),
+    );
     #[cfg(feature = "board-f405")]
     let port = {
         // USB CDC-ACM.
@@ -204,7 +209,6 @@ async fn main(spawner: Spawner) {
         usb_cfg.serial_number = Some(embassy_stm32::uid::uid_hex());
         usb_cfg.max_power = 100;
         usb_cfg.max_packet_size_0 = 64;
-        use static_cell::StaticCell;
         static CONFIG_DESC: StaticCell<[u8; 256]> = StaticCell::new();
         static BOS_DESC: StaticCell<[u8; 256]> = StaticCell::new();
         static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
@@ -237,6 +241,23 @@ async fn main(spawner: Spawner) {
         rest.led_run,
         rest.led_fault
     )));
+}
+
+/// Builds the control loop in its static and hands it to the interrupt: its own frame (out
+/// of `main`'s), the loop copied into the static once and finished there.
+#[inline(never)]
+fn install_loop(
+    hw: board::ControlHw,
+    core: ControlLoop,
+    telemetry: control::TelemetryTx,
+    map: &'static mut [f32; gms_core::posmap::MAP_VALUES],
+    table: &'static mut [f32; gms_core::table::TABLE_VALUES],
+) {
+    if let Some(l) = Loop::new(hw, core, telemetry).install() {
+        l.core_mut().attach_map(map);
+        l.core_mut().attach_table(table);
+        Loop::hand_over(l);
+    }
 }
 
 /// A panic switches the bridge off first, then logs, then ends in a HardFault (`udf`), where
@@ -290,11 +311,20 @@ async fn usb_task(
 }
 
 #[embassy_executor::task]
-async fn comms_task(port: port::HostPort, dev: comms::Dev, telemetry: control::TelemetryRx) -> ! {
+async fn comms_task(
+    port: port::HostPort,
+    dev: &'static mut comms::Dev,
+    telemetry: control::TelemetryRx,
+) -> ! {
     comms::serve(port, dev, telemetry).await
 }
 
-/// Watchdog, LEDs and fault logs, every 250 ms. The watchdog is fed only while the control
+/// Starts the control interrupt, then watchdog, LEDs and fault logs, every 250 ms.
+///
+/// The control interrupt starts here rather than in `main`: `main`'s one poll builds every
+/// part of the firmware (its frame, with the spawns', is some 20 KiB of thread stack) and has
+/// returned by the time this task first runs, so the loop's interrupts never nest on it.
+/// The watchdog is fed only while the control
 /// interrupt keeps running (its step counter advances) and the deadman has not tripped: a
 /// stall is terminal, the watchdog resets the MCU.
 #[embassy_executor::task]
@@ -308,6 +338,8 @@ async fn supervisor(
     let mut tick = 0u32;
     let mut told = false;
     let mut deepest = 0usize;
+    board::start_control();
+    info!("control loop running");
     loop {
         Timer::after_millis(250).await;
         tick = tick.wrapping_add(1);

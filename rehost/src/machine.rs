@@ -131,11 +131,10 @@ pub struct Chip {
     cpi: f64,
     /// Stop the engine at or after this time \[cycles\].
     next_stop: u64,
-    /// Instruction counts of the blocks seen (by address and size), and whether the block
-    /// ends with a WFE or WFI (the engine runs WFE as a no-op).
-    block_len: HashMap<(u64, u32), (u32, bool)>,
-    /// The block just run ended with WFE/WFI: the core sleeps unless the event register is
-    /// set (or an interrupt is pending, for WFI).
+    /// Instruction counts of the blocks seen (by address and size).
+    block_len: HashMap<(u64, u32), u32>,
+    /// The run stopped at a WFE or WFI: the core sleeps there unless the event register is
+    /// set (WFE) or an interrupt wakes it.
     pub slept: bool,
     /// The event register (B1.5.18): set by exception entry and return and by SEV.
     event: bool,
@@ -209,6 +208,8 @@ pub struct Machine {
     pub resets: u32,
     /// Log lines so far.
     pub log_lines: Vec<rtt::Line>,
+    /// The faults raised so far (time, kind, address, why).
+    pub faults: Vec<String>,
 }
 
 /// Counts Thumb-2 instructions in `code` (a 32-bit one starts with 0b11101, 0b11110 or
@@ -222,19 +223,6 @@ pub fn thumb_instructions(code: &[u8]) -> u32 {
         n += 1;
     }
     n
-}
-
-/// Whether the Thumb code `code` ends with WFE (0xBF20) or WFI (0xBF30) as its last
-/// instruction.
-pub fn ends_with_wait(code: &[u8]) -> bool {
-    let mut i = 0;
-    let mut last = None;
-    while i + 1 < code.len() {
-        let hw = u16::from_le_bytes([code[i], code[i + 1]]);
-        last = Some(hw);
-        i += if hw >> 11 >= 0b11101 { 4 } else { 2 };
-    }
-    matches!(last, Some(0xBF20) | Some(0xBF30))
 }
 
 fn err(e: uc_error) -> String {
@@ -384,36 +372,47 @@ impl Machine {
             HookType::MEM_WRITE_PROT,
             FLASH,
             FLASH + board.flash_size() as u64 - 1,
-            |uc: &mut Unicorn<'_, Chip>, _t: MemType, addr: u64, _size: usize, _v: i64| {
+            |uc: &mut Unicorn<'_, Chip>, _t: MemType, addr: u64, size: usize, v: i64| {
                 let c = uc.get_data_mut();
                 if !c.p.flash.programming() {
                     c.p.flash.bad_write();
                     c.bad_flash_write.get_or_insert(addr as u32);
+                    return true;
                 }
+                // Programming clears bits only (RM0090 §3.6.4: a 1 cannot be written over a
+                // 0 without an erase).
+                let mut old = vec![0u8; size];
+                let _ = uc.mem_read(addr, &mut old);
+                let new: Vec<u8> = old
+                    .iter()
+                    .zip((v as u64).to_le_bytes())
+                    .map(|(o, n)| o & n)
+                    .collect();
+                let _ = uc.mem_write(addr, &new);
                 true
             },
         )
         .map_err(err)?;
 
+        // Every block: its instructions counted (when it runs: a stop requested here ends the
+        // run before the block), the stack's depth, PRIMASK's hold, the guard.
         uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, Chip>, addr: u64, size: u32| {
-            let (n, sleeps) = match uc.get_data().block_len.get(&(addr, size)) {
-                Some(&v) => v,
+            let n = match uc.get_data().block_len.get(&(addr, size)) {
+                Some(&n) => n,
                 None => {
                     let mut code = vec![0u8; size as usize];
-                    let v = if uc.mem_read(addr, &mut code).is_ok() {
-                        (thumb_instructions(&code), ends_with_wait(&code))
+                    let n = if uc.mem_read(addr, &mut code).is_ok() {
+                        thumb_instructions(&code)
                     } else {
-                        (1, false)
+                        1
                     };
-                    uc.get_data_mut().block_len.insert((addr, size), v);
-                    v
+                    uc.get_data_mut().block_len.insert((addr, size), n);
+                    n
                 }
             };
             let sp = uc.reg_read(R::SP).unwrap_or(0) as u32;
             let primask = uc.reg_read(R::PRIMASK).unwrap_or(0) & 1 != 0;
             let c = uc.get_data_mut();
-            c.add_instructions(n);
-            c.last_block_end = addr + size as u64;
             if sp < c.sp_min {
                 c.sp_min = sp;
                 c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
@@ -427,10 +426,6 @@ impl Machine {
                 _ => {}
             }
             let mut stop = c.cycles >= c.next_stop || c.check_pending;
-            if sleeps {
-                c.slept = true;
-                stop = true;
-            }
             if let Some((g, len)) = c.guard
                 && sp >= g
                 && sp < g + len
@@ -441,9 +436,29 @@ impl Machine {
             }
             if stop {
                 let _ = uc.emu_stop();
+            } else {
+                c.add_instructions(n);
             }
         })
         .map_err(err)?;
+        // WFE and WFI (the engine runs WFE as a no-op and WFI as a stop): a hook on each, the
+        // core sleeps there (`step_once`).
+        for (addr, data) in &segments {
+            if *addr < FLASH || *addr >= FLASH + board.flash_size() as u64 {
+                continue;
+            }
+            for k in (0..data.len().saturating_sub(1)).step_by(2) {
+                let hw = u16::from_le_bytes([data[k], data[k + 1]]);
+                if hw == 0xBF20 || hw == 0xBF30 {
+                    let at = addr + k as u64;
+                    uc.add_code_hook(at, at, |uc: &mut Unicorn<'_, Chip>, _a: u64, _s: u32| {
+                        uc.get_data_mut().slept = true;
+                        let _ = uc.emu_stop();
+                    })
+                    .map_err(err)?;
+                }
+            }
+        }
 
         let mut m = Machine {
             uc,
@@ -460,6 +475,7 @@ impl Machine {
             handled: Vec::new(),
             resets: 0,
             log_lines: Vec::new(),
+            faults: Vec::new(),
         };
         m.load()?;
         m.reset_core()?;
@@ -474,6 +490,11 @@ impl Machine {
     /// The image's bytes.
     pub fn image(&self) -> &[u8] {
         &self.image
+    }
+
+    /// The program counter now.
+    pub fn pc(&self) -> u32 {
+        self.reg(R::PC)
     }
 
     /// The exceptions active now, outermost first.
@@ -765,6 +786,8 @@ impl Machine {
     /// the execution priority, else HardFault (escalation, B1.5.5); a HardFault that cannot
     /// be taken is a lockup.
     fn fault(&mut self, kind: u32, pc: u32, why: &str) -> Result<(), Stop> {
+        let t = self.seconds();
+        self.faults.push(format!("{t:.6} s: fault {kind} at {pc:#010x}: {why}"));
         let exec = self.execution_priority();
         let c = self.chip();
         let n = if c.core.fault_enabled(kind) && c.core.group_priority(kind) < exec {
@@ -816,6 +839,10 @@ impl Machine {
                 // WFE/WFI: sleep to the next event unless the event register is set (WFE) or
                 // something already wakes the core.
                 if std::mem::take(&mut self.uc.get_data_mut().slept) {
+                    // The WFE/WFI completes (the return address of what wakes it is the next
+                    // instruction).
+                    self.uc.reg_write(R::PC, (pc + 2) as u64).map_err(|e| Stop::Lockup(err(e)))?;
+                    self.chip_mut().add_instructions(1);
                     let event = std::mem::take(&mut self.uc.get_data_mut().event);
                     self.raise_lines();
                     if !event && !self.wakes() {
@@ -828,7 +855,9 @@ impl Machine {
                     }
                 }
             }
-            Err(uc_error::FETCH_UNMAPPED) if pc >= 0xFFFF_FF00 => {
+            // EXC_RETURN: the engine stops at the fetch (unmapped, or its own exception-exit
+            // trap at 0xFFFFFFF0 and above).
+            Err(uc_error::FETCH_UNMAPPED | uc_error::EXCEPTION) if pc >= 0xFFFF_FF00 => {
                 self.exception_return(pc | 1).map_err(Stop::Lockup)?;
             }
             Err(e) => {
@@ -1304,5 +1333,82 @@ mod tests {
         assert_eq!(thumb_instructions(&code), 3);
         // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
         assert_eq!(thumb_instructions(&[0xD1, 0xF8, 0x00, 0x00]), 1);
+    }
+}
+
+impl Machine {
+    /// Sends `line` on the link and runs until its reply ends (a line `ok…` or `err…`;
+    /// telemetry lines, `#…`, are left out), at most `seconds` of device time. The reply's
+    /// lines, or why none came.
+    pub fn request(&mut self, line: &str, seconds: f64) -> Result<Vec<String>, String> {
+        let _ = self.take_from_image();
+        let mut bytes = line.as_bytes().to_vec();
+        bytes.push(b'\n');
+        self.send_to_image(&bytes);
+        let until = self.chip().cycles + (seconds * HZ as f64) as u64;
+        let mut text = String::new();
+        while self.chip().cycles < until {
+            let slice = (self.chip().cycles + HZ / 2000).min(until);
+            self.run_until(slice)
+                .map_err(|e| format!("`{line}`: the image stopped: {e:?}"))?;
+            text.push_str(&String::from_utf8_lossy(&self.take_from_image()));
+            let lines: Vec<String> = text
+                .lines()
+                .filter(|l| !l.starts_with('#'))
+                .map(str::to_string)
+                .collect();
+            if text.ends_with('\n')
+                && lines
+                    .last()
+                    .is_some_and(|l| l.starts_with("ok") || l.starts_with("err"))
+            {
+                return Ok(lines);
+            }
+        }
+        Err(format!(
+            "`{line}`: no reply within {seconds} s of device time (got {text:?})"
+        ))
+    }
+
+    /// Runs until a log line containing `text` comes, at most `seconds` of device time.
+    pub fn run_until_logged(&mut self, text: &str, seconds: f64) -> Result<(), String> {
+        let until = self.chip().cycles + (seconds * HZ as f64) as u64;
+        let from = self.log_lines.len();
+        while !self.log_lines[from..].iter().any(|l| l.text.contains(text)) {
+            if self.chip().cycles >= until {
+                return Err(format!("no log line {text:?} within {seconds} s"));
+            }
+            let slice = (self.chip().cycles + HZ / 1000).min(until);
+            self.run_until(slice).map_err(|e| format!("{e:?}"))?;
+        }
+        Ok(())
+    }
+
+    /// A power cycle: RAM lost (filled with a pattern), flash kept, the image from reset.
+    pub fn power_cycle(&mut self) -> Result<(), String> {
+        self.uc
+            .mem_write(SRAM, &vec![0xA5; SRAM_LEN as usize])
+            .map_err(err)?;
+        let c = self.uc.get_data_mut();
+        c.p.rcc = crate::periph::clock::Rcc::new();
+        let rcc = c.p.rcc.clone();
+        self.system_reset(0)?;
+        self.chip_mut().p.rcc = rcc;
+        self.load_data()
+    }
+
+    /// The image's loadable segments that live in RAM are the startup code's to initialise
+    /// (from flash); nothing to load on a reset.
+    fn load_data(&mut self) -> Result<(), String> {
+        Ok(())
+    }
+
+    /// Instructions of every run of exception `exc` entered at or after `from` \[cycles\].
+    pub fn instructions_of(&self, exc: u32, from: u64) -> Vec<u64> {
+        self.handled
+            .iter()
+            .filter(|h| h.exc == exc && h.at >= from)
+            .map(|h| h.instructions)
+            .collect()
     }
 }

@@ -8,6 +8,8 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use rehost::{Board, Machine, Options};
 
+mod check;
+
 #[derive(Parser)]
 #[command(about = "The firmware image on an emulated STM32F4, its loop closed on hil-sim's plant")]
 struct Cli {
@@ -31,6 +33,18 @@ enum Cmd {
         #[arg(long, default_value_t = 1.5)]
         cpi: f64,
     },
+    /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
+    /// while moving, save, a power cycle, the setting back; the figures printed, the
+    /// image's faults and its stack held to the board's limits (non-zero exit otherwise, with
+    /// the decoded log).
+    Check {
+        /// The firmware ELF.
+        elf: std::path::PathBuf,
+        /// The board it was built for: nucleo-f446 or f405 (the F405's USB link is not
+        /// modelled: boot and run only).
+        #[arg(long, default_value = "nucleo-f446")]
+        board: String,
+    },
 }
 
 fn main() -> ExitCode {
@@ -46,6 +60,28 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
+        Cmd::Check { elf, board } => {
+            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+            let board = Board::parse(&board)?;
+            let mut m = Machine::new(&image, board, Options::default())?;
+            let r = check::run(&mut m);
+            if r.is_err() {
+                eprintln!("the image's log:");
+                for l in &m.log_lines {
+                    eprintln!("  {l}");
+                }
+                for f in &m.faults {
+                    eprintln!("  fault: {f}");
+                }
+                let c = m.chip();
+                eprintln!(
+                    "  flash: a write outside programming at {:?}; FLASH_SR {:#x}",
+                    c.bad_flash_write,
+                    c.p.flash.read(0x0C)
+                );
+            }
+            r
+        }
         Cmd::Boot {
             elf,
             board,
@@ -95,6 +131,10 @@ fn run(cli: Cli) -> Result<(), String> {
                     "exception {exc:3}: {n:7} times, {:8.1} instructions mean, {max:6} max",
                     sum as f64 / n as f64
                 );
+            }
+            println!("pc now {:#010x}", m.pc());
+            for f in &m.faults {
+                println!("{f}");
             }
             println!("PRIMASK held at most {} instructions", c.primask_max);
             if let Err(e) = r {

@@ -262,8 +262,14 @@ impl ControlLoop {
     /// The loop with a table motion's buffer (`buf`: [`crate::table::TABLE_VALUES`] values).
     /// Without one the table's requests are refused by the protocol side and do nothing here.
     pub fn with_table(mut self, buf: TableBuf) -> Self {
-        self.table_buf = Some(buf);
+        self.attach_table(buf);
         self
+    }
+
+    /// Gives the loop its table-motion buffer in place (as [`ControlLoop::with_table`], for a
+    /// loop already in its static: no copy of the loop through the stack).
+    pub fn attach_table(&mut self, buf: TableBuf) {
+        self.table_buf = Some(buf);
     }
 
     /// Ends a table run now (another motion takes over, the bridge goes off); its report goes
@@ -291,9 +297,15 @@ impl ControlLoop {
     /// Without one the map settings have no effect and the map's requests read and write
     /// nothing.
     pub fn with_map(mut self, table: MapTable) -> Self {
+        self.attach_map(table);
+        self
+    }
+
+    /// Gives the loop its position map's table in place (as [`ControlLoop::with_map`], for a
+    /// loop already in its static).
+    pub fn attach_map(&mut self, table: MapTable) {
         self.map_table = Some(table);
         self.map_cursor = self.map_cursor_for(self.ctrl.params(), self.ctrl.rad_per_count());
-        self
     }
 
     /// The map's cursor for the settings `p` (an encoder of `rpc` rad/count) at the reference
