@@ -167,7 +167,13 @@ async fn main(spawner: Spawner) {
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     install_loop(
         hw,
-        ControlLoop::new(board::BOARD, start.applied, sense, faults, encoder, capture),
+        LoopParts {
+            applied: start.applied,
+            sense,
+            faults,
+            encoder,
+            capture,
+        },
         telemetry_tx,
         table,
         TABLE.take(),
@@ -186,18 +192,7 @@ async fn main(spawner: Spawner) {
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     // The device front lives in a static (its task holds a reference: the task's future, built
     // on the stack by the spawn, stays small).
-    static DEV: StaticCell<comms::Dev> = StaticCell::new();
-    let dev = DEV.init(
-        comms::Dev::new(
-            comms::IrqLink,
-            store,
-            board::BOARD,
-            start.settings,
-            defaults,
-        )
-        .with_configured(start.configured, false)
-        .with_table(),
-    );
+    let dev = install_dev(store, start.settings, defaults, start.configured);
     #[cfg(feature = "board-f405")]
     let port = {
         // USB CDC-ACM.
@@ -243,21 +238,57 @@ async fn main(spawner: Spawner) {
     )));
 }
 
+/// What the control loop starts from (start-up's decisions and the capture buffer).
+struct LoopParts {
+    applied: device::Applied,
+    sense: gms_core::drive::CurrentSense,
+    faults: Faults,
+    encoder: u32,
+    capture: &'static mut [f32; board::CAPTURE_VALUES as usize],
+}
+
 /// Builds the control loop in its static and hands it to the interrupt: its own frame (out
 /// of `main`'s), the loop copied into the static once and finished there.
 #[inline(never)]
 fn install_loop(
     hw: board::ControlHw,
-    core: ControlLoop,
+    parts: LoopParts,
     telemetry: control::TelemetryTx,
     map: &'static mut [f32; gms_core::posmap::MAP_VALUES],
     table: &'static mut [f32; gms_core::table::TABLE_VALUES],
 ) {
+    let core = ControlLoop::new(
+        board::BOARD,
+        parts.applied,
+        parts.sense,
+        parts.faults,
+        parts.encoder,
+        parts.capture,
+    );
     if let Some(l) = Loop::new(hw, core, telemetry).install() {
         l.core_mut().attach_map(map);
         l.core_mut().attach_table(table);
         Loop::hand_over(l);
     }
+}
+
+/// Builds the device front (the protocol's side) in its static: its own frame, out of
+/// `main`'s. Its task holds a reference, so the task's future (built on the stack by the
+/// spawn) stays small.
+#[inline(never)]
+fn install_dev(
+    store: storage::Store,
+    settings: gms_core::protocol::Settings,
+    defaults: gms_core::protocol::Settings,
+    configured: bool,
+) -> &'static mut comms::Dev {
+    static DEV: StaticCell<comms::Dev> = StaticCell::new();
+    // `configured=0` in the status until someone sets, loads or stored this axis's settings.
+    DEV.init(
+        comms::Dev::new(comms::IrqLink, store, board::BOARD, settings, defaults)
+            .with_configured(configured, false)
+            .with_table(),
+    )
 }
 
 /// A panic switches the bridge off first, then logs, then ends in a HardFault (`udf`), where

@@ -138,8 +138,6 @@ pub struct Chip {
     pub slept: bool,
     /// The event register (B1.5.18): set by exception entry and return and by SEV.
     event: bool,
-    /// The end of the last block executed.
-    last_block_end: u64,
     /// The encoder's count from the plant, and TIM2's offset to it.
     enc_counts: i64,
     enc_offset: u32,
@@ -279,7 +277,6 @@ impl Machine {
             cpi: opts.cpi,
             next_stop: u64::MAX,
             block_len: HashMap::new(),
-            last_block_end: 0,
             enc_counts: plant.encoder(),
             enc_offset: 0,
             active: Vec::new(),
@@ -787,7 +784,8 @@ impl Machine {
     /// be taken is a lockup.
     fn fault(&mut self, kind: u32, pc: u32, why: &str) -> Result<(), Stop> {
         let t = self.seconds();
-        self.faults.push(format!("{t:.6} s: fault {kind} at {pc:#010x}: {why}"));
+        self.faults
+            .push(format!("{t:.6} s: fault {kind} at {pc:#010x}: {why}"));
         let exec = self.execution_priority();
         let c = self.chip();
         let n = if c.core.fault_enabled(kind) && c.core.group_priority(kind) < exec {
@@ -841,7 +839,9 @@ impl Machine {
                 if std::mem::take(&mut self.uc.get_data_mut().slept) {
                     // The WFE/WFI completes (the return address of what wakes it is the next
                     // instruction).
-                    self.uc.reg_write(R::PC, (pc + 2) as u64).map_err(|e| Stop::Lockup(err(e)))?;
+                    self.uc
+                        .reg_write(R::PC, (pc + 2) as u64)
+                        .map_err(|e| Stop::Lockup(err(e)))?;
                     self.chip_mut().add_instructions(1);
                     let event = std::mem::take(&mut self.uc.get_data_mut().event);
                     self.raise_lines();
@@ -1322,20 +1322,6 @@ fn periph_write(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize, value: u32) 
     let _ = irq::ADC;
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn thumb_instruction_lengths_follow_the_first_halfword() {
-        // movs r0, #1 (16-bit); bl (32-bit: 0xF000 0xF800); bx lr (16-bit).
-        let code = [0x01, 0x20, 0x00, 0xF0, 0x00, 0xF8, 0x70, 0x47];
-        assert_eq!(thumb_instructions(&code), 3);
-        // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
-        assert_eq!(thumb_instructions(&[0xD1, 0xF8, 0x00, 0x00]), 1);
-    }
-}
-
 impl Machine {
     /// Sends `line` on the link and runs until its reply ends (a line `ok…` or `err…`;
     /// telemetry lines, `#…`, are left out), at most `seconds` of device time. The reply's
@@ -1410,5 +1396,19 @@ impl Machine {
             .filter(|h| h.exc == exc && h.at >= from)
             .map(|h| h.instructions)
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thumb_instruction_lengths_follow_the_first_halfword() {
+        // movs r0, #1 (16-bit); bl (32-bit: 0xF000 0xF800); bx lr (16-bit).
+        let code = [0x01, 0x20, 0x00, 0xF0, 0x00, 0xF8, 0x70, 0x47];
+        assert_eq!(thumb_instructions(&code), 3);
+        // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
+        assert_eq!(thumb_instructions(&[0xD1, 0xF8, 0x00, 0x00]), 1);
     }
 }
