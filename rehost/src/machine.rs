@@ -587,8 +587,8 @@ impl Machine {
     }
 
     /// The execution priority (B1.5.4): the most urgent of the active exceptions', BASEPRI
-    /// and PRIMASK (0).
-    fn execution_priority(&self) -> i32 {
+    /// and, with `primask`, PRIMASK (0).
+    fn execution_priority(&self, primask: bool) -> i32 {
         let c = self.chip();
         let mut p = 256;
         for a in &c.active {
@@ -598,17 +598,18 @@ impl Machine {
         if basepri != 0 {
             p = p.min(basepri as i32);
         }
-        if self.reg(R::PRIMASK) & 1 != 0 {
+        if primask && self.reg(R::PRIMASK) & 1 != 0 {
             p = p.min(0);
         }
         p
     }
 
-    /// The pending exception to take now, if any: enabled, the most urgent, above the
-    /// execution priority (ties to the lower number).
-    fn exception_to_take(&self) -> Option<u32> {
+    /// The most urgent pending, enabled exception above the execution priority (ties to the
+    /// lower number); `primask` false asks what would wake a WFE/WFI, which PRIMASK does not
+    /// hold off.
+    fn pending_above(&self, primask: bool) -> Option<u32> {
         let c = self.chip();
-        let exec = self.execution_priority();
+        let exec = self.execution_priority(primask);
         let mut best: Option<(i32, u32)> = None;
         for n in 2..c.core.pending.len() as u32 {
             if !c.core.pending[n as usize] {
@@ -625,22 +626,14 @@ impl Machine {
         best.map(|(_, n)| n)
     }
 
-    /// Whether any pending, enabled interrupt would wake a WFI (PRIMASK ignored).
+    /// The pending exception to take now, if any.
+    fn exception_to_take(&self) -> Option<u32> {
+        self.pending_above(true)
+    }
+
+    /// Whether a pending interrupt wakes a WFE/WFI (PRIMASK ignored).
     fn wakes(&self) -> bool {
-        let c = self.chip();
-        let mut exec = 256;
-        for a in &c.active {
-            exec = exec.min(c.core.group_priority(a.exc));
-        }
-        let basepri = self.reg(R::BASEPRI) & 0xFF;
-        if basepri != 0 {
-            exec = exec.min(basepri as i32);
-        }
-        (2..c.core.pending.len() as u32).any(|n| {
-            c.core.pending[n as usize]
-                && (n < exc::IRQ0 || c.core.enabled[(n - exc::IRQ0) as usize])
-                && c.core.group_priority(n) < exec
-        })
+        self.pending_above(false).is_some()
     }
 
     /// Enters exception `n` at the current instruction boundary (`ret` the return address).
@@ -786,7 +779,7 @@ impl Machine {
         let t = self.seconds();
         self.faults
             .push(format!("{t:.6} s: fault {kind} at {pc:#010x}: {why}"));
-        let exec = self.execution_priority();
+        let exec = self.execution_priority(true);
         let c = self.chip();
         let n = if c.core.fault_enabled(kind) && c.core.group_priority(kind) < exec {
             kind
