@@ -38,6 +38,7 @@ pub fn run(m: &mut Machine) -> Result<(), String> {
     let moving_from = m.chip().cycles;
     expect_ok(m, "move 0.02", 0.5)?;
     m.run_for(0.05).map_err(|e| format!("{e:?}"))?;
+    expect_ok(m, "status", 0.5)?;
     let set_at = m.chip().cycles;
     expect_ok(m, "set pos.kp 0.65", 0.5)?;
     let set_steps = m.instructions_of(CONTROL, set_at);
