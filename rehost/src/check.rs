@@ -29,11 +29,21 @@ pub fn run(m: &mut Machine) -> Result<(), String> {
         m.run_for(0.5).map_err(|e| format!("{e:?}"))?;
         return report(m, 0);
     }
+    let thread0 = m.chip().thread_instructions;
     let st = expect_ok(m, "status", 0.5)?;
+    println!(
+        "the `status` request and reply: {} instructions of thread mode",
+        m.chip().thread_instructions - thread0
+    );
     if !st.last().is_some_and(|l| l.contains("enabled=0")) {
         return Err(format!("status after boot: {st:?}"));
     }
+    let enable_at = m.chip().cycles;
     expect_ok(m, "enable", 0.5)?;
+    println!(
+        "the periods from the `enable` on: {} instructions at most",
+        stats(&m.instructions_of(CONTROL, enable_at)).1
+    );
     m.run_for(0.05).map_err(|e| format!("{e:?}"))?;
     let moving_from = m.chip().cycles;
     expect_ok(m, "move 0.02", 0.5)?;
