@@ -165,7 +165,7 @@ async fn main(spawner: Spawner) {
     static TABLE: ConstStaticCell<[f32; gms_core::table::TABLE_VALUES]> =
         ConstStaticCell::new([0.0; gms_core::table::TABLE_VALUES]);
     let (telemetry_tx, telemetry_rx) = control::telemetry();
-    install_loop(
+    let spare = install_loop(
         hw,
         LoopParts {
             applied: start.applied,
@@ -192,7 +192,7 @@ async fn main(spawner: Spawner) {
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     // The device front lives in a static (its task holds a reference: the task's future, built
     // on the stack by the spawn, stays small).
-    let dev = install_dev(store, start.settings, defaults, start.configured);
+    let dev = install_dev(store, start.settings, defaults, start.configured, spare);
     #[cfg(feature = "board-f405")]
     let port = {
         // USB CDC-ACM.
@@ -256,7 +256,13 @@ fn install_loop(
     telemetry: control::TelemetryTx,
     map: &'static mut [f32; gms_core::posmap::MAP_VALUES],
     table: &'static mut [f32; gms_core::table::TABLE_VALUES],
-) {
+) -> device::CtrlBuf {
+    // The two controllers' storage: the loop runs one, the protocol side builds the next
+    // parameter set in the other (`device::Staged`), and the loop swaps them by reference.
+    static RUN: StaticCell<device::Ctrl> = StaticCell::new();
+    static SPARE: StaticCell<device::Ctrl> = StaticCell::new();
+    let spare = SPARE.init(parts.applied.ctrl.clone());
+    let run = RUN.init(parts.applied.ctrl.clone());
     let core = ControlLoop::new(
         board::BOARD,
         parts.applied,
@@ -264,12 +270,14 @@ fn install_loop(
         parts.faults,
         parts.encoder,
         parts.capture,
+        run,
     );
     if let Some(l) = Loop::new(hw, core, telemetry).install() {
         l.core_mut().attach_map(map);
         l.core_mut().attach_table(table);
         Loop::hand_over(l);
     }
+    spare
 }
 
 /// Builds the device front (the protocol's side) in its static: its own frame, out of
@@ -281,13 +289,26 @@ fn install_dev(
     settings: gms_core::protocol::Settings,
     defaults: gms_core::protocol::Settings,
     configured: bool,
+    spare: device::CtrlBuf,
 ) -> &'static mut comms::Dev {
     static DEV: StaticCell<comms::Dev> = StaticCell::new();
+    // The requests' storage: the loop acts on it by reference, outside the mailbox's
+    // critical section.
+    static REQUESTS: ConstStaticCell<device::Requests> =
+        ConstStaticCell::new(device::Requests::new());
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     DEV.init(
-        comms::Dev::new(comms::IrqLink, store, board::BOARD, settings, defaults)
-            .with_configured(configured, false)
-            .with_table(),
+        comms::Dev::new(
+            comms::IrqLink,
+            store,
+            board::BOARD,
+            settings,
+            defaults,
+            REQUESTS.take(),
+            spare,
+        )
+        .with_configured(configured, false)
+        .with_table(),
     )
 }
 

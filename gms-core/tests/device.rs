@@ -18,16 +18,28 @@ fn buffer() -> &'static mut [f32] {
     Box::leak(vec![0.0; 8192].into_boxed_slice())
 }
 
+/// Requests in storage of their own (the loop takes them by reference).
+fn leak(r: Requests) -> &'static mut Requests {
+    Box::leak(Box::new(r))
+}
+
+/// Storage for a controller (a loop's running one, a front's spare).
+fn ctrl_buf() -> gms_core::device::CtrlBuf {
+    Box::leak(Box::new(
+        prepare(&default_settings(), &board()).unwrap().ctrl,
+    ))
+}
+
 /// A loop at rest at count 0, zero current.
 fn rest() -> ControlLoop {
     let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
-    ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer())
+    ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf())
 }
 
 fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
-    let mut req = req;
+    let mut req = req.map(leak);
     let inp = Inputs {
         encoder: 0,
         current_codes: 16 * 2048,
@@ -70,11 +82,11 @@ fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
 fn a_halt_from_the_deadman_switches_off_and_says_so() {
     let period = 168_000_000 / 20_000;
     let mut lp = rest();
-    let enable = Requests {
+    let enable = || Requests {
         enable: true,
         ..Requests::default()
     };
-    step(&mut lp, period, Some(enable.clone()));
+    step(&mut lp, period, Some(enable()));
     for _ in 0..40 {
         step(&mut lp, period, None);
     }
@@ -85,7 +97,7 @@ fn a_halt_from_the_deadman_switches_off_and_says_so() {
         step(&mut lp, period, None);
     }
     assert!(lp.status().faults.contains(Faults::CONTROL_STALL));
-    step(&mut lp, period, Some(enable));
+    step(&mut lp, period, Some(enable()));
     assert!(!lp.enabled(), "a latched stall keeps the bridge off");
     let mut names = String::new();
     lp.faults().write_names(&mut names).unwrap();
@@ -98,12 +110,12 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     b.bridge_wake_s = 1e-3;
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
-    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer());
+    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
     let period = 168_000_000 / 20_000;
-    let mut req = Some(Requests {
+    let mut req = Some(leak(Requests {
         enable: true,
         ..Requests::default()
-    });
+    }));
     // The axis reads 5 counts off its hold point: control would drive at once.
     let mut outs = Vec::new();
     for _ in 0..40 {
@@ -176,10 +188,10 @@ fn a_capture_records_what_the_loop_saw() {
     assert_eq!((st.capture, st.captured), (CaptureState::Done, 10));
     // Read back through the mailbox's chunk: position 0 (at rest), current 0.
     let mut chunk = None;
-    let mut req = Some(Requests {
+    let mut req = Some(leak(Requests {
         capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
         ..Requests::default()
-    });
+    }));
     for _ in 0..4 {
         let inp = Inputs {
             encoder: 0,
@@ -351,7 +363,7 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
     // One position step (the loop takes requests at position steps only: every other PWM
     // period here).
     let run = |lp: &mut ControlLoop, encoder: u32, codes: u32, req: Option<Requests>| {
-        let mut req = req;
+        let mut req = req.map(leak);
         let inp = Inputs {
             encoder,
             current_codes: codes,
@@ -385,8 +397,17 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
     let mut s = default_settings();
     s.counts_per_rev = 2000.0;
     s.sense_v_per_a = 0.75;
+    let a = prepare(&s, &b).unwrap();
+    let ctrl = ctrl_buf();
+    *ctrl = a.ctrl;
     let apply = Requests {
-        apply: Some(prepare(&s, &b).unwrap()),
+        apply: Some(gms_core::device::Staged {
+            ctrl,
+            limits: a.limits,
+            psc: a.psc,
+            arr: a.arr,
+            taken: false,
+        }),
         ..Requests::default()
     };
     run(&mut lp, 7, codes, Some(apply));
@@ -481,13 +502,30 @@ fn board_device(
     let defaults = default_settings();
     let start = startup(store.load(), &defaults, &b).unwrap();
     let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(16 * 2048));
-    let lp = ControlLoop::new(b, start.applied, zero.sense, zero.faults, 0, buffer());
+    let lp = ControlLoop::new(
+        b,
+        start.applied,
+        zero.sense,
+        zero.faults,
+        0,
+        buffer(),
+        ctrl_buf(),
+    );
     let link = InlineLink {
         lp,
         mb: gms_core::device::Mailbox::new(),
         t_us: 0,
     };
-    Front::new(link, store, b, start.settings, defaults).with_configured(start.configured, false)
+    Front::new(
+        link,
+        store,
+        b,
+        start.settings,
+        defaults,
+        leak(Requests::new()),
+        ctrl_buf(),
+    )
+    .with_configured(start.configured, false)
 }
 
 fn ask(dev: &mut gms_core::device::Front<InlineLink, MemStore>, line: &str) -> String {

@@ -22,7 +22,8 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
     let zero = calibrate_sense(&board, s.sense_v_per_a, || Some(16 * 2048));
     let sense = zero.sense;
     let buf: &'static mut [f32] = Box::leak(vec![0.0; 8192].into_boxed_slice());
-    let mut lp = ControlLoop::new(board, applied, zero.sense, zero.faults, 0, buf);
+    let ctrl = Box::leak(Box::new(applied.ctrl.clone()));
+    let mut lp = ControlLoop::new(board, applied, zero.sense, zero.faults, 0, buf, ctrl);
     let ratio = lp.ratio();
     let rpc = s.rad_per_count();
     let n = 16u32;
@@ -63,7 +64,8 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
                     from_step: st.steps,
                 });
             }
-            r
+            // In storage of their own: the loop takes requests by reference.
+            r.map(|r| &mut *Box::leak(Box::new(r)))
         });
         assert!(out.enabled || k == 0, "the loop went off at period {k}");
         if !out.enabled {

@@ -22,7 +22,7 @@ fn stats(v: &[u64]) -> (f64, u64) {
 }
 
 /// Runs the session; an error names the first thing that went wrong.
-pub fn run(m: &mut Machine) -> Result<(), String> {
+pub fn run(m: &mut Machine, profile: bool) -> Result<(), String> {
     m.run_until_logged("control loop running", 1.0)?;
     println!("booted: \"control loop running\" at {:.4} s", m.seconds());
     if m.board() == Board::F405 {
@@ -30,11 +30,19 @@ pub fn run(m: &mut Machine) -> Result<(), String> {
         return report(m, 0);
     }
     let thread0 = m.chip().thread_instructions;
+    if profile {
+        m.start_profile();
+    }
     let st = expect_ok(m, "status", 0.5)?;
     println!(
         "the `status` request and reply: {} instructions of thread mode",
         m.chip().thread_instructions - thread0
     );
+    if profile {
+        for (f, n) in m.take_profile().iter().take(15) {
+            println!("  {n:9} {f}");
+        }
+    }
     if !st.last().is_some_and(|l| l.contains("enabled=0")) {
         return Err(format!("status after boot: {st:?}"));
     }
@@ -93,6 +101,10 @@ fn report(m: &Machine, _moving_max: u64) -> Result<(), String> {
         m.stack_depth(),
         c.primask_max,
         m.resets
+    );
+    println!(
+        "the longest PRIMASK hold began in {}",
+        m.symbol_at(c.primask_max_at)
     );
     if let Some(sp) = c.guard_hit {
         return Err(format!("the stack entered the MPU guard (SP {sp:#010x})"));

@@ -157,10 +157,15 @@ pub struct Chip {
     primask_since: Option<u64>,
     /// The longest time PRIMASK was held \[instructions\].
     pub primask_max: u64,
+    /// Where the longest hold began (the first block run with PRIMASK set).
+    pub primask_max_at: u64,
+    primask_from: u64,
     /// A write to flash outside a programming sequence (address).
     pub bad_flash_write: Option<u32>,
     /// Stop before the next block: a pending exception may now be taken.
     check_pending: bool,
+    /// Instructions by block address, while profiling.
+    profile: Option<HashMap<u64, u64>>,
 }
 
 impl Chip {
@@ -287,10 +292,13 @@ impl Machine {
             guard_hit: None,
             primask_since: None,
             primask_max: 0,
+            primask_max_at: 0,
+            primask_from: 0,
             bad_flash_write: None,
             check_pending: false,
             slept: false,
             event: false,
+            profile: None,
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, chip).map_err(err)?;
@@ -415,9 +423,15 @@ impl Machine {
                 c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
             }
             match (primask, c.primask_since) {
-                (true, None) => c.primask_since = Some(c.instructions),
+                (true, None) => {
+                    c.primask_since = Some(c.instructions);
+                    c.primask_from = addr;
+                }
                 (false, Some(s)) => {
-                    c.primask_max = c.primask_max.max(c.instructions - s);
+                    if c.instructions - s > c.primask_max {
+                        c.primask_max = c.instructions - s;
+                        c.primask_max_at = c.primask_from;
+                    }
                     c.primask_since = None;
                 }
                 _ => {}
@@ -435,6 +449,9 @@ impl Machine {
                 let _ = uc.emu_stop();
             } else {
                 c.add_instructions(n);
+                if let Some(p) = c.profile.as_mut() {
+                    *p.entry(addr).or_insert(0) += n as u64;
+                }
             }
         })
         .map_err(err)?;
@@ -1380,6 +1397,61 @@ impl Machine {
     /// (from flash); nothing to load on a reset.
     fn load_data(&mut self) -> Result<(), String> {
         Ok(())
+    }
+
+    /// Starts counting instructions by function (everything the core runs).
+    pub fn start_profile(&mut self) {
+        self.chip_mut().profile = Some(HashMap::new());
+    }
+
+    /// The instructions counted since [`Machine::start_profile`], by function (the image's
+    /// symbols), most first.
+    pub fn take_profile(&mut self) -> Vec<(String, u64)> {
+        use object::{Object, ObjectSymbol, SymbolKind};
+        let Some(blocks) = self.chip_mut().profile.take() else {
+            return Vec::new();
+        };
+        let Ok(file) = object::File::parse(&*self.image) else {
+            return Vec::new();
+        };
+        let mut syms: Vec<(u64, u64, String)> = file
+            .symbols()
+            .filter(|s| s.kind() == SymbolKind::Text && s.size() > 0)
+            .map(|s| {
+                (
+                    s.address() & !1,
+                    s.size(),
+                    s.name().unwrap_or("?").to_string(),
+                )
+            })
+            .collect();
+        syms.sort();
+        let mut by: HashMap<String, u64> = HashMap::new();
+        for (addr, n) in blocks {
+            let i = syms.partition_point(|s| s.0 <= addr);
+            let name = i
+                .checked_sub(1)
+                .and_then(|i| syms.get(i))
+                .filter(|s| addr < s.0 + s.1)
+                .map_or_else(|| format!("{addr:#010x}"), |s| s.2.clone());
+            *by.entry(name).or_insert(0) += n;
+        }
+        let mut v: Vec<(String, u64)> = by.into_iter().collect();
+        v.sort_by(|a, b| b.1.cmp(&a.1));
+        v
+    }
+
+    /// The image's function at `addr` (its symbol), or the address.
+    pub fn symbol_at(&self, addr: u64) -> String {
+        use object::{Object, ObjectSymbol, SymbolKind};
+        let Ok(file) = object::File::parse(&*self.image) else {
+            return format!("{addr:#010x}");
+        };
+        file.symbols()
+            .filter(|s| s.kind() == SymbolKind::Text)
+            .find(|s| (s.address() & !1) <= addr && addr < (s.address() & !1) + s.size())
+            .and_then(|s| s.name().ok().map(str::to_string))
+            .unwrap_or_else(|| format!("{addr:#010x}"))
     }
 
     /// Instructions of every run of exception `exc` entered at or after `from` \[cycles\].

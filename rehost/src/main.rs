@@ -44,6 +44,9 @@ enum Cmd {
         /// modelled: boot and run only).
         #[arg(long, default_value = "nucleo-f446")]
         board: String,
+        /// Print where the `status` request's instructions go (by function).
+        #[arg(long)]
+        profile: bool,
     },
 }
 
@@ -60,11 +63,15 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
-        Cmd::Check { elf, board } => {
+        Cmd::Check {
+            elf,
+            board,
+            profile,
+        } => {
             let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
             let board = Board::parse(&board)?;
             let mut m = Machine::new(&image, board, Options::default())?;
-            let r = check::run(&mut m);
+            let r = check::run(&mut m, profile);
             if r.is_err() {
                 eprintln!("the image's log:");
                 for l in &m.log_lines {

@@ -165,17 +165,20 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
         tb[k] = 0.05 / rpc * (1.0 - c);
         tb[gms_core::table::TABLE_POINTS + k] = if s >= 0.0 { 20e-6 } else { -20e-6 };
     }
-    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture)
+    static mut CTRL: Option<device::Ctrl> = None;
+    // SAFETY: the benchmark's references to the storage, one per call, never alive together.
+    let ctrl = unsafe { (*core::ptr::addr_of_mut!(CTRL)).insert(a.ctrl.clone()) };
+    let mut lp = ControlLoop::new(board, a, zero.sense, zero.faults, 0, capture, ctrl)
         .with_map(map)
         .with_table(tb);
     let mut mb = Mailbox::new();
     // About 0.02 A: the board's 16 conversions of 2048 + 84 codes (3.3 V / 4095 codes / 3.4 V/A).
     let codes = board.sense_oversample * (2048 + 84);
-    let mut first = Some(Requests {
+    let mut first = Some(stored(Requests {
         enable: true,
         stream_every: Some(10),
         ..Requests::default()
-    });
+    }));
     lp.step(
         Inputs {
             encoder: 0,
@@ -211,10 +214,10 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
             TableRequest::Use,
             TableRequest::Run(1_000_000),
         ] {
-            let mut r = Some(Requests {
+            let mut r = Some(stored(Requests {
                 table: Some(t),
                 ..Requests::default()
-            });
+            }));
             for _ in 0..ratio {
                 lp.step(
                     Inputs {
@@ -227,14 +230,14 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
             }
         }
     }
-    let mut mv = Some(Requests {
+    let mut mv = Some(stored(Requests {
         motion: Some(MoveRequest {
             plan,
             from_step: st.steps,
         }),
         frf: frf.map(device::FrfRequest::Start),
         ..Requests::default()
-    })
+    }))
     .filter(|_| !table);
     for _ in 0..ratio {
         lp.step(
@@ -481,4 +484,18 @@ fn main() -> ! {
     loop {
         cortex_m::asm::wfi();
     }
+}
+
+/// Requests in storage of their own (the loop takes them by reference and gives them back at
+/// its next exchange): a ring of eight, the benchmark posting one at a time, so a slot is
+/// reused only long after the loop gave it back.
+fn stored(r: Requests) -> &'static mut Requests {
+    use core::sync::atomic::{AtomicUsize, Ordering};
+    static mut POOL: [Requests; 8] = [const { Requests::new() }; 8];
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let k = NEXT.fetch_add(1, Ordering::Relaxed) % 8;
+    // SAFETY: slot k is not referenced any more (see above); the index is the pool's own.
+    let slot = unsafe { &mut (*core::ptr::addr_of_mut!(POOL))[k] };
+    *slot = r;
+    slot
 }

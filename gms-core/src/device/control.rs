@@ -9,8 +9,8 @@ use crate::posmap::MapCursor;
 use crate::table::{Player, Recorded, TableReport};
 
 use super::{
-    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, Drive, FrfRequest, Handover, MapRequest,
-    Requests, Sample, Status, StepValues,
+    Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, CtrlBuf, Drive, FrfRequest, Handover,
+    MapRequest, Requests, RequestsBuf, Sample, Status, StepValues,
 };
 
 /// Readings of the current-sense zero taken at start-up, bridge off (each a sum of
@@ -140,7 +140,9 @@ pub type CaptureBuf = &'static mut [f32];
 #[derive(Debug)]
 pub struct ControlLoop {
     board: Board,
-    ctrl: Ctrl,
+    /// The running controller, in its storage (swapped, not copied, for a new parameter
+    /// set).
+    ctrl: CtrlBuf,
     limits: Limits,
     psc: u32,
     arr: u32,
@@ -193,6 +195,8 @@ pub struct ControlLoop {
     table_corr: f32,
     /// A chunk or a report waits for the next exchange (one test a step when none does).
     fresh: bool,
+    /// Requests acted on, given back at the next exchange.
+    done: Option<RequestsBuf>,
 }
 
 /// The buffer of the table motion ([`crate::table::TABLE_VALUES`] values; the shell's: a
@@ -205,8 +209,9 @@ pub type MapTable = &'static mut [f32];
 
 impl ControlLoop {
     /// A loop at rest (bridge off) running the parameter set `a` on `board`, with the current
-    /// sense `sense`, the faults found at start-up, the encoder counter's value now, and the
-    /// buffer for captures (`Board::capture_values` long).
+    /// sense `sense`, the faults found at start-up, the encoder counter's value now, the
+    /// buffer for captures (`Board::capture_values` long) and the storage of its running
+    /// controller (`ctrl`: `a`'s is put there).
     pub fn new(
         board: Board,
         a: Applied,
@@ -214,13 +219,15 @@ impl ControlLoop {
         faults: Faults,
         encoder: u32,
         capture: CaptureBuf,
+        ctrl: CtrlBuf,
     ) -> Self {
         let ratio = a.ctrl.params().ratio().max(1);
         let enc_dir = a.ctrl.params().enc_dir;
+        *ctrl = a.ctrl;
         ControlLoop {
             board,
             ratio,
-            ctrl: a.ctrl,
+            ctrl,
             limits: a.limits,
             psc: a.psc,
             arr: a.arr,
@@ -256,6 +263,7 @@ impl ControlLoop {
             table_report: None,
             table_corr: 0.0,
             fresh: false,
+            done: None,
         }
     }
 
@@ -322,7 +330,7 @@ impl ControlLoop {
 
     /// The controller.
     pub fn controller(&self) -> &Ctrl {
-        &self.ctrl
+        self.ctrl
     }
 
     /// Current-loop steps per position step.
@@ -428,13 +436,14 @@ impl ControlLoop {
             self.faults = Faults::NONE;
         }
         self.faults.latch(req.latch);
-        if let Some(a) = req.apply.take() {
+        if let Some(a) = req.apply.as_mut().filter(|a| !a.taken) {
             let ratio = a.ctrl.params().ratio().max(1);
             let rates = self.ctrl.rates_differ(a.ctrl.params())
                 || (a.psc, a.arr, ratio) != (self.psc, self.arr, self.ratio);
             // Same rates: the running state is handed over (bumpless); new rates: the new
             // controller starts at rest, keeping what the adaptation learned about the axis.
-            let mut next = a.ctrl;
+            // The new controller is the protocol side's storage, worked on in place.
+            let next: &mut Ctrl = &mut *a.ctrl;
             // The new map's cursor, and its sample at the reference set before the hand-over,
             // so that switching the map on or off (or another table geometry) is bumpless.
             let mut cursor = self.map_cursor_for(next.params(), next.rad_per_count());
@@ -445,7 +454,7 @@ impl ControlLoop {
             } else if self.table.playing() {
                 next.set_map_sample(self.table_corr, 1.0);
             }
-            next.take_state_from(&self.ctrl);
+            next.take_state_from(self.ctrl);
             let (old, new) = (self.ctrl.params(), next.params());
             // A direction or a scale changed: the loop's feedback changes sign or size.
             let dirs = old.enc_dir != new.enc_dir
@@ -478,7 +487,10 @@ impl ControlLoop {
                 self.arr = a.arr;
                 timing = Some((a.psc, a.arr));
             }
-            self.ctrl = next;
+            // The running controller swapped for the new one by reference (no copy in the
+            // control interrupt); the old one goes back to the protocol side in its place.
+            core::mem::swap(&mut self.ctrl, &mut a.ctrl);
+            a.taken = true;
             self.limits = a.limits;
             self.map_cursor = cursor;
         }
@@ -616,7 +628,7 @@ impl ControlLoop {
     pub fn step(
         &mut self,
         inp: Inputs,
-        exchange: impl FnOnce(Status, Handover<'_>) -> Option<Requests>,
+        exchange: impl FnOnce(Status, Handover<'_>) -> Option<RequestsBuf>,
     ) -> Outputs {
         self.last_raw = inp.encoder;
         self.enc
@@ -639,14 +651,19 @@ impl ControlLoop {
         if self.phase == 0 {
             // Handed over by reference and then dropped: a chunk or a report is not copied
             // in a step that has none.
+            let returned = self.done.take();
             let h = if self.fresh {
                 Handover {
                     chunk: self.chunk.as_ref(),
                     frf: self.frf_report.as_ref(),
                     table: self.table_report.as_ref(),
+                    returned,
                 }
             } else {
-                Handover::default()
+                Handover {
+                    returned,
+                    ..Handover::default()
+                }
             };
             let req = exchange(self.status(), h);
             if self.fresh {
@@ -655,8 +672,11 @@ impl ControlLoop {
                 self.table_report = None;
                 self.fresh = false;
             }
-            if let Some(mut req) = req {
-                timing = self.take(&mut req);
+            if let Some(req) = req {
+                // Acted on in place, outside the shell's critical section; given back at the
+                // next exchange.
+                timing = self.take(req);
+                self.done = Some(req);
             }
             self.steps = self.steps.wrapping_add(1);
             let pos = self.enc.count();

@@ -9,9 +9,9 @@ use crate::protocol::{self, Device, Settings};
 use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
-    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, Drive, FIELDS, FrfRequest,
-    MAP_WRITE_BINS, MAX_STREAM_HZ, Mailbox, MapRequest, MoveRequest, Requests, Sample, Status,
-    StatusReply, VelocityRequest, capture_fields,
+    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, CtrlBuf, Drive, FIELDS,
+    FrfRequest, MAP_WRITE_BINS, MAX_STREAM_HZ, Mailbox, MapRequest, MoveRequest, Requests,
+    RequestsBuf, Sample, Staged, Status, StatusReply, VelocityRequest, capture_fields,
 };
 use crate::frf::{Channel, FrfSpec, Injection};
 use crate::protocol::TableCmd;
@@ -170,13 +170,62 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     has_table: bool,
     /// The table being written, as checked so far.
     upload: Upload,
+    /// The requests' storage and the spare controller's, while not with the loop.
+    bufs: Bufs,
+}
+
+/// The protocol side's share of the storage the two halves hand each other: the requests'
+/// (while not posted or with the loop) and the spare controller's (where the next parameter
+/// set is built, outside the control interrupt).
+#[derive(Debug)]
+struct Bufs {
+    req: Option<RequestsBuf>,
+    spare: Option<CtrlBuf>,
+}
+
+impl Bufs {
+    /// The requests' storage, emptied: the protocol side's own, or the one the loop gave
+    /// back (its controller kept as the spare).
+    fn requests<L: LoopLink>(&mut self, link: &mut L) -> Result<RequestsBuf, &'static str> {
+        let buf = match self.req.take() {
+            Some(b) => b,
+            None => link
+                .with_mailbox(|m| m.returned.take())
+                .ok_or("control loop not responding")?,
+        };
+        Ok(self.recycle(buf))
+    }
+
+    /// Empties `buf`, keeping the controller it carries (the old one after a swap, or one
+    /// never taken) as the spare.
+    fn recycle(&mut self, buf: RequestsBuf) -> RequestsBuf {
+        if let Some(a) = buf.apply.take() {
+            self.spare = Some(a.ctrl);
+        }
+        *buf = Requests::new();
+        buf
+    }
 }
 
 impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// The protocol side of a device running `settings` (what [`startup`] chose), with
-    /// `defaults` for `defaults` and `load`.
-    pub fn new(link: L, store: S, board: Board, settings: Settings, defaults: Settings) -> Self {
+    /// `defaults` for `defaults` and `load`; `req` is the storage of the requests it posts,
+    /// `spare` that of the controllers it builds (the loop runs its own, given to
+    /// [`super::ControlLoop::new`]).
+    pub fn new(
+        link: L,
+        store: S,
+        board: Board,
+        settings: Settings,
+        defaults: Settings,
+        req: RequestsBuf,
+        spare: CtrlBuf,
+    ) -> Self {
         Front {
+            bufs: Bufs {
+                req: Some(req),
+                spare: Some(spare),
+            },
             link,
             store,
             board,
@@ -257,7 +306,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// them, so that a reply and the status after it agree. If the loop does not take them
     /// within the link's timeout they are withdrawn and nothing changes.
     fn post(&mut self, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
-        post_on(&mut self.link, f)
+        post_on(&mut self.link, &mut self.bufs, f)
     }
 
     /// Writes rows `start..end` that the loop copies into the mailbox's chunk (`ask` puts the
@@ -297,13 +346,15 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// beside the parameter record; nothing when the store keeps no map or the loop has none.
     fn save_map(&mut self) -> Result<(), &'static str> {
         let (bins, period) = (self.settings.map.bins as u32, self.settings.map.period);
-        let Front { link, store, .. } = self;
+        let Front {
+            link, store, bufs, ..
+        } = self;
         let Some(buf) = store.map_buffer() else {
             return Ok(());
         };
         let mut at = 0;
         while at < bins {
-            post_on(link, |r| {
+            post_on(link, bufs, |r| {
                 r.map = Some(MapRequest::Read {
                     start: at,
                     max: bins - at,
@@ -330,7 +381,9 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// stored. A map of another period or bin count is refused with the reason.
     fn load_map(&mut self) -> Result<(), &'static str> {
         let p = self.settings.map;
-        let Front { link, store, .. } = self;
+        let Front {
+            link, store, bufs, ..
+        } = self;
         let len = match store.load_map() {
             Ok(Some(len)) => len,
             Ok(None) => return Ok(()),
@@ -350,7 +403,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             for (k, v) in values.iter_mut().enumerate().take(2 * n) {
                 *v = crate::posmap::map_record_value(rec, 2 * start + k);
             }
-            post_on(link, |r| {
+            post_on(link, bufs, |r| {
                 r.map = Some(MapRequest::Write {
                     start: start as u32,
                     n: n as u32,
@@ -400,7 +453,24 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
 
     fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         let a = prepare(&new, &self.board)?;
-        self.post(|r| r.apply = Some(a))?;
+        // The new controller built in the spare storage here, on the protocol side; the loop
+        // only swaps it in (the storage the loop gave back is reclaimed first).
+        let buf = self.bufs.requests(&mut self.link)?;
+        self.bufs.req = Some(buf);
+        let ctrl = self
+            .bufs
+            .spare
+            .take()
+            .ok_or("control loop not responding")?;
+        *ctrl = a.ctrl;
+        let staged = Staged {
+            ctrl,
+            limits: a.limits,
+            psc: a.psc,
+            arr: a.arr,
+            taken: false,
+        };
+        self.post(|r| r.apply = Some(staged))?;
         self.settings = new;
         self.configured = true;
         Ok(())
@@ -1011,36 +1081,45 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
     }
 }
 
-/// [`Front::post`] on a link: the requests `f` fills in posted, and the wait until the loop
-/// has taken them.
-fn post_on<L: LoopLink>(link: &mut L, f: impl FnOnce(&mut Requests)) -> Result<(), &'static str> {
-    link.with_mailbox(|m| m.post(f));
-    wait_taken(link)
+/// [`Front::post`] on a link: the requests `f` fills in (in the protocol side's storage)
+/// posted by reference, and the wait until the loop has taken them; withdrawn ones come back
+/// to `bufs`.
+fn post_on<L: LoopLink>(
+    link: &mut L,
+    bufs: &mut Bufs,
+    f: impl FnOnce(&mut Requests),
+) -> Result<(), &'static str> {
+    let buf = bufs.requests(link)?;
+    f(buf);
+    link.with_mailbox(|m| m.post(buf));
+    match wait_taken(link) {
+        Ok(()) => Ok(()),
+        Err((why, withdrawn)) => {
+            if let Some(b) = withdrawn {
+                let b = bufs.recycle(b);
+                bufs.req = Some(b);
+            }
+            Err(why)
+        }
+    }
 }
 
 /// The wait of [`Front::post`], one copy for every request (not generic over the requests:
-/// the firmware's flash).
-fn wait_taken<L: LoopLink>(link: &mut L) -> Result<(), &'static str> {
+/// the firmware's flash). On a timeout, the requests withdrawn if the loop has not taken
+/// them.
+fn wait_taken<L: LoopLink>(link: &mut L) -> Result<(), (&'static str, Option<RequestsBuf>)> {
     let t0 = link.now_us();
     let timeout = link.timeout_us();
     loop {
-        let (pending, taken, steps) = link.with_mailbox(|m| (m.posted, m.taken_at, m.status.steps));
+        let (pending, taken, steps) =
+            link.with_mailbox(|m| (m.posted(), m.taken_at, m.status.steps));
         if !pending && steps > taken {
             return Ok(());
         }
         if link.now_us().saturating_sub(t0) > timeout {
-            let withdrawn = link.with_mailbox(|m| {
-                let p = m.posted;
-                if p {
-                    m.requests = Requests::default();
-                    m.posted = false;
-                }
-                p
-            });
-            return if withdrawn {
-                Err("control loop not responding")
-            } else {
-                Ok(())
+            return match link.with_mailbox(|m| m.requests.take()) {
+                Some(b) => Err(("control loop not responding", Some(b))),
+                None => Ok(()),
             };
         }
         link.pause();

@@ -174,8 +174,10 @@ pub enum FrfRequest {
 
 /// What the loop hands the protocol side at an exchange besides its status (each only when
 /// there is something new).
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Default)]
 pub struct Handover<'a> {
+    /// The requests taken at the last exchange, acted on, given back.
+    pub returned: Option<RequestsBuf>,
     /// A chunk of captured samples read ([`CaptureRequest::Read`]).
     pub chunk: Option<&'a Chunk>,
     /// The frequency-response measurement's report (at the end of each group of periods, and
@@ -210,12 +212,38 @@ pub struct VelocityRequest {
     pub from_step: u64,
 }
 
-/// What the protocol side asks of the loop; taken whole at the start of a position step.
-#[derive(Debug, Clone, Default)]
+/// A controller's storage, handed between the two halves by reference: the loop runs one,
+/// the protocol side builds the next in the other (`static`s on a board).
+pub type CtrlBuf = &'static mut Ctrl;
+
+/// The requests' storage, handed between the two halves by reference: the protocol side
+/// fills it, the loop acts on it in place, and gives it back.
+pub type RequestsBuf = &'static mut Requests;
+
+/// A parameter set posted to the loop: the controller built by the protocol side in its
+/// spare storage ([`CtrlBuf`]); the loop swaps it for the running one (handing its running
+/// state over) and gives the old one back in its place.
+#[derive(Debug)]
+pub struct Staged {
+    /// The new controller (at rest); after the swap, the old one.
+    pub ctrl: CtrlBuf,
+    /// The safety limits that go with it.
+    pub limits: Limits,
+    /// PWM timer prescaler (register value).
+    pub psc: u32,
+    /// PWM period (register value) [timer counts].
+    pub arr: u32,
+    /// Set by the loop once it has swapped the controllers (`ctrl` is then the old one).
+    pub taken: bool,
+}
+
+/// What the protocol side asks of the loop; acted on in place at the start of a position
+/// step (the loop holds it by reference: nothing is copied into the control interrupt).
+#[derive(Debug, Default)]
 pub struct Requests {
     /// A new parameter set: taken without a bump at the same loop rates; other rates switch
     /// the bridge off for the change.
-    pub apply: Option<Applied>,
+    pub apply: Option<Staged>,
     /// Switch the bridge on (ignored while a fault is latched).
     pub enable: bool,
     /// Switch the bridge off.
@@ -249,6 +277,28 @@ pub struct Requests {
 }
 
 impl Requests {
+    /// Nothing asked (as [`Default`], for a `static`).
+    pub const fn new() -> Requests {
+        Requests {
+            apply: None,
+            enable: false,
+            disable: false,
+            clear: false,
+            latch: Faults::NONE,
+            motion: None,
+            velocity: None,
+            current: None,
+            current_steps: None,
+            hold_here: false,
+            capture: None,
+            frf: None,
+            map: None,
+            table: None,
+            stream_every: None,
+            reset_stats: false,
+        }
+    }
+
     /// True when anything is asked.
     pub fn pending(&self) -> bool {
         self.apply.is_some()
@@ -379,19 +429,19 @@ pub const FIELDS: [&str; 8] = [
 pub const MAX_STREAM_HZ: f32 = 1000.0;
 
 /// The exchange between the two halves: requests one way, the status the other. Held by the
-/// shell behind whatever makes it atomic (a critical section on the board, a mutex on a host),
-/// and only for a copy.
+/// shell behind whatever makes it atomic (a critical section on a board, a mutex on a host),
+/// and only for a copy of the status and the move of a reference: the requests themselves
+/// travel as a [`RequestsBuf`], so the loop acts on them outside the critical section.
 #[derive(Debug, Default)]
 pub struct Mailbox {
-    /// Requests to the loop.
-    pub requests: Requests,
+    /// Requests posted to the loop and not taken yet.
+    pub requests: Option<RequestsBuf>,
+    /// Requests the loop has acted on, back for the protocol side.
+    pub returned: Option<RequestsBuf>,
     /// The loop's latest status.
     pub status: Status,
     /// The position step at which the loop last took requests.
     pub taken_at: u64,
-    /// Requests were posted and not taken yet (set by the protocol side with them: the loop
-    /// looks at this flag, not at every request, in each step).
-    pub posted: bool,
     /// The last chunk of captured samples read (`CaptureRequest::Read`).
     pub chunk: Chunk,
     /// The frequency-response measurement's last report.
@@ -404,24 +454,8 @@ impl Mailbox {
     /// An empty mailbox (for a `static`).
     pub const fn new() -> Mailbox {
         Mailbox {
-            requests: Requests {
-                apply: None,
-                enable: false,
-                disable: false,
-                clear: false,
-                latch: Faults::NONE,
-                motion: None,
-                velocity: None,
-                current: None,
-                current_steps: None,
-                hold_here: false,
-                capture: None,
-                frf: None,
-                map: None,
-                table: None,
-                stream_every: None,
-                reset_stats: false,
-            },
+            requests: None,
+            returned: None,
             status: Status {
                 steps: 0,
                 pos_rate_hz: 0.0,
@@ -447,7 +481,6 @@ impl Mailbox {
                 capture_origin: 0,
             },
             taken_at: 0,
-            posted: false,
             chunk: Chunk::new(0, 0),
             frf: crate::frf::FrfReport {
                 state: crate::frf::FrfState::Idle,
@@ -471,15 +504,19 @@ impl Mailbox {
         }
     }
 
-    /// The protocol side's: adds requests (`f` fills them in) for the loop to take.
-    pub fn post(&mut self, f: impl FnOnce(&mut Requests)) {
-        f(&mut self.requests);
-        self.posted = self.requests.pending();
+    /// Requests are posted and not taken yet.
+    pub fn posted(&self) -> bool {
+        self.requests.is_some()
+    }
+
+    /// The protocol side's: posts the requests `buf` holds for the loop to take.
+    pub fn post(&mut self, buf: RequestsBuf) {
+        self.requests = Some(buf);
     }
 
     /// The loop's side: publishes `status` (and what else it hands over) and takes the
-    /// pending requests, if any.
-    pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<Requests> {
+    /// posted requests, if any.
+    pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<RequestsBuf> {
         self.status = status;
         if let Some(c) = h.chunk {
             self.chunk = *c;
@@ -490,13 +527,14 @@ impl Mailbox {
         if let Some(t) = h.table {
             self.table = *t;
         }
-        if self.posted {
-            self.posted = false;
-            self.taken_at = status.steps;
-            Some(core::mem::take(&mut self.requests))
-        } else {
-            None
+        if let Some(b) = h.returned {
+            self.returned = Some(b);
         }
+        let taken = self.requests.take();
+        if taken.is_some() {
+            self.taken_at = status.steps;
+        }
+        taken
     }
 }
 

@@ -71,9 +71,11 @@ impl LocalDevice {
             queue: Mutex::new(VecDeque::with_capacity(QUEUE)),
         };
         Ok(LocalDevice {
-            dev: Front::new(link, p.store, p.board, p.settings, p.defaults)
-                .with_configured(true, true)
-                .with_table(),
+            dev: Front::new(
+                link, p.store, p.board, p.settings, p.defaults, p.requests, p.spare,
+            )
+            .with_configured(true, true)
+            .with_table(),
         })
     }
 

@@ -24,8 +24,8 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{
-    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Requests, Sample,
-    SenseChain, Status,
+    self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Sample, SenseChain,
+    Status,
 };
 use gms_core::drive::BoardLimits;
 use gms_core::protocol::{self, LineReader, Settings};
@@ -146,7 +146,7 @@ impl Sim {
     /// host when `timed` (real time), else counted as 0 (simulated time).
     fn tick(
         &mut self,
-        mut exchange: impl FnMut(Status, device::Handover<'_>) -> Option<Requests>,
+        mut exchange: impl FnMut(Status, device::Handover<'_>) -> Option<device::RequestsBuf>,
         queue: &Mutex<VecDeque<Sample>>,
         timed: bool,
     ) {
@@ -201,6 +201,10 @@ struct PowerUp {
     board: Board,
     settings: Settings,
     defaults: Settings,
+    /// The front's requests storage.
+    requests: device::RequestsBuf,
+    /// The front's spare controller storage.
+    spare: device::CtrlBuf,
     /// Why the start-up latched faults, if it did.
     why: Option<&'static str>,
 }
@@ -235,6 +239,9 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
         None
     };
     let encoder = plant.encoder() as u32;
+    // The controllers' storage: the loop's running one and the front's spare (statics on a
+    // board; one pair per power-up here).
+    let spare: &'static mut device::Ctrl = Box::leak(Box::new(start.applied.ctrl.clone()));
     Ok(PowerUp {
         sim: Sim {
             core: ControlLoop::new(
@@ -245,6 +252,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
                 encoder,
                 // One buffer per power-up of a virtual device (a board's is a static).
                 Box::leak(vec![0.0; CAPTURE_VALUES as usize].into_boxed_slice()),
+                Box::leak(Box::new(spare.clone())),
             )
             .with_map(table)
             .with_table(Box::leak(
@@ -260,6 +268,8 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
         board,
         settings: start.settings,
         defaults,
+        requests: Box::leak(Box::new(device::Requests::new())),
+        spare,
         why,
     })
 }

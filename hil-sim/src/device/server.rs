@@ -192,6 +192,8 @@ fn serve_inner(
         settings,
         defaults,
         why,
+        requests,
+        spare,
     } = power_up(&sc, flash)?;
     let shared = Arc::new(Shared {
         // The loop's status from the start (before its first step).
@@ -224,9 +226,17 @@ fn serve_inner(
         start: Instant::now(),
     };
     // The scenario describes the axis: its defaults are configured for it.
-    let mut dev = Front::new(link, flash_store, board, settings, defaults)
-        .with_configured(true, true)
-        .with_table();
+    let mut dev = Front::new(
+        link,
+        flash_store,
+        board,
+        settings,
+        defaults,
+        requests,
+        spare,
+    )
+    .with_configured(true, true)
+    .with_table();
     match endpoint {
         Endpoint::Tcp(listener) => {
             let addr = listener

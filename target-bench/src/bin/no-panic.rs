@@ -159,6 +159,16 @@ fn main() -> ! {
     // SAFETY: the check's only reference to the table, taken once.
     let map_table = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
     gms_core::posmap::clear(map_table);
+    // The controllers' storage (the loop's running one, the front's spare) and the
+    // requests', as the firmware's statics.
+    static mut CTRL: [Option<device::Ctrl>; 2] = [None, None];
+    // SAFETY: the check's only references to the two, taken once.
+    let [run, spare] = unsafe { &mut *core::ptr::addr_of_mut!(CTRL) };
+    let run = run.insert(start.applied.ctrl.clone());
+    let spare = spare.insert(start.applied.ctrl.clone());
+    static mut REQUESTS: device::Requests = device::Requests::new();
+    // SAFETY: the check's only reference to it, taken once.
+    let requests = unsafe { &mut *core::ptr::addr_of_mut!(REQUESTS) };
     let core = ControlLoop::new(
         board,
         start.applied,
@@ -166,6 +176,7 @@ fn main() -> ! {
         zero.faults,
         black_box(0),
         capture,
+        run,
     )
     .with_map(map_table);
     let link = CheckLink {
@@ -173,7 +184,15 @@ fn main() -> ! {
         core,
         t: 0,
     };
-    let mut dev = Front::new(link, store, board, start.settings, defaults);
+    let mut dev = Front::new(
+        link,
+        store,
+        board,
+        start.settings,
+        defaults,
+        requests,
+        spare,
+    );
     let mut reader = LineReader::default();
     let mut sink = Sink(0);
     loop {
