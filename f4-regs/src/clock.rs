@@ -25,6 +25,24 @@ pub fn start_hse(
     true
 }
 
+/// Switches the clock security system on (RCC_CR.CSSON, RM0090 §7.3.1; §6.2.7): should the
+/// HSE fail while it clocks the system, the HSE is switched off, the system clock falls back
+/// to the HSI, and an NMI is raised (RCC_CIR.CSSF), which cannot be masked: the firmware's
+/// NMI handler switches the bridge off. Call with the HSE running (CSS is ignored otherwise).
+pub fn enable_css(rcc: pac::rcc::Rcc) {
+    rcc.cr().modify(|w| w.set_csson(true));
+}
+
+/// Whether the clock security system raised the NMI (RCC_CIR.CSSF, RM0090 §7.3.4); the flag
+/// cleared (CSSC), as the NMI handler must, or the NMI comes again at once.
+pub fn css_ack(rcc: pac::rcc::Rcc) -> bool {
+    let fired = rcc.cir().read().cssf();
+    if fired {
+        rcc.cir().modify(|w| w.set_cssc(true));
+    }
+    fired
+}
+
 /// Switches the flash accelerator on (RM0090 §3.5.2, FLASH_ACR): the instruction and data
 /// caches, and the prefetch buffer where the part allows it — `idcode` is DBGMCU_IDCODE as
 /// read, `dev_id` the part's DEV_ID (a code that does not read as this part, or an F405/407 of

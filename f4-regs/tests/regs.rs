@@ -423,6 +423,19 @@ fn the_flash_accelerator_and_erase_set_up() {
 }
 
 #[test]
+fn the_clock_security_system_is_switched_on_and_its_nmi_acknowledged() {
+    let rcc = block(pac::rcc::Rcc::from_ptr);
+    clock::enable_css(rcc);
+    // RCC_CR.CSSON is bit 19 (RM0090 §7.3.1).
+    assert_eq!(word(rcc.as_ptr(), 0x00) & (1 << 19), 1 << 19);
+    assert!(!clock::css_ack(rcc), "no failure: no NMI");
+    // CSSF (RCC_CIR bit 7) set by the hardware: acknowledged with CSSC (bit 23).
+    set_word(rcc.as_ptr(), 0x0C, 1 << 7);
+    assert!(clock::css_ack(rcc));
+    assert_ne!(word(rcc.as_ptr(), 0x0C) & (1 << 23), 0, "CSSC written");
+}
+
+#[test]
 fn reset_cause_debug_freeze_and_encoder() {
     let rcc = block(pac::rcc::Rcc::from_ptr);
     assert!(!clock::watchdog_reset(rcc));

@@ -93,7 +93,7 @@ pub const DTR_POLL_MS: u64 = 50;
 const REPLY: usize = 4096;
 
 /// Serves the protocol to one host after another, forever.
-pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, mut telemetry: TelemetryRx) -> ! {
+pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: TelemetryRx) -> ! {
     let mut reply = Buf::<REPLY>::new();
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];

@@ -25,7 +25,7 @@ use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 use embassy_sync::blocking_mutex::Mutex;
 use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
 use gms_core::drive::{Faults, Stall};
-use static_cell::{ConstStaticCell, StaticCell};
+use static_cell::StaticCell;
 
 use embassy_stm32::{interrupt, pac};
 use f4_regs::{pwm, sense};
@@ -38,20 +38,23 @@ use crate::irq::IrqOffRawMutex;
 pub static MAILBOX: Mutex<IrqOffRawMutex, RefCell<Mailbox>> =
     Mutex::new(RefCell::new(Mailbox::new()));
 
-/// Telemetry samples from the loop to the comms task: a lock-free single-producer,
-/// single-consumer queue (heapless), so that the loop never wakes a task — an executor's
-/// waker takes the global critical section, which does not exclude an interrupt above its
-/// mask (`irq.rs`); the comms task polls the queue instead. A full queue drops the sample.
-pub type TelemetryQueue = heapless::spsc::Queue<Sample, 65>;
+/// Telemetry samples from the loop to the comms task: a lock-free queue (heapless's MPMC
+/// one, used by one producer and one consumer), so that the loop never wakes a task — an
+/// executor's waker takes the global critical section, which does not exclude an interrupt
+/// above its mask (`irq.rs`); the comms task polls the queue instead. A full queue drops the
+/// sample. (Not heapless's SPSC queue: in heapless 0.9 its capacity is a run-time value and
+/// its index arithmetic a `%` whose division by zero would link a panic into the control
+/// interrupt; this one masks a power-of-two index.)
+pub type TelemetryQueue = heapless::mpmc::Queue<Sample, 64>;
 /// The loop's end of the telemetry queue.
-pub type TelemetryTx = heapless::spsc::Producer<'static, Sample>;
+pub type TelemetryTx = &'static TelemetryQueue;
 /// The comms task's end of the telemetry queue.
-pub type TelemetryRx = heapless::spsc::Consumer<'static, Sample>;
+pub type TelemetryRx = &'static TelemetryQueue;
 
-/// The telemetry queue's two ends (once: a second call panics at start-up).
+/// The telemetry queue's two ends.
 pub fn telemetry() -> (TelemetryTx, TelemetryRx) {
-    static QUEUE: ConstStaticCell<TelemetryQueue> = ConstStaticCell::new(TelemetryQueue::new());
-    QUEUE.take().split()
+    static QUEUE: TelemetryQueue = TelemetryQueue::new();
+    (&QUEUE, &QUEUE)
 }
 
 /// Control steps started so far (wrapping): written by the control interrupt only, read by
@@ -83,10 +86,14 @@ pub fn trip(cause: Stall) {
         Ordering::Relaxed,
         Ordering::Relaxed,
     );
+    // `try_borrow_mut`, not `borrow_mut`: the lock masks every interrupt, so the mailbox is
+    // never borrowed when an interrupt runs, and no panicking borrow is linked into the
+    // handlers (`cargo xtask check-elf` holds them free of any panic).
     MAILBOX.lock(|m| {
-        let mut m = m.borrow_mut();
-        m.status.faults.latch(Faults::CONTROL_STALL);
-        m.status.enabled = false;
+        if let Ok(mut m) = m.try_borrow_mut() {
+            m.status.faults.latch(Faults::CONTROL_STALL);
+            m.status.enabled = false;
+        }
     });
 }
 
@@ -167,7 +174,7 @@ impl Loop {
             since_last,
         };
         let out = self.core.step(inp, |st, chunk| {
-            MAILBOX.lock(|m| m.borrow_mut().exchange(st, chunk))
+            MAILBOX.lock(|m| m.try_borrow_mut().ok()?.exchange(st, chunk))
         });
         if let Some((psc, arr)) = out.timing {
             self.hw.set_bridge(0, 0);
@@ -191,7 +198,7 @@ impl Loop {
 #[inline(always)]
 pub fn on_sample(slot: &mut Option<&'static mut Loop>) {
     if slot.is_none()
-        && let Some(l) = HANDOFF.lock(|h| h.borrow_mut().take())
+        && let Some(l) = HANDOFF.lock(|h| h.try_borrow_mut().ok()?.take())
     {
         // A reference: nothing is dropped here, so no drop glue of the loop's drivers (which
         // take the global critical section) is reachable from this interrupt (`cargo xtask

@@ -74,7 +74,12 @@ async fn main(spawner: Spawner) {
         }
     }
     let (mut hw, rest) = board::init();
-    info!("clocks up: {} Hz", board::CLOCKS.sysclk_hz());
+    // The clock security system: the HSE failing from here on switches the bridge off (NMI).
+    f4_regs::clock::enable_css(embassy_stm32::pac::RCC);
+    info!(
+        "clocks up: {} Hz; clock security system on",
+        board::CLOCKS.sysclk_hz()
+    );
 
     let mut faults = Faults::NONE;
     if rest.update_at_bottom {
@@ -339,6 +344,18 @@ extern "C" fn gms_fault_stop() -> ! {
     board::bridge_off_now();
     loop {
         cortex_m::asm::nop();
+    }
+}
+
+/// The NMI: the clock security system found the HSE failed (the core now runs on the HSI,
+/// every rate a tenth of what it was): the bridge off, `control_stall` latched; the supervisor
+/// logs it and stops feeding the watchdog. Nothing here can panic or wait (an NMI preempts
+/// even PRIMASK).
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    board::bridge_off_now();
+    if f4_regs::clock::css_ack(embassy_stm32::pac::RCC) {
+        control::trip(Stall::ClockLost);
     }
 }
 

@@ -186,7 +186,8 @@ fn a_capture_records_what_the_loop_saw() {
     }
     let st = lp.status();
     assert_eq!((st.capture, st.captured), (CaptureState::Done, 10));
-    // Read back through the mailbox's chunk: position 0 (at rest), current 0.
+    // Read back through the requests' chunk (given back at the next exchange): position 0
+    // (at rest), current 0.
     let mut chunk = None;
     let mut req = Some(leak(Requests {
         capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
@@ -198,9 +199,9 @@ fn a_capture_records_what_the_loop_saw() {
             current_codes: 16 * 2048,
             since_last: period,
         };
-        lp.step(inp, |_, c| {
-            if let Some(c) = c.chunk {
-                chunk = Some(*c);
+        lp.step(inp, |_, h| {
+            if let Some(r) = h.returned {
+                chunk = Some(r.chunk);
             }
             req.take()
         });

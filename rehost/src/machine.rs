@@ -166,6 +166,12 @@ pub struct Chip {
     check_pending: bool,
     /// Instructions by block address, while profiling.
     profile: Option<HashMap<u64, u64>>,
+    /// Profile only this exception's own instructions (all when `None`).
+    profile_exc: Option<u32>,
+    /// With `profile_exc`: only its runs of more than this many instructions.
+    profile_over: u64,
+    /// The blocks of the profiled exception's run in progress.
+    run_blocks: Vec<(u64, u32)>,
 }
 
 impl Chip {
@@ -299,6 +305,9 @@ impl Machine {
             slept: false,
             event: false,
             profile: None,
+            profile_exc: None,
+            profile_over: 0,
+            run_blocks: Vec::new(),
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, chip).map_err(err)?;
@@ -449,8 +458,15 @@ impl Machine {
                 let _ = uc.emu_stop();
             } else {
                 c.add_instructions(n);
-                if let Some(p) = c.profile.as_mut() {
-                    *p.entry(addr).or_insert(0) += n as u64;
+                let here = c.active.last().map(|a| a.exc);
+                if c.profile.is_some() {
+                    if c.profile_exc.is_none() {
+                        if let Some(p) = c.profile.as_mut() {
+                            *p.entry(addr).or_insert(0) += n as u64;
+                        }
+                    } else if c.profile_exc == here {
+                        c.run_blocks.push((addr, n));
+                    }
                 }
             }
         })
@@ -781,6 +797,16 @@ impl Machine {
         c.core.vect_active = c.active.last().map_or(0, |a| a.exc);
         c.event = true;
         c.cycles += 10;
+        if c.profile_exc == Some(done.exc) {
+            let blocks = std::mem::take(&mut c.run_blocks);
+            if done.instructions > c.profile_over
+                && let Some(p) = c.profile.as_mut()
+            {
+                for (a, n) in blocks {
+                    *p.entry(a).or_insert(0) += n as u64;
+                }
+            }
+        }
         self.handled.push(Handled {
             exc: done.exc,
             instructions: done.instructions,
@@ -1140,6 +1166,25 @@ impl Machine {
         }
     }
 
+    /// The HSE fails for good (RM0090 §6.2.7): with the clock security system on, CSSF and
+    /// the NMI, the HSE off and the system clock switched back to the HSI (RCC_CFGR.SWS = 00);
+    /// after a reset it never becomes ready again. (The model keeps the core's time at
+    /// 168 MHz.)
+    pub fn hse_fails(&mut self) {
+        let c = self.chip_mut();
+        c.p.rcc.hse_dead = true;
+        let cr = c.p.rcc.read(0x00);
+        if cr & (1 << 19) == 0 {
+            return;
+        }
+        c.p.rcc.write(0x00, cr & !(1 << 16));
+        let cfgr = c.p.rcc.read(0x08);
+        c.p.rcc.write(0x08, cfgr & !3);
+        c.p.rcc.css_fired();
+        c.core.pending[2] = true;
+        c.stop_soon();
+    }
+
     /// Bytes for the image's link (USART2's receive line).
     pub fn send_to_image(&mut self, bytes: &[u8]) {
         let c = self.chip_mut();
@@ -1386,7 +1431,9 @@ impl Machine {
             .mem_write(SRAM, &vec![0xA5; SRAM_LEN as usize])
             .map_err(err)?;
         let c = self.uc.get_data_mut();
+        let dead = c.p.rcc.hse_dead;
         c.p.rcc = crate::periph::clock::Rcc::new();
+        c.p.rcc.hse_dead = dead;
         let rcc = c.p.rcc.clone();
         self.system_reset(0)?;
         self.chip_mut().p.rcc = rcc;
@@ -1399,9 +1446,20 @@ impl Machine {
         Ok(())
     }
 
-    /// Starts counting instructions by function (everything the core runs).
-    pub fn start_profile(&mut self) {
-        self.chip_mut().profile = Some(HashMap::new());
+    /// Starts counting instructions by function: everything the core runs, or exception
+    /// `exc`'s own.
+    pub fn start_profile(&mut self, exc: Option<u32>) {
+        self.start_profile_over(exc, 0);
+    }
+
+    /// As [`Machine::start_profile`], only the runs of exception `exc` of more than `over`
+    /// instructions counted.
+    pub fn start_profile_over(&mut self, exc: Option<u32>, over: u64) {
+        let c = self.chip_mut();
+        c.profile = Some(HashMap::new());
+        c.profile_exc = exc;
+        c.profile_over = over;
+        c.run_blocks.clear();
     }
 
     /// The instructions counted since [`Machine::start_profile`], by function (the image's
@@ -1437,7 +1495,7 @@ impl Machine {
             *by.entry(name).or_insert(0) += n;
         }
         let mut v: Vec<(String, u64)> = by.into_iter().collect();
-        v.sort_by(|a, b| b.1.cmp(&a.1));
+        v.sort_by_key(|e| std::cmp::Reverse(e.1));
         v
     }
 

@@ -9,6 +9,7 @@ use clap::{Parser, Subcommand};
 use rehost::{Board, Machine, Options};
 
 mod check;
+mod serve;
 
 #[derive(Parser)]
 #[command(about = "The firmware image on an emulated STM32F4, its loop closed on hil-sim's plant")]
@@ -32,6 +33,19 @@ enum Cmd {
         /// Cycles per instruction (the time model).
         #[arg(long, default_value_t = 1.5)]
         cpi: f64,
+    },
+    /// Runs the image with its USART2 bridged to a TCP port: `gms-tune --tcp HOST:PORT` talks
+    /// to the shipped firmware (one client at a time; the log on stderr).
+    Serve {
+        /// The firmware ELF (the Nucleo's: its link is USART2).
+        elf: std::path::PathBuf,
+        /// The address to listen on.
+        #[arg(long, default_value = "127.0.0.1:7879")]
+        listen: String,
+        /// Device time per second of wall time, at most (the emulator runs slower than the
+        /// board on a slow machine, never faster than this).
+        #[arg(long, default_value_t = 1.0)]
+        speed: f64,
     },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
     /// while moving, save, a power cycle, the setting back; the figures printed, the
@@ -63,6 +77,21 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
+        Cmd::Serve { elf, listen, speed } => {
+            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+            if !(speed > 0.0 && speed.is_finite()) {
+                return Err(format!("--speed {speed}: must be above 0"));
+            }
+            let m = Machine::new(
+                &image,
+                Board::NucleoF446,
+                Options {
+                    echo_log: true,
+                    ..Options::default()
+                },
+            )?;
+            serve::run(m, &listen, speed)
+        }
         Cmd::Check {
             elf,
             board,

@@ -142,6 +142,8 @@ pub struct Chain {
     /// Calls to functions the listing does not hold, or a recursion: the figure is then a
     /// lower bound.
     pub unknown: Vec<String>,
+    /// A path from the root to the panic handler, if one is reachable by direct calls.
+    pub panic_path: Option<Vec<String>>,
 }
 
 /// The bytes an exception entry stacks with the FPU's context (ARMv7-M: 8 words, plus 18 of
@@ -158,13 +160,29 @@ pub fn chain(funcs: &BTreeMap<String, Function>, root: &str) -> Chain {
     c.stack = depth + ENTRY_BYTES;
     c.path = path;
     let mut todo = vec![root.to_string()];
+    let mut parent: BTreeMap<String, String> = BTreeMap::new();
     while let Some(n) = todo.pop() {
         if !seen.insert(n.clone()) {
             continue;
         }
         if let Some(f) = funcs.get(&n) {
             if terminal(&n) {
+                if c.panic_path.is_none() {
+                    let mut path = vec![n.clone()];
+                    let mut at = &n;
+                    while let Some(p) = parent.get(at) {
+                        path.push(p.clone());
+                        at = p;
+                    }
+                    path.reverse();
+                    c.panic_path = Some(path);
+                }
                 continue;
+            }
+            for callee in &f.calls {
+                if !seen.contains(callee) {
+                    parent.entry(callee.clone()).or_insert_with(|| n.clone());
+                }
             }
             c.indirect += f.indirect;
             for b in &f.basepri {
@@ -275,5 +293,16 @@ mod tests {
             c.unknown,
             vec!["elsewhere (not in the listing)".to_string()]
         );
+        // The panic handler is reachable, through `tail`; from `leaf` it is not.
+        assert_eq!(
+            c.panic_path,
+            Some(
+                ["ISR", "tail", "_RNvCs1_7___rustc17rust_begin_unwind"]
+                    .iter()
+                    .map(|s| s.to_string())
+                    .collect()
+            )
+        );
+        assert_eq!(chain(&f, "leaf").panic_path, None);
     }
 }

@@ -299,21 +299,26 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
 
     /// The recorded samples from `start`, as many as a chunk holds and at most `max`.
     pub fn read(&self, start: u32, max: u32) -> Chunk {
+        let mut c = Chunk::default();
+        self.read_into(start, max, &mut c);
+        c
+    }
+
+    /// [`Capture::read`] into `c` in place (the requests' storage: nothing copied after).
+    pub fn read_into(&self, start: u32, max: u32, c: &mut Chunk) {
         let n = self.spec.nfields.max(1) as usize;
         let avail = self.count.saturating_sub(start);
         let per_chunk = CHUNK_VALUES.checked_div(n).unwrap_or(0) as u32;
         let samples = avail.min(max).min(per_chunk);
-        let mut c = Chunk {
-            samples,
-            ..Chunk::new(start, n as u8)
-        };
+        c.start = start;
+        c.nfields = n as u8;
+        c.samples = samples;
         let from = start as usize * n;
         let len = samples as usize * n;
         let src = self.buf.as_ref().iter().skip(from).take(len);
         for (d, s) in c.values.iter_mut().zip(src) {
             *d = *s;
         }
-        c
     }
 
     /// The spec armed last.

@@ -174,8 +174,6 @@ pub struct ControlLoop {
     /// The step at which a timed current ends (0 A from then on).
     current_until: Option<u64>,
     capture: Capture<CaptureBuf>,
-    /// A chunk read for the protocol side, handed over at the next exchange.
-    chunk: Option<Chunk>,
     /// The frequency-response measurement (the last one, running or not).
     frf: Option<Frf>,
     /// Its report for the protocol side, handed over at the next exchange.
@@ -253,7 +251,6 @@ impl ControlLoop {
             current_mode: None,
             current_until: None,
             capture: Capture::new(capture),
-            chunk: None,
             frf: None,
             frf_report: None,
             map_table: None,
@@ -507,7 +504,11 @@ impl ControlLoop {
                 }
             }
             Some(MapRequest::Read { start, max }) => {
-                let mut c = Chunk::new(start, 2);
+                // Into the requests' own storage (it goes back to the protocol side).
+                let c = &mut req.chunk;
+                c.start = start;
+                c.nfields = 2;
+                c.samples = 0;
                 if let Some(t) = self.map_table.as_deref() {
                     let n = (max as usize)
                         .min(super::CHUNK_VALUES / 2)
@@ -520,8 +521,6 @@ impl ControlLoop {
                         c.samples = n as u32;
                     }
                 }
-                self.chunk = Some(c);
-                self.fresh = true;
             }
             Some(MapRequest::Clear) => {
                 if let Some(t) = self.map_table.as_deref_mut() {
@@ -531,7 +530,7 @@ impl ControlLoop {
             None => {}
         }
         if let Some(t) = req.table {
-            self.take_table(&t);
+            self.take_table(&t, &mut req.chunk);
         }
         if req.disable {
             self.switch_off();
@@ -547,8 +546,7 @@ impl ControlLoop {
             Some(CaptureRequest::Arm(spec)) => self.capture.arm(spec),
             Some(CaptureRequest::Off) => self.capture.off(),
             Some(CaptureRequest::Read { start, max }) => {
-                self.chunk = Some(self.capture.read(start, max));
-                self.fresh = true;
+                self.capture.read_into(start, max, &mut req.chunk);
             }
             None => {}
         }
@@ -654,7 +652,6 @@ impl ControlLoop {
             let returned = self.done.take();
             let h = if self.fresh {
                 Handover {
-                    chunk: self.chunk.as_ref(),
                     frf: self.frf_report.as_ref(),
                     table: self.table_report.as_ref(),
                     returned,
@@ -667,7 +664,6 @@ impl ControlLoop {
             };
             let req = exchange(self.status(), h);
             if self.fresh {
-                self.chunk = None;
                 self.frf_report = None;
                 self.table_report = None;
                 self.fresh = false;
@@ -857,11 +853,10 @@ impl ControlLoop {
         }
     }
 
-    /// Acts on a table request: a read into the chunk; a run only with the position loop
-    /// running and the reference at the table's start (within a count). Out of the step's
-    /// line: its chunk would otherwise sit in the control interrupt's own frame.
+    /// Acts on a table request: a read into `chunk` (the requests' storage); a run only with
+    /// the position loop running and the reference at the table's start (within a count).
     #[inline(never)]
-    fn take_table(&mut self, req: &crate::table::TableRequest) {
+    fn take_table(&mut self, req: &crate::table::TableRequest, chunk: &mut Chunk) {
         use crate::table::TableRequest;
         let Some(t) = self.table_buf.as_deref_mut() else {
             return;
@@ -881,9 +876,10 @@ impl ControlLoop {
         }
         match req {
             TableRequest::Read { start, .. } => {
-                let c = self.chunk.insert(Chunk::new(*start, 1));
-                self.table.take(req, t, Some(c));
-                self.fresh = true;
+                chunk.start = *start;
+                chunk.nfields = 1;
+                chunk.samples = 0;
+                self.table.take(req, t, Some(chunk));
             }
             _ => self.table.take(req, t, None),
         }

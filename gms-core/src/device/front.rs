@@ -9,7 +9,7 @@ use crate::protocol::{self, Device, Settings};
 use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
-    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Ctrl, CtrlBuf, Drive, FIELDS,
+    Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Chunk, Ctrl, CtrlBuf, Drive, FIELDS,
     FrfRequest, MAP_WRITE_BINS, MAX_STREAM_HZ, Mailbox, MapRequest, MoveRequest, Requests,
     RequestsBuf, Sample, Staged, Status, StatusReply, VelocityRequest, capture_fields,
 };
@@ -196,6 +196,15 @@ impl Bufs {
         Ok(self.recycle(buf))
     }
 
+    /// The chunk the loop wrote into the requests it acted on last (a read's answer; a copy,
+    /// in the protocol side's time).
+    fn chunk<L: LoopLink>(&mut self, link: &mut L) -> Chunk {
+        if self.req.is_none() {
+            self.req = link.with_mailbox(|m| m.returned.take());
+        }
+        self.req.as_ref().map_or_else(Chunk::default, |r| r.chunk)
+    }
+
     /// Empties `buf`, keeping the controller it carries (the old one after a swap, or one
     /// never taken) as the spare.
     fn recycle(&mut self, buf: RequestsBuf) -> RequestsBuf {
@@ -322,7 +331,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         let mut at = start;
         while at < end {
             self.post(|r| ask(r, at, end - at))?;
-            let c = self.link.with_mailbox(|m| m.chunk);
+            let c = self.bufs.chunk(&mut self.link);
             if c.start != at || c.samples == 0 {
                 return Err(missing);
             }
@@ -360,7 +369,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
                     max: bins - at,
                 })
             })?;
-            let c = link.with_mailbox(|m| m.chunk);
+            let c = bufs.chunk(link);
             if c.start != at || c.samples == 0 || c.nfields != 2 {
                 // A loop without a table: nothing to keep.
                 return Ok(());

@@ -149,7 +149,7 @@ pub enum MapRequest {
         /// Their values, interleaved.
         values: [f32; 2 * MAP_WRITE_BINS],
     },
-    /// Copy bins from `start` (at most `max`) into the mailbox's chunk (two fields).
+    /// Copy bins from `start` (at most `max`) into the requests' chunk (two fields).
     Read {
         /// First bin.
         start: u32,
@@ -176,10 +176,9 @@ pub enum FrfRequest {
 /// there is something new).
 #[derive(Debug, Default)]
 pub struct Handover<'a> {
-    /// The requests taken at the last exchange, acted on, given back.
+    /// The requests taken at the last exchange, acted on, given back (with the chunk a read
+    /// asked for).
     pub returned: Option<RequestsBuf>,
-    /// A chunk of captured samples read ([`CaptureRequest::Read`]).
-    pub chunk: Option<&'a Chunk>,
     /// The frequency-response measurement's report (at the end of each group of periods, and
     /// when it stops).
     pub frf: Option<&'a crate::frf::FrfReport>,
@@ -194,7 +193,7 @@ pub enum CaptureRequest {
     Arm(CaptureSpec),
     /// Stop and drop.
     Off,
-    /// Copy samples from `start` (at most `max`) into the mailbox's chunk.
+    /// Copy samples from `start` (at most `max`) into the requests' chunk.
     Read {
         /// First sample.
         start: u32,
@@ -274,6 +273,9 @@ pub struct Requests {
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
     pub reset_stats: bool,
+    /// What a read (capture, map, table) put here for the protocol side: the loop writes it
+    /// in place, and it goes back with the requests.
+    pub chunk: Chunk,
 }
 
 impl Requests {
@@ -296,6 +298,7 @@ impl Requests {
             table: None,
             stream_every: None,
             reset_stats: false,
+            chunk: Chunk::new(0, 0),
         }
     }
 
@@ -442,8 +445,6 @@ pub struct Mailbox {
     pub status: Status,
     /// The position step at which the loop last took requests.
     pub taken_at: u64,
-    /// The last chunk of captured samples read (`CaptureRequest::Read`).
-    pub chunk: Chunk,
     /// The frequency-response measurement's last report.
     pub frf: crate::frf::FrfReport,
     /// The table motion's last report.
@@ -481,7 +482,6 @@ impl Mailbox {
                 capture_origin: 0,
             },
             taken_at: 0,
-            chunk: Chunk::new(0, 0),
             frf: crate::frf::FrfReport {
                 state: crate::frf::FrfState::Idle,
                 injection: None,
@@ -518,9 +518,6 @@ impl Mailbox {
     /// posted requests, if any.
     pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<RequestsBuf> {
         self.status = status;
-        if let Some(c) = h.chunk {
-            self.chunk = *c;
-        }
         if let Some(f) = h.frf {
             self.frf = *f;
         }

@@ -27,6 +27,9 @@ pub enum Stall {
     AdcOverrun = 3,
     /// The stack came within [`STACK_MARGIN_BYTES`] of its guard (or the statics).
     StackLow = 4,
+    /// The HSE failed: the clock security system switched the system clock to the HSI (every
+    /// rate and time of the board is then wrong).
+    ClockLost = 5,
 }
 
 /// The stack's high-water mark may come this close to the bottom of its usable region (the
@@ -49,6 +52,7 @@ impl Stall {
             2 => Stall::DmaError,
             3 => Stall::AdcOverrun,
             4 => Stall::StackLow,
+            5 => Stall::ClockLost,
             _ => Stall::NoStep,
         }
     }
@@ -61,6 +65,9 @@ impl Stall {
             Stall::DmaError => "the current-sense DMA stream reported a transfer error",
             Stall::AdcOverrun => "the current-sense ADC overran (its DMA requests stopped)",
             Stall::StackLow => "the stack came within 2 KiB of its guard",
+            Stall::ClockLost => {
+                "the HSE failed: the clock security system switched to the HSI (every rate wrong)"
+            }
         }
     }
 

@@ -7,6 +7,9 @@
 #[derive(Debug, Clone)]
 pub struct Rcc {
     regs: [u32; 0x90 / 4],
+    /// The HSE's source is gone (a dead crystal, the ST-LINK's clock missing): HSEON no
+    /// longer brings HSERDY. Kept across resets (the hardware's fault, not the chip's state).
+    pub hse_dead: bool,
 }
 
 /// RCC_CSR.IWDGRSTF (RM0090 §7.3.21).
@@ -25,15 +28,20 @@ impl Rcc {
         regs[0] = 0x0000_0083;
         regs[1] = 0x2400_3010; // PLLCFGR (0x04)
         regs[0x74 / 4] = CSR_PORRSTF | CSR_PINRSTF;
-        Rcc { regs }
+        Rcc {
+            regs,
+            hse_dead: false,
+        }
     }
 
     /// The state after a system reset of cause `flag` (RCC_CSR's flags are kept until RMVF;
     /// the other registers go back to their reset values).
     pub fn reset(&mut self, flag: u32) {
         let csr = self.regs[0x74 / 4] | flag | CSR_PINRSTF;
+        let dead = self.hse_dead;
         *self = Rcc::new();
         self.regs[0x74 / 4] = csr;
+        self.hse_dead = dead;
     }
 
     /// Reads the register at `off`.
@@ -51,7 +59,7 @@ impl Rcc {
                     & 0x15FF_FFF9
                     & !((1 << 1) | (1 << 17) | (1 << 25) | (1 << 27) | (1 << 29));
                 for (on, rdy) in [(0, 1), (16, 17), (24, 25), (26, 27), (28, 29)] {
-                    if value & (1 << on) != 0 {
+                    if value & (1 << on) != 0 && !(on == 16 && self.hse_dead) {
                         v |= 1 << rdy;
                     }
                 }
@@ -61,8 +69,14 @@ impl Rcc {
             }
             // CFGR: SWS (bits 3:2) follows SW (bits 1:0).
             0x08 => self.regs[2] = (value & !0xC) | ((value & 3) << 2),
-            // CIR: the ready-interrupt flags are cleared by their clear bits; the CSS flag too.
-            0x0C => self.regs[3] = value & 0x0000_FF00,
+            // CIR: the enables (bits 8-13) as written; CSSC (bit 23) clears CSSF (bit 7).
+            0x0C => {
+                let mut v = (self.regs[3] & 0x80) | (value & 0x0000_3F00);
+                if value & (1 << 23) != 0 {
+                    v &= !0x80;
+                }
+                self.regs[3] = v;
+            }
             // CSR: RMVF (24) clears the reset flags; LSIRDY (1) follows LSION (0).
             0x74 => {
                 let flags = if value & (1 << 24) != 0 {
@@ -81,6 +95,11 @@ impl Rcc {
                 }
             }
         }
+    }
+
+    /// The clock security system found the HSE failed: RCC_CIR.CSSF.
+    pub fn css_fired(&mut self) {
+        self.regs[3] |= 0x80;
     }
 
     /// RCC_CSR (the reset flags).
@@ -146,6 +165,25 @@ mod tests {
         assert_eq!(r.read(0) & (1 << 17), 0, "HSERDY off with HSEON");
         r.write(8, 2);
         assert_eq!((r.read(8) >> 2) & 3, 2, "SWS = PLL");
+    }
+
+    #[test]
+    fn a_dead_hse_never_becomes_ready_even_after_a_reset() {
+        let mut r = Rcc::new();
+        r.hse_dead = true;
+        r.reset(CSR_IWDGRSTF);
+        r.write(0, 0x83 | (1 << 16));
+        assert_eq!(r.read(0) & (1 << 17), 0);
+    }
+
+    #[test]
+    fn cssf_is_cleared_by_cssc_only() {
+        let mut r = Rcc::new();
+        r.css_fired();
+        r.write(0x0C, 0x0000_0100);
+        assert_eq!(r.read(0x0C) & 0x80, 0x80, "an enable write leaves CSSF");
+        r.write(0x0C, 1 << 23);
+        assert_eq!(r.read(0x0C) & 0x80, 0);
     }
 
     #[test]
