@@ -86,6 +86,13 @@ pub fn run(m: &mut Machine, profile: bool) -> Result<(), String> {
 
 /// The bench's first minutes over the Nucleo's UART; returns the `status` request's cost.
 fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
+    // An empty line (a host flushing the line first, as gms-tune does) gets no reply and
+    // changes nothing.
+    s.m.send_to_image(b"\n");
+    s.run_for(0.01)?;
+    if !s.m.take_from_image().is_empty() || !s.m.faults.is_empty() || s.m.logged("panic") {
+        return Err("an empty line was answered, or faulted the image".into());
+    }
     let thread0 = s.m.chip().thread_instructions;
     if profile {
         s.m.start_profile(None);
