@@ -155,29 +155,24 @@ pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: Telem
                     }
                 }
                 Either3::Second(()) => {
-                    // Batch what is queued, a few lines per transfer.
-                    let mut link_ok = true;
-                    loop {
-                        lines.clear();
-                        while lines.len < 384 {
-                            let Some(s) = telemetry.dequeue() else {
-                                break;
-                            };
-                            let mark = lines.len;
-                            if dev.telemetry_line(&mut lines, &s).is_err() {
-                                lines.len = mark;
-                                break;
-                            }
-                        }
-                        if lines.len == 0 {
+                    // One batch of what is queued (a few lines per transfer), then back to the
+                    // select: requests are read between batches. Draining the queue here
+                    // instead never ended while the stream outran the link (1 kHz of six
+                    // fields is ~100 kB/s, the UART carries 92 kB/s): `stream off` was never
+                    // read (found running the image under `gms-tune step-test`, docs/rehost.md).
+                    // Samples the link cannot carry are dropped where the queue is full.
+                    lines.clear();
+                    while lines.len < 384 {
+                        let Some(s) = telemetry.dequeue() else {
                             break;
-                        }
-                        if port.send(lines.as_bytes()).await.is_err() {
-                            link_ok = false;
+                        };
+                        let mark = lines.len;
+                        if dev.telemetry_line(&mut lines, &s).is_err() {
+                            lines.len = mark;
                             break;
                         }
                     }
-                    if !link_ok {
+                    if lines.len > 0 && port.send(lines.as_bytes()).await.is_err() {
                         break;
                     }
                 }

@@ -24,6 +24,8 @@ pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
     let device0 = m.seconds();
     let mut client: Option<TcpStream> = None;
     let mut buf = [0u8; 4096];
+    // REHOST_TRACE=1: every byte both ways on stderr.
+    let trace = std::env::var_os("REHOST_TRACE").is_some();
     loop {
         if client.is_none()
             && let Ok((c, peer)) = listener.accept()
@@ -36,7 +38,16 @@ pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
         if let Some(c) = client.as_mut() {
             match c.read(&mut buf) {
                 Ok(0) => client = None,
-                Ok(n) => m.send_to_image(&buf[..n]),
+                Ok(n) => {
+                    if trace {
+                        eprintln!(
+                            "rehost: {:.4} s host > {:?}",
+                            m.seconds(),
+                            String::from_utf8_lossy(&buf[..n])
+                        );
+                    }
+                    m.send_to_image(&buf[..n]);
+                }
                 Err(e) if e.kind() == ErrorKind::WouldBlock => {}
                 Err(_) => client = None,
             }
@@ -44,6 +55,13 @@ pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
         m.run_for(SLICE)
             .map_err(|e| format!("the image stopped: {e:?}"))?;
         let out = m.take_from_image();
+        if trace && !out.is_empty() {
+            eprintln!(
+                "rehost: {:.4} s image > {:?}",
+                m.seconds(),
+                String::from_utf8_lossy(&out)
+            );
+        }
         if !out.is_empty()
             && let Some(c) = client.as_mut()
         {
