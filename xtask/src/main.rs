@@ -202,11 +202,105 @@ fn check_elf(args: &[String]) -> Result<(), String> {
             ));
         }
     }
+    match stack_bound(&bytes, &funcs) {
+        Ok(line) => println!("{name}: {line}"),
+        Err(e) => bad.push(e),
+    }
     if bad.is_empty() {
         Ok(())
     } else {
         Err(format!("{path} (board {name}):\n{}", bad.join("\n")))
     }
+}
+
+/// The handlers by the priority level they run at (`firmware/src/irq.rs`, `board.rs`), least
+/// urgent first: one of each level can be active at once, nested on thread mode. The DMA
+/// streams other than the link's and the control's are embassy's, at the drivers' level.
+const NESTING: [(&str, &[&str]); 4] = [
+    (
+        "link (P4)",
+        &["USART2", "DMA1_STREAM5", "DMA1_STREAM6", "OTG_FS"],
+    ),
+    ("drivers (P3)", &["TIM4", "DMA1_STREAM*", "DMA2_STREAM*"]),
+    ("control (P1)", &["DMA2_STREAM0"]),
+    (
+        "deadman (P0), NMI",
+        &["TIM8_UP_TIM13", "ADC", "NonMaskableInt"],
+    ),
+];
+
+/// The stack the image can need at once against the stack above its guard: thread mode (the
+/// executor's loop from `main` plus its deepest task, each `TaskStorage::poll`, which the
+/// executor calls through a pointer) plus the worst handler of each priority level nested on
+/// it (the deadman and the NMI counted as one level, a conservative sum would add both). A
+/// chain through indirect calls is a lower bound, and said so.
+fn stack_bound(
+    bytes: &[u8],
+    funcs: &std::collections::BTreeMap<String, stack::Function>,
+) -> Result<String, String> {
+    use object::{Object, ObjectSymbol};
+    let file = object::File::parse(bytes).map_err(|e| format!("not an ELF file: {e}"))?;
+    let sym = |n: &str| {
+        file.symbols()
+            .find(|s| s.name() == Ok(n))
+            .map(|s| s.address())
+    };
+    let (Some(end), Some(start)) = (sym("_stack_end"), sym("_stack_start")) else {
+        return Err("no _stack_end/_stack_start symbols (cortex-m-rt's)".into());
+    };
+    let guard = gms_core::hw::STACK_GUARD_BYTES as u64;
+    let guard_top = end.div_ceil(guard) * guard + guard;
+    let room = start.saturating_sub(guard_top);
+    let main = stack::chain(funcs, "main");
+    let tasks: Vec<(&String, stack::Chain)> = funcs
+        .keys()
+        .filter(|n| n.contains("TaskStorage") && n.contains("4poll"))
+        .map(|n| (n, stack::chain(funcs, n)))
+        .collect();
+    let task = tasks
+        .iter()
+        .map(|(_, c)| c.stack - stack::ENTRY_BYTES)
+        .max()
+        .unwrap_or(0);
+    let thread = main.stack - stack::ENTRY_BYTES + task;
+    let mut indirect = main.indirect + tasks.iter().map(|(_, c)| c.indirect).sum::<u32>();
+    let mut total = thread;
+    let mut parts = vec![format!("thread {thread} B ({} tasks)", tasks.len())];
+    // A handler named at a level is not taken by another level's wildcard.
+    let named: Vec<&str> = NESTING
+        .iter()
+        .flat_map(|(_, ns)| ns.iter().copied())
+        .filter(|n| !n.ends_with('*'))
+        .collect();
+    let mut seen: Vec<&str> = Vec::new();
+    for (level, names) in NESTING {
+        let mut worst = 0;
+        for (n, _) in funcs.iter() {
+            let hit = names.iter().any(|p| match p.strip_suffix('*') {
+                Some(prefix) => n.starts_with(prefix) && !named.contains(&n.as_str()),
+                None => n == p,
+            });
+            if !hit || seen.contains(&n.as_str()) {
+                continue;
+            }
+            seen.push(n.as_str());
+            let c = stack::chain(funcs, n);
+            indirect += c.indirect;
+            worst = worst.max(c.stack);
+        }
+        total += worst;
+        parts.push(format!("{level} {worst} B"));
+    }
+    let line = format!(
+        "stack at once: {} = {total} B{}, of {room} B above the guard ({guard_top:#010x}..{start:#010x})",
+        parts.join(" + "),
+        if indirect > 0 {
+            format!(" (a lower bound: {indirect} indirect calls not followed)")
+        } else {
+            String::new()
+        }
+    );
+    if total > room { Err(line) } else { Ok(line) }
 }
 
 /// The handlers that run above the global critical section's mask, and the most stack each
