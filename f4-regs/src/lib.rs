@@ -13,6 +13,8 @@
 //!   accelerator, the flash's erase parallelism and data-cache flush.
 //! - [`encoder`]: TIM2's range and input filter.
 //! - [`stack`]: the stack's high-water mark from cortex-m-rt's paint.
+//! - [`uart_rx`]: a UART's reception by circular DMA, read by the DMA's count (never by the
+//!   data register).
 //! - [`mpu`]: the stack guard (an MPU region at the bottom of the stack) and the fault
 //!   handlers that run without the stack they overflowed ([`stack_guard_fault_handlers`]).
 #![no_std]
@@ -25,3 +27,4 @@ pub mod mpu;
 pub mod pwm;
 pub mod sense;
 pub mod stack;
+pub mod uart_rx;

@@ -550,3 +550,53 @@ fn the_stack_guard_region_and_registers() {
     );
     assert_eq!(scb_mem[0x24 / 4], 1 << 16, "MEMFAULTENA");
 }
+
+#[test]
+fn uart_reception_by_circular_dma_never_reads_the_data_register() {
+    use f4_regs::uart_rx::{self, Ring, RxStream};
+    let dma = block(pac::dma::Dma::from_ptr);
+    let usart = block(pac::usart::Usart::from_ptr);
+    let ring_mem: &'static mut [u8; 16] = Box::leak(Box::new([0u8; 16]));
+    let ring = Ring {
+        addr: ring_mem.as_mut_ptr(),
+        len: 16,
+    };
+    let s = RxStream {
+        dma,
+        stream: 5,
+        channel: 4,
+    };
+    assert!(uart_rx::start(s, usart, ring));
+    let st = dma.st(5);
+    let cr = st.cr().read();
+    // RM0390 §9.5.5: CHSEL 4, peripheral to memory, bytes, MINC, CIRC, enabled, no interrupt.
+    assert_eq!(cr.chsel(), 4);
+    assert!(cr.minc() && cr.circ() && cr.en());
+    assert!(!cr.tcie() && !cr.htie() && !cr.teie() && !cr.dmeie());
+    assert_eq!(cr.dir(), pac::dma::vals::Dir::PERIPHERAL_TO_MEMORY);
+    assert_eq!(st.par().read(), usart.dr().as_ptr() as usize as u32);
+    assert_eq!(st.m0ar().read(), ring_mem.as_ptr() as usize as u32);
+    assert_eq!(st.ndtr().read().ndt(), 16);
+    assert!(usart.cr3().read().dmar(), "the USART requests the DMA");
+    // The stream's flags cleared in HIFCR (stream 5: bits 6-11).
+    assert_eq!(word(dma.as_ptr(), 0x0C), 0x3D << 6);
+    // The stream wrote 5 bytes: NDTR 11; then it wrapped to 3 written of the next lap.
+    st.ndtr().write(|w| w.set_ndt(11));
+    assert_eq!(uart_rx::write_pos(s, 16), 5);
+    st.ndtr().write(|w| w.set_ndt(0));
+    assert_eq!(
+        uart_rx::write_pos(s, 16),
+        0,
+        "a 0 read at the reload is the ring's start"
+    );
+    for (k, b) in ring_mem.iter_mut().enumerate() {
+        *b = k as u8;
+    }
+    let mut out = [0u8; 8];
+    // SAFETY: the ring is the stream's, every byte written.
+    let n = unsafe { uart_rx::copy_out(ring, 14, 3, &mut out) };
+    assert_eq!(&out[..n], &[14, 15, 0, 1, 2], "across the wrap");
+    let n = unsafe { uart_rx::copy_out(ring, 2, 15, &mut out) };
+    assert_eq!(n, 8, "as many as fit");
+    assert_eq!(out, [2, 3, 4, 5, 6, 7, 8, 9]);
+}

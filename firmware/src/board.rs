@@ -368,9 +368,29 @@ pub fn init() -> (ControlHw, Rest) {
         interrupt::DMA1_STREAM5.set_priority(crate::irq::LINK);
         interrupt::DMA1_STREAM6.set_priority(crate::irq::LINK);
         let (tx, rx) = uart.split();
+        // Reception by our own circular DMA on stream 5 (`f4_regs::uart_rx`), read by the
+        // stream's count: embassy's ring-buffered reader reads DR at every call and can take a
+        // byte from under the DMA (embassy-rs/embassy issue 1556). embassy's `UartRx` is kept
+        // (it owns the pins and the stream) and never read.
+        let ring = RX_RING.take();
+        let ring = f4_regs::uart_rx::Ring {
+            addr: ring.as_mut_ptr(),
+            len: ring.len() as u16,
+        };
+        let stream = f4_regs::uart_rx::RxStream {
+            dma: pac::DMA1,
+            stream: 5,
+            channel: 4,
+        };
+        if !f4_regs::uart_rx::start(stream, pac::USART2, ring) {
+            defmt::error!("USART2's receive DMA stream did not stop: no reception");
+        }
         crate::port::HostPort {
             tx,
-            rx: rx.into_ring_buffered(RX_RING.take()),
+            _rx: rx,
+            stream,
+            ring,
+            at: 0,
             started: false,
         }
     };

@@ -146,8 +146,6 @@ pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: Telem
                         break;
                     }
                 }
-                // Bytes lost on the line: the partial line is not a request.
-                Either3::First(Ok(Read::Broken)) => reader = LineReader::default(),
                 Either3::First(Err(_)) => break,
                 Either3::Third(()) => {
                     if !port.host_here() {

@@ -10,12 +10,9 @@ pub struct Gone;
 
 /// What a read brought.
 pub enum Read {
-    /// So many bytes, at the start of the buffer.
+    /// So many bytes, at the start of the buffer. (A UART's bytes damaged on the line, the
+    /// only loss left with its reception by DMA, make a line the protocol refuses: `err`.)
     Bytes(usize),
-    /// Bytes were lost (a UART overrun, framing or noise error): the partial line is dropped.
-    /// (USB's own error checks and retries never lose bytes silently.)
-    #[cfg_attr(not(feature = "board-nucleo-f446"), allow(dead_code))]
-    Broken,
 }
 
 /// A byte link to the host.
@@ -116,7 +113,9 @@ pub use usb::UsbPort as HostPort;
 #[cfg(feature = "board-nucleo-f446")]
 mod uart {
     use embassy_stm32::mode::Async;
-    use embassy_stm32::usart::{RingBufferedUartRx, UartTx};
+    use embassy_stm32::usart::{UartRx, UartTx};
+    use embassy_time::Timer;
+    use f4_regs::uart_rx::{self, Ring, RxStream};
 
     use super::{Gone, Port, Read};
 
@@ -128,14 +127,25 @@ mod uart {
         c
     }
 
+    /// How often the reader looks at the ring while nothing has come \[µs\]: 46 bytes at
+    /// 921,600 Bd, against a ring of 1024 (11 ms).
+    pub const RX_POLL_US: u64 = 500;
+
     /// USART2 to the ST-LINK's virtual COM port, both ways by DMA (RM0390 table 28: DMA1
-    /// stream 5 channel 4 receives, stream 6 channel 4 sends); reception into a ring buffer
-    /// that runs on its own.
+    /// stream 5 channel 4 receives, stream 6 channel 4 sends); reception into a ring the
+    /// stream fills on its own (`f4_regs::uart_rx`: the data register is never read by the
+    /// CPU). A host sends one request and waits for its reply, so the ring never laps.
     pub struct UartPort {
         /// Sending side.
         pub tx: UartTx<'static, Async>,
-        /// Receiving side.
-        pub rx: RingBufferedUartRx<'static>,
+        /// embassy's receiving side, kept alive (the pins, the stream) and never read.
+        pub _rx: UartRx<'static, Async>,
+        /// The receiving stream.
+        pub stream: RxStream,
+        /// Its ring.
+        pub ring: Ring,
+        /// Where the next byte to read is in the ring.
+        pub at: u16,
         /// A session has begun (a UART has no connection: the first `connected` returns at
         /// once, so does every later one).
         pub started: bool,
@@ -149,12 +159,18 @@ mod uart {
         }
 
         async fn read(&mut self, buf: &mut [u8]) -> Result<Read, Gone> {
-            // An error stops the reception; the next read starts it again (embassy-stm32 0.6
-            // `usart/ringbuffered.rs`).
-            Ok(match self.rx.read(buf).await {
-                Ok(n) => Read::Bytes(n),
-                Err(_) => Read::Broken,
-            })
+            // Cancel-safe: `at` moves only when bytes are returned.
+            loop {
+                let to = uart_rx::write_pos(self.stream, self.ring.len);
+                if to != self.at {
+                    // SAFETY: the ring is the one the stream writes (`board.rs`), and the
+                    // bytes from `at` to `to` are written and not yet reached again.
+                    let n = unsafe { uart_rx::copy_out(self.ring, self.at, to, buf) };
+                    self.at = ((self.at as usize + n) % self.ring.len as usize) as u16;
+                    return Ok(Read::Bytes(n));
+                }
+                Timer::after_micros(RX_POLL_US).await;
+            }
         }
 
         async fn send(&mut self, bytes: &[u8]) -> Result<(), Gone> {

@@ -261,6 +261,13 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
     if c.primask_max > PRIMASK_BUDGET {
         over.push(format!("PRIMASK held {} instructions", c.primask_max));
     }
+    if c.dr_reads_under_dma > 0 {
+        over.push(format!(
+            "{} reads of USART2's DR by the CPU while its DMA received (each could take a byte \
+             from under the DMA)",
+            c.dr_reads_under_dma
+        ));
+    }
     if status_cost > STATUS_BUDGET {
         over.push(format!("a status reply of {status_cost} instructions"));
     }

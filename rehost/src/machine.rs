@@ -162,6 +162,10 @@ pub struct Chip {
     primask_from: u64,
     /// A write to flash outside a programming sequence (address).
     pub bad_flash_write: Option<u32>,
+    /// CPU reads of USART2's DR while its DMA receives (CR3.DMAR): each could take a byte
+    /// that arrived in the instant before the DMA served it (RM0390 §25.6.1: a DR read
+    /// clears RXNE), and is counted.
+    pub dr_reads_under_dma: u64,
     /// Stop before the next block: a pending exception may now be taken.
     check_pending: bool,
     /// Instructions by block address, while profiling.
@@ -301,6 +305,7 @@ impl Machine {
             primask_max_at: 0,
             primask_from: 0,
             bad_flash_write: None,
+            dr_reads_under_dma: 0,
             check_pending: false,
             slept: false,
             event: false,
@@ -1277,6 +1282,9 @@ fn periph_read(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize) -> u32 {
         }
         a if (base::TIM4..base::TIM4 + 0x400).contains(&a) => c.p.tim4.read(off(base::TIM4), now),
         a if (base::USART2..base::USART2 + 0x400).contains(&a) => {
+            if off(base::USART2) == 0x04 && c.p.usart2.dma_rx() {
+                c.dr_reads_under_dma += 1;
+            }
             c.p.usart2.read(off(base::USART2))
         }
         a if (base::IWDG..base::IWDG + 0x400).contains(&a) => c.p.iwdg.read(off(base::IWDG)),
