@@ -109,8 +109,17 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     s.ok("enable", 0.5)?;
     s.run_for(0.05)?;
     let moving_from = s.m.chip().cycles;
+    if profile {
+        s.m.start_profile_over(Some(CONTROL), 1700);
+    }
     s.ok("move 0.02", 0.5)?;
     s.run_for(0.05)?;
+    if profile {
+        profile_print(
+            s.m,
+            "the control interrupt's runs over 1,700 instructions while moving:",
+        );
+    }
     let st = s.ok("status", 0.5)?;
     if !st
         .last()
