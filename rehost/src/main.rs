@@ -78,7 +78,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::Serve { elf, listen, speed } => {
-            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+            let (image, _) = load(&elf, "nucleo-f446")?;
             if !(speed > 0.0 && speed.is_finite()) {
                 return Err(format!("--speed {speed}: must be above 0"));
             }
@@ -97,8 +97,7 @@ fn run(cli: Cli) -> Result<(), String> {
             board,
             profile,
         } => {
-            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-            let board = Board::parse(&board)?;
+            let (image, board) = load(&elf, &board)?;
             let mut m = Machine::new(&image, board, Options::default())?;
             let r = check::run(&mut m, profile);
             if r.is_err() {
@@ -124,8 +123,7 @@ fn run(cli: Cli) -> Result<(), String> {
             seconds,
             cpi,
         } => {
-            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-            let board = Board::parse(&board)?;
+            let (image, board) = load(&elf, &board)?;
             let mut m = Machine::new(
                 &image,
                 board,
@@ -179,4 +177,10 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
     }
+}
+
+/// The image's bytes and the board named.
+fn load(elf: &std::path::Path, board: &str) -> Result<(Vec<u8>, Board), String> {
+    let image = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+    Ok((image, Board::parse(board)?))
 }
