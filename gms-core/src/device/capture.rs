@@ -136,6 +136,14 @@ impl Chunk {
             values: [0.0; CHUNK_VALUES],
         }
     }
+
+    /// The chunk started over in place as an empty one of rows from `start`, `nfields`
+    /// values a row (its values are left: only the first `samples × nfields` are read).
+    pub fn restart(&mut self, start: u32, nfields: u8) {
+        self.start = start;
+        self.nfields = nfields;
+        self.samples = 0;
+    }
 }
 
 impl Default for Chunk {
@@ -310,8 +318,7 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let avail = self.count.saturating_sub(start);
         let per_chunk = CHUNK_VALUES.checked_div(n).unwrap_or(0) as u32;
         let samples = avail.min(max).min(per_chunk);
-        c.start = start;
-        c.nfields = n as u8;
+        c.restart(start, n as u8);
         c.samples = samples;
         let from = start as usize * n;
         let len = samples as usize * n;

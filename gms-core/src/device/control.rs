@@ -506,9 +506,7 @@ impl ControlLoop {
             Some(MapRequest::Read { start, max }) => {
                 // Into the requests' own storage (it goes back to the protocol side).
                 let c = &mut req.chunk;
-                c.start = start;
-                c.nfields = 2;
-                c.samples = 0;
+                c.restart(start, 2);
                 if let Some(t) = self.map_table.as_deref() {
                     let n = (max as usize)
                         .min(super::CHUNK_VALUES / 2)
@@ -876,9 +874,7 @@ impl ControlLoop {
         }
         match req {
             TableRequest::Read { start, .. } => {
-                chunk.start = *start;
-                chunk.nfields = 1;
-                chunk.samples = 0;
+                chunk.restart(*start, 1);
                 self.table.take(req, t, Some(chunk));
             }
             _ => self.table.take(req, t, None),

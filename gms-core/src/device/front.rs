@@ -184,24 +184,35 @@ struct Bufs {
 }
 
 impl Bufs {
+    /// The requests' storage back from the loop, if the protocol side does not hold it.
+    fn reclaim<L: LoopLink>(&mut self, link: &mut L) {
+        if self.req.is_none() {
+            self.req = link.with_mailbox(|m| m.returned.take());
+        }
+    }
+
     /// The requests' storage, emptied: the protocol side's own, or the one the loop gave
     /// back (its controller kept as the spare).
     fn requests<L: LoopLink>(&mut self, link: &mut L) -> Result<RequestsBuf, &'static str> {
-        let buf = match self.req.take() {
-            Some(b) => b,
-            None => link
-                .with_mailbox(|m| m.returned.take())
-                .ok_or("control loop not responding")?,
-        };
+        self.reclaim(link);
+        let buf = self.req.take().ok_or("control loop not responding")?;
         Ok(self.recycle(buf))
+    }
+
+    /// The spare controller's storage (reclaimed with the requests the loop gave back, if
+    /// it came with them).
+    fn spare<L: LoopLink>(&mut self, link: &mut L) -> Result<CtrlBuf, &'static str> {
+        if self.spare.is_none() {
+            let buf = self.requests(link)?;
+            self.req = Some(buf);
+        }
+        self.spare.take().ok_or("control loop not responding")
     }
 
     /// The chunk the loop wrote into the requests it acted on last (a read's answer; a copy,
     /// in the protocol side's time).
     fn chunk<L: LoopLink>(&mut self, link: &mut L) -> Chunk {
-        if self.req.is_none() {
-            self.req = link.with_mailbox(|m| m.returned.take());
-        }
+        self.reclaim(link);
         self.req.as_ref().map_or_else(Chunk::default, |r| r.chunk)
     }
 
@@ -463,14 +474,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
     fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         let a = prepare(&new, &self.board)?;
         // The new controller built in the spare storage here, on the protocol side; the loop
-        // only swaps it in (the storage the loop gave back is reclaimed first).
-        let buf = self.bufs.requests(&mut self.link)?;
-        self.bufs.req = Some(buf);
-        let ctrl = self
-            .bufs
-            .spare
-            .take()
-            .ok_or("control loop not responding")?;
+        // only swaps it in.
+        let ctrl = self.bufs.spare(&mut self.link)?;
         *ctrl = a.ctrl;
         let staged = Staged {
             ctrl,

@@ -238,7 +238,7 @@ pub struct Staged {
 
 /// What the protocol side asks of the loop; acted on in place at the start of a position
 /// step (the loop holds it by reference: nothing is copied into the control interrupt).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Requests {
     /// A new parameter set: taken without a bump at the same loop rates; other rates switch
     /// the bridge off for the change.
@@ -301,24 +301,11 @@ impl Requests {
             chunk: Chunk::new(0, 0),
         }
     }
+}
 
-    /// True when anything is asked.
-    pub fn pending(&self) -> bool {
-        self.apply.is_some()
-            || self.enable
-            || self.disable
-            || self.clear
-            || !self.latch.is_empty()
-            || self.motion.is_some()
-            || self.velocity.is_some()
-            || self.current.is_some()
-            || self.hold_here
-            || self.capture.is_some()
-            || self.frf.is_some()
-            || self.map.is_some()
-            || self.table.is_some()
-            || self.stream_every.is_some()
-            || self.reset_stats
+impl Default for Requests {
+    fn default() -> Requests {
+        Requests::new()
     }
 }
 
