@@ -216,24 +216,22 @@ fn check_elf(args: &[String]) -> Result<(), String> {
 /// The handlers by the priority level they run at (`firmware/src/irq.rs`, `board.rs`), least
 /// urgent first: one of each level can be active at once, nested on thread mode. The DMA
 /// streams other than the link's and the control's are embassy's, at the drivers' level.
-const NESTING: [(&str, &[&str]); 4] = [
+const NESTING: [(&str, &[&str]); 5] = [
     (
         "link (P4)",
         &["USART2", "DMA1_STREAM5", "DMA1_STREAM6", "OTG_FS"],
     ),
     ("drivers (P3)", &["TIM4", "DMA1_STREAM*", "DMA2_STREAM*"]),
     ("control (P1)", &["DMA2_STREAM0"]),
-    (
-        "deadman (P0), NMI",
-        &["TIM8_UP_TIM13", "ADC", "NonMaskableInt"],
-    ),
+    ("deadman (P0)", &["TIM8_UP_TIM13", "ADC"]),
+    // The NMI preempts the deadman too (priority −2).
+    ("NMI", &["NonMaskableInt"]),
 ];
 
 /// The stack the image can need at once against the stack above its guard: thread mode (the
 /// executor's loop from `main` plus its deepest task, each `TaskStorage::poll`, which the
 /// executor calls through a pointer) plus the worst handler of each priority level nested on
-/// it (the deadman and the NMI counted as one level, a conservative sum would add both). A
-/// chain through indirect calls is a lower bound, and said so.
+/// it. A chain through indirect calls is a lower bound, and said so.
 fn stack_bound(
     bytes: &[u8],
     funcs: &std::collections::BTreeMap<String, stack::Function>,
@@ -248,9 +246,15 @@ fn stack_bound(
     let (Some(end), Some(start)) = (sym("_stack_end"), sym("_stack_start")) else {
         return Err("no _stack_end/_stack_start symbols (cortex-m-rt's)".into());
     };
-    let guard = gms_core::hw::STACK_GUARD_BYTES as u64;
-    let guard_top = end.div_ceil(guard) * guard + guard;
-    let room = start.saturating_sub(guard_top);
+    // Where the firmware puts its guard (`board::stack_guard`), by the same function.
+    let guard = gms_core::hw::STACK_GUARD_BYTES;
+    let Some((guard_base, room)) = f4_regs::mpu::guard_region(end as u32, start as u32, guard, 0)
+    else {
+        return Err(format!(
+            "no room for the {guard} B stack guard between {end:#010x} and {start:#010x}"
+        ));
+    };
+    let (guard_top, room) = (guard_base as u64 + guard as u64, room as u64);
     let main = stack::chain(funcs, "main");
     let tasks: Vec<(&String, stack::Chain)> = funcs
         .keys()
