@@ -21,7 +21,7 @@ use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot, uc_erro
 use unicorn_engine::{RegisterARM as R, Unicorn};
 
 use crate::core_regs::{CoreRegs, exc};
-use crate::periph::{Periphs, base, irq, tim, usart};
+use crate::periph::{Periphs, base, tim, usart};
 use crate::rtt;
 
 /// The board an image is built for.
@@ -166,8 +166,6 @@ pub struct Chip {
     /// that arrived in the instant before the DMA served it (RM0390 §25.6.1: a DR read
     /// clears RXNE), and is counted.
     pub dr_reads_under_dma: u64,
-    /// Stop before the next block: a pending exception may now be taken.
-    check_pending: bool,
     /// Instructions by block address, while profiling.
     profile: Option<HashMap<u64, u64>>,
     /// Profile only this exception's own instructions (all when `None`).
@@ -245,32 +243,25 @@ fn err(e: uc_error) -> String {
 impl Machine {
     /// Loads `elf` for `board`: its segments into flash and RAM, the plant, reset.
     pub fn new(elf: &[u8], board: Board, opts: Options) -> Result<Machine, String> {
-        use object::{Object, ObjectSegment, ObjectSymbol};
-        let file = object::File::parse(elf).map_err(|e| format!("the image: {e}"))?;
+        use object::read::elf::{ElfFile32, ProgramHeader};
+        use object::{Object, ObjectSymbol};
+        let file =
+            ElfFile32::<object::Endianness>::parse(elf).map_err(|e| format!("the image: {e}"))?;
+        let endian = file.endian();
+        // The loadable segments at their physical (load) addresses: .data's initial values
+        // sit in flash, where the startup code copies them from.
         let mut segments = Vec::new();
-        for seg in file.segments() {
-            let data = seg.data().map_err(|e| format!("the image: {e}"))?;
-            if data.is_empty() {
+        for ph in file.elf_program_headers() {
+            if ph.p_type(endian) != object::elf::PT_LOAD {
                 continue;
             }
-            // Load at the physical address (LMA): .data's initial values sit in flash.
-            let (addr, _) = seg.file_range();
-            let _ = addr;
-            segments.push((seg.address(), data.to_vec()));
+            let data = ph
+                .data(endian, elf)
+                .map_err(|()| "the image: a segment outside the file".to_string())?;
+            if !data.is_empty() {
+                segments.push((ph.p_paddr(endian) as u64, data.to_vec()));
+            }
         }
-        // Physical addresses from the program headers (object gives the virtual ones).
-        let phys = program_header_paddrs(elf)?;
-        let segments: Vec<(u64, Vec<u8>)> = segments
-            .into_iter()
-            .map(|(vaddr, data)| {
-                let p = phys
-                    .iter()
-                    .find(|(v, _)| *v == vaddr)
-                    .map(|(_, p)| *p)
-                    .unwrap_or(vaddr);
-                (p, data)
-            })
-            .collect();
         let rtt_cb = file
             .symbols()
             .find(|s| s.name() == Ok("_SEGGER_RTT"))
@@ -306,7 +297,6 @@ impl Machine {
             primask_from: 0,
             bad_flash_write: None,
             dr_reads_under_dma: 0,
-            check_pending: false,
             slept: false,
             event: false,
             profile: None,
@@ -450,7 +440,7 @@ impl Machine {
                 }
                 _ => {}
             }
-            let mut stop = c.cycles >= c.next_stop || c.check_pending;
+            let mut stop = c.cycles >= c.next_stop;
             if let Some((g, len)) = c.guard
                 && sp >= g
                 && sp < g + len
@@ -843,8 +833,7 @@ impl Machine {
         self.enter(n, pc).map_err(Stop::Lockup)
     }
 
-    /// Runs until `until` \[cycles\] or a lockup; `each` is called at every stop of the
-    /// engine (a point to exchange data with the host).
+    /// Runs until `until` \[cycles\] or a lockup.
     pub fn run_until(&mut self, until: u64) -> Result<(), Stop> {
         while self.chip().cycles < until {
             self.step_once(until)?;
@@ -869,7 +858,6 @@ impl Machine {
         let next = self.next_event().min(until);
         let c = self.uc.get_data_mut();
         c.next_stop = next;
-        c.check_pending = false;
         let pc = self.reg(R::PC);
         let r = self.uc.emu_start((pc | 1) as u64, 0, 0, 0);
         let pc = self.reg(R::PC);
@@ -1237,35 +1225,6 @@ fn reg_s(k: usize) -> R {
     S[k]
 }
 
-/// The physical (load) address of each loadable segment, by its virtual address, from the
-/// ELF32 program headers.
-fn program_header_paddrs(elf: &[u8]) -> Result<Vec<(u64, u64)>, String> {
-    let u16_at = |o: usize| elf.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
-    let u32_at = |o: usize| {
-        elf.get(o..o + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    let bad = || "the image: not a little-endian ELF32".to_string();
-    if elf.get(0..6) != Some(&[0x7F, b'E', b'L', b'F', 1, 1][..]) {
-        return Err(bad());
-    }
-    let phoff = u32_at(0x1C).ok_or_else(bad)? as usize;
-    let phentsize = u16_at(0x2A).ok_or_else(bad)? as usize;
-    let phnum = u16_at(0x2C).ok_or_else(bad)? as usize;
-    let mut out = Vec::new();
-    for k in 0..phnum {
-        let h = phoff + k * phentsize;
-        let (Some(ptype), Some(vaddr), Some(paddr)) = (u32_at(h), u32_at(h + 8), u32_at(h + 12))
-        else {
-            return Err(bad());
-        };
-        if ptype == 1 {
-            out.push((vaddr as u64, paddr as u64));
-        }
-    }
-    Ok(out)
-}
-
 /// A read of the peripheral space.
 fn periph_read(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize) -> u32 {
     let c = uc.get_data_mut();
@@ -1382,7 +1341,6 @@ fn periph_write(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize, value: u32) 
     if let Some(e) = erase {
         let _ = uc.mem_write(e.addr as u64, &vec![0xFF; e.len as usize]);
     }
-    let _ = irq::ADC;
 }
 
 impl Machine {
@@ -1433,24 +1391,14 @@ impl Machine {
         Ok(())
     }
 
-    /// A power cycle: RAM lost (filled with a pattern), flash kept, the image from reset.
+    /// A power cycle: RAM lost (filled with a pattern), flash kept, the image from reset with
+    /// the RCC's power-on reset flags.
     pub fn power_cycle(&mut self) -> Result<(), String> {
         self.uc
             .mem_write(SRAM, &vec![0xA5; SRAM_LEN as usize])
             .map_err(err)?;
-        let c = self.uc.get_data_mut();
-        let dead = c.p.rcc.hse_dead;
-        c.p.rcc = crate::periph::clock::Rcc::new();
-        c.p.rcc.hse_dead = dead;
-        let rcc = c.p.rcc.clone();
         self.system_reset(0)?;
-        self.chip_mut().p.rcc = rcc;
-        self.load_data()
-    }
-
-    /// The image's loadable segments that live in RAM are the startup code's to initialise
-    /// (from flash); nothing to load on a reset.
-    fn load_data(&mut self) -> Result<(), String> {
+        self.chip_mut().p.rcc.power_on();
         Ok(())
     }
 

@@ -155,10 +155,6 @@ impl Adc {
         self.dr
     }
 
-    /// The DMA no longer takes requests (its stream is off): with DDS clear, DMA requests
-    /// stop after the last transfer of the stream's count; the next conversion overruns.
-    pub fn dma_refused(&mut self) {}
-
     /// The interrupt line (ADC_IRQn): OVR with OVRIE, EOC with EOCIE.
     pub fn irq(&self) -> bool {
         let sr = self.regs[SR];

@@ -38,9 +38,15 @@ impl Rcc {
     /// the other registers go back to their reset values).
     pub fn reset(&mut self, flag: u32) {
         let csr = self.regs[0x74 / 4] | flag | CSR_PINRSTF;
+        self.power_on();
+        self.regs[0x74 / 4] = csr;
+    }
+
+    /// The state after a power-on reset (RCC_CSR: PORRSTF and PINRSTF only); a dead HSE stays
+    /// dead (the board's fault, not the chip's state).
+    pub fn power_on(&mut self) {
         let dead = self.hse_dead;
         *self = Rcc::new();
-        self.regs[0x74 / 4] = csr;
         self.hse_dead = dead;
     }
 

@@ -174,14 +174,19 @@ impl Usart {
         self.tx_at.is_none() && self.transmitting()
     }
 
-    /// The interrupt line: IDLE with IDLEIE, RXNE or ORE with RXNEIE, TC with TCIE, TXE
-    /// with TXEIE, errors with CR3.EIE (in DMA mode).
-    pub fn irq(&self) -> bool {
-        let sr = if self.tx_at.is_none() {
+    /// SR as the core reads it: TXE set while no byte is being sent.
+    fn sr_now(&self) -> u32 {
+        if self.tx_at.is_none() {
             self.sr | SR_TXE
         } else {
             self.sr & !SR_TXE
-        };
+        }
+    }
+
+    /// The interrupt line: IDLE with IDLEIE, RXNE or ORE with RXNEIE, TC with TCIE, TXE
+    /// with TXEIE, errors with CR3.EIE (in DMA mode).
+    pub fn irq(&self) -> bool {
+        let sr = self.sr_now();
         (sr & SR_IDLE != 0 && self.cr1 & (1 << 4) != 0)
             || (sr & (SR_RXNE | SR_ORE) != 0 && self.cr1 & (1 << 5) != 0)
             || (sr & SR_TC != 0 && self.cr1 & (1 << 6) != 0)
@@ -193,11 +198,7 @@ impl Usart {
     pub fn read(&mut self, off: u32) -> u32 {
         match off {
             0x00 => {
-                let sr = if self.tx_at.is_none() {
-                    self.sr | SR_TXE
-                } else {
-                    self.sr & !SR_TXE
-                };
+                let sr = self.sr_now();
                 self.sr_read = sr;
                 sr
             }
