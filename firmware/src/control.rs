@@ -173,8 +173,20 @@ impl Loop {
             current_codes: self.hw.current_codes(),
             since_last,
         };
-        let out = self.core.step(inp, |st, chunk| {
-            MAILBOX.lock(|m| m.try_borrow_mut().ok()?.exchange(st, chunk))
+        // Two short critical sections, the status built between them (and only when no
+        // requests were taken): PRIMASK is held for a copy, not for the build.
+        let out = self.core.step(inp, |status, mut h| {
+            let taken = MAILBOX.lock(|m| m.try_borrow_mut().ok()?.take(&mut h));
+            if taken.is_some() {
+                return taken;
+            }
+            let st = status();
+            MAILBOX.lock(|m| {
+                if let Ok(mut m) = m.try_borrow_mut() {
+                    m.publish(st, &h);
+                }
+            });
+            None
         });
         if let Some((psc, arr)) = out.timing {
             self.hw.set_bridge(0, 0);

@@ -8,7 +8,7 @@
 use crate::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use crate::error::ParamError;
 use crate::gms::{Gms, GmsParams};
-use crate::math::{self, clamp};
+use crate::math::{self, clamp, i64_to_f32};
 use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::shaping::{Shaping, ShapingParams};
@@ -658,16 +658,16 @@ impl<const N: usize> Controller<N> {
     pub fn position_step(&mut self, meas: i64, r: &RefSample) -> PositionOutput {
         let rpc = self.rpc;
         let meas_sub = meas.saturating_mul(SUB_PER_COUNT as i64);
-        let error = (r.pos.saturating_sub(meas_sub)) as f32 * (rpc / SUB_PER_COUNT);
+        let error = i64_to_f32(r.pos.saturating_sub(meas_sub)) * (rpc / SUB_PER_COUNT);
         // Reference increment for the GMS feedforward (exact in fixed point).
         let dx_ref = match self.last_ref {
-            Some(prev) => (r.pos.saturating_sub(prev)) as f32 * (rpc / SUB_PER_COUNT),
+            Some(prev) => i64_to_f32(r.pos.saturating_sub(prev)) * (rpc / SUB_PER_COUNT),
             None => 0.0,
         };
         self.last_ref = Some(r.pos);
         // Derivative on the measurement, first-order filtered.
         let vel_meas = match self.last_meas {
-            Some(prev) => (meas.saturating_sub(prev)) as f32 * rpc / self.dt_pos,
+            Some(prev) => i64_to_f32(meas.saturating_sub(prev)) * rpc / self.dt_pos,
             None => 0.0,
         };
         self.last_meas = Some(meas);

@@ -142,6 +142,9 @@ pub struct Gms<const N: usize> {
     /// alpha_i Fc for positive and negative motion: the least alpha_i |s(v)| can be; +inf for
     /// an unused block, so that it never leaves the fast path (its force stays 0 on both).
     alpha_fc: [[f32; N]; 2],
+    /// Each block's force limit for a hand-over, `alpha_i` times the larger breakaway level
+    /// (computed when built: [`Gms::take_state_from`] runs in a control step).
+    hand_over_lim: [f32; N],
     viscous: f32,
     force: f32,
 }
@@ -158,9 +161,11 @@ impl<const N: usize> Gms<N> {
                 params.blocks[i].alpha * stribeck.coulomb(dir)
             }
         };
+        let fs = stribeck.max_magnitude();
         Ok(Gms {
             params,
             stribeck,
+            hand_over_lim: core::array::from_fn(|i| params.blocks[i].alpha * fs),
             k: core::array::from_fn(|i| params.blocks[i].k),
             alpha: core::array::from_fn(|i| params.blocks[i].alpha),
             f: [0.0; N],
@@ -201,15 +206,32 @@ impl<const N: usize> Gms<N> {
     /// rescaled to the new `sigma` (zero if the old `sigma` was 0). A few dozen operations: fit
     /// for a control step.
     pub fn take_state_from(&mut self, old: &Gms<N>) {
-        let fs = self.stribeck.max_magnitude();
+        // Usually every block is within its new limit: the state copied as it is, and one
+        // comparison a block (the limits computed when this model was built). Beyond (or
+        // NaN), the force clamped and its rounding error dropped.
+        self.f = old.f;
+        self.comp = old.comp;
         let mut sum = 0.0f32;
-        for i in 0..N {
-            let lim = self.alpha[i] * fs;
-            let f = old.f[i];
-            let clamped = math::clamp(f, lim);
-            self.f[i] = clamped;
-            self.comp[i] = if clamped == f { old.comp[i] } else { 0.0 };
-            sum += clamped;
+        let mut within = true;
+        for (&f, &lim) in self.f.iter().zip(&self.hand_over_lim) {
+            within &= f.abs() <= lim;
+            sum += f;
+        }
+        if !within {
+            // Only the blocks beyond their limit are touched, then the sum taken again.
+            for ((f, c), &lim) in self
+                .f
+                .iter_mut()
+                .zip(&mut self.comp)
+                .zip(&self.hand_over_lim)
+            {
+                let inside = f.abs() <= lim;
+                if !inside {
+                    *f = math::clamp(*f, lim);
+                    *c = 0.0;
+                }
+            }
+            sum = self.f.iter().sum();
         }
         let old_sigma = old.params.sigma;
         let viscous = if old_sigma > 0.0 {

@@ -242,6 +242,46 @@ pub fn powf(base: f32, p: f32) -> f32 {
     exp(p * ln(base))
 }
 
+/// `x` as the nearest `f32`, as `x as f32`: through the FPU's one-instruction conversion when
+/// `x` fits in an `i32` (the same integer, so the same rounding), by the soft 64-bit one
+/// (`__aeabi_l2f`, about 25 instructions on the M4F) only beyond. The control step's
+/// differences of fixed-point positions (an error, a step's increment) always fit.
+#[inline]
+pub(crate) fn i64_to_f32(x: i64) -> f32 {
+    match i32::try_from(x) {
+        Ok(v) => v as f32,
+        Err(_) => i64_to_f32_wide(x),
+    }
+}
+
+/// The soft conversion, out of line: inlined, LLVM computes it on every call and selects.
+#[cold]
+#[inline(never)]
+fn i64_to_f32_wide(x: i64) -> f32 {
+    x as f32
+}
+
+/// `c` rounded half away from zero to an `i64`, saturating (NaN gives 0), as
+/// `(c ± 0.5) as i64`: through the FPU's conversion to `i32` when the result fits, the soft
+/// 64-bit one (`__aeabi_f2lz`) only beyond.
+#[inline]
+pub(crate) fn round_to_i64(c: f32) -> i64 {
+    let r = if c >= 0.0 { c + 0.5 } else { c - 0.5 };
+    // 2^31 is exact in f32; every f32 strictly inside (-2^31, 2^31) truncates into an i32.
+    if r > -2_147_483_648.0 && r < 2_147_483_648.0 {
+        r as i32 as i64
+    } else {
+        f32_to_i64_wide(r)
+    }
+}
+
+/// The soft conversion, out of line (see [`i64_to_f32_wide`]).
+#[cold]
+#[inline(never)]
+fn f32_to_i64_wide(r: f32) -> i64 {
+    r as i64
+}
+
 /// `x` clamped into `[-lim, lim]` (`lim >= 0`; a NaN `x` stays NaN).
 pub(crate) fn clamp(x: f32, lim: f32) -> f32 {
     if x > lim {
@@ -269,4 +309,62 @@ pub fn sqrt(x: f32) -> f32 {
         y = 0.5 * (y + x / y);
     }
     y
+}
+
+#[cfg(test)]
+mod conversions {
+    use super::{i64_to_f32, round_to_i64};
+    use proptest::prelude::*;
+
+    /// The values where the fast paths hand over to the soft ones.
+    const EDGES: [i64; 8] = [
+        0,
+        i32::MAX as i64,
+        i32::MAX as i64 + 1,
+        i32::MIN as i64,
+        i32::MIN as i64 - 1,
+        i64::MAX,
+        i64::MIN,
+        16_777_217,
+    ];
+
+    #[test]
+    fn the_fast_conversions_are_the_plain_ones_at_their_edges() {
+        for x in EDGES {
+            assert_eq!(i64_to_f32(x).to_bits(), (x as f32).to_bits(), "{x}");
+        }
+        for c in [
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            2_147_483_520.0,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            -2_147_483_904.0,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            f32::MAX,
+        ] {
+            let plain = (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64;
+            assert_eq!(round_to_i64(c), plain, "{c}");
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn i64_to_f32_is_as_f32(x in any::<i64>(), small in any::<i32>()) {
+            prop_assert_eq!(i64_to_f32(x).to_bits(), (x as f32).to_bits());
+            prop_assert_eq!(i64_to_f32(small as i64).to_bits(), (small as i64 as f32).to_bits());
+        }
+
+        #[test]
+        fn round_to_i64_is_the_plain_rounding(bits in any::<u32>(), c in -3e9f32..3e9) {
+            for c in [f32::from_bits(bits), c] {
+                let plain = (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64;
+                prop_assert_eq!(round_to_i64(c), plain);
+            }
+        }
+    }
 }

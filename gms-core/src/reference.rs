@@ -310,7 +310,7 @@ impl<const S: usize> Reference<S> {
     fn to_sub(&self, rad: f32) -> SubCounts {
         let c = rad / self.rad_per_count * SUB_PER_COUNT;
         // Round to nearest; saturating conversion for absurd values.
-        (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64
+        crate::math::round_to_i64(c)
     }
 }
 
@@ -637,7 +637,7 @@ impl MovePlan {
         }
         let (x, v, a, _) = self.eval(t);
         let c = x / self.rad_per_count * SUB_PER_COUNT;
-        let off = (if c >= 0.0 { c + 0.5 } else { c - 0.5 }) as i64;
+        let off = crate::math::round_to_i64(c);
         RefSample {
             pos: self.start.saturating_add(off),
             vel: v,

@@ -52,6 +52,7 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
             if !phase0 {
                 return None;
             }
+            let st = st();
             let mut r = pending.pop();
             if let Some(req) = &mut r
                 && !req.enable

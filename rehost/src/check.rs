@@ -7,12 +7,10 @@ use rehost::{Board, Machine};
 /// The control interrupt's exception number (DMA2 stream 0, IRQ 56).
 const CONTROL: u32 = 16 + 56;
 
-/// A control period's instructions, at most, outside the steps that take a request (at 1.5
-/// cycles an instruction 17.9 µs, at 2.1 25 µs: under the board's 30 µs budget).
+/// A control period's instructions, at most, the steps that take a request included (a
+/// parameter set hands its running state over there): at 1.5 cycles an instruction 17.9 µs,
+/// at 2.1 25 µs, under the board's 30 µs budget.
 const STEP_BUDGET: u64 = 2_000;
-/// A control period's instructions, at most, in a step that takes a request (a parameter set
-/// hands its running state over: 2,413 measured; 21.5 µs at 1.5 cycles an instruction).
-const REQUEST_STEP_BUDGET: u64 = 2_500;
 /// PRIMASK held, at most \[instructions\]: 200 cycles at 1.5 cycles an instruction.
 const PRIMASK_BUDGET: u64 = 133;
 /// A `status` request and its reply, at most \[instructions of thread mode\].
@@ -146,6 +144,24 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     if !last.contains("pos=0.0199") && !last.contains("pos=0.02") {
         return Err(format!("the move did not end at 0.02 rad: {last}"));
     }
+    // A friction change while moving, that the running state does not fit: Fs lowered to
+    // just above Fc shrinks every block's limit (alpha_i Fs) below the forces of the slow
+    // slide, so the hand-over clamps them (its slow path, in the step that takes the set).
+    s.ok("move 0", 0.5)?;
+    s.run_for(0.03)?;
+    s.ok("set gms.fs 0.000126", 0.5)?;
+    s.run_for(0.15)?;
+    let st = s.ok("status", 0.5)?;
+    let last = st.last().cloned().unwrap_or_default();
+    if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
+        return Err(format!(
+            "a friction `set` while moving faulted the axis: {last}"
+        ));
+    }
+    if !last.contains("pos=0 ") && !last.contains("pos=0.0000") && !last.contains("pos=-0.0000") {
+        return Err(format!("the move back did not end at 0: {last}"));
+    }
+    s.ok("set gms.fs 0.00022", 0.5)?;
     // A stream faster than the UART carries (six fields at 1 kHz: ~100 kB/s against 92): the
     // requests are still read and answered between its batches.
     s.ok("stream t,ref,pos,error,ff,friction 1000", 0.5)?;
@@ -235,8 +251,7 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
     println!(
         "{:.3} s of device time, {:.1} M instructions, {} resets; the control interrupt {} \
          times: {mean:.0} instructions mean, {steady} at most outside requests (budget \
-         {STEP_BUDGET}), {requests} at most in the steps taking them (budget \
-         {REQUEST_STEP_BUDGET}); deepest stack {} B (budget {STACK_BUDGET}); PRIMASK held \
+         {STEP_BUDGET}), {requests} at most in the steps taking them (the same budget); deepest stack {} B (budget {STACK_BUDGET}); PRIMASK held \
          {} instructions at most (budget {PRIMASK_BUDGET}; from {})",
         m.seconds(),
         c.instructions as f64 / 1e6,
@@ -259,7 +274,7 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
     if steady > STEP_BUDGET {
         over.push(format!("a control period of {steady} instructions"));
     }
-    if requests > REQUEST_STEP_BUDGET {
+    if requests > STEP_BUDGET {
         over.push(format!(
             "a request-taking period of {requests} instructions"
         ));

@@ -160,6 +160,9 @@ pub struct Chip {
     /// Where the longest hold began (the first block run with PRIMASK set).
     pub primask_max_at: u64,
     primask_from: u64,
+    /// An interrupt is pending and masked, by these PRIMASK and BASEPRI values: the run stops
+    /// at the first block where they differ, to take it there.
+    masked_pending: Option<(u32, u32)>,
     /// A write to flash outside a programming sequence (address).
     pub bad_flash_write: Option<u32>,
     /// CPU reads of USART2's DR while its DMA receives (CR3.DMAR): each could take a byte
@@ -295,6 +298,7 @@ impl Machine {
             primask_max: 0,
             primask_max_at: 0,
             primask_from: 0,
+            masked_pending: None,
             bad_flash_write: None,
             dr_reads_under_dma: 0,
             slept: false,
@@ -421,6 +425,10 @@ impl Machine {
             };
             let sp = uc.reg_read(R::SP).unwrap_or(0) as u32;
             let primask = uc.reg_read(R::PRIMASK).unwrap_or(0) & 1 != 0;
+            // An interrupt held pending by a mask: the run stops where the mask changes.
+            let unmasked = uc.get_data().masked_pending.is_some_and(|m| {
+                m != (primask as u32, uc.reg_read(R::BASEPRI).unwrap_or(0) as u32)
+            });
             let c = uc.get_data_mut();
             if sp < c.sp_min {
                 c.sp_min = sp;
@@ -440,7 +448,7 @@ impl Machine {
                 }
                 _ => {}
             }
-            let mut stop = c.cycles >= c.next_stop;
+            let mut stop = c.cycles >= c.next_stop || unmasked;
             if let Some((g, len)) = c.guard
                 && sp >= g
                 && sp < g + len
@@ -636,8 +644,25 @@ impl Machine {
     /// lower number); `primask` false asks what would wake a WFE/WFI, which PRIMASK does not
     /// hold off.
     fn pending_above(&self, primask: bool) -> Option<u32> {
+        self.pending_over(self.execution_priority(primask))
+    }
+
+    /// Whether an interrupt is pending that only PRIMASK or BASEPRI keeps from being taken
+    /// (it would preempt the active exceptions).
+    fn pending_masked(&self) -> bool {
         let c = self.chip();
-        let exec = self.execution_priority(primask);
+        let active = c
+            .active
+            .iter()
+            .map(|a| c.core.group_priority(a.exc))
+            .min()
+            .unwrap_or(256);
+        self.pending_over(active).is_some()
+    }
+
+    /// The pending and enabled exception of the highest priority above `exec`, if any.
+    fn pending_over(&self, exec: i32) -> Option<u32> {
+        let c = self.chip();
         let mut best: Option<(i32, u32)> = None;
         for n in 2..c.core.pending.len() as u32 {
             if !c.core.pending[n as usize] {
@@ -854,12 +879,19 @@ impl Machine {
         if let Some(n) = self.exception_to_take() {
             let pc = self.reg(R::PC);
             self.enter(n, pc).map_err(Stop::Lockup)?;
+        } else if self.pending_masked() {
+            // Pending but masked (PRIMASK or BASEPRI): taken as soon as the mask changes
+            // (the block hook stops the run there), as the core takes it at the CPSIE or MSR
+            // that unmasks it (ARMv7-M ARM B1.5.4), not at the next event.
+            let mask = (self.reg(R::PRIMASK) & 1, self.reg(R::BASEPRI));
+            self.uc.get_data_mut().masked_pending = Some(mask);
         }
         let next = self.next_event().min(until);
         let c = self.uc.get_data_mut();
         c.next_stop = next;
         let pc = self.reg(R::PC);
         let r = self.uc.emu_start((pc | 1) as u64, 0, 0, 0);
+        self.uc.get_data_mut().masked_pending = None;
         let pc = self.reg(R::PC);
         match r {
             Ok(()) => {

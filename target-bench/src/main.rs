@@ -261,8 +261,9 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         since_last: black_box(8400),
                     },
                     |st, c| {
-                        reference.set(st.reference.pos);
-                        mb.exchange(st, c)
+                        let r = mb.exchange(st, c);
+                        reference.set(mb.status.reference.pos);
+                        r
                     },
                 );
                 black_box((o.compare, o.sample.map(|s| s.error)));

@@ -1,6 +1,5 @@
 //! The loop half of the device core: one call per PWM period.
 
-use crate::controller::PositionOutput;
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
 use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
@@ -136,6 +135,23 @@ pub struct Outputs {
 /// The buffer a control loop records its captures into (the shell's: a static on the board).
 pub type CaptureBuf = &'static mut [f32];
 
+/// What the loop keeps of the position step's output for its status, telemetry, table and
+/// frequency response.
+#[derive(Debug, Clone, Copy)]
+struct Out {
+    /// Position error [rad].
+    error: f32,
+    /// The friction feedforward [N·m].
+    ff_friction: f32,
+}
+
+impl Out {
+    const ZERO: Out = Out {
+        error: 0.0,
+        ff_friction: 0.0,
+    };
+}
+
 /// The device's control loop and everything it owns.
 #[derive(Debug)]
 pub struct ControlLoop {
@@ -159,7 +175,7 @@ pub struct ControlLoop {
     enabled: bool,
     motion: Motion,
     r: RefSample,
-    out: PositionOutput,
+    out: Out,
     current: f32,
     duty: f32,
     stats: StepStats,
@@ -239,7 +255,7 @@ impl ControlLoop {
             enabled: false,
             motion: Motion::holding(0),
             r: RefSample::default(),
-            out: PositionOutput::default(),
+            out: Out::ZERO,
             current: 0.0,
             duty: 0.0,
             stats: StepStats::new(),
@@ -393,7 +409,9 @@ impl ControlLoop {
         Status {
             steps: self.steps,
             pos_rate_hz: self.ctrl.params().pos_rate_hz,
-            pos: self.enc.count(),
+            // The count of the last position step, as the reference and the error are (not
+            // the one read at this step's start: a status must add up).
+            pos: self.last_pos,
             reference: self.r,
             error: self.out.error,
             ff: self.out.ff_friction,
@@ -619,12 +637,14 @@ impl ControlLoop {
     }
 
     /// One PWM period: `inp` as measured now, `exchange` the shell's access to the mailbox
-    /// (called once per position step with the status; returns the pending requests).
+    /// (called once per position step with what builds the status; returns the pending
+    /// requests, and publishes the status only when there are none: see
+    /// [`Mailbox::exchange`](super::Mailbox)).
     ///
     pub fn step(
         &mut self,
         inp: Inputs,
-        exchange: impl FnOnce(Status, Handover<'_>) -> Option<RequestsBuf>,
+        exchange: impl FnOnce(&dyn Fn() -> Status, Handover<'_>) -> Option<RequestsBuf>,
     ) -> Outputs {
         self.last_raw = inp.encoder;
         self.enc
@@ -650,18 +670,21 @@ impl ControlLoop {
             let returned = self.done.take();
             let h = if self.fresh {
                 Handover {
+                    steps: self.steps,
                     frf: self.frf_report.as_ref(),
                     table: self.table_report.as_ref(),
                     returned,
                 }
             } else {
                 Handover {
+                    steps: self.steps,
                     returned,
                     ..Handover::default()
                 }
             };
-            let req = exchange(self.status(), h);
-            if self.fresh {
+            // The status built only if published: not in a step that takes requests.
+            let req = exchange(&|| self.status(), h);
+            if req.is_none() && self.fresh {
                 self.frf_report = None;
                 self.table_report = None;
                 self.fresh = false;
@@ -688,7 +711,7 @@ impl ControlLoop {
                     vel: 0.0,
                     acc: 0.0,
                 };
-                self.out = PositionOutput::default();
+                self.out = Out::ZERO;
                 if self.wake_left == 0 {
                     self.ctrl.hold_current(amps);
                 }
@@ -714,7 +737,13 @@ impl ControlLoop {
                 } else if let Some(u) = corr {
                     self.ctrl.set_map_sample(u, 1.0);
                 }
-                self.out = self.ctrl.position_step(pos, &r);
+                // The two figures the loop reports, not the whole output (a 40-byte copy
+                // through memmove, ~60 instructions on the M4F).
+                let o = self.ctrl.position_step(pos, &r);
+                self.out = Out {
+                    error: o.error,
+                    ff_friction: o.ff_friction,
+                };
                 if let Some(f) = frf {
                     self.frf_output(f);
                 }
@@ -723,14 +752,14 @@ impl ControlLoop {
                 }
             } else if self.enabled {
                 // The bridge wakes: hold the reference where the axis is, no control yet.
-                self.out = PositionOutput::default();
+                self.out = Out::ZERO;
             } else {
                 self.r = RefSample {
                     pos: pos.saturating_mul(SUB_PER_COUNT as i64),
                     vel: 0.0,
                     acc: 0.0,
                 };
-                self.out = PositionOutput::default();
+                self.out = Out::ZERO;
             }
             if !(self.enabled && self.current_mode.is_none()) {
                 // No position loop: no frequency response.

@@ -176,6 +176,8 @@ pub enum FrfRequest {
 /// there is something new).
 #[derive(Debug, Default)]
 pub struct Handover<'a> {
+    /// The loop's position step at this exchange (what [`Mailbox::taken_at`] records).
+    pub steps: u64,
     /// The requests taken at the last exchange, acted on, given back (with the chunk a read
     /// asked for).
     pub returned: Option<RequestsBuf>,
@@ -316,7 +318,8 @@ pub struct Status {
     pub steps: u64,
     /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
-    /// Encoder position \[counts\].
+    /// Encoder position at the last position step \[counts\]: the count its `error` was
+    /// computed from (reference minus error is this position).
     pub pos: i64,
     /// The reference of that step (position [1/65536 count], velocity, acceleration).
     pub reference: RefSample,
@@ -501,9 +504,38 @@ impl Mailbox {
         self.requests = Some(buf);
     }
 
-    /// The loop's side: publishes `status` (and what else it hands over) and takes the
-    /// posted requests, if any.
-    pub fn exchange(&mut self, status: Status, h: Handover<'_>) -> Option<RequestsBuf> {
+    /// The loop's side, once a position step: gives back the requests acted on; then takes
+    /// the posted requests, if any, or else publishes the status `status` builds (with the
+    /// reports handed over). The step that takes requests (a parameter set: the heaviest,
+    /// with its hand-over) neither builds nor copies the status; the next one publishes it.
+    /// Returns the requests taken. (A shell that must keep its critical sections short calls
+    /// [`Mailbox::take`] and [`Mailbox::publish`] under two, and builds the status between.)
+    pub fn exchange(
+        &mut self,
+        status: &dyn Fn() -> Status,
+        mut h: Handover<'_>,
+    ) -> Option<RequestsBuf> {
+        if let Some(taken) = self.take(&mut h) {
+            return Some(taken);
+        }
+        self.publish(status(), &h);
+        None
+    }
+
+    /// The first half of [`Mailbox::exchange`]: the requests acted on given back (moved out
+    /// of `h`), the posted ones taken, if any.
+    pub fn take(&mut self, h: &mut Handover<'_>) -> Option<RequestsBuf> {
+        if let Some(b) = h.returned.take() {
+            self.returned = Some(b);
+        }
+        let taken = self.requests.take()?;
+        self.taken_at = h.steps;
+        Some(taken)
+    }
+
+    /// The second half of [`Mailbox::exchange`], when nothing was taken: `status` published,
+    /// with the reports `h` hands over.
+    pub fn publish(&mut self, status: Status, h: &Handover<'_>) {
         self.status = status;
         if let Some(f) = h.frf {
             self.frf = *f;
@@ -511,14 +543,6 @@ impl Mailbox {
         if let Some(t) = h.table {
             self.table = *t;
         }
-        if let Some(b) = h.returned {
-            self.returned = Some(b);
-        }
-        let taken = self.requests.take();
-        if taken.is_some() {
-            self.taken_at = status.steps;
-        }
-        taken
     }
 }
 

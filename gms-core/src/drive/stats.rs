@@ -7,7 +7,12 @@ pub fn missed_periods(since_last: u32, period: u32) -> u32 {
     if since_last == 0 || period == 0 {
         return 0;
     }
-    let periods = (since_last as u64 + period as u64 / 2) / period as u64;
+    let half_up = since_last as u64 + period as u64 / 2;
+    // The usual case (on time) without the soft 64-bit division (`__aeabi_uldivmod`).
+    if half_up < 2 * period as u64 {
+        return 0;
+    }
+    let periods = half_up / period as u64;
     periods.saturating_sub(1).min(u32::MAX as u64) as u32
 }
 

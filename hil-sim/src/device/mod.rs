@@ -146,7 +146,10 @@ impl Sim {
     /// host when `timed` (real time), else counted as 0 (simulated time).
     fn tick(
         &mut self,
-        mut exchange: impl FnMut(Status, device::Handover<'_>) -> Option<device::RequestsBuf>,
+        mut exchange: impl FnMut(
+            &dyn Fn() -> Status,
+            device::Handover<'_>,
+        ) -> Option<device::RequestsBuf>,
         queue: &Mutex<VecDeque<Sample>>,
         timed: bool,
     ) {
