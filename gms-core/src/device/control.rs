@@ -409,9 +409,7 @@ impl ControlLoop {
         Status {
             steps: self.steps,
             pos_rate_hz: self.ctrl.params().pos_rate_hz,
-            // The count of the last position step, as the reference and the error are (not
-            // the one read at this step's start: a status must add up).
-            pos: self.last_pos,
+            pos: self.enc.count(),
             reference: self.r,
             error: self.out.error,
             ff: self.out.ff_friction,

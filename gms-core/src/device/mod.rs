@@ -318,8 +318,7 @@ pub struct Status {
     pub steps: u64,
     /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
-    /// Encoder position at the last position step \[counts\]: the count its `error` was
-    /// computed from (reference minus error is this position).
+    /// Encoder position \[counts\].
     pub pos: i64,
     /// The reference of that step (position [1/65536 count], velocity, acceleration).
     pub reference: RefSample,
