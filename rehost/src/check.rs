@@ -13,7 +13,8 @@ const CONTROL: u32 = 16 + 56;
 const STEP_BUDGET: u64 = 2_000;
 /// PRIMASK held, at most \[instructions\]: 200 cycles at 1.5 cycles an instruction.
 const PRIMASK_BUDGET: u64 = 133;
-/// A `status` request and its reply, at most \[instructions of thread mode\].
+/// A `status` request and its reply, and a telemetry line, at most \[instructions of thread
+/// mode\].
 const STATUS_BUDGET: u64 = 50_000;
 /// The stack above the guard the image may use, at most \[bytes\]: 32 KiB less the 2 KiB the
 /// supervisor keeps as its margin.
@@ -165,7 +166,26 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     // A stream faster than the UART carries (six fields at 1 kHz: ~100 kB/s against 92): the
     // requests are still read and answered between its batches.
     s.ok("stream t,ref,pos,error,ff,friction 1000", 0.5)?;
+    let _ = s.m.take_from_image();
+    let thread0 = s.m.chip().thread_instructions;
     s.run_for(0.1)?;
+    // The telemetry's cost: all thread-mode instructions of the window (the link's polling
+    // too) over the sample lines sent.
+    let lines =
+        s.m.take_from_image()
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count() as u64;
+    let per_line = (s.m.chip().thread_instructions - thread0) / lines.max(1);
+    println!(
+        "the stream: {lines} sample lines in 0.1 s, {per_line} instructions of thread mode each"
+    );
+    if lines < 50 || per_line > STATUS_BUDGET {
+        return Err(format!(
+            "the stream sent {lines} lines in 0.1 s at {per_line} instructions each (budget \
+             {STATUS_BUDGET})"
+        ));
+    }
     s.ok("status", 0.5)
         .map_err(|e| format!("with the stream saturating the link: {e}"))?;
     s.ok("stream off", 0.5)?;
