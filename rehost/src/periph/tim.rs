@@ -133,11 +133,17 @@ impl Timer {
         core::mem::take(&mut self.events)
     }
 
-    /// Brings the counter to `now` (whole ticks), firing nothing: only call with no event due
-    /// before `now` (the machine fires them first).
+    /// Brings the counter to `now` (whole ticks). The events due before `now` are fired on
+    /// the way (their flags set, their [`Event`]s queued): the machine fires events between
+    /// its runs, but a register access inside a run can come after an event's time (the run
+    /// stops at block boundaries), and moving the counter past a compare value without its
+    /// match would put the match a whole wrap later.
     fn sync(&mut self, now: u64) {
         if !self.running() || now <= self.t_ref {
             return;
+        }
+        while let Some(t) = self.next_event().filter(|&t| t <= now) {
+            self.fire(t);
         }
         let ticks = (now - self.t_ref) / self.tick();
         if ticks == 0 {
@@ -448,6 +454,22 @@ mod tests {
         let trig: Vec<_> = ev.iter().filter(|(_, e)| *e == Event::Trigger).collect();
         // Down from 4200 at 4200 cycles; CNT = 99 after 4101 ticks: 100 ticks before the bottom.
         assert_eq!(trig, vec![&(8400 - 99, Event::Trigger)]);
+    }
+
+    /// A register access after a compare's time (within one run of the core) sets its flag
+    /// then, not a whole wrap later.
+    #[test]
+    fn a_compare_passed_before_an_access_still_matches() {
+        // TIM4 as embassy's time driver runs it: 1 MHz (168 cycles a tick), free-running.
+        let mut t = Timer::new(2, 16, false);
+        t.write(0x28, 83, 0); // PSC
+        t.write(0x2C, 0xFFFF, 0); // ARR
+        t.write(0x14, 1, 0); // EGR.UG
+        t.write(0x00, 1, 0); // CR1.CEN
+        t.write(0x38, 10, 0); // CCR2: a match at tick 10
+        // The next access at tick 12: CC2IF is set, the counter at 12.
+        assert_eq!(t.read(0x24, 12 * 168), 12);
+        assert_ne!(t.read(0x10, 12 * 168) & (1 << 2), 0, "CC2IF");
     }
 
     #[test]
