@@ -341,7 +341,11 @@ pub(crate) fn commission_steps(
             let v = dir * speed * k as f64;
             let t_acc = v.abs() / VELOCITY_ACC;
             let run = KE_RUN;
-            timed_run(b, v, run, "t,pos,current,volts", dt)?;
+            // The current and the voltage as their means over each sample's steps: decimated
+            // point samples alias the position loop's ripple at the encoder's count rate
+            // into their means (a coarse encoder's k_e read 4 to 18 % low, depending on the
+            // phase of the counts against the samples).
+            timed_run(b, v, run, "t,pos,current_mean,volts_mean", dt)?;
             let rows: Vec<Vec<f64>> = capture_rows(b)?
                 .into_iter()
                 .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)

@@ -204,6 +204,12 @@ impl<const N: usize> ControllerParams<N> {
         (core::f64::consts::TAU / self.counts_per_rev as f64) as f32
     }
 
+    /// The position loop's period \[s\] (the one value the controller and the protocol side
+    /// both use: a speed profile is prepared for it outside the control interrupt).
+    pub fn dt_pos(&self) -> f32 {
+        1.0 / self.pos_rate_hz
+    }
+
     /// The number of current-loop steps per position-loop step.
     pub fn ratio(&self) -> u32 {
         let r = self.cur_rate_hz / self.pos_rate_hz;
@@ -403,7 +409,7 @@ impl<const N: usize> Controller<N> {
     /// Validates `p` into a controller at rest.
     pub fn try_new(p: ControllerParams<N>) -> Result<Self, ControllerError> {
         p.validate()?;
-        let dt_pos = 1.0 / p.pos_rate_hz;
+        let dt_pos = p.dt_pos();
         let gms_act = Gms::try_new(p.ff.actuator).map_err(ControllerError::Actuator)?;
         let map_act =
             StaticMap::try_new(p.ff.actuator.static_params()).map_err(ControllerError::Actuator)?;

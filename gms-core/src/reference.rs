@@ -336,11 +336,19 @@ pub struct Sweep {
 /// to `vel` at up to `amax`; then, with a [`Sweep`], it oscillates around `vel` for the sweep's
 /// duration (starting at phase 0, so the speed is continuous), then ramps to rest and stays
 /// there (a run that ends on the device: with an amplitude of 0, a timed constant speed). The
-/// position is the speed's exact integral (trapezoid per step, accumulated in f64 sub-counts,
-/// so that a long run at constant speed does not drift).
+/// position is the speed's integral (trapezoid per step) in fixed point, so that a long run
+/// does not drift and no control step does double arithmetic in software: the step's mean
+/// speed as an exact multiple of 2^-40 rad/s, times the step's length in sub-counts per rad/s
+/// (computed once per step length, in f64), accumulated in integer sub-counts with a 32-bit
+/// fraction carried.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct VelocityProfile {
-    pos: f64,
+    /// Position \[sub-counts\] and its fraction \[2^-32 sub-count\].
+    pos: SubCounts,
+    frac: u32,
+    /// The step length `dt` \[s\] prepared (0: none yet), and it in sub-counts per rad/s
+    /// \[2^-32 sub-count per rad/s\]: see [`VelocityProfile::next`].
+    per_speed: (f32, i64),
     v: f32,
     vel: f32,
     amax: f32,
@@ -380,7 +388,9 @@ impl VelocityProfile {
             return Err(SegmentError::NotPositive(0));
         }
         Ok(VelocityProfile {
-            pos: from.pos as f64,
+            pos: from.pos,
+            frac: 0,
+            per_speed: (0.0, 0),
             v: from.vel,
             vel,
             amax,
@@ -394,6 +404,16 @@ impl VelocityProfile {
     /// The mean speed [rad/s].
     pub fn speed(&self) -> f32 {
         self.vel
+    }
+
+    /// This profile prepared for steps of `dt` \[s\] (the position loop's period): the
+    /// step's factor for the position computed here, in f64, so that no control step does
+    /// it (a step of another length computes it when first used).
+    pub fn for_step(mut self, dt: f32) -> Self {
+        let k = dt as f64 * self.sub_per_rad * 4_294_967_296.0;
+        // Within ±2^63 up to steps of 0.25 s with a 3.8 µrad encoder.
+        self.per_speed = (dt, k.clamp(-9.2e18, 9.2e18) as i64);
+        self
     }
 
     /// The reference for the next step of `dt` \[s\].
@@ -434,13 +454,51 @@ impl VelocityProfile {
             self.v = self.vel;
             acc = 0.0;
         }
-        self.pos += 0.5 * (v0 + self.v) as f64 * dt as f64 * self.sub_per_rad;
+        // The trapezoid: the mean of the two speeds (their f32 mean, as the profile has always
+        // integrated it) in 2^-40 rad/s, exact, times `k`, dt in 2^-32 sub-counts per rad/s
+        // (computed once per step length in f64: 52 bits at 20 kHz with the paper's encoder,
+        // rounded by less than 1e-15), shifted right by 40.
+        if self.per_speed.0 != dt {
+            // Not prepared for this step (`for_step`): computed here, once.
+            *self = self.for_step(dt);
+        }
+        let k = self.per_speed.1;
+        let mean_fx = speed_fx(0.5 * (v0 + self.v));
+        let inc = (mean_fx as i128 * k as i128) >> 40;
+        // inc = whole · 2^32 + low (whole floored), the carry from the fraction added.
+        let low = self.frac as i128 + (inc & 0xFFFF_FFFF);
+        self.frac = low as u32;
+        let whole = (inc >> 32) + (low >> 32);
+        self.pos = self
+            .pos
+            .saturating_add(whole.clamp(i64::MIN as i128, i64::MAX as i128) as i64);
         RefSample {
-            pos: self.pos as i64,
+            pos: self.pos,
             vel: self.v,
             acc,
         }
     }
+}
+
+/// `v` \[rad/s\] in 2^-40 rad/s, exactly for |v| from 2^-17 to 2^15 rad/s (an f32's 24 bits
+/// fit), without a soft 64-bit conversion: the whole 2^-16 steps and the rest, each through
+/// the FPU's conversion to i32 (`x - hi` is exact: both share x's exponent range).
+fn speed_fx(v: f32) -> i64 {
+    let x = v * 65_536.0;
+    let within = x.abs() < 2_147_483_520.0;
+    if !within {
+        // Beyond any speed a profile takes (or NaN: 0): saturated.
+        return if x.is_nan() {
+            0
+        } else if x > 0.0 {
+            1 << 62
+        } else {
+            -(1 << 62)
+        };
+    }
+    let hi = x as i32;
+    let lo = ((x - hi as f32) * 16_777_216.0) as i32;
+    ((hi as i64) << 24) + lo as i64
 }
 
 /// Speed limit of the protocol's `move` when none is given [rad/s].
@@ -690,6 +748,11 @@ impl Motion {
         self.moving = None;
     }
 
+    /// The speed profile playing, if any.
+    pub fn velocity_mut(&mut self) -> Option<&mut VelocityProfile> {
+        self.velocity.as_mut()
+    }
+
     /// True while a speed profile plays.
     pub fn is_velocity(&self) -> bool {
         self.velocity.is_some()
@@ -787,5 +850,29 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
         1 => (c, -s),
         2 => (-s, -c),
         _ => (-c, s),
+    }
+}
+
+#[cfg(test)]
+mod speed_fixed_point {
+    use super::speed_fx;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// A speed in 2^-40 rad/s is exact over the speeds a profile takes.
+        #[test]
+        fn speed_fx_is_exact(v in -40.0f32..40.0) {
+            prop_assume!(v.abs() >= 2f32.powi(-17));
+            prop_assert_eq!(speed_fx(v), (v as f64 * 2f64.powi(40)) as i64);
+        }
+    }
+
+    #[test]
+    fn speed_fx_at_its_edges() {
+        for v in [0.0f32, -0.0, 0.5, -0.5, 20.0, -20.0, 2f32.powi(-17), 1e-30] {
+            assert_eq!(speed_fx(v), (v as f64 * 2f64.powi(40)) as i64, "{v}");
+        }
+        assert_eq!(speed_fx(f32::NAN), 0);
+        assert!(speed_fx(f32::INFINITY) > 0 && speed_fx(f32::NEG_INFINITY) < 0);
     }
 }

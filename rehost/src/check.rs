@@ -190,6 +190,16 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
         .map_err(|e| format!("with the stream saturating the link: {e}"))?;
     s.ok("stream off", 0.5)?;
     s.run_for(0.02)?;
+    // A speed, then a hold: the steps that take them within the budget, no fault.
+    s.ok("velocity 0.2", 0.5)?;
+    s.run_for(0.05)?;
+    s.ok("hold", 0.5)?;
+    s.run_for(0.05)?;
+    let st = s.ok("status", 0.5)?;
+    let last = st.last().cloned().unwrap_or_default();
+    if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
+        return Err(format!("a speed and a hold faulted the axis: {last}"));
+    }
     let _ = s.m.take_from_image();
     let moving = s.m.instructions_of(CONTROL, moving_from);
     let (mean, max) = stats(&moving);

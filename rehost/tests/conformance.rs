@@ -10,12 +10,10 @@
 //! Nucleo's USART2 cannot tell that its host went away: `Port::host_here` is always true
 //! there, docs/protocol.md; the F405's USB does, by DTR).
 //!
-//! Two more wait for a fix this suite found (issue 40): `velocity` overruns the control period
-//! on the image. The speed profile integrates its position in software f64, so a step at a
-//! constant speed runs 2,105 instructions, and the step that takes `velocity` runs 3,249
-//! (budget 2,000). The image latches `overrun` and switches the bridge off.
-//! `velocity_mode_runs_and_hold_stops_it` and `capture_records_at_the_control_rate_and_reads_back`
-//! (which captures during a `velocity`) fail on the image until then.
+//! `velocity` overran the control period on the image until its position was integrated in
+//! fixed point (the software f64 took a constant-speed step to 2,105 instructions and the
+//! step taking `velocity` to 3,249, against 2,000): these checks found it.
+//!
 //! The emulator runs slower than a board, so a wait is in the device's own time: `status`'s
 //! `t=` polled until it has passed.
 
@@ -204,4 +202,14 @@ fn leaving_the_soft_limits_latches_position_limit() {
 #[test]
 fn current_mode_pushes_and_hold_takes_position_back() {
     on_image(suite::current_mode_pushes_and_hold_takes_position_back);
+}
+
+#[test]
+fn velocity_mode_runs_and_hold_stops_it() {
+    on_image(suite::velocity_mode_runs_and_hold_stops_it);
+}
+
+#[test]
+fn capture_records_at_the_control_rate_and_reads_back() {
+    on_image(suite::capture_records_at_the_control_rate_and_reads_back);
 }

@@ -12,10 +12,11 @@ pub const CHUNK_VALUES: usize = 128;
 /// The fields a capture may record (the telemetry's, without the simulator's truth): time
 /// since the trigger \[s\], position and reference since the trigger \[rad\], error \[rad\],
 /// feedforward and estimated friction [N·m], current \[A\], the bridge voltage commanded
-/// (duty × supply) \[V\], and the current's mean over the `every` steps a sample stands for
-/// \[A\] (`current` is that step's alone: decimated, a current that ripples at the encoder's
-/// count rate aliases into its mean; `current_mean` is the boxcar's, every step counted).
-pub const CAPTURE_NAMES: [&str; 9] = [
+/// (duty × supply) \[V\], and the current's and the voltage's means over the `every` steps a
+/// sample stands for \[A, V\] (`current` and `volts` are that step's alone: decimated, a
+/// current or a voltage that ripples at the encoder's count rate aliases into its mean;
+/// `current_mean` and `volts_mean` are the boxcar's, every step counted).
+pub const CAPTURE_NAMES: [&str; 10] = [
     "t",
     "pos",
     "ref",
@@ -25,6 +26,7 @@ pub const CAPTURE_NAMES: [&str; 9] = [
     "friction",
     "volts",
     "current_mean",
+    "volts_mean",
 ];
 
 /// The index in [`CAPTURE_NAMES`] of the field `name`.
@@ -41,6 +43,7 @@ pub fn capture_field(name: &str) -> Option<u8> {
         "friction" => Some(6),
         "volts" => Some(7),
         "current_mean" => Some(8),
+        "volts_mean" => Some(9),
         _ => None,
     }
 }
@@ -59,7 +62,8 @@ pub fn capture_fields(list: &str) -> Result<([u8; CAPTURE_FIELDS], u8), &'static
         if end_of_name {
             let name = list.get(start..at).unwrap_or("");
             let i = capture_field(name).ok_or(
-                "unknown field (t, pos, ref, error, ff, current, friction, volts, current_mean)",
+                "unknown field (t, pos, ref, error, ff, current, friction, volts, current_mean, \
+                 volts_mean)",
             )?;
             let slot = idx.get_mut(n).ok_or("at most 4 fields")?;
             *slot = i;
@@ -188,8 +192,9 @@ pub struct Capture<B: AsRef<[f32]> + AsMut<[f32]>> {
     skip: u32,
     t0: u64,
     pos0: i64,
-    /// The current summed over the steps since the last sample \[A\], and their number.
-    sum: (f32, u32),
+    /// The current \[A\] and the voltage \[V\] summed over the steps since the last sample,
+    /// and their number.
+    sum: (f32, f32, u32),
 }
 
 impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
@@ -203,7 +208,7 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             skip: 0,
             t0: 0,
             pos0: 0,
-            sum: (0.0, 0),
+            sum: (0.0, 0.0, 0),
         }
     }
 
@@ -263,12 +268,16 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             self.t0 = v.steps;
             self.pos0 = v.pos;
             self.skip = 0;
-            self.sum = (0.0, 0);
+            self.sum = (0.0, 0.0, 0);
         }
         if self.state != CaptureState::Recording {
             return;
         }
-        self.sum = (self.sum.0 + v.current, self.sum.1.saturating_add(1));
+        self.sum = (
+            self.sum.0 + v.current,
+            self.sum.1 + v.volts,
+            self.sum.2.saturating_add(1),
+        );
         if self.skip > 0 {
             self.skip -= 1;
             return;
@@ -280,8 +289,9 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let at = self.count as usize * n;
         let (fields, t0, pos0) = (self.spec.fields, self.t0, self.pos0);
         // At least this step is in the sum.
-        let mean = self.sum.0 / self.sum.1.max(1) as f32;
-        self.sum = (0.0, 0);
+        let steps = self.sum.2.max(1) as f32;
+        let (mean, volts_mean) = (self.sum.0 / steps, self.sum.1 / steps);
+        self.sum = (0.0, 0.0, 0);
         let buf = self.buf.as_mut();
         for (k, &f) in fields.iter().take(n).enumerate() {
             let x = match f {
@@ -293,7 +303,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
                 5 => v.current,
                 6 => v.friction,
                 7 => v.volts,
-                _ => mean,
+                8 => mean,
+                _ => volts_mean,
             };
             if let Some(slot) = buf.get_mut(at + k) {
                 *slot = x;

@@ -616,20 +616,23 @@ impl ControlLoop {
             Some(FrfRequest::Stop) => self.stop_frf(),
             None => {}
         }
-        if let Some(v) = req.velocity
+        if let Some(v) = &req.velocity
             && self.enabled
         {
             if self.current_mode.is_some() {
                 self.hold_here();
             }
             self.stop_table();
-            let mut p = v.profile;
-            // Catch up with the steps since `from_step`, as a move does.
+            // Catch up with the steps since `from_step`, as a move does (in place: the
+            // profile is copied once).
             let behind = self.steps.saturating_add(1).saturating_sub(v.from_step);
-            for _ in 0..behind.min(1000) {
-                p.next(self.ctrl.dt_pos());
+            let dt = self.ctrl.dt_pos();
+            self.motion.start_velocity(v.profile);
+            if let Some(p) = self.motion.velocity_mut() {
+                for _ in 0..behind.min(1000) {
+                    p.next(dt);
+                }
             }
-            self.motion.start_velocity(p);
         }
         timing
     }

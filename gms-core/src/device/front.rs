@@ -673,7 +673,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         }
         let rpc = self.settings.rad_per_count();
         let profile = VelocityProfile::new(st.reference, vel, sweep, MOVE_AMAX, rpc)
-            .map_err(|_| "bad velocity (|VEL| + AMP <= 20 rad/s; frequencies and duration > 0)")?;
+            .map_err(|_| "bad velocity (|VEL| + AMP <= 20 rad/s; frequencies and duration > 0)")?
+            .for_step(self.settings.dt_pos());
         let req = VelocityRequest {
             profile,
             from_step: st.steps,
