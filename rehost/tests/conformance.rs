@@ -2,7 +2,8 @@
 //! device) against the shipped firmware image: the Nucleo ELF that `cargo fw-f446` builds,
 //! run by `rehost serve` on emulated silicon, its USART2 bridged to TCP, the plant hil-sim's.
 //!
-//! The image is named by `REHOST_ELF` (CI sets it to the Nucleo image it has just built).
+//! The image is named by `REHOST_ELF` (CI sets it to the Nucleo image it has just built; a
+//! relative path is from the workspace's root).
 //!
 //! Of the suite's eleven checks, two are not run here: `save_restart_load` (`rehost serve`
 //! keeps no flash across its processes; `rehost check` saves, power-cycles and reads the
@@ -43,13 +44,25 @@ struct Image {
     log: Arc<Mutex<Vec<String>>>,
 }
 
+/// The image `REHOST_ELF` names; a relative path from the workspace's root (cargo runs the
+/// test in `rehost/`).
 fn elf() -> String {
-    std::env::var("REHOST_ELF").unwrap_or_else(|_| {
+    let path = std::env::var("REHOST_ELF").unwrap_or_else(|_| {
         panic!(
             "REHOST_ELF is not set: name the Nucleo image (`cargo fw-f446`, then \
              REHOST_ELF=target/thumbv7em-none-eabihf/release/firmware)"
         )
-    })
+    });
+    let p = std::path::Path::new(&path);
+    let p = if p.is_relative() {
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(p)
+    } else {
+        p.to_path_buf()
+    };
+    assert!(p.is_file(), "REHOST_ELF: no file at {}", p.display());
+    p.display().to_string()
 }
 
 impl Image {
