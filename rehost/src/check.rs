@@ -32,6 +32,17 @@ impl Session<'_> {
         self.m.run_for(seconds).map_err(|e| format!("{e:?}"))
     }
 
+    /// `status`, which must say the bridge drives without a fault; its reply line. `what`
+    /// names what came before, for the error.
+    fn driving(&mut self, what: &str) -> Result<String, String> {
+        let st = self.ok("status", 0.5)?;
+        let last = st.last().cloned().unwrap_or_default();
+        if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
+            return Err(format!("{what} faulted the axis: {last}"));
+        }
+        Ok(last)
+    }
+
     /// Sends `line`; its reply must end `ok`.
     fn ok(&mut self, line: &str, seconds: f64) -> Result<Vec<String>, String> {
         let from = self.m.chip().cycles;
@@ -119,13 +130,7 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
             "the control interrupt's runs over 1,700 instructions while moving:",
         );
     }
-    let st = s.ok("status", 0.5)?;
-    if !st
-        .last()
-        .is_some_and(|l| l.contains("enabled=1") && l.contains("faults=0 "))
-    {
-        return Err(format!("the axis is not moving: {st:?}"));
-    }
+    s.driving("a `move`")?;
     if profile {
         s.m.start_profile_over(Some(CONTROL), STEP_BUDGET);
     }
@@ -137,11 +142,7 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
         );
     }
     s.run_for(0.1)?;
-    let st = s.ok("status", 0.5)?;
-    let last = st.last().cloned().unwrap_or_default();
-    if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
-        return Err(format!("a `set` while moving faulted the axis: {last}"));
-    }
+    let last = s.driving("a `set` while moving")?;
     if !last.contains("pos=0.0199") && !last.contains("pos=0.02") {
         return Err(format!("the move did not end at 0.02 rad: {last}"));
     }
@@ -152,13 +153,7 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     s.run_for(0.03)?;
     s.ok("set gms.fs 0.000126", 0.5)?;
     s.run_for(0.15)?;
-    let st = s.ok("status", 0.5)?;
-    let last = st.last().cloned().unwrap_or_default();
-    if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
-        return Err(format!(
-            "a friction `set` while moving faulted the axis: {last}"
-        ));
-    }
+    let last = s.driving("a friction `set` while moving")?;
     if !last.contains("pos=0 ") && !last.contains("pos=0.0000") && !last.contains("pos=-0.0000") {
         return Err(format!("the move back did not end at 0: {last}"));
     }
@@ -195,11 +190,7 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     s.run_for(0.05)?;
     s.ok("hold", 0.5)?;
     s.run_for(0.05)?;
-    let st = s.ok("status", 0.5)?;
-    let last = st.last().cloned().unwrap_or_default();
-    if !(last.contains("enabled=1") && last.contains("faults=0 ")) {
-        return Err(format!("a speed and a hold faulted the axis: {last}"));
-    }
+    s.driving("a speed and a hold")?;
     let _ = s.m.take_from_image();
     let moving = s.m.instructions_of(CONTROL, moving_from);
     let (mean, max) = stats(&moving);

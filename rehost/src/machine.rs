@@ -625,11 +625,7 @@ impl Machine {
     /// The execution priority (B1.5.4): the most urgent of the active exceptions', BASEPRI
     /// and, with `primask`, PRIMASK (0).
     fn execution_priority(&self, primask: bool) -> i32 {
-        let c = self.chip();
-        let mut p = 256;
-        for a in &c.active {
-            p = p.min(c.core.group_priority(a.exc));
-        }
+        let mut p = self.active_priority();
         let basepri = self.reg(R::BASEPRI) & 0xFF;
         if basepri != 0 {
             p = p.min(basepri as i32);
@@ -650,14 +646,18 @@ impl Machine {
     /// Whether an interrupt is pending that only PRIMASK or BASEPRI keeps from being taken
     /// (it would preempt the active exceptions).
     fn pending_masked(&self) -> bool {
+        self.pending_over(self.active_priority()).is_some()
+    }
+
+    /// The most urgent group priority of the active exceptions (256, below any, in thread
+    /// mode).
+    fn active_priority(&self) -> i32 {
         let c = self.chip();
-        let active = c
-            .active
+        c.active
             .iter()
             .map(|a| c.core.group_priority(a.exc))
             .min()
-            .unwrap_or(256);
-        self.pending_over(active).is_some()
+            .unwrap_or(256)
     }
 
     /// The pending and enabled exception of the highest priority above `exec`, if any.
