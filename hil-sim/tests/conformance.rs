@@ -2,9 +2,7 @@
 //! the simulated plant, in simulated time) and against `hil-sim serve` over TCP (real time):
 //! both are gms-core's device core, so both must answer alike.
 
-use std::io::{Read, Write};
-use std::net::TcpStream;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use std::path::{Path, PathBuf};
 
@@ -14,7 +12,7 @@ use hil_sim::scenario::Scenario;
 mod common;
 use common::Server;
 mod suite;
-use suite::{Dut, error_after, field, keys};
+use suite::{Dut, TcpLink, error_after, field, keys};
 
 struct Local {
     sc: Scenario,
@@ -48,8 +46,7 @@ impl Dut for Local {
 
 struct Tcp {
     srv: Option<Server>,
-    s: TcpStream,
-    pending: String,
+    link: TcpLink,
     args: Vec<String>,
     store: PathBuf,
 }
@@ -58,12 +55,10 @@ impl Tcp {
     fn start(args: Vec<String>, store: PathBuf) -> Tcp {
         let a: Vec<&str> = args.iter().map(String::as_str).collect();
         let srv = common::serve(&a, &store);
-        let s = TcpStream::connect(&srv.addr).unwrap();
-        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let link = TcpLink::connect(&srv.addr);
         Tcp {
             srv: Some(srv),
-            s,
-            pending: String::new(),
+            link,
             args,
             store,
         }
@@ -72,39 +67,15 @@ impl Tcp {
 
 impl Dut for Tcp {
     fn ask_all(&mut self, line: &str) -> Vec<String> {
-        self.s.write_all(format!("{line}\n").as_bytes()).unwrap();
-        let deadline = Instant::now() + Duration::from_secs(10);
-        let mut buf = [0u8; 8192];
-        loop {
-            if let Some(end) = self.pending.match_indices('\n').map(|(i, _)| i).find(|&i| {
-                let start = self.pending[..i].rfind('\n').map_or(0, |j| j + 1);
-                let l = &self.pending[start..i];
-                l.starts_with("ok") || l.starts_with("err ")
-            }) {
-                let lines = self.pending[..end].lines().map(String::from).collect();
-                self.pending = self.pending[end + 1..].to_string();
-                return lines;
-            }
-            assert!(Instant::now() < deadline, "no reply: {:?}", self.pending);
-            if let Ok(n) = self.s.read(&mut buf) {
-                assert!(n > 0, "server closed");
-                self.pending.push_str(&String::from_utf8_lossy(&buf[..n]));
-            }
-        }
+        let reply = self.link.exchange(line, Duration::from_secs(10));
+        reply.unwrap_or_else(|| panic!("no reply: {:?}", self.link.pending()))
     }
     fn wait(&mut self, seconds: f64) {
         std::thread::sleep(Duration::from_secs_f64(seconds));
     }
     fn reconnect(&mut self) {
         let addr = self.srv.as_ref().unwrap().addr.clone();
-        self.s.shutdown(std::net::Shutdown::Both).unwrap();
-        // The device serves one client at a time: the new one is taken once the old one
-        // is seen gone.
-        self.s = TcpStream::connect(&addr).unwrap();
-        self.s
-            .set_read_timeout(Some(Duration::from_millis(20)))
-            .unwrap();
-        self.pending.clear();
+        self.link.reconnect(&addr);
     }
     fn restart(&mut self) {
         // The process ends (its store file stays, as a board's flash does).

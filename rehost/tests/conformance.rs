@@ -18,15 +18,14 @@
 //! The emulator runs slower than a board, so a wait is in the device's own time: `status`'s
 //! `t=` polled until it has passed.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex, mpsc};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 #[path = "../../hil-sim/tests/suite/mod.rs"]
 mod suite;
-use suite::{Dut, field};
+use suite::{Dut, TcpLink, field};
 
 /// Wall time for one reply at most: the emulator at a tenth of a board's speed or less (a
 /// loaded machine) still answers a `status` within a second.
@@ -36,8 +35,7 @@ const REPLY_WITHIN: Duration = Duration::from_secs(60);
 struct Image {
     child: Child,
     addr: String,
-    s: TcpStream,
-    pending: String,
+    link: TcpLink,
     /// Telemetry lines received while waiting, handed out with the next reply.
     telemetry: Vec<String>,
     /// The decoded log of the image (rehost's stderr), for a failure's message.
@@ -93,12 +91,11 @@ impl Image {
         let addr = rx
             .recv_timeout(REPLY_WITHIN)
             .unwrap_or_else(|_| panic!("rehost serve did not listen: {:?}", log.lock()));
-        let s = connect(&addr);
+        let link = TcpLink::connect(&addr);
         Image {
             child,
             addr,
-            s,
-            pending: String::new(),
+            link,
             telemetry: Vec::new(),
             log,
         }
@@ -113,38 +110,14 @@ impl Image {
     }
 
     fn exchange(&mut self, line: &str) -> Vec<String> {
-        self.s.write_all(format!("{line}\n").as_bytes()).unwrap();
-        let deadline = Instant::now() + REPLY_WITHIN;
-        let mut buf = [0u8; 8192];
-        loop {
-            if let Some(end) = self.pending.match_indices('\n').map(|(i, _)| i).find(|&i| {
-                let start = self.pending[..i].rfind('\n').map_or(0, |j| j + 1);
-                let l = &self.pending[start..i];
-                l.starts_with("ok") || l.starts_with("err ")
-            }) {
-                let lines = self.pending[..end].lines().map(String::from).collect();
-                self.pending = self.pending[end + 1..].to_string();
-                return lines;
-            }
-            if Instant::now() > deadline {
-                panic!(
-                    "no reply to {line:?}: {:?}\nthe image's log:\n{}",
-                    self.pending,
-                    self.log.lock().unwrap().join("\n")
-                );
-            }
-            if let Ok(n) = self.s.read(&mut buf) {
-                assert!(n > 0, "rehost serve closed the link");
-                self.pending.push_str(&String::from_utf8_lossy(&buf[..n]));
-            }
-        }
+        self.link.exchange(line, REPLY_WITHIN).unwrap_or_else(|| {
+            panic!(
+                "no reply to {line:?}: {:?}\nthe image's log:\n{}",
+                self.link.pending(),
+                self.log.lock().unwrap().join("\n")
+            )
+        })
     }
-}
-
-fn connect(addr: &str) -> TcpStream {
-    let s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
-    s
 }
 
 impl Drop for Image {
@@ -170,9 +143,7 @@ impl Dut for Image {
         panic!("rehost serve keeps no flash across processes: `rehost check` power-cycles");
     }
     fn reconnect(&mut self) {
-        self.s.shutdown(std::net::Shutdown::Both).unwrap();
-        self.s = connect(&self.addr);
-        self.pending.clear();
+        self.link.reconnect(&self.addr);
         self.telemetry.clear();
     }
 }

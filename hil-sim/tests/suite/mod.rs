@@ -6,6 +6,10 @@
 
 #![allow(dead_code)]
 
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::time::{Duration, Instant};
+
 /// A device under test.
 pub trait Dut {
     /// Sends a line; returns every line received up to its reply (telemetry included).
@@ -19,6 +23,64 @@ pub trait Dut {
     /// The reply line.
     fn ask(&mut self, line: &str) -> String {
         self.ask_all(line).pop().unwrap_or_default()
+    }
+}
+
+/// The host's end of a device's TCP link (`hil-sim serve`, `rehost serve`): lines out, the
+/// lines up to each reply back.
+pub struct TcpLink {
+    s: TcpStream,
+    /// What has come and is not a reply's yet.
+    pending: String,
+}
+
+impl TcpLink {
+    /// Connected to `addr`.
+    pub fn connect(addr: &str) -> TcpLink {
+        let s = TcpStream::connect(addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        TcpLink {
+            s,
+            pending: String::new(),
+        }
+    }
+
+    /// Sends `line`; returns every line received up to its reply (`ok…` or `err …`,
+    /// telemetry included), or None when `within` passes first (what came is kept).
+    pub fn exchange(&mut self, line: &str, within: Duration) -> Option<Vec<String>> {
+        self.s.write_all(format!("{line}\n").as_bytes()).unwrap();
+        let deadline = Instant::now() + within;
+        let mut buf = [0u8; 8192];
+        loop {
+            if let Some(end) = self.pending.match_indices('\n').map(|(i, _)| i).find(|&i| {
+                let start = self.pending[..i].rfind('\n').map_or(0, |j| j + 1);
+                let l = &self.pending[start..i];
+                l.starts_with("ok") || l.starts_with("err ")
+            }) {
+                let lines = self.pending[..end].lines().map(String::from).collect();
+                self.pending = self.pending[end + 1..].to_string();
+                return Some(lines);
+            }
+            if Instant::now() > deadline {
+                return None;
+            }
+            if let Ok(n) = self.s.read(&mut buf) {
+                assert!(n > 0, "the device closed the link");
+                self.pending.push_str(&String::from_utf8_lossy(&buf[..n]));
+            }
+        }
+    }
+
+    /// What has come and is not a reply's yet.
+    pub fn pending(&self) -> &str {
+        &self.pending
+    }
+
+    /// This client goes away and a new one connects to `addr` (a device serves one client at
+    /// a time: the new one is taken once the old one is seen gone).
+    pub fn reconnect(&mut self, addr: &str) {
+        self.s.shutdown(std::net::Shutdown::Both).unwrap();
+        *self = TcpLink::connect(addr);
     }
 }
 
