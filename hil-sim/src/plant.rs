@@ -303,9 +303,16 @@ impl Plant {
         ((self.enc_sign * self.theta / self.rad_per_count).floor() as i64).saturating_add(glitch)
     }
 
+    /// The sense chain's output now, before its ADC \[A\]: the current as wired, with the
+    /// noise's standard deviation times `noise_scale` (the scenario's `adc_noise` is after 16×
+    /// oversampling: one of 16 conversions that are averaged has 4 times it).
+    pub fn sense(&mut self, noise_scale: f64) -> f64 {
+        self.sense_sign * self.i + noise_scale * self.noise.sample(&mut self.rng)
+    }
+
     /// The current-sense reading now \[A\]: noise, then quantisation and clipping.
     pub fn adc(&mut self) -> f32 {
-        let raw = self.sense_sign * self.i + self.noise.sample(&mut self.rng);
+        let raw = self.sense(1.0);
         let q = (raw / self.adc_lsb).round() * self.adc_lsb;
         q.clamp(-self.adc_max, self.adc_max - self.adc_lsb) as f32
     }

@@ -215,7 +215,10 @@ pub struct Machine {
     /// The plant.
     pub plant: Plant,
     supply: f64,
-    last_bottom: u64,
+    /// When the plant's state is \[cycles\].
+    plant_at: u64,
+    /// The bridge's duty since the last update event \[−1, 1\] (the compare values active then).
+    applied_duty: f64,
     /// Every exception handled, in order.
     pub handled: Vec<Handled>,
     /// Resets so far (watchdog or software).
@@ -504,7 +507,8 @@ impl Machine {
             echo_log: opts.echo_log,
             supply: scenario.plant.supply_v,
             plant,
-            last_bottom: 0,
+            plant_at: 0,
+            applied_duty: 0.0,
             handled: Vec::new(),
             resets: 0,
             log_lines: Vec::new(),
@@ -957,6 +961,19 @@ impl Machine {
         if let Some(t) = self.chip().p.iwdg.expires
             && self.chip().cycles >= t
         {
+            // Where the image was when the watchdog bit: a hang's place.
+            let pc = self.reg(R::PC);
+            let active: Vec<u32> = self.chip().active.iter().map(|a| a.exc).collect();
+            let line = format!(
+                "{:.6} s: the watchdog reset the image at pc {pc:#010x} ({}), active exceptions \
+                 {active:?}",
+                self.seconds(),
+                self.symbol_at(pc as u64)
+            );
+            if self.echo_log {
+                eprintln!("rehost: {line}");
+            }
+            self.faults.push(line);
             self.system_reset(crate::periph::clock::CSR_IWDGRSTF)
                 .map_err(Stop::Lockup)?;
         }
@@ -1044,14 +1061,33 @@ impl Machine {
         }
     }
 
-    /// The plant over the PWM period that ended at `t`, at the bridge's voltage.
+    /// The update event at the bottom, `t`: the plant brought to it at the duty of the period
+    /// that ended, then the compare values the update made active applied from here on (the
+    /// duty the control step wrote during the period drives the next one: RM0090 §17.3.7,
+    /// preload, OCxPE).
     fn plant_period(&mut self, t: u64) {
-        let dt = (t - self.last_bottom) as f64 / HZ as f64;
-        self.last_bottom = t;
-        let duty = self.bridge_duty();
+        self.advance_plant(t);
+        self.applied_duty = self.bridge_duty();
+    }
+
+    /// The plant advanced from where it was to `t` \[cycles\] at the applied duty, in steps of
+    /// 5 µs at most; the encoder's count from it. The outputs off (MOE cleared, the pins
+    /// taken from the timer) take the voltage off from the last event on. A gap over 10 ms
+    /// (the PWM not yet running) moves the plant's clock without stepping it.
+    fn advance_plant(&mut self, t: u64) {
+        let Some(cycles) = t.checked_sub(self.plant_at).filter(|&c| c > 0) else {
+            return;
+        };
+        self.plant_at = t;
+        let dt = cycles as f64 / HZ as f64;
+        let duty = if self.bridge_on() {
+            self.applied_duty
+        } else {
+            0.0
+        };
         self.plant.voltage = duty * self.supply;
-        if dt > 0.0 && dt < 0.01 {
-            let n = 10;
+        if dt < 0.01 {
+            let n = (dt / 5e-6).ceil().max(1.0) as usize;
             for _ in 0..n {
                 self.plant.step(dt / n as f64);
             }
@@ -1085,9 +1121,13 @@ impl Machine {
     }
 
     fn fire_adc(&mut self, t: u64) {
+        self.advance_plant(t);
         // The current at the sampling instant through the board's sense chain: 3.4 V/A
-        // around 1.65 V, 4095 codes over 3.3 V (power_stage.rs).
-        let amps = self.plant.adc() as f64;
+        // around 1.65 V, 4095 codes over 3.3 V (power_stage.rs). One conversion of the
+        // sequence the firmware averages: the scenario's noise is the average's, so one
+        // conversion has sqrt(length) times it; quantised once, here.
+        let n = self.chip().p.adc.length() as f64;
+        let amps = self.plant.sense(n.sqrt());
         let code = (2048.0 + amps * 3.4 * 4095.0 / 3.3)
             .round()
             .clamp(0.0, 4095.0) as u32;

@@ -190,26 +190,24 @@ impl Timer {
         (c >= 1 && self.cnt >= c).then(|| (self.cnt - c + 1) as u64)
     }
 
-    /// Ticks to the next compare match (edge-aligned counting up): CCxIF is set on the count
-    /// that reaches CCRx whether or not its interrupt is enabled (RM0090 §18.3.7).
-    fn compare_ticks(&self) -> Option<(u64, usize)> {
-        if self.centre() {
+    /// Ticks from the counter to channel `ch`'s next compare match (edge-aligned counting
+    /// up), if its compare value is within the period: CCxIF is set on the count that reaches
+    /// CCRx whether or not its interrupt is enabled (RM0090 §18.3.7).
+    fn compare_ticks_of(&self, ch: usize) -> Option<u64> {
+        let c = self.ccr[ch];
+        if self.centre() || c > self.arr {
             return None;
         }
-        (0..4)
-            .filter_map(|ch| {
-                let c = self.ccr[ch];
-                if c > self.arr {
-                    return None;
-                }
-                let d = if c > self.cnt {
-                    (c - self.cnt) as u64
-                } else {
-                    (self.arr as u64 + 1 - self.cnt as u64) + c as u64
-                };
-                Some((d, ch))
-            })
-            .min()
+        Some(if c > self.cnt {
+            (c - self.cnt) as u64
+        } else {
+            (self.arr as u64 + 1 - self.cnt as u64) + c as u64
+        })
+    }
+
+    /// Ticks to the next compare match of any channel.
+    fn compare_ticks(&self) -> Option<u64> {
+        (0..4).filter_map(|ch| self.compare_ticks_of(ch)).min()
     }
 
     /// When the next event is due \[cycles\], if the counter runs.
@@ -221,7 +219,7 @@ impl Timer {
         if let Some(t) = self.trigger_ticks() {
             ticks = ticks.min(t);
         }
-        if let Some((t, _)) = self.compare_ticks() {
+        if let Some(t) = self.compare_ticks() {
             ticks = ticks.min(t);
         }
         Some(self.t_ref + ticks * self.tick())
@@ -235,7 +233,11 @@ impl Timer {
         let ticks = (t - self.t_ref) / self.tick();
         let boundary = self.ticks_to_boundary();
         let trigger = self.trigger_ticks();
-        let compare = self.compare_ticks();
+        // Every channel that matches on this count (embassy's time driver can put its alarm
+        // on the same count as its half-period compare, CCR1 = CCR2 = 0x8000).
+        let matched: Vec<usize> = (0..4)
+            .filter(|&ch| self.compare_ticks_of(ch) == Some(ticks))
+            .collect();
         self.t_ref += ticks * self.tick();
         if ticks >= boundary {
             self.move_by(boundary);
@@ -247,10 +249,10 @@ impl Timer {
             self.events.push(Event::Trigger);
             self.regs[SR] |= 1 << 4; // CC4IF
         }
-        if let Some((c, ch)) = compare
-            && c == ticks
-        {
+        for &ch in &matched {
             self.regs[SR] |= 2 << ch;
+        }
+        if !matched.is_empty() {
             self.events.push(Event::Compare);
         }
     }
@@ -470,6 +472,22 @@ mod tests {
         // The next access at tick 12: CC2IF is set, the counter at 12.
         assert_eq!(t.read(0x24, 12 * 168), 12);
         assert_ne!(t.read(0x10, 12 * 168) & (1 << 2), 0, "CC2IF");
+    }
+
+    /// Two channels with the same compare value both match on that count (the image's
+    /// supervisor stopped, the watchdog reset it, when embassy's alarm fell on its
+    /// half-period compare and only one flag was set).
+    #[test]
+    fn two_channels_on_the_same_count_both_match() {
+        let mut t = Timer::new(2, 16, false);
+        t.write(0x28, 83, 0); // PSC
+        t.write(0x2C, 0xFFFF, 0); // ARR
+        t.write(0x14, 1, 0); // EGR.UG
+        t.write(0x00, 1, 0); // CR1.CEN
+        t.write(0x34, 0x8000, 0); // CCR1
+        t.write(0x38, 0x8000, 0); // CCR2
+        run(&mut t, 0x8001 * 168);
+        assert_eq!(t.read(0x10, 0x8001 * 168) & 0b110, 0b110, "CC1IF and CC2IF");
     }
 
     #[test]
