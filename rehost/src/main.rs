@@ -46,6 +46,10 @@ enum Cmd {
         /// board on a slow machine, never faster than this).
         #[arg(long, default_value_t = 1.0)]
         speed: f64,
+        /// The plant: a hil-sim scenario file (its `[plant]`; the image keeps its own
+        /// settings); hil-sim's default plant without it.
+        #[arg(long, value_name = "SCENARIO.toml")]
+        scenario: Option<std::path::PathBuf>,
     },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
     /// while moving, save, a power cycle, the setting back; the figures printed, the
@@ -77,16 +81,33 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
-        Cmd::Serve { elf, listen, speed } => {
+        Cmd::Serve {
+            elf,
+            listen,
+            speed,
+            scenario,
+        } => {
             let (image, _) = load(&elf, "nucleo-f446")?;
             if !(speed > 0.0 && speed.is_finite()) {
                 return Err(format!("--speed {speed}: must be above 0"));
             }
+            let scenario = match scenario {
+                Some(p) => {
+                    let text = std::fs::read_to_string(&p)
+                        .map_err(|e| format!("--scenario {}: {e}", p.display()))?;
+                    Some(
+                        hil_sim::scenario::Scenario::parse(&text, &p.display().to_string())
+                            .map_err(|e| format!("--scenario {}: {e}", p.display()))?,
+                    )
+                }
+                None => None,
+            };
             let m = Machine::new(
                 &image,
                 Board::NucleoF446,
                 Options {
                     echo_log: true,
+                    scenario,
                     ..Options::default()
                 },
             )?;

@@ -18,14 +18,14 @@
 //! The emulator runs slower than a board, so a wait is in the device's own time: `status`'s
 //! `t=` polled until it has passed.
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::sync::{Arc, Mutex, mpsc};
 use std::time::Duration;
 
 #[path = "../../hil-sim/tests/suite/mod.rs"]
 mod suite;
 use suite::{Dut, TcpLink, field};
+
+mod support;
+use support::Served;
 
 /// Wall time for one reply at most: the emulator at a tenth of a board's speed or less (a
 /// loaded machine) still answers a `status` within a second.
@@ -33,71 +33,21 @@ const REPLY_WITHIN: Duration = Duration::from_secs(60);
 
 /// `rehost serve` on the image, and the host's end of its TCP bridge.
 struct Image {
-    child: Child,
-    addr: String,
+    served: Served,
     link: TcpLink,
     /// Telemetry lines received while waiting, handed out with the next reply.
     telemetry: Vec<String>,
-    /// The decoded log of the image (rehost's stderr), for a failure's message.
-    log: Arc<Mutex<Vec<String>>>,
-}
-
-/// The image `REHOST_ELF` names; a relative path from the workspace's root (cargo runs the
-/// test in `rehost/`).
-fn elf() -> String {
-    let path = std::env::var("REHOST_ELF").unwrap_or_else(|_| {
-        panic!(
-            "REHOST_ELF is not set: name the Nucleo image (`cargo fw-f446`, then \
-             REHOST_ELF=target/thumbv7em-none-eabihf/release/firmware)"
-        )
-    });
-    let p = std::path::Path::new(&path);
-    let p = if p.is_relative() {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("..")
-            .join(p)
-    } else {
-        p.to_path_buf()
-    };
-    assert!(p.is_file(), "REHOST_ELF: no file at {}", p.display());
-    p.display().to_string()
 }
 
 impl Image {
     /// The image from reset, served on a free port.
     fn start() -> Image {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_rehost"))
-            .args(["serve", &elf(), "--listen", "127.0.0.1:0"])
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("rehost serve");
-        let log = Arc::new(Mutex::new(Vec::new()));
-        let (tx, rx) = mpsc::channel();
-        let stderr = child.stderr.take().unwrap();
-        let keep = Arc::clone(&log);
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                if let Some(addr) = line
-                    .strip_prefix("rehost: the image's USART2 on ")
-                    .and_then(|r| r.split_whitespace().next())
-                {
-                    let _ = tx.send(addr.to_string());
-                }
-                keep.lock().unwrap().push(line);
-            }
-        });
-        let addr = rx
-            .recv_timeout(REPLY_WITHIN)
-            .unwrap_or_else(|_| panic!("rehost serve did not listen: {:?}", log.lock()));
-        let link = TcpLink::connect(&addr);
+        let served = Served::start(&[], REPLY_WITHIN);
+        let link = TcpLink::connect(&served.addr);
         Image {
-            child,
-            addr,
+            served,
             link,
             telemetry: Vec::new(),
-            log,
         }
     }
 
@@ -114,16 +64,9 @@ impl Image {
             panic!(
                 "no reply to {line:?}: {:?}\nthe image's log:\n{}",
                 self.link.pending(),
-                self.log.lock().unwrap().join("\n")
+                self.served.log_text()
             )
         })
-    }
-}
-
-impl Drop for Image {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
@@ -143,7 +86,7 @@ impl Dut for Image {
         panic!("rehost serve keeps no flash across processes: `rehost check` power-cycles");
     }
     fn reconnect(&mut self) {
-        self.link.reconnect(&self.addr);
+        self.link.reconnect(&self.served.addr);
         self.telemetry.clear();
     }
 }
