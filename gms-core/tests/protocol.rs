@@ -278,6 +278,18 @@ fn line_reader_handles_crlf_partial_long_and_binary_lines() {
     feed(&mut rd, &[b'a'; 500], &mut lines);
     feed(&mut rd, b"\nhelp\n\x00\xff\x1b[A\nlist\n", &mut lines);
     assert_eq!(lines, ["T:get pos.kp", "LONG", "T:help", "BIN", "T:list"]);
+    // CAN drops the half line before it, binary or too long ones too: a new host's CAN LF
+    // ends as an empty line, and the half request is not run.
+    let mut lines = Vec::new();
+    feed(&mut rd, b"move 0.2", &mut lines);
+    feed(&mut rd, &[protocol::CANCEL, b'\n'], &mut lines);
+    feed(&mut rd, b"\x00\x01", &mut lines);
+    feed(&mut rd, &[protocol::CANCEL], &mut lines);
+    feed(&mut rd, b"status\n", &mut lines);
+    feed(&mut rd, &[b'y'; protocol::MAX_LINE + 5], &mut lines);
+    feed(&mut rd, &[protocol::CANCEL], &mut lines);
+    feed(&mut rd, b"list\n", &mut lines);
+    assert_eq!(lines, ["T:", "T:status", "T:list"]);
     // Exactly MAX_LINE bytes fit; one more does not.
     let mut lines = Vec::new();
     feed(&mut rd, &[b'x'; protocol::MAX_LINE], &mut lines);

@@ -89,10 +89,13 @@ impl Link {
         Ok(Self::new(Box::new(p), timeout))
     }
 
-    /// A link over any stream. An empty line goes out first: it ends whatever half line an
-    /// earlier client left in the device (an empty line has no reply).
+    /// A link over any stream. CAN LF goes out first: the device drops whatever half line an
+    /// earlier client left (gms-core's `protocol::CANCEL`), never running it, and the empty
+    /// line has no reply (a firmware from before CAN answers the line `err`: not run either).
     pub fn new(mut io: Box<dyn Stream>, timeout: Duration) -> Link {
-        let _ = io.write_all(b"\n").and_then(|_| io.flush());
+        let _ = io
+            .write_all(&[gms_core::protocol::CANCEL, b'\n'])
+            .and_then(|_| io.flush());
         let mut link = Link {
             io,
             pending: Vec::new(),

@@ -89,6 +89,9 @@ impl Dut for Image {
         self.link.reconnect(&self.served.addr);
         self.telemetry.clear();
     }
+    fn send_bytes(&mut self, bytes: &[u8]) {
+        self.link.send_bytes(bytes);
+    }
 }
 
 /// One check on a freshly booted image.
@@ -119,6 +122,11 @@ fn an_over_current_latches() {
 #[test]
 fn a_refused_set_changes_nothing() {
     on_image(suite::a_refused_set_changes_nothing);
+}
+
+#[test]
+fn a_half_request_of_a_lost_link_is_not_run() {
+    on_image(suite::a_half_request_of_a_lost_link_is_not_run);
 }
 
 #[test]

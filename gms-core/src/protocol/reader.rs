@@ -3,6 +3,12 @@
 /// The longest request line \[bytes\], without its line ending.
 pub const MAX_LINE: usize = 120;
 
+/// CAN (ASCII 0x18): drops the line received so far, with no reply. A host starts its session
+/// with CAN LF, so that a half request an earlier host left (a link cut mid-line, which a UART
+/// cannot tell) is dropped rather than completed by the newline and run: `move 0.25` cut after
+/// `move 0.2` must not move the axis to 0.2.
+pub const CANCEL: u8 = 0x18;
+
 /// Accumulates received bytes into request lines.
 #[derive(Debug, Clone)]
 pub struct LineReader {
@@ -35,8 +41,15 @@ pub enum Line<'a> {
 }
 
 impl LineReader {
-    /// Feeds one byte; returns a line when `byte` ends one (LF).
+    /// Feeds one byte; returns a line when `byte` ends one (LF). [`CANCEL`] drops the line so
+    /// far.
     pub fn push(&mut self, byte: u8) -> Option<Line<'_>> {
+        if byte == CANCEL {
+            self.len = 0;
+            self.too_long = false;
+            self.not_text = false;
+            return None;
+        }
         if byte == b'\n' {
             let (too_long, not_text, len) = (self.too_long, self.not_text, self.len);
             self.len = 0;

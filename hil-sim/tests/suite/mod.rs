@@ -20,6 +20,8 @@ pub trait Dut {
     fn restart(&mut self);
     /// The client goes away and a new one comes.
     fn reconnect(&mut self);
+    /// Bytes on the link that wait for no reply (a half request line).
+    fn send_bytes(&mut self, bytes: &[u8]);
     /// The reply line.
     fn ask(&mut self, line: &str) -> String {
         self.ask_all(line).pop().unwrap_or_default()
@@ -35,14 +37,21 @@ pub struct TcpLink {
 }
 
 impl TcpLink {
-    /// Connected to `addr`.
+    /// Connected to `addr`; CAN LF sent first, as a host starts (gms-core's
+    /// `protocol::CANCEL`: a half line an earlier host left is dropped, no reply).
     pub fn connect(addr: &str) -> TcpLink {
-        let s = TcpStream::connect(addr).unwrap();
+        let mut s = TcpStream::connect(addr).unwrap();
         s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        s.write_all(&[gms_core::protocol::CANCEL, b'\n']).unwrap();
         TcpLink {
             s,
             pending: String::new(),
         }
+    }
+
+    /// Sends `bytes` as they are (no line end, no reply awaited).
+    pub fn send_bytes(&mut self, bytes: &[u8]) {
+        self.s.write_all(bytes).unwrap();
     }
 
     /// Sends `line`; returns every line received up to its reply (`ok…` or `err …`,
@@ -396,4 +405,18 @@ pub fn capture_records_at_the_control_rate_and_reads_back(d: &mut dyn Dut) {
     );
     assert_eq!(d.ask("capture off"), "ok");
     assert!(d.ask("capture").starts_with("ok state=idle"));
+}
+
+/// A request cut by a lost link (half a line, then the host gone) is not run: the next host's
+/// CAN LF drops the half line, and the device answers that host as before. (`set pos.kp 0.5`
+/// of a `set pos.kp 0.55`, completed by a bare newline, would set 0.5.)
+pub fn a_half_request_of_a_lost_link_is_not_run(d: &mut dyn Dut) {
+    let kp = d.ask("get pos.kp");
+    assert!(kp.starts_with("ok "), "{kp}");
+    assert_ne!(kp, "ok 0.5");
+    d.send_bytes(b"set pos.kp 0.5");
+    d.reconnect();
+    assert_eq!(d.ask("get pos.kp"), kp, "the half request was run");
+    let st = d.ask("status");
+    assert_eq!(field(&st, "faults"), 0.0, "{st}");
 }
