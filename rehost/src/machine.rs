@@ -117,6 +117,39 @@ struct Active {
     at: u64,
 }
 
+/// Faults a test puts on the board: what the sense chain, the encoder and the supply do.
+#[derive(Debug, Clone, Default)]
+pub struct Inject {
+    /// Every ADC conversion reads this code (a dead sense chain: its amplifier unpowered
+    /// reads 0, a broken ground full scale).
+    pub sense_code: Option<u32>,
+    /// The encoder's counter no longer follows the axis (a broken encoder cable).
+    pub encoder_frozen: bool,
+    /// Flash writes so far (each program store and each sector erase).
+    pub flash_writes: u64,
+    /// The supply fails during this flash write (counted as `flash_writes`): a program store
+    /// lands on its low half-word only, an erase on the sector's first half; then nothing
+    /// runs until [`Machine::power_cycle`].
+    pub cut_at_flash_write: Option<u64>,
+    /// The supply has failed: the core is stopped, time passes.
+    pub power_lost: bool,
+    /// Code patched in by [`Machine::hang_handler`], put back at the next reset: (address,
+    /// the original halfword).
+    patches: Vec<(u64, [u8; 2])>,
+}
+
+impl Inject {
+    /// Counts a flash write; true when the supply fails on it.
+    fn flash_write_cut(&mut self) -> bool {
+        self.flash_writes += 1;
+        if self.cut_at_flash_write == Some(self.flash_writes) {
+            self.power_lost = true;
+            return true;
+        }
+        false
+    }
+}
+
 /// The state the engine's hooks reach.
 pub struct Chip {
     /// The core's registers.
@@ -165,6 +198,8 @@ pub struct Chip {
     masked_pending: Option<(u32, u32)>,
     /// A write to flash outside a programming sequence (address).
     pub bad_flash_write: Option<u32>,
+    /// Faults put on the board by a test ([`Inject`]).
+    pub inject: Inject,
     /// CPU reads of USART2's DR while its DMA receives (CR3.DMAR): each could take a byte
     /// that arrived in the instant before the DMA served it (RM0390 §25.6.1: a DR read
     /// clears RXNE), and is counted.
@@ -303,6 +338,7 @@ impl Machine {
             primask_from: 0,
             masked_pending: None,
             bad_flash_write: None,
+            inject: Inject::default(),
             dr_reads_under_dma: 0,
             slept: false,
             event: false,
@@ -399,10 +435,22 @@ impl Machine {
                 // 0 without an erase).
                 let mut old = vec![0u8; size];
                 let _ = uc.mem_read(addr, &mut old);
+                // The supply failing mid-store: only the low half of it lands (and nothing
+                // after it, in what is left of the block).
+                let c = uc.get_data_mut();
+                if c.inject.power_lost {
+                    return true;
+                }
+                let cut = c.inject.flash_write_cut();
+                if cut {
+                    c.stop_soon();
+                }
+                let landing = if cut { size.div_ceil(2) } else { size };
                 let new: Vec<u8> = old
                     .iter()
                     .zip((v as u64).to_le_bytes())
-                    .map(|(o, n)| o & n)
+                    .enumerate()
+                    .map(|(k, (o, n))| if k < landing { o & n } else { *o })
                     .collect();
                 let _ = uc.mem_write(addr, &new);
                 true
@@ -611,6 +659,11 @@ impl Machine {
     /// A system reset of cause `rcc_flag` (RCC_CSR): the peripherals and the core back to
     /// reset, RAM and flash kept, the image started again.
     fn system_reset(&mut self, rcc_flag: u32) -> Result<(), String> {
+        // A hang patched in was the running image's, not its flash's.
+        for (addr, orig) in std::mem::take(&mut self.chip_mut().inject.patches) {
+            self.uc.mem_write(addr, &orig).map_err(err)?;
+            self.uc.ctl_remove_cache(addr, addr + 2).map_err(err)?;
+        }
         let c = self.uc.get_data_mut();
         let mut rcc = c.p.rcc.clone();
         rcc.reset(rcc_flag);
@@ -865,6 +918,12 @@ impl Machine {
     /// Runs until `until` \[cycles\] or a lockup.
     pub fn run_until(&mut self, until: u64) -> Result<(), Stop> {
         while self.chip().cycles < until {
+            if self.chip().inject.power_lost {
+                // No supply: nothing runs, time passes.
+                let c = self.chip_mut();
+                c.cycles = c.cycles.max(until);
+                return Ok(());
+            }
             self.step_once(until)?;
         }
         Ok(())
@@ -1093,7 +1152,10 @@ impl Machine {
             }
         }
         let counts = self.plant.encoder();
-        self.chip_mut().enc_counts = counts;
+        let c = self.chip_mut();
+        if !c.inject.encoder_frozen {
+            c.enc_counts = counts;
+        }
     }
 
     /// The bridge's mean duty over a period \[−1, 1\]: IN1's high fraction minus IN2's
@@ -1110,6 +1172,14 @@ impl Machine {
         let arr = p.tim8.arr().max(1) as f64;
         let f = |c: u32| (c as f64).min(arr) / arr;
         f(p.tim8.ccr(0)) - f(p.tim8.ccr(1))
+    }
+
+    /// Whether the bridge's inputs switch: the outputs on ([`Machine::bridge_on`]) and not
+    /// both held low by their compare values (CCR 0 in PWM mode 1: the coast a fault or
+    /// `disable` leaves, the driver's outputs off).
+    pub fn bridge_driving(&self) -> bool {
+        let p = &self.chip().p;
+        self.bridge_on() && (p.tim8.ccr(0) != 0 || p.tim8.ccr(1) != 0)
     }
 
     /// Whether the bridge drives (MOE set and both pins on the timer).
@@ -1131,6 +1201,7 @@ impl Machine {
         let code = (2048.0 + amps * 3.4 * 4095.0 / 3.3)
             .round()
             .clamp(0.0, 4095.0) as u32;
+        let code = self.chip().inject.sense_code.unwrap_or(code);
         let c = self.chip_mut();
         if c.p.adc.take_conversion(t, code) {
             // DMA2 stream 0, channel 0 (ADC1): a halfword into memory.
@@ -1247,6 +1318,54 @@ impl Machine {
         c.p.rcc.write(0x08, cfgr & !3);
         c.p.rcc.css_fired();
         c.core.pending[2] = true;
+        c.stop_soon();
+    }
+
+    /// The flash's contents now (the image and what it stored).
+    pub fn flash(&self) -> Result<Vec<u8>, String> {
+        let mut b = vec![0u8; self.board.flash_size() as usize];
+        self.uc.mem_read(FLASH, &mut b).map_err(err)?;
+        Ok(b)
+    }
+
+    /// Puts the flash back to `bytes` (from [`Machine::flash`]): the 4 KiB pages that differ
+    /// are written and their translated code dropped.
+    pub fn set_flash(&mut self, bytes: &[u8]) -> Result<(), String> {
+        let now = self.flash()?;
+        if bytes.len() != now.len() {
+            return Err(format!("{} bytes of flash, not {}", now.len(), bytes.len()));
+        }
+        for (k, (a, b)) in now.chunks(4096).zip(bytes.chunks(4096)).enumerate() {
+            if a != b {
+                let at = FLASH + (k * 4096) as u64;
+                self.uc.mem_write(at, b).map_err(err)?;
+                self.uc
+                    .ctl_remove_cache(at, at + b.len() as u64)
+                    .map_err(err)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Exception `exc`'s handler hangs from its first instruction (a `b .` patched over it
+    /// until the next reset): a control step that never ends, for the deadman.
+    pub fn hang_handler(&mut self, exc: u32) -> Result<(), String> {
+        let addr = (self.read_u32(self.vector_table + 4 * exc)? & !1) as u64;
+        let mut orig = [0u8; 2];
+        self.uc.mem_read(addr, &mut orig).map_err(err)?;
+        // B . (T1 encoding, offset -4 from PC: itself).
+        self.uc.mem_write(addr, &[0xFE, 0xE7]).map_err(err)?;
+        self.uc.ctl_remove_cache(addr, addr + 2).map_err(err)?;
+        let c = self.chip_mut();
+        c.inject.patches.push((addr, orig));
+        c.stop_soon();
+        Ok(())
+    }
+
+    /// The encoder jumps by `counts` (a burst of noise counted as edges).
+    pub fn encoder_jump(&mut self, counts: i32) {
+        let c = self.chip_mut();
+        c.enc_offset = c.enc_offset.wrapping_add(counts as u32);
         c.stop_soon();
     }
 
@@ -1411,7 +1530,18 @@ fn periph_write(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize, value: u32) 
         }
     }
     if let Some(e) = erase {
-        let _ = uc.mem_write(e.addr as u64, &vec![0xFF; e.len as usize]);
+        // The supply failing mid-erase: the sector's first half erased.
+        let c = uc.get_data_mut();
+        if c.inject.power_lost {
+            return;
+        }
+        let len = if c.inject.flash_write_cut() {
+            c.stop_soon();
+            e.len / 2
+        } else {
+            e.len
+        };
+        let _ = uc.mem_write(e.addr as u64, &vec![0xFF; len as usize]);
     }
 }
 
@@ -1469,6 +1599,9 @@ impl Machine {
         self.uc
             .mem_write(SRAM, &vec![0xA5; SRAM_LEN as usize])
             .map_err(err)?;
+        let c = self.chip_mut();
+        c.inject.power_lost = false;
+        c.inject.cut_at_flash_write = None;
         self.system_reset(0)?;
         self.chip_mut().p.rcc.power_on();
         Ok(())

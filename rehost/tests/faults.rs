@@ -1,0 +1,287 @@
+//! A board's faults, thrown at the shipped image on emulated silicon (`REHOST_ELF`, the
+//! Nucleo's): a dead current-sense chain, an encoder that stops counting or jumps, a control
+//! step that hangs (the deadman, then the watchdog), a power cut at every flash write of a
+//! `save`. Each asserts what the image does: the bridge, the faults latched, the log line,
+//! what survives. (No HSE is `rehost check`'s; an over-current and a request cut by a lost
+//! link are the conformance suite's, `conformance.rs`.)
+
+use rehost::{Board, Machine, Options};
+
+mod support;
+
+/// The control interrupt (DMA2 stream 0, IRQ 56).
+const CONTROL: u32 = 16 + 56;
+/// One PWM period \[s\] (20 kHz).
+const PERIOD: f64 = 50e-6;
+
+/// The image from reset, `before` applied before its first instruction; booted to its loop
+/// (or to `until`, a log line).
+fn boot_with(before: impl FnOnce(&mut Machine), until: &str) -> Machine {
+    let elf = std::fs::read(support::elf()).unwrap();
+    let mut m = Machine::new(&elf, Board::NucleoF446, Options::default()).unwrap();
+    before(&mut m);
+    m.run_until_logged(until, 1.0)
+        .unwrap_or_else(|e| panic!("boot: {e}\n{}", log(&m)));
+    m
+}
+
+fn boot() -> Machine {
+    boot_with(|_| {}, "control loop running")
+}
+
+fn log(m: &Machine) -> String {
+    m.log_lines
+        .iter()
+        .map(|l| l.text.clone())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `line`'s reply line (the last).
+fn ask(m: &mut Machine, line: &str) -> String {
+    let r = m
+        .request(line, 0.5)
+        .unwrap_or_else(|e| panic!("{e}\n{}", log(m)));
+    r.last().cloned().unwrap_or_default()
+}
+
+fn status(m: &mut Machine) -> String {
+    ask(m, "status")
+}
+
+/// Runs until the bridge no longer drives (its outputs off, or both inputs low: coasting),
+/// in steps of 5 µs, at most `seconds`; the time it took.
+fn until_bridge_off(m: &mut Machine, seconds: f64) -> Option<f64> {
+    let t0 = m.seconds();
+    while m.seconds() - t0 < seconds {
+        if !m.bridge_driving() {
+            return Some(m.seconds() - t0);
+        }
+        m.run_for(5e-6).unwrap();
+    }
+    None
+}
+
+/// The current-sense amplifier unpowered (every conversion 0): at start the zero is out of
+/// its window, `current_sense` latches and is logged; the image runs on (no boot loop, no
+/// reset over 6 s), the bridge stays off and `enable` is refused.
+#[test]
+fn a_dead_current_sense_latches_current_sense_and_keeps_the_bridge_off() {
+    let mut m = boot_with(
+        |m| m.chip_mut().inject.sense_code = Some(0),
+        "control loop running",
+    );
+    assert!(
+        m.logged("current_sense: zero at 0.0 codes"),
+        "the log:\n{}",
+        log(&m)
+    );
+    let st = status(&mut m);
+    assert!(
+        st.contains("current_sense") && st.contains("enabled=0"),
+        "{st}"
+    );
+    assert!(ask(&mut m, "enable").starts_with("err 8"));
+    m.run_for(0.001).unwrap();
+    assert!(!m.bridge_driving());
+    m.run_for(6.0).unwrap();
+    assert_eq!(m.resets, 0, "a boot loop:\n{}", log(&m));
+    assert!(status(&mut m).contains("current_sense"));
+    // Cleared anyway: the dead chain reads -0.5 A against the nominal zero, and the first
+    // step trips over_current.
+    assert!(ask(&mut m, "clear").starts_with("ok"));
+    let _ = ask(&mut m, "enable");
+    assert!(until_bridge_off(&mut m, 0.001).is_some());
+    let st = status(&mut m);
+    assert!(
+        st.contains("over_current") && st.contains("enabled=0"),
+        "{st}"
+    );
+}
+
+/// The encoder stops counting in the middle of a move (its cable cut): the loop pushes
+/// against a position that does not change, the current command saturates at `lim.i_max`
+/// (0.5 A by default), and that is above the over-current trip (0.46 A: 95 % of the 0.485 A
+/// the 3.4 V/A sense shows), so `over_current` latches before `following_error` would; the
+/// bridge goes off, and stays off.
+#[test]
+fn an_encoder_that_stops_counting_switches_the_bridge_off() {
+    let mut m = boot();
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    assert!(ask(&mut m, "move 0.5").starts_with("ok"));
+    m.run_for(0.02).unwrap();
+    assert!(m.bridge_driving());
+    m.chip_mut().inject.encoder_frozen = true;
+    let off = until_bridge_off(&mut m, 1.0).expect("the bridge stayed on");
+    let st = status(&mut m);
+    assert!(
+        (st.contains("over_current") || st.contains("following_error")) && st.contains("enabled=0"),
+        "{st}"
+    );
+    eprintln!(
+        "encoder stopped: bridge off after {:.1} ms; {st}",
+        off * 1e3
+    );
+    m.run_for(0.01).unwrap();
+    assert!(!m.bridge_driving());
+}
+
+/// The encoder jumps 100 000 counts (0.38 rad in one period: 7,600 rad/s): `encoder_jump`
+/// latches at the next step and the bridge goes off within two PWM periods.
+#[test]
+fn an_encoder_jump_latches_encoder_jump_within_two_periods() {
+    let mut m = boot();
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    m.run_for(0.01).unwrap();
+    m.encoder_jump(100_000);
+    let off = until_bridge_off(&mut m, 0.01).expect("the bridge stayed on");
+    assert!(off <= 2.0 * PERIOD + 5e-6, "{off} s");
+    let st = status(&mut m);
+    assert!(
+        st.contains("encoder_jump") && st.contains("enabled=0"),
+        "{st}"
+    );
+}
+
+/// The control step hangs (its handler a `b .`): the deadman above it switches the bridge
+/// off within two PWM periods; the supervisor, starved, no longer feeds the watchdog, which
+/// resets the board within its 4 s; the next boot says so (`reset by the watchdog`, the
+/// `watchdog_reset` fault latched, `enable` refused until `clear`) and runs again.
+#[test]
+fn a_hung_control_step_is_cut_off_by_the_deadman_then_the_watchdog() {
+    let mut m = boot();
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    m.run_for(0.01).unwrap();
+    assert!(m.bridge_driving());
+    m.hang_handler(CONTROL).unwrap();
+    let off = until_bridge_off(&mut m, 0.01).expect("the deadman did not switch the bridge off");
+    assert!(off <= 2.0 * PERIOD + 10e-6, "bridge off after {off} s");
+    // Starved: no reset before the watchdog's 4 s (the LSI at 32 kHz: 4 s nominal; RM0390's
+    // LSI range 17-47 kHz gives 2.7-7.5 s), one after.
+    let t0 = m.seconds();
+    while m.resets == 0 && m.seconds() - t0 < 8.0 {
+        m.run_for(0.05).unwrap();
+        assert!(
+            !m.bridge_driving() || m.resets > 0,
+            "the bridge came back on while hung"
+        );
+    }
+    assert_eq!(m.resets, 1, "no watchdog reset:\n{}", log(&m));
+    let waited = m.seconds() - t0;
+    assert!(
+        (3.0..5.0).contains(&waited),
+        "the watchdog after {waited} s"
+    );
+    assert!(
+        m.faults.iter().any(|f| f.contains("the watchdog reset")),
+        "{:?}",
+        m.faults
+    );
+    let booted = |m: &Machine| {
+        m.log_lines
+            .iter()
+            .filter(|l| l.text.contains("control loop running"))
+            .count()
+    };
+    let t1 = m.seconds();
+    while booted(&m) < 2 && m.seconds() - t1 < 1.0 {
+        m.run_for(0.001).unwrap();
+    }
+    assert_eq!(booted(&m), 2, "after the reset:\n{}", log(&m));
+    assert!(m.logged("reset by the watchdog"), "{}", log(&m));
+    let st = status(&mut m);
+    assert!(
+        st.contains("watchdog_reset") && st.contains("enabled=0"),
+        "{st}"
+    );
+    assert!(ask(&mut m, "enable").starts_with("err 8"));
+    assert!(ask(&mut m, "clear").starts_with("ok"));
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    m.run_for(0.01).unwrap();
+    assert!(m.bridge_driving(), "the loop runs again after the reset");
+    eprintln!(
+        "hung step: bridge off after {:.1} µs, the watchdog reset after {waited:.2} s",
+        off * 1e6
+    );
+}
+
+/// The value of `pos.kp` the image runs, and whether it started on a stored set without
+/// complaint.
+fn kp_after_power_cycle(m: &mut Machine) -> (String, String) {
+    m.power_cycle().unwrap();
+    m.run_until_logged("control loop running", 1.0)
+        .unwrap_or_else(|e| panic!("after the power cycle: {e}\n{}", log(m)));
+    (ask(m, "get pos.kp"), status(m))
+}
+
+/// A power cut at every flash write of a `save` (each program store landing on its low half
+/// only, or an erase on half its sector, then nothing): after the power comes back the image
+/// runs the old settings or the new, never neither, never a mix, and answers. One machine
+/// throughout, its flash put back to the old save before each cut.
+#[test]
+fn a_power_cut_at_every_flash_write_of_a_save_leaves_the_old_or_the_new() {
+    const OLD: &str = "0.61";
+    const NEW: &str = "0.73";
+    let mut m = boot();
+    assert!(ask(&mut m, &format!("set pos.kp {OLD}")).starts_with("ok"));
+    assert!(
+        m.request("save", 3.0)
+            .unwrap()
+            .last()
+            .unwrap()
+            .starts_with("ok")
+    );
+    let saved_old = m.flash().unwrap();
+    // The writes a save of NEW takes, uncut.
+    let w0 = m.chip().inject.flash_writes;
+    assert!(ask(&mut m, &format!("set pos.kp {NEW}")).starts_with("ok"));
+    assert!(
+        m.request("save", 3.0)
+            .unwrap()
+            .last()
+            .unwrap()
+            .starts_with("ok")
+    );
+    let writes = m.chip().inject.flash_writes - w0;
+    assert!(writes > 0);
+    let (kp, _) = kp_after_power_cycle(&mut m);
+    assert_eq!(kp, format!("ok {NEW}"));
+    // Every write (REHOST_EVERY_WRITE=1, 1,098 cuts, about 2 min), or every one of the first
+    // 96 (the parameter record and its commit: the new set lands at the 70th), every 16th
+    // of the rest (the position map's) and the last 8.
+    let every = std::env::var_os("REHOST_EVERY_WRITE").is_some();
+    let cuts: Vec<u64> = (1..=writes)
+        .filter(|&k| every || k <= 96 || k % 16 == 0 || k + 8 > writes)
+        .collect();
+    let (mut old, mut new) = (0, 0);
+    for &k in &cuts {
+        m.set_flash(&saved_old).unwrap();
+        let (kp, st) = kp_after_power_cycle(&mut m);
+        assert_eq!(kp, format!("ok {OLD}"), "{st}");
+        assert!(ask(&mut m, &format!("set pos.kp {NEW}")).starts_with("ok"));
+        let w = m.chip().inject.flash_writes;
+        m.chip_mut().inject.cut_at_flash_write = Some(w + k);
+        // No reply: the supply fails during the save.
+        assert!(m.request("save", 0.5).is_err(), "cut at write {k}");
+        assert!(m.chip().inject.power_lost);
+        let (kp, st) = kp_after_power_cycle(&mut m);
+        match kp.as_str() {
+            l if l == format!("ok {OLD}") => old += 1,
+            l if l == format!("ok {NEW}") => new += 1,
+            _ => panic!(
+                "cut at write {k} of {writes}: pos.kp {kp}; {st}\n{}",
+                log(&m)
+            ),
+        }
+        assert!(
+            !st.contains("invalid_params"),
+            "cut at write {k}: {st}\n{}",
+            log(&m)
+        );
+    }
+    eprintln!(
+        "a save is {writes} flash writes; cut at {} of them: {old} came back old, {new} new",
+        cuts.len()
+    );
+    assert!(old > 0 && new > 0, "{old} old, {new} new");
+}
