@@ -260,6 +260,8 @@ pub struct Machine {
     pub resets: u32,
     /// Log lines so far.
     pub log_lines: Vec<rtt::Line>,
+    /// The watchdog's resets so far: when, and where the image was.
+    pub watchdog_resets: Vec<String>,
     /// The faults raised so far (time, kind, address, why).
     pub faults: Vec<String>,
 }
@@ -560,6 +562,7 @@ impl Machine {
             handled: Vec::new(),
             resets: 0,
             log_lines: Vec::new(),
+            watchdog_resets: Vec::new(),
             faults: Vec::new(),
         };
         m.load()?;
@@ -1032,7 +1035,7 @@ impl Machine {
             if self.echo_log {
                 eprintln!("rehost: {line}");
             }
-            self.faults.push(line);
+            self.watchdog_resets.push(line);
             self.system_reset(crate::periph::clock::CSR_IWDGRSTF)
                 .map_err(Stop::Lockup)?;
         }

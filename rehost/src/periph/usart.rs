@@ -62,6 +62,8 @@ pub struct Usart {
     tx_byte: u8,
     /// When the line has been idle a frame after the last byte \[cycles\].
     idle_at: Option<u64>,
+    /// The transmit line's busy time so far \[cycles\]: a frame for each byte sent.
+    tx_busy: u64,
 }
 
 impl Usart {
@@ -82,7 +84,13 @@ impl Usart {
             tx_at: None,
             tx_byte: 0,
             idle_at: None,
+            tx_busy: 0,
         }
+    }
+
+    /// The transmit line's busy time so far \[cycles\] (a frame for each byte sent).
+    pub fn line_busy_cycles(&self) -> u64 {
+        self.tx_busy
     }
 
     /// One frame (start, 8 data, stop) \[cycles\].
@@ -128,6 +136,7 @@ impl Usart {
         if self.tx_at == Some(t) {
             self.tx_at = None;
             self.to_host.push(self.tx_byte);
+            self.tx_busy += self.frame();
             self.sr |= SR_TC;
             return LineEvent::TxFree;
         }
