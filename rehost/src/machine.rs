@@ -1324,6 +1324,15 @@ impl Machine {
         c.stop_soon();
     }
 
+    /// Whether the image's loadable segments touch flash bytes `offset..offset + len`
+    /// (offsets from the flash's start).
+    pub fn image_covers(&self, offset: u32, len: u32) -> bool {
+        let (a, b) = (FLASH + offset as u64, FLASH + offset as u64 + len as u64);
+        self.segments
+            .iter()
+            .any(|(at, data)| *at < b && at + data.len() as u64 > a)
+    }
+
     /// The flash's contents now (the image and what it stored).
     pub fn flash(&self) -> Result<Vec<u8>, String> {
         let mut b = vec![0u8; self.board.flash_size() as usize];

@@ -2,6 +2,10 @@
 //!
 //! - `rehost boot ELF --board nucleo-f446 --seconds 1`: runs the image from reset and prints
 //!   its decoded log and the figures of the run.
+//! - `rehost serve ELF [--scenario PLANT.toml] [--flash FILE]`: the image's USART2 on a TCP
+//!   port for `gms-tune --tcp`, on hil-sim's plant, its stored settings kept in FILE.
+//! - `rehost check ELF --board BOARD`: the bench's first minutes on the image, held to the
+//!   board's budgets.
 
 use std::process::ExitCode;
 
@@ -50,6 +54,10 @@ enum Cmd {
         /// settings); hil-sim's default plant without it.
         #[arg(long, value_name = "SCENARIO.toml")]
         scenario: Option<std::path::PathBuf>,
+        /// The board's flash outside the image, kept in this file across runs (what `save`
+        /// stored survives a restart, as on a board); none: erased at each start.
+        #[arg(long, value_name = "FILE")]
+        flash: Option<std::path::PathBuf>,
     },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
     /// while moving, save, a power cycle, the setting back; the figures printed, the
@@ -86,6 +94,7 @@ fn run(cli: Cli) -> Result<(), String> {
             listen,
             speed,
             scenario,
+            flash,
         } => {
             let (image, _) = load(&elf, "nucleo-f446")?;
             if !(speed > 0.0 && speed.is_finite()) {
@@ -111,7 +120,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     ..Options::default()
                 },
             )?;
-            serve::run(m, &listen, speed)
+            serve::run(m, &listen, speed, flash.as_deref())
         }
         Cmd::Check {
             elf,

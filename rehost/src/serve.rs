@@ -10,8 +10,19 @@ use rehost::Machine;
 const SLICE: f64 = 0.5e-3;
 
 /// Serves one client at a time on `listen`, the image running all along (between clients
-/// too: a board does not stop when its host goes away).
-pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
+/// too: a board does not stop when its host goes away). With `flash`, the chip's flash
+/// outside the image is that file's (what an earlier run stored) and is written back to it
+/// after every slice in which the image wrote flash, before its reply goes out.
+pub fn run(
+    mut m: Machine,
+    listen: &str,
+    speed: f64,
+    flash: Option<&std::path::Path>,
+) -> Result<(), String> {
+    if let Some(f) = flash {
+        restore_flash(&mut m, f)?;
+    }
+    let mut writes = m.chip().inject.flash_writes;
     let listener = TcpListener::bind(listen).map_err(|e| format!("listen on {listen}: {e}"))?;
     listener
         .set_nonblocking(true)
@@ -54,6 +65,13 @@ pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
         }
         m.run_for(SLICE)
             .map_err(|e| format!("the image stopped: {e:?}"))?;
+        if let Some(f) = flash
+            && m.chip().inject.flash_writes != writes
+        {
+            writes = m.chip().inject.flash_writes;
+            let bytes = m.flash()?;
+            std::fs::write(f, bytes).map_err(|e| format!("--flash {}: {e}", f.display()))?;
+        }
         let out = m.take_from_image();
         if trace && !out.is_empty() {
             eprintln!(
@@ -78,4 +96,28 @@ pub fn run(mut m: Machine, listen: &str, speed: f64) -> Result<(), String> {
             std::thread::sleep(Duration::from_secs_f64(ahead.min(0.05)));
         }
     }
+}
+
+/// The pages of `file` (a whole flash, as [`run`] writes it) that the image does not load
+/// into: what the board had stored. No file yet: the flash as erased.
+fn restore_flash(m: &mut Machine, file: &std::path::Path) -> Result<(), String> {
+    let Ok(stored) = std::fs::read(file) else {
+        return Ok(());
+    };
+    let mut now = m.flash()?;
+    if stored.len() != now.len() {
+        return Err(format!(
+            "--flash {}: {} bytes, not this board's {}",
+            file.display(),
+            stored.len(),
+            now.len()
+        ));
+    }
+    for (page, (a, b)) in now.chunks_mut(4096).zip(stored.chunks(4096)).enumerate() {
+        let at = page as u32 * 4096;
+        if !m.image_covers(at, 4096) {
+            a.copy_from_slice(b);
+        }
+    }
+    m.set_flash(&now)
 }

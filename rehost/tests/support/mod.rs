@@ -70,6 +70,12 @@ impl Served {
         Served { child, addr, log }
     }
 
+    /// Ends the process (as a power cut: what its flash file holds stays).
+    pub fn stop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
     /// The image's log so far, one line each.
     pub fn log_text(&self) -> String {
         self.log.lock().unwrap().join("\n")
@@ -78,7 +84,6 @@ impl Served {
 
 impl Drop for Served {
     fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        self.stop();
     }
 }
