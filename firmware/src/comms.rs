@@ -14,7 +14,9 @@
 //! axis is not touched — it keeps holding or finishing its move, the bridge as it was, every
 //! fault check running (`disable` is a request like any other). A UART cannot tell that the
 //! host has gone: its session never ends, and bytes lost on the line (an overrun, a framing
-//! error) drop the partial line, whose request then gets no reply.
+//! error) drop the partial line, whose request then gets no reply. A host starts with CAN LF
+//! (gms-core's `protocol::CANCEL`): the half line an earlier host left is dropped, and that
+//! host's stream and experiment end (`Front::new_session`), on either link.
 
 use core::fmt::{self, Write};
 

@@ -268,6 +268,7 @@ fn line_reader_handles_crlf_partial_long_and_binary_lines() {
                     Line::Text(t) => format!("T:{t}"),
                     Line::TooLong => "LONG".into(),
                     Line::NotText => "BIN".into(),
+                    Line::Cancel => "CAN".into(),
                 });
             }
         }
@@ -289,7 +290,7 @@ fn line_reader_handles_crlf_partial_long_and_binary_lines() {
     feed(&mut rd, &[b'y'; protocol::MAX_LINE + 5], &mut lines);
     feed(&mut rd, &[protocol::CANCEL], &mut lines);
     feed(&mut rd, b"list\n", &mut lines);
-    assert_eq!(lines, ["T:", "T:status", "T:list"]);
+    assert_eq!(lines, ["CAN", "T:", "CAN", "T:status", "CAN", "T:list"]);
     // Exactly MAX_LINE bytes fit; one more does not.
     let mut lines = Vec::new();
     feed(&mut rd, &[b'x'; protocol::MAX_LINE], &mut lines);
@@ -305,7 +306,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
     /// Anything on the wire: no panic; every complete non-empty line gets exactly one final
-    /// line starting with `ok` or `err`; the settings stay valid.
+    /// line starting with `ok` or `err` (CAN none); the settings stay valid.
     #[test]
     fn any_bytes_are_handled(
         chunks in prop::collection::vec(
@@ -324,7 +325,9 @@ proptest! {
         for chunk in chunks {
             for b in chunk {
                 if let Some(line) = rd.push(b) {
-                    let empty = matches!(line, Line::Text(t) if t.trim().is_empty());
+                    // An empty line and CAN have no reply.
+                    let empty = matches!(line, Line::Text(t) if t.trim().is_empty())
+                        || line == Line::Cancel;
                     let mut out = String::new();
                     protocol::execute(&mut d, line, &mut out).unwrap();
                     if empty {

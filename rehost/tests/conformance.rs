@@ -5,10 +5,11 @@
 //! The image is named by `REHOST_ELF` (CI sets it to the Nucleo image it has just built; a
 //! relative path is from the workspace's root).
 //!
-//! Of the suite's twelve checks, one is not run here: `a_lost_link_ends_an_experiment_but_not_a_hold`
-//! (the Nucleo's USART2 cannot tell that its host went away: `Port::host_here` is always true
-//! there, docs/protocol.md; the F405's USB does, by DTR). `save_restart_load` restarts
-//! `rehost serve` on the flash file it stored to (`--flash`).
+//! All twelve of the suite's checks run here. `save_restart_load` restarts `rehost serve` on
+//! the flash file it stored to (`--flash`). The Nucleo's USART2 cannot tell that its host went
+//! away (`Port::host_here` is always true there; the F405's USB tells by DTR): the next host's
+//! CAN (`protocol::CANCEL`) ends the last one's experiment, which
+//! `a_lost_link_ends_an_experiment_but_not_a_hold` checks.
 //!
 //! `velocity` overran the control period on the image until its position was integrated in
 //! fixed point (the software f64 took a constant-speed step to 2,105 instructions and the
@@ -146,6 +147,11 @@ fn a_half_request_of_a_lost_link_is_not_run() {
 #[test]
 fn save_restart_load() {
     on_image(suite::save_restart_load);
+}
+
+#[test]
+fn a_lost_link_ends_an_experiment_but_not_a_hold() {
+    on_image(suite::a_lost_link_ends_an_experiment_but_not_a_hold);
 }
 
 #[test]

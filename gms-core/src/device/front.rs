@@ -463,6 +463,10 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
 }
 
 impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
+    fn new_session(&mut self) {
+        self.disconnected();
+    }
+
     fn settings(&self) -> &Settings {
         &self.settings
     }

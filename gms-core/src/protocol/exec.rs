@@ -5,6 +5,9 @@ use super::*;
 /// What the device does for the commands that are not about parameters. Every command can
 /// be refused with a reason (the reply is then `err 8 <reason>` and nothing changed).
 pub trait Device {
+    /// A new host's session starts ([`Line::Cancel`]): the previous host's stream and
+    /// experiment end, as when its link is seen gone. Nothing by default.
+    fn new_session(&mut self) {}
     /// The current settings.
     fn settings(&self) -> &Settings;
     /// The set being staged by `stage` (the current settings with the staged changes), if
@@ -155,6 +158,10 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Line::Text(t) => t,
         Line::TooLong => return err(out, ErrorCode::LineTooLong, "line too long"),
         Line::NotText => return err(out, ErrorCode::NotText, "not printable ASCII"),
+        Line::Cancel => {
+            dev.new_session();
+            return Ok(());
+        }
     };
     let cmd = match parse(text) {
         Ok(c) => c,

@@ -3,10 +3,11 @@
 /// The longest request line \[bytes\], without its line ending.
 pub const MAX_LINE: usize = 120;
 
-/// CAN (ASCII 0x18): drops the line received so far, with no reply. A host starts its session
-/// with CAN LF, so that a half request an earlier host left (a link cut mid-line, which a UART
-/// cannot tell) is dropped rather than completed by the newline and run: `move 0.25` cut after
-/// `move 0.2` must not move the axis to 0.2.
+/// CAN (ASCII 0x18): a host's session starts. The line received so far is dropped, with no
+/// reply, and the previous host's stream and experiment end as when a USB host goes away
+/// ([`Line::Cancel`]). A host starts with CAN LF, so that a half request an earlier host left
+/// (a link cut mid-line, which a UART cannot tell) is dropped rather than completed by the
+/// newline and run: `move 0.25` cut after `move 0.2` must not move the axis to 0.2.
 pub const CANCEL: u8 = 0x18;
 
 /// Accumulates received bytes into request lines.
@@ -38,17 +39,19 @@ pub enum Line<'a> {
     TooLong,
     /// The line held other bytes than printable ASCII and tab.
     NotText,
+    /// [`CANCEL`]: the line so far dropped, a new host's session.
+    Cancel,
 }
 
 impl LineReader {
-    /// Feeds one byte; returns a line when `byte` ends one (LF). [`CANCEL`] drops the line so
-    /// far.
+    /// Feeds one byte; returns a line when `byte` ends one (LF), and [`Line::Cancel`] for
+    /// [`CANCEL`] (the line so far dropped).
     pub fn push(&mut self, byte: u8) -> Option<Line<'_>> {
         if byte == CANCEL {
             self.len = 0;
             self.too_long = false;
             self.not_text = false;
-            return None;
+            return Some(Line::Cancel);
         }
         if byte == b'\n' {
             let (too_long, not_text, len) = (self.too_long, self.not_text, self.len);
