@@ -48,7 +48,10 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
                     buf.push(byte[0]);
                     continue;
                 }
-                let line = String::from_utf8_lossy(&buf).trim().to_string();
+                // A host's CAN (session start) is not a request.
+                let line = String::from_utf8_lossy(&buf)
+                    .trim_matches(|c: char| c == '\u{18}' || c.is_whitespace())
+                    .to_string();
                 buf.clear();
                 if line.is_empty() {
                     continue;
