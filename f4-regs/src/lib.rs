@@ -15,6 +15,7 @@
 //! - [`stack`]: the stack's high-water mark from cortex-m-rt's paint.
 //! - [`uart_rx`]: a UART's reception by circular DMA, read by the DMA's count (never by the
 //!   data register).
+//! - [`uart_tx`]: a UART's transmission by DMA, the next batch filled while one is on the line.
 //! - [`mpu`]: the stack guard (an MPU region at the bottom of the stack) and the fault
 //!   handlers that run without the stack they overflowed ([`stack_guard_fault_handlers`]).
 #![no_std]
@@ -28,3 +29,4 @@ pub mod pwm;
 pub mod sense;
 pub mod stack;
 pub mod uart_rx;
+pub mod uart_tx;

@@ -600,3 +600,47 @@ fn uart_reception_by_circular_dma_never_reads_the_data_register() {
     assert_eq!(n, 8, "as many as fit");
     assert_eq!(out, [2, 3, 4, 5, 6, 7, 8, 9]);
 }
+
+#[test]
+fn uart_transmission_by_dma_starts_only_when_the_last_has_ended() {
+    use f4_regs::uart_tx::{self, TxStream};
+    let dma = block(pac::dma::Dma::from_ptr);
+    let usart = block(pac::usart::Usart::from_ptr);
+    let buf = [b'x'; 8];
+    let s = TxStream {
+        dma,
+        stream: 6,
+        channel: 4,
+    };
+    // SAFETY: `buf` outlives the test's use of the (model) stream.
+    assert!(
+        !unsafe { uart_tx::start(s, usart, buf.as_ptr(), 0) },
+        "nothing to send"
+    );
+    assert!(unsafe { uart_tx::start(s, usart, buf.as_ptr(), 8) });
+    let st = dma.st(6);
+    let cr = st.cr().read();
+    // RM0390 §9.5.5: CHSEL 4, memory to peripheral, bytes, MINC, not circular, enabled, no
+    // interrupt.
+    assert_eq!(cr.chsel(), 4);
+    assert!(cr.minc() && !cr.circ() && cr.en());
+    assert!(!cr.tcie() && !cr.htie() && !cr.teie() && !cr.dmeie());
+    assert_eq!(cr.dir(), pac::dma::vals::Dir::MEMORY_TO_PERIPHERAL);
+    assert_eq!(st.par().read(), usart.dr().as_ptr() as usize as u32);
+    assert_eq!(st.m0ar().read(), buf.as_ptr() as usize as u32);
+    assert_eq!(st.ndtr().read().ndt(), 8);
+    assert!(usart.cr3().read().dmat(), "the USART requests the DMA");
+    // The stream's flags cleared in HIFCR (stream 6: bits 16-21).
+    assert_eq!(word(dma.as_ptr(), 0x0C), 0x3D << 16);
+    // Running: 8 left, a second start refused.
+    assert!(uart_tx::busy(s));
+    assert_eq!(uart_tx::left(s), 8);
+    assert!(!unsafe { uart_tx::start(s, usart, buf.as_ptr(), 4) });
+    // The hardware ends it (EN cleared, NDTR 0): idle, a new start taken.
+    st.ndtr().write(|w| w.set_ndt(0));
+    st.cr().modify(|w| w.set_en(false));
+    assert!(!uart_tx::busy(s));
+    assert_eq!(uart_tx::left(s), 0);
+    assert!(unsafe { uart_tx::start(s, usart, buf.as_ptr(), 4) });
+    assert_eq!(st.ndtr().read().ndt(), 4);
+}

@@ -385,8 +385,19 @@ pub fn init() -> (ControlHw, Rest) {
         if !f4_regs::uart_rx::start(stream, pac::USART2, ring) {
             defmt::error!("USART2's receive DMA stream did not stop: no reception");
         }
+        // Transmission by our own stream 6 from the port's buffer (`f4_regs::uart_tx`): the
+        // next batch is formatted while this one is on the line. embassy's `UartTx` is kept
+        // (it owns the pin and the stream) and never written.
+        static TX_BUF: static_cell::ConstStaticCell<[u8; crate::port::TX_BUF]> =
+            static_cell::ConstStaticCell::new([0; crate::port::TX_BUF]);
         crate::port::HostPort {
-            tx,
+            _tx: tx,
+            tx_stream: f4_regs::uart_tx::TxStream {
+                dma: pac::DMA1,
+                stream: 6,
+                channel: 4,
+            },
+            tx_buf: TX_BUF.take(),
             _rx: rx,
             stream,
             ring,

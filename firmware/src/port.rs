@@ -113,9 +113,11 @@ pub use usb::UsbPort as HostPort;
 #[cfg(feature = "board-nucleo-f446")]
 mod uart {
     use embassy_stm32::mode::Async;
+    use embassy_stm32::pac;
     use embassy_stm32::usart::{UartRx, UartTx};
     use embassy_time::Timer;
     use f4_regs::uart_rx::{self, Ring, RxStream};
+    use f4_regs::uart_tx::{self, TxStream};
 
     use super::{Gone, Port, Read};
 
@@ -131,13 +133,30 @@ mod uart {
     /// 921,600 Bd, against a ring of 1024 (11 ms).
     pub const RX_POLL_US: u64 = 500;
 
+    /// The transmit buffer \[bytes\]: what one transfer carries (4.7 ms of the line).
+    pub const TX_BUF: usize = 512;
+
+    /// One byte on the line \[µs\], rounded up: 10 bits at 921,600 Bd.
+    const BYTE_US: u64 = 11;
+
+    /// A transfer that has not ended this long after it should have \[µs\]: the stream is
+    /// taken as stuck and the session as gone.
+    const TX_STALL_US: u64 = 50_000;
+
     /// USART2 to the ST-LINK's virtual COM port, both ways by DMA (RM0390 table 28: DMA1
     /// stream 5 channel 4 receives, stream 6 channel 4 sends); reception into a ring the
     /// stream fills on its own (`f4_regs::uart_rx`: the data register is never read by the
     /// CPU). A host sends one request and waits for its reply, so the ring never laps.
+    /// Transmission from the port's own buffer (`f4_regs::uart_tx`): `send` copies and
+    /// starts the transfer and returns, so the next batch is formatted while this one is on
+    /// the line.
     pub struct UartPort {
-        /// Sending side.
-        pub tx: UartTx<'static, Async>,
+        /// embassy's sending side, kept alive (the pin, the stream) and never written.
+        pub _tx: UartTx<'static, Async>,
+        /// The sending stream.
+        pub tx_stream: TxStream,
+        /// What it sends from.
+        pub tx_buf: &'static mut [u8; TX_BUF],
         /// embassy's receiving side, kept alive (the pins, the stream) and never read.
         pub _rx: UartRx<'static, Async>,
         /// The receiving stream.
@@ -174,15 +193,40 @@ mod uart {
         }
 
         async fn send(&mut self, bytes: &[u8]) -> Result<(), Gone> {
-            // Nothing to send is nothing sent: embassy-stm32 0.6's DMA write asserts a length
-            // of 1..=0xFFFF (`dma/dma_bdma.rs`, `Channel::configure`: `assert!(mem_len > 0 && mem_len <= 0xFFFF)`), and an empty line's
-            // empty reply reached it — a panic, found running the image (`rehost serve` with
-            // `gms-tune`, which sends an empty line first).
-            if bytes.is_empty() {
-                return Ok(());
-            }
+            // Nothing to send is nothing sent (no chunk; `uart_tx::start` refuses a length of
+            // 0, as embassy-stm32 0.6's DMA write asserted one, `dma/dma_bdma.rs`: an empty
+            // line's empty reply reached it, a panic found running the image).
             // A UART always sends, at its baud rate, whether or not anyone listens.
-            self.tx.write(bytes).await.map_err(|_| Gone)
+            for chunk in bytes.chunks(TX_BUF) {
+                // The last transfer ends at the line's rate: wait for what it has left.
+                let mut waited = 0;
+                while uart_tx::busy(self.tx_stream) {
+                    let us = (uart_tx::left(self.tx_stream) as u64 * BYTE_US).max(20);
+                    Timer::after_micros(us).await;
+                    waited += us;
+                    if waited > TX_STALL_US + TX_BUF as u64 * BYTE_US {
+                        return Err(Gone);
+                    }
+                }
+                let Some(buf) = self.tx_buf.get_mut(..chunk.len()) else {
+                    return Err(Gone);
+                };
+                buf.copy_from_slice(chunk);
+                // SAFETY: the buffer is the port's own static, written again only here, once
+                // the stream is no longer busy (the wait above).
+                let started = unsafe {
+                    uart_tx::start(
+                        self.tx_stream,
+                        pac::USART2,
+                        self.tx_buf.as_ptr(),
+                        chunk.len() as u16,
+                    )
+                };
+                if !started {
+                    return Err(Gone);
+                }
+            }
+            Ok(())
         }
 
         fn host_here(&mut self) -> bool {
@@ -192,4 +236,4 @@ mod uart {
 }
 
 #[cfg(feature = "board-nucleo-f446")]
-pub use uart::{UartPort as HostPort, config as uart_config};
+pub use uart::{TX_BUF, UartPort as HostPort, config as uart_config};
