@@ -229,3 +229,89 @@ fn a_scenario_gives_its_encoder_in_counts_per_revolution_or_radians_per_count() 
         assert!(e.contains(why), "{text}: {e}");
     }
 }
+
+/// Sets `[controller.TABLE] KEY = value` in a scenario's controller table.
+fn tell(sc: &mut Scenario, table: &str, key: &str, value: f64) {
+    let t = sc
+        .controller
+        .entry(table)
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let toml::Value::Table(t) = t {
+        t.insert(key.into(), toml::Value::Float(value));
+    }
+}
+
+/// A property over coarse-encoder motors commissioning is not told (proptest, a fixed seed,
+/// ten cases): gear motors of R 1.5-5 Ω, k 8-20 mN·m/A, J 1-4e-6 kg·m², L/R 0.1-0.4 ms and a
+/// breakaway of 2-5 mN·m (Coulomb two thirds of it), behind the gear motor's 2000 counts/rev
+/// encoder and ±2 A sense; the device told a datasheet's R, k and J each 0.8-1.25 times the
+/// truth, and its current loop made from them (docs/bring-up.md). Commissioning (`--speed 5`)
+/// finds R and k_e within 5 %, J within 15 %, L within 20 % (k_e read 4-18 % low before its
+/// runs averaged the current and the voltage over each sample's steps).
+///
+/// Ignored until issue 41's gain rule: the measurements hold on every case tried, but on a
+/// heavy motor of little torque constant (k 8.6 mN·m/A, J 4.0e-6 kg·m², the device's friction
+/// model's pre-sliding stiffness 15 N·m/rad) `position_gains` finds no kd that the loop model
+/// calls stable, and commissioning ends with "no position-loop gains for the measured motor".
+#[test]
+#[ignore = "issue 41: the position-gain rule finds no gains for a heavy motor of little torque constant"]
+fn commissioning_holds_on_random_coarse_encoder_motors() {
+    use proptest::test_runner::{Config, RngSeed, TestRunner};
+    let mut runner = TestRunner::new(Config {
+        cases: 10,
+        failure_persistence: None,
+        rng_seed: RngSeed::Fixed(41),
+        ..Config::default()
+    });
+    let motor = (
+        (
+            1.5f64..5.0,
+            8e-3f64..20e-3,
+            1e-6f64..4e-6,
+            0.1e-3f64..0.4e-3,
+        ),
+        2e-3f64..5e-3,
+        (0.8f64..1.25, 0.8f64..1.25, 0.8f64..1.25),
+    );
+    runner
+        .run(&motor, |((r, k, j, tau), fs, (fr, fk, fj))| {
+            let mut sc = scenario("");
+            let p = &mut sc.plant;
+            (p.resistance, p.k_m, p.k_e, p.inertia, p.inductance) = (r, k, k, j, r * tau);
+            p.actuator.fs = Some(fs);
+            p.actuator.fc = Some(fs * 2.0 / 3.0);
+            let (rt, lt) = (r * fr, r * tau * fr);
+            let (kp, ki) = gms_ident::gains::current_pi(rt, lt, 20_000.0);
+            tell(&mut sc, "motor", "r", rt);
+            tell(&mut sc, "motor", "k_m", k * fk);
+            tell(&mut sc, "motor", "k_e", k * fk);
+            tell(&mut sc, "ff", "inertia", j * fj);
+            tell(&mut sc, "cur", "kp", kp);
+            tell(&mut sc, "cur", "ki", ki);
+            let mut dev = LocalDevice::new(&sc).unwrap();
+            let c = commission(&mut dev, 5.0)
+                .unwrap_or_else(|e| panic!("R {r} k {k} J {j} L/R {tau}: {e}"));
+            let rel = |a: f64, b: f64| a / b - 1.0;
+            let (er, ek, ej, el) = (
+                rel(c.r, r),
+                rel(c.k_e, k),
+                rel(c.inertia, j),
+                rel(c.inductance, r * tau),
+            );
+            eprintln!(
+                "R {r:.2} k {k:.2e} J {j:.2e} L/R {:.0} µs Fs {fs:.1e}: R {:+.2} %, k_e {:+.2} %, \
+                 J {:+.1} %, L {:+.1} %",
+                tau * 1e6,
+                er * 100.0,
+                ek * 100.0,
+                ej * 100.0,
+                el * 100.0
+            );
+            proptest::prop_assert!(er.abs() < 0.05, "R {}", c.r);
+            proptest::prop_assert!(ek.abs() < 0.05, "k_e {}", c.k_e);
+            proptest::prop_assert!(ej.abs() < 0.15, "J {}", c.inertia);
+            proptest::prop_assert!(el.abs() < 0.20, "L {}", c.inductance);
+            Ok(())
+        })
+        .unwrap();
+}
