@@ -23,6 +23,7 @@
 pub use stm32_metapac as pac;
 
 pub mod clock;
+mod dma;
 pub mod encoder;
 pub mod mpu;
 pub mod pwm;

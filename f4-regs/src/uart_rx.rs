@@ -55,15 +55,13 @@ pub fn start(s: RxStream, usart: pac::usart::Usart, ring: Ring) -> bool {
             return false;
         }
     }
-    // The stream's six flags, in LIFCR (streams 0-3) or HIFCR (4-7).
-    let (reg, shift) = (s.stream / 4, [0, 6, 16, 22][s.stream % 4]);
-    s.dma
-        .ifcr(reg)
-        .write_value(pac::dma::regs::Ixr(0x3D << shift));
-    st.par().write_value(usart.dr().as_ptr() as usize as u32);
-    st.m0ar().write_value(ring.addr as usize as u32);
-    st.ndtr().write(|w| w.set_ndt(ring.len));
-    st.fcr().write_value(pac::dma::regs::Fcr(0));
+    crate::dma::point(
+        s.dma,
+        s.stream,
+        usart.dr().as_ptr() as usize as u32,
+        ring.addr as usize as u32,
+        ring.len,
+    );
     st.cr().write(|w| {
         w.set_chsel(s.channel);
         w.set_dir(Dir::PERIPHERAL_TO_MEMORY);

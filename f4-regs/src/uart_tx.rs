@@ -49,18 +49,15 @@ pub unsafe fn start(s: TxStream, usart: pac::usart::Usart, buf: *const u8, len: 
     if len == 0 || busy(s) {
         return false;
     }
-    let st = s.dma.st(s.stream);
-    // The stream's six flags, in LIFCR (streams 0-3) or HIFCR (4-7).
-    let (reg, shift) = (s.stream / 4, [0, 6, 16, 22][s.stream % 4]);
-    s.dma
-        .ifcr(reg)
-        .write_value(pac::dma::regs::Ixr(0x3D << shift));
-    st.par().write_value(usart.dr().as_ptr() as usize as u32);
-    st.m0ar().write_value(buf as usize as u32);
-    st.ndtr().write(|w| w.set_ndt(len));
-    st.fcr().write_value(pac::dma::regs::Fcr(0));
+    crate::dma::point(
+        s.dma,
+        s.stream,
+        usart.dr().as_ptr() as usize as u32,
+        buf as usize as u32,
+        len,
+    );
     usart.cr3().modify(|w| w.set_dmat(true));
-    st.cr().write(|w| {
+    s.dma.st(s.stream).cr().write(|w| {
         w.set_chsel(s.channel);
         w.set_dir(Dir::MEMORY_TO_PERIPHERAL);
         w.set_psize(Size::BITS8);
