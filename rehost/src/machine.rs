@@ -1165,13 +1165,10 @@ impl Machine {
     /// (PWM mode 1, centre-aligned: high while CNT < CCR), 0 when the outputs are off (MOE
     /// clear, or the pins taken from the timer as GPIO outputs).
     pub fn bridge_duty(&self) -> f64 {
-        let p = &self.chip().p;
-        let moe = p.tim8.reg(0x44 / 4) & (1 << 15) != 0;
-        let moder = p.plain.get(&base::GPIOC).copied().unwrap_or(0);
-        let af = (moder >> 12) & 3 == 2 && (moder >> 14) & 3 == 2;
-        if !moe || !af {
+        if !self.bridge_on() {
             return 0.0;
         }
+        let p = &self.chip().p;
         let arr = p.tim8.arr().max(1) as f64;
         let f = |c: u32| (c as f64).min(arr) / arr;
         f(p.tim8.ccr(0)) - f(p.tim8.ccr(1))

@@ -20,6 +20,9 @@ use std::time::{Duration, Instant};
 mod support;
 use support::Served;
 
+#[path = "../../hil-sim/tests/suite/mod.rs"]
+mod suite;
+
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
 #[test]
 #[ignore = "the virtual device of the other test"]
@@ -120,13 +123,8 @@ fn bench(addr: &str, dir: &Path, log: &dyn Fn() -> String) -> Figures {
         );
         so
     };
-    let device_t = |tune: &dyn Fn(&[&str]) -> String| -> f64 {
-        let s = tune(&["send", "status"]);
-        s.split_whitespace()
-            .find_map(|w| w.strip_prefix("t="))
-            .and_then(|v| v.parse().ok())
-            .expect("status has t=")
-    };
+    let device_t =
+        |tune: &dyn Fn(&[&str]) -> String| -> f64 { suite::field(&tune(&["send", "status"]), "t") };
     // The axis described (the encoder as fitted): from here the device counts as configured.
     tune(&[
         "set",

@@ -49,6 +49,25 @@ fn status(m: &mut Machine) -> String {
     ask(m, "status")
 }
 
+/// The status, which must say the bridge is off with one of `faults` latched.
+fn off_with(m: &mut Machine, faults: &[&str]) -> String {
+    let st = status(m);
+    assert!(
+        faults.iter().any(|f| st.contains(f)) && st.contains("enabled=0"),
+        "{st}"
+    );
+    st
+}
+
+/// The image booted, enabled, holding and its bridge driving 10 ms later.
+fn driving() -> Machine {
+    let mut m = boot();
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    m.run_for(0.01).unwrap();
+    assert!(m.bridge_driving());
+    m
+}
+
 /// Runs until the bridge no longer drives (its outputs off, or both inputs low: coasting),
 /// in steps of 5 µs, at most `seconds`; the time it took.
 fn until_bridge_off(m: &mut Machine, seconds: f64) -> Option<f64> {
@@ -76,11 +95,7 @@ fn a_dead_current_sense_latches_current_sense_and_keeps_the_bridge_off() {
         "the log:\n{}",
         log(&m)
     );
-    let st = status(&mut m);
-    assert!(
-        st.contains("current_sense") && st.contains("enabled=0"),
-        "{st}"
-    );
+    off_with(&mut m, &["current_sense"]);
     assert!(ask(&mut m, "enable").starts_with("err 8"));
     m.run_for(0.001).unwrap();
     assert!(!m.bridge_driving());
@@ -92,11 +107,7 @@ fn a_dead_current_sense_latches_current_sense_and_keeps_the_bridge_off() {
     assert!(ask(&mut m, "clear").starts_with("ok"));
     let _ = ask(&mut m, "enable");
     assert!(until_bridge_off(&mut m, 0.001).is_some());
-    let st = status(&mut m);
-    assert!(
-        st.contains("over_current") && st.contains("enabled=0"),
-        "{st}"
-    );
+    off_with(&mut m, &["over_current"]);
 }
 
 /// The encoder stops counting in the middle of a move (its cable cut): the loop pushes
@@ -113,11 +124,7 @@ fn an_encoder_that_stops_counting_switches_the_bridge_off() {
     assert!(m.bridge_driving());
     m.chip_mut().inject.encoder_frozen = true;
     let off = until_bridge_off(&mut m, 1.0).expect("the bridge stayed on");
-    let st = status(&mut m);
-    assert!(
-        (st.contains("over_current") || st.contains("following_error")) && st.contains("enabled=0"),
-        "{st}"
-    );
+    let st = off_with(&mut m, &["over_current", "following_error"]);
     eprintln!(
         "encoder stopped: bridge off after {:.1} ms; {st}",
         off * 1e3
@@ -130,17 +137,11 @@ fn an_encoder_that_stops_counting_switches_the_bridge_off() {
 /// latches at the next step and the bridge goes off within two PWM periods.
 #[test]
 fn an_encoder_jump_latches_encoder_jump_within_two_periods() {
-    let mut m = boot();
-    assert!(ask(&mut m, "enable").starts_with("ok"));
-    m.run_for(0.01).unwrap();
+    let mut m = driving();
     m.encoder_jump(100_000);
     let off = until_bridge_off(&mut m, 0.01).expect("the bridge stayed on");
     assert!(off <= 2.0 * PERIOD + 5e-6, "{off} s");
-    let st = status(&mut m);
-    assert!(
-        st.contains("encoder_jump") && st.contains("enabled=0"),
-        "{st}"
-    );
+    off_with(&mut m, &["encoder_jump"]);
 }
 
 /// The control step hangs (its handler a `b .`): the deadman above it switches the bridge
@@ -149,10 +150,7 @@ fn an_encoder_jump_latches_encoder_jump_within_two_periods() {
 /// `watchdog_reset` fault latched, `enable` refused until `clear`) and runs again.
 #[test]
 fn a_hung_control_step_is_cut_off_by_the_deadman_then_the_watchdog() {
-    let mut m = boot();
-    assert!(ask(&mut m, "enable").starts_with("ok"));
-    m.run_for(0.01).unwrap();
-    assert!(m.bridge_driving());
+    let mut m = driving();
     m.hang_handler(CONTROL).unwrap();
     let off = until_bridge_off(&mut m, 0.01).expect("the deadman did not switch the bridge off");
     assert!(off <= 2.0 * PERIOD + 10e-6, "bridge off after {off} s");
@@ -189,11 +187,7 @@ fn a_hung_control_step_is_cut_off_by_the_deadman_then_the_watchdog() {
     }
     assert_eq!(booted(&m), 2, "after the reset:\n{}", log(&m));
     assert!(m.logged("reset by the watchdog"), "{}", log(&m));
-    let st = status(&mut m);
-    assert!(
-        st.contains("watchdog_reset") && st.contains("enabled=0"),
-        "{st}"
-    );
+    off_with(&mut m, &["watchdog_reset"]);
     assert!(ask(&mut m, "enable").starts_with("err 8"));
     assert!(ask(&mut m, "clear").starts_with("ok"));
     assert!(ask(&mut m, "enable").starts_with("ok"));

@@ -458,16 +458,21 @@ mod tests {
         assert_eq!(trig, vec![&(8400 - 99, Event::Trigger)]);
     }
 
-    /// A register access after a compare's time (within one run of the core) sets its flag
-    /// then, not a whole wrap later.
-    #[test]
-    fn a_compare_passed_before_an_access_still_matches() {
-        // TIM4 as embassy's time driver runs it: 1 MHz (168 cycles a tick), free-running.
+    /// TIM4 as embassy's time driver runs it: 1 MHz (168 cycles a tick), free-running.
+    fn tim4_as_embassy() -> Timer {
         let mut t = Timer::new(2, 16, false);
         t.write(0x28, 83, 0); // PSC
         t.write(0x2C, 0xFFFF, 0); // ARR
         t.write(0x14, 1, 0); // EGR.UG
         t.write(0x00, 1, 0); // CR1.CEN
+        t
+    }
+
+    /// A register access after a compare's time (within one run of the core) sets its flag
+    /// then, not a whole wrap later.
+    #[test]
+    fn a_compare_passed_before_an_access_still_matches() {
+        let mut t = tim4_as_embassy();
         t.write(0x38, 10, 0); // CCR2: a match at tick 10
         // The next access at tick 12: CC2IF is set, the counter at 12.
         assert_eq!(t.read(0x24, 12 * 168), 12);
@@ -479,11 +484,7 @@ mod tests {
     /// half-period compare and only one flag was set).
     #[test]
     fn two_channels_on_the_same_count_both_match() {
-        let mut t = Timer::new(2, 16, false);
-        t.write(0x28, 83, 0); // PSC
-        t.write(0x2C, 0xFFFF, 0); // ARR
-        t.write(0x14, 1, 0); // EGR.UG
-        t.write(0x00, 1, 0); // CR1.CEN
+        let mut t = tim4_as_embassy();
         t.write(0x34, 0x8000, 0); // CCR1
         t.write(0x38, 0x8000, 0); // CCR2
         run(&mut t, 0x8001 * 168);
