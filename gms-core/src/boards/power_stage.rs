@@ -67,7 +67,7 @@ pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
     SenseTiming {
         adc_hz: clocks.adc_hz(),
         sample_cycles: 15,
-        conversions: 16,
+        conversions: 8,
         latency_cycles: 2,
     }
 }

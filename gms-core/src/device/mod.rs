@@ -566,22 +566,22 @@ pub fn default_settings() -> Settings {
     };
     ControllerParams {
         pos_rate_hz: 20_000.0,
-        cur_rate_hz: 20_000.0,
+        cur_rate_hz: 40_000.0,
         // The paper's encoder: 2π / 3.8 µrad in single precision (1653469.75), whose radians
         // per count are 3.8e-6 exactly again (`ControllerParams::rad_per_count`).
         counts_per_rev: 1_653_469.8,
         // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (gms-core/src/boards/power_stage.rs).
         sense_v_per_a: 3.4,
         pid: PidParams {
-            kp: 0.7,
-            ki: 600.0,
+            kp: 0.6,
+            ki: 900.0,
             kd: 2.7e-4,
-            d_filter_hz: 8000.0,
+            d_filter_hz: 15000.0,
             i_limit: 1e-3,
         },
         shaping: crate::shaping::ShapingParams::OFF,
         map: crate::posmap::MapParams::DEFAULT,
-        current: CurrentParams { kp: 1.5, ki: 6e4 },
+        current: CurrentParams { kp: 12.0, ki: 2e4 },
         motor: MotorModel {
             k_m: 6.6e-3,
             r: 10.0,
