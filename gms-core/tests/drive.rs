@@ -372,7 +372,7 @@ fn limits_from_settings_and_board() {
     let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count
     s.pos_min = -38.0;
     s.pos_max = 19.0;
-    let b = gms_core::boards::f405::BOARD.limits; // 1.5 × i_max, 10 mrad, 100 rad/s, 168 MHz, 60 %
+    let b = gms_core::boards::f405::BOARD.limits; // 1.5 × i_max, 10 mrad, 100 rad/s, 168 MHz, 55 %
     let l = drive::limits_for(&s, &b, 0.48);
     // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
     assert!((l.i_trip - 0.456).abs() < 1e-6);
@@ -384,9 +384,10 @@ fn limits_from_settings_and_board() {
     // 38 rad / 3.8 urad = 1e7 counts, 19 rad 5e6 (f32 rounding of 3.8e-6 allows ±1).
     assert!((l.pos_min + 10_000_000).abs() <= 1, "{}", l.pos_min);
     assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);
-    // 168 MHz / 20 kHz = 8400 cycles, 60 % of it.
-    assert_eq!(l.budget_cycles, 5040);
-    assert_eq!(l.period_cycles, 8400);
+    // 168 MHz / 40 kHz (the current loop's rate) = 4200 cycles, 55 % of it.
+    assert_eq!(s.cur_rate_hz, 40_000.0);
+    assert_eq!(l.budget_cycles, 2310);
+    assert_eq!(l.period_cycles, 4200);
     assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.75).abs() < 1e-6);
 }
 
@@ -607,10 +608,10 @@ fn rates_the_current_sense_cannot_sample_are_refused() {
     // The F405 board: 16 conversions of 15 + 12 cycles and a 2-cycle latency at 21 MHz.
     let board = gms_core::boards::f405::BOARD;
     assert!((board.sense.window_s - (2.0 + 16.0 * 27.0) / 21e6).abs() < 1e-9);
-    // 20.67 us of window against 2 × 0.4 × period: 20 kHz (40 us) and 30 kHz (26.7 us) run,
-    // 40 kHz (20 us) does not.
+    // 20.67 us of window against 2 × 0.45 × period: 20 kHz (45 us) and 40 kHz (22.5 us) run,
+    // 45 kHz (20 us) does not.
     let mut s = default_settings();
-    for (hz, ok) in [(20_000.0, true), (30_000.0, true), (40_000.0, false)] {
+    for (hz, ok) in [(20_000.0, true), (40_000.0, true), (45_000.0, false)] {
         s.cur_rate_hz = hz;
         s.pos_rate_hz = hz / 2.0;
         let r = prepare(&s, &board);

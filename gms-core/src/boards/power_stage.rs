@@ -67,7 +67,7 @@ pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
     SenseTiming {
         adc_hz: clocks.adc_hz(),
         sample_cycles: 15,
-        conversions: 8,
+        conversions: 16,
         latency_cycles: 2,
     }
 }
@@ -96,8 +96,9 @@ pub const fn limits(clocks: &F4Clocks) -> BoardLimits {
         clock_hz: clocks.hclk_hz(),
         // The step starts when the samples are in, half the sense window (10.3 us) after
         // the bottom, and must end before the next bottom (its compare values are taken
-        // there): 60 % of the period (30 us at 20 kHz) leaves 9 us.
-        budget_fraction: 0.6,
+        // there): 55 % of the period (13.75 us, 2,310 cycles at 168 MHz, at the default 40 kHz
+        // current loop) leaves 0.95 us; at 20 kHz, 27.5 us and 12.2 us.
+        budget_fraction: 0.55,
     }
 }
 
