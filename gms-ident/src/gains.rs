@@ -1,39 +1,51 @@
-//! Loop gains from a measured motor: the current loop's PI from a bandwidth, and the position
-//! loop's PID with the derivative gain between the friction's lower bound and the loop's
-//! stability limit, each with its margin (docs/commissioning.md).
+//! Loop gains from a measured motor: the current loop's PI from a crossover, and the
+//! position loop's PID with the derivative gain chosen for the margins of the linear model
+//! over the plant variations commissioning must hold (kp lowered until they meet the floor),
+//! between the friction's lower bound and the loop's stability limit (docs/commissioning.md).
 //!
 //! The rules reproduce the device's defaults for the default motor (R 10 Ω, L 0.24 mH,
-//! J 6e-8 kg·m², current and position loops both at 20 kHz, the derivative filter at 8 kHz):
-//! cur.kp 1.5, cur.ki 6e4 (1 kHz), pos.kp 0.7, pos.ki about 600; the derivative gain between
-//! its bounds as the default 2.7e-4 is.
+//! J 6e-8 kg·m², the current loop at 40 kHz and the position loop at 20 kHz, the derivative
+//! filter at 0.45 of the position rate): cur.kp 13, cur.ki 2.04e4, pos.kp 0.57, pos.ki 880,
+//! pos.kd 2.8e-4, pos.d_filter_hz 9000.
 
 use gms_core::controller::{Controller, ControllerParams, FfMode};
 use gms_core::reference::RefSample;
 
-/// The current loop's bandwidth as a fraction of its rate \[-\]: 1/20 (1 kHz at 20 kHz),
-/// which leaves about 63° of phase margin against the loop's 1.5 periods of delay.
+/// The current loop's crossover as a fraction of its rate \[-\]: 1/20 (2 kHz at the default
+/// 40 kHz), where the loop's 1.5 periods of delay cost 27°.
 pub const CURRENT_BW_FRACTION: f64 = 0.05;
 
-/// The position loop's natural frequency as a fraction of the current loop's bandwidth
-/// \[-\]: 0.5436 (544 Hz under a 1 kHz current loop, the default tune's sqrt(kp / J) with
-/// kp 0.7: the stiff loop the learning's accuracy needs, docs/learning.md; 0.29, kp 0.2, was
-/// the earlier default).
-pub const POS_NATURAL_FRACTION: f64 = 0.5436;
+/// The position loop's natural frequency as a fraction of the current loop's crossover
+/// \[-\]: 0.2516 (503 Hz under the default 2 kHz, the default tune's sqrt(kp / J) with kp 0.6
+/// on 6e-8 kg·m²), which leaves the loop 45-47° and 12 dB at rest and sliding, and at least
+/// 40° and 9.9 dB over the pre-sliding stiffness ×0.5…×2 and the inertia ±20 % (the linear
+/// model, `cargo run -p hil-sim --example margins`).
+pub const POS_NATURAL_FRACTION: f64 = 0.2516;
+
+/// The integral's corner below the position loop's natural frequency \[-\]: ki = kp ω_n / 2.
+pub const POS_INTEGRAL_DIVISOR: f64 = 2.0;
 
 /// The derivative filter's corner over the position loop's natural frequency \[-\], as a cap
-/// on the axis's own corner: 24 (the default tune's 8 kHz is under 24 × its 544 Hz, so it
-/// stays). A loop the encoder's count holds down (a coarse encoder: the natural frequency
-/// low) gets a lower corner, so that each count's step reaches the motor smaller and over more
-/// periods: on a 2000 counts/rev gear motor (85 Hz) 2 kHz, where with the 8 kHz corner its
-/// sliding friction read 15 % off (the fit's Fc; the points scatter ±20 % either way).
-pub const D_FILTER_NATURAL: f64 = 24.0;
+/// on the axis's own corner: 30 (the default tune's 15 kHz is 30 × its 503 Hz). A loop the
+/// encoder's count holds down (a coarse encoder: the natural frequency low) gets a lower
+/// corner, so that each count's step reaches the motor smaller and over more periods: on a
+/// 2000 counts/rev gear motor (85 Hz) 2.5 kHz, where with an 8 kHz corner its sliding friction
+/// read 15 % off (the fit's Fc; the points scatter ±20 % either way).
+pub const D_FILTER_NATURAL: f64 = 30.0;
 
-/// The current loop's PI for a bandwidth of [`CURRENT_BW_FRACTION`] of `cur_hz` \[Hz\] on a
-/// winding of `r` \[ohm\] and `l` \[H\]: `(kp [V/A], ki [V/(A·s)])` = (ω L, ω R), the PI's
-/// zero on the winding's pole, a first-order loop of bandwidth ω.
+/// The current loop's PI for a crossover of [`CURRENT_BW_FRACTION`] of `cur_hz` \[Hz\] on a
+/// winding of `r` \[ohm\] and `l` \[H\]: `(kp [V/A], ki [V/(A·s)])` = (ω L + R, kp ω / 8).
+/// The device feeds the resistance's drop forward (`motor.r` × the command), so the command
+/// reaches the winding at its own corner R / L (6.6 kHz on the default motor) and the PI's
+/// feedback only corrects it: kp = ω L + R keeps the loop's gain through the winding near one
+/// up to ω (ω L where the inductance dominates, a first-order loop of bandwidth ω; R where the
+/// resistance does, a flat response without the peak of +5 dB near 2.5 kHz that a PI with
+/// its zero on the winding's pole, (ω L, ω R), gives beside the feedforward); the integral's
+/// corner three octaves below ω.
 pub fn current_pi(r: f64, l: f64, cur_hz: f64) -> (f64, f64) {
     let w = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * cur_hz;
-    (w * l, w * r)
+    let kp = w * l + r;
+    (kp, kp * w / 8.0)
 }
 
 /// The measuring loop's damping ratio \[-\]: the position loop the friction is measured with
@@ -184,10 +196,10 @@ impl Axis {
             l: 0.24e-3,
             k_m: 6.6e-3,
             inertia: 6e-8,
-            cur_pi: current_pi(10.0, 0.24e-3, 20e3),
-            cur_hz: 20e3,
+            cur_pi: current_pi(10.0, 0.24e-3, 40e3),
+            cur_hz: 40e3,
             pos_hz: 20e3,
-            d_filter_hz: 8000.0,
+            d_filter_hz: 15000.0,
             v_supply: 12.0,
             k_presliding: 1.2501,
             rad_per_count: 3.8e-6,
@@ -233,7 +245,64 @@ pub struct PositionGains {
     pub kd_max: f64,
     /// Whether the encoder's count lowered kp or kd below the rule's.
     pub count_limited: bool,
+    /// The linear model's margins of the loop with these gains on the axis as measured.
+    pub nominal: LoopMargins,
+    /// The least of them over the plant variations of [`VARIATIONS`].
+    pub worst: LoopMargins,
 }
+
+/// A loop's margins at rest (the friction's pre-sliding spring in the loop) and sliding.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopMargins {
+    /// At rest: phase margin \[deg\], gain margin \[dB\].
+    pub rest: (f64, f64),
+    /// Sliding: phase margin \[deg\], gain margin \[dB\].
+    pub sliding: (f64, f64),
+}
+
+impl LoopMargins {
+    /// The least of the four over the floor's \[-\]: 1 or more meets
+    /// [`MIN_PHASE_MARGIN_DEG`] and [`MIN_GAIN_MARGIN_DB`] everywhere.
+    pub fn over_floor(&self) -> f64 {
+        self.score(MIN_PHASE_MARGIN_DEG, MIN_GAIN_MARGIN_DB)
+    }
+
+    /// The least of the phase margins over `pm` and the gain margins over `gm`.
+    fn score(&self, pm: f64, gm: f64) -> f64 {
+        let f = |v: f64, d: f64| if v.is_nan() { 0.0 } else { v / d };
+        f(self.rest.0, pm)
+            .min(f(self.rest.1, gm))
+            .min(f(self.sliding.0, pm))
+            .min(f(self.sliding.1, gm))
+    }
+
+    /// The least of each of `self` and `o`.
+    fn least(&self, o: &LoopMargins) -> LoopMargins {
+        let m = |a: f64, b: f64| if a.is_nan() || b < a { b } else { a };
+        LoopMargins {
+            rest: (m(self.rest.0, o.rest.0), m(self.rest.1, o.rest.1)),
+            sliding: (
+                m(self.sliding.0, o.sliding.0),
+                m(self.sliding.1, o.sliding.1),
+            ),
+        }
+    }
+}
+
+pub use crate::margins::{MIN_GAIN_MARGIN_DB, MIN_PHASE_MARGIN_DEG};
+
+/// The plant variations the rule holds its margins over, as factors on what was measured:
+/// the pre-sliding stiffness (×0.5, ×1, ×2: load, lubricant, temperature, a friction model
+/// that is not the axis's) and the inertia (×0.8, ×1, ×1.2).
+pub const VARIATIONS: ([f64; 3], [f64; 3]) = ([0.5, 1.0, 2.0], [0.8, 1.0, 1.2]);
+
+/// The margins the rule aims at \[deg, dB\]: the derivative gain is chosen for the most of
+/// them over [`VARIATIONS`].
+pub const AIM: (f64, f64) = (45.0, 8.0);
+
+/// How many times, at most, the rule lowers kp (×0.95) when the best derivative gain leaves
+/// the worst variation under the floor.
+pub const KP_STEPS_DOWN: usize = 24;
 
 impl PositionGains {
     /// The device's parameters these set, by their protocol paths (SI).
@@ -262,12 +331,41 @@ pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
     let w_cur = 2.0 * std::f64::consts::PI * CURRENT_BW_FRACTION * axis.cur_hz;
     let wn_rule = POS_NATURAL_FRACTION * w_cur;
     let kp_rule = axis.inertia * wn_rule * wn_rule;
-    let kp = kp_rule.min(axis.kp_count_limit());
-    let wn = (kp / axis.inertia).sqrt();
-    let ki = kp * wn / 4.0;
+    let mut kp = kp_rule.min(axis.kp_count_limit());
     if !(kp.is_finite() && kp > 0.0) {
         return None;
     }
+    let kd_min = s.negative_slope().max(0.0);
+    let mut best: Option<PositionGains> = None;
+    for _ in 0..=KP_STEPS_DOWN {
+        let g = gains_at(axis, s, kp, kd_min)?;
+        let done = g.worst.over_floor() >= 1.0;
+        if best
+            .as_ref()
+            .is_none_or(|b| g.worst.over_floor() > b.worst.over_floor())
+        {
+            best = Some(g);
+        }
+        if done {
+            break;
+        }
+        kp *= 0.95;
+    }
+    let by_count = kp_rule > axis.kp_count_limit();
+    best.map(|g| PositionGains {
+        count_limited: g.count_limited || by_count,
+        ..g
+    })
+}
+
+/// The gains at `kp`: ki from the natural frequency, the filter's corner, the stability
+/// limit, and kd the one of a log-spaced set between 0.5 and 4 × J ω_n (above `kd_min`, the
+/// friction's negative damping, where that leaves room; below the stability limit / 1.5 and
+/// the encoder's count limit) whose least margin over [`VARIATIONS`] is the most over
+/// [`AIM`].
+fn gains_at(axis: &Axis, s: &SlidingCurve, kp: f64, kd_min: f64) -> Option<PositionGains> {
+    let wn = (kp / axis.inertia).sqrt();
+    let ki = kp * wn / POS_INTEGRAL_DIVISOR;
     // The derivative's filter: at most D_FILTER_NATURAL × the natural frequency (and the
     // axis's, and 0.45 of the position rate); the stability limit and the count's limit are
     // those of the loop with it.
@@ -296,13 +394,32 @@ pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
         }
     }
     let kd_max = lo;
-    let kd_min = s.negative_slope().max(0.0);
-    let kd_rule = if kd_max > kd_min {
-        (kd_min.max(kd_max / 1e3) * kd_max).sqrt()
-    } else {
-        kd_max / 1.5
-    };
-    let kd = kd_rule.min(axis.kd_count_limit());
+    let top = (kd_max / 1.5).min(axis.kd_count_limit());
+    let jw = axis.inertia * wn;
+    let (from, to) = (
+        (0.5 * jw).max(kd_min.min(top)).min(top),
+        (4.0 * jw).min(top),
+    );
+    let mut pick: Option<(f64, LoopMargins, LoopMargins)> = None;
+    const N: usize = 16;
+    for i in 0..N {
+        let kd = if to > from {
+            from * (to / from).powf(i as f64 / (N - 1) as f64)
+        } else {
+            top
+        };
+        let (nominal, worst) = robust_margins(axis, s.sigma, kp, ki, kd)?;
+        if pick
+            .as_ref()
+            .is_none_or(|p| worst.score(AIM.0, AIM.1) > p.2.score(AIM.0, AIM.1))
+        {
+            pick = Some((kd, nominal, worst));
+        }
+        if to <= from {
+            break;
+        }
+    }
+    let (kd, nominal, worst) = pick?;
     Some(PositionGains {
         kp,
         ki,
@@ -310,17 +427,15 @@ pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
         d_filter_hz,
         kd_min,
         kd_max,
-        count_limited: kp < kp_rule || kd < kd_rule,
+        count_limited: kd < 0.5 * jw && kd >= axis.kd_count_limit(),
+        nominal,
+        worst,
     })
 }
 
-/// Whether the position loop with `kp`, `ki`, `kd` on `axis` is stable: a small step of the
-/// reference (no friction, no feedforward, an encoder fine enough not to matter) through the
-/// device's own controller, its current loop driving the winding one period late, the motor
-/// turning the inertia, the friction's pre-sliding spring holding it; stable when the
-/// position's swing over the last fifth of 0.2 s is below 0.9 of the fifth before (it
-/// decays), or settled within a thousandth of the step. `None` when the set is not one the controller takes.
-fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
+/// The device's settings for the position loop `kp`, `ki`, `kd` on `axis` (its current loop,
+/// rates, filter, supply and motor), no feedforward.
+fn loop_settings(axis: &Axis, kp: f64, ki: f64, kd: f64) -> ControllerParams<6> {
     let mut p: ControllerParams<6> = gms_core::device::default_settings();
     p.pid.kp = kp as f32;
     p.pid.ki = ki as f32;
@@ -336,6 +451,71 @@ fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
     p.motor.k_e = axis.k_m as f32;
     p.motor.inertia = axis.inertia as f32;
     p.ff.mode = FfMode::None;
+    p
+}
+
+/// The linear model's margins (`crate::linear`, `crate::margins`) of the position loop `kp`,
+/// `ki`, `kd` on `axis` with the friction's viscous term `sigma` \[N·m·s/rad\]: on the axis as
+/// measured, and the least over [`VARIATIONS`] (the controller told the measured figures, the
+/// plant varied). `None` when the settings make no model.
+pub fn robust_margins(
+    axis: &Axis,
+    sigma: f64,
+    kp: f64,
+    ki: f64,
+    kd: f64,
+) -> Option<(LoopMargins, LoopMargins)> {
+    use crate::linear::{LinearAxis, Operating, SmallSignal};
+    let p = loop_settings(axis, kp, ki, kd);
+    let one = |kx: f64, jx: f64| -> Option<LoopMargins> {
+        let ss = SmallSignal {
+            r: axis.r,
+            l: axis.l,
+            k_m: axis.k_m,
+            k_e: axis.k_m,
+            j: axis.inertia * jx,
+            two_mass: None,
+            k_act: axis.k_presliding * kx,
+            sigma_act: sigma,
+            k_gw: 0.0,
+            sigma_gw: 0.0,
+            rad_per_count: axis.rad_per_count,
+        };
+        let at = |op: Operating| -> Option<(f64, f64)> {
+            let lin = LinearAxis::new(&ss, &p, op).ok()?;
+            let (f0, f1) = (2.0, 0.49 * axis.pos_hz);
+            let l: Vec<(f64, nalgebra::Complex<f64>)> = (0..400)
+                .map(|i| {
+                    let f = f0 * (f1 / f0).powf(i as f64 / 399.0);
+                    (f, lin.open_loop(f))
+                })
+                .collect();
+            let m = crate::margins::margins(&l);
+            Some((m.phase_margin_deg, m.gain_margin_db))
+        };
+        Some(LoopMargins {
+            rest: at(Operating::Rest)?,
+            sliding: at(Operating::Sliding)?,
+        })
+    };
+    let nominal = one(1.0, 1.0)?;
+    let mut worst = nominal;
+    for kx in VARIATIONS.0 {
+        for jx in VARIATIONS.1 {
+            worst = worst.least(&one(kx, jx)?);
+        }
+    }
+    Some((nominal, worst))
+}
+
+/// Whether the position loop with `kp`, `ki`, `kd` on `axis` is stable: a small step of the
+/// reference (no friction, no feedforward, an encoder fine enough not to matter) through the
+/// device's own controller, its current loop driving the winding one period late, the motor
+/// turning the inertia, the friction's pre-sliding spring holding it; stable when the
+/// position's swing over the last fifth of 0.2 s is below 0.9 of the fifth before (it
+/// decays), or settled within a thousandth of the step. `None` when the set is not one the controller takes.
+fn stable(axis: &Axis, kp: f64, ki: f64, kd: f64) -> Option<bool> {
+    let mut p = loop_settings(axis, kp, ki, kd);
     // A nanoradian count: the loop as if continuous in position.
     p.counts_per_rev = (std::f64::consts::TAU / 1e-9) as f32;
     let rpc = p.rad_per_count() as f64;
@@ -412,15 +592,27 @@ mod tests {
     fn the_default_motor_gets_the_default_tune() {
         let g = position_gains(&Axis::default_motor(), &SlidingCurve::TABLE1).unwrap();
         eprintln!("{g:?}");
-        // The defaults: kp 0.7, ki 600 (here 598: ki = kp ω_n / 4), kd 2.7e-4.
-        assert!((g.kp / 0.7 - 1.0).abs() < 0.01, "kp {}", g.kp);
-        assert!((g.ki / 600.0 - 1.0).abs() < 0.1, "ki {}", g.ki);
-        assert!((g.kd / 2.7e-4 - 1.0).abs() < 0.05, "kd {}", g.kd);
+        let d = gms_core::device::default_settings();
+        let (ckp, cki) = current_pi(10.0, 0.24e-3, 40e3);
+        assert!(
+            (ckp / d.current.kp as f64 - 1.0).abs() < 0.01,
+            "cur.kp {ckp}"
+        );
+        assert!(
+            (cki / d.current.ki as f64 - 1.0).abs() < 0.01,
+            "cur.ki {cki}"
+        );
+        assert!((g.kp / d.pid.kp as f64 - 1.0).abs() < 0.01, "kp {}", g.kp);
+        assert!((g.ki / d.pid.ki as f64 - 1.0).abs() < 0.01, "ki {}", g.ki);
+        assert!((g.kd / d.pid.kd as f64 - 1.0).abs() < 0.01, "kd {}", g.kd);
+        assert_eq!(g.d_filter_hz, d.pid.d_filter_hz as f64);
         // Table 1's slope at Vs: (Fs - Fc) δ / (e Vs) - σ.
         let slope = 95e-6 * 0.9 / (std::f64::consts::E * 0.2) - 10.5e-6;
         assert!((g.kd_min / slope - 1.0).abs() < 1e-12);
         assert!(g.kd_min < g.kd && g.kd < g.kd_max);
-        assert!((g.margin_low() / g.margin_high() - 1.0).abs() < 1e-9);
+        // The worst variation at the floor, the axis as measured at the aim or above.
+        assert!(g.worst.over_floor() >= 1.0, "{:?}", g.worst);
+        assert!(g.nominal.score(AIM.0, AIM.1) >= 1.0, "{:?}", g.nominal);
     }
 
     /// A loop with more inertia takes more derivative gain before it goes unstable; a stiffer

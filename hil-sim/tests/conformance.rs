@@ -229,9 +229,9 @@ fn save_restart_load() {
 const LIVE_SETS: [&str; 7] = [
     "set ff.gain 0.94",
     "set ff.gain 0.9",
-    "set pos.kp 0.77",
-    "set pos.ki 660",
-    "set cur.kp 1.65",
+    "set pos.kp 0.66",
+    "set pos.ki 990",
+    "set cur.kp 13.2",
     "set gms.fc 1.3e-4",
     "set ff.mode gms-adaptive",
 ];
