@@ -47,6 +47,10 @@ pub struct Commissioned {
     pub pos: Option<gms_ident::gains::PositionGains>,
     /// What was done, a line per step.
     pub lines: Vec<String>,
+    /// Why the loop found is under the floor ([`MIN_PHASE_MARGIN`], [`MIN_GAIN_MARGIN`]), if
+    /// it is: measured at rest after backing off, or (where the encoder hides the response)
+    /// the model's. `gms-tune commission` does not apply such a loop unless forced.
+    pub short_of_floor: Option<String>,
 }
 
 impl Commissioned {
@@ -420,14 +424,28 @@ pub(crate) fn commission_steps(
     Ok(c)
 }
 
-/// The least phase margin commissioning leaves \[deg\], measured at rest: below it the gains
-/// are backed off. At rest the friction's pre-sliding spring is in the loop (Table 1's Σk
-/// 1.25 N·m/rad on the default rotor: a resonance near 700 Hz) and the margin there is the
-/// loop's least: the default tune has 20-23° at rest (gain margin 2.4-2.7 dB) and 37-38°
-/// sliding, which the learning's accuracy needs (docs/learning.md: a tune with 30° at rest,
-/// kp 0.6 and kd 1.8e-4, leaves reversal peaks of 2.8-3.2 counts after ten iterations
-/// against 2.3; one with 28.6° and 4 dB, kp 0.6 and kd 2.2e-4, 2.6-2.8).
-pub const MIN_PHASE_MARGIN: f64 = 20.0;
+/// The least phase margin commissioning leaves \[deg\], measured at rest (the friction's
+/// pre-sliding spring in the loop, where a loop's margins are least): below it, or below
+/// [`MIN_GAIN_MARGIN`], the gains are backed off, and a loop still under it is not applied
+/// unless forced. The floor of `gms_ident::margins`, which `gms-tune frf` warns under too.
+pub const MIN_PHASE_MARGIN: f64 = gms_ident::margins::MIN_PHASE_MARGIN_DEG;
+
+/// The least gain margin commissioning leaves \[dB\] (see [`MIN_PHASE_MARGIN`]).
+pub const MIN_GAIN_MARGIN: f64 = gms_ident::margins::MIN_GAIN_MARGIN_DB;
+
+/// Why the rule's loop `g` is under the floor by the linear model on the axis as measured,
+/// if it is (for a loop that could not be measured).
+fn modelled_short(g: &gms_ident::gains::PositionGains) -> Option<String> {
+    let n = g.nominal;
+    (n.over_floor() < 1.0).then(|| {
+        format!(
+            "the loop's modelled margins, {:.1}° and {:.2} dB at rest, {:.1}° and {:.2} dB \
+             sliding, are under the floor of {MIN_PHASE_MARGIN}° and {MIN_GAIN_MARGIN} dB \
+             (not measured)",
+            n.rest.0, n.rest.1, n.sliding.0, n.sliding.1
+        )
+    })
+}
 
 /// The factor the position gains are backed off by, and how many times at most.
 pub const BACK_OFF: (f64, usize) = (0.7, 3);
@@ -527,6 +545,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
                  counts at most: the encoder's count would hide it)",
                 si(plan.amplitude, "A")
             ));
+            c.short_of_floor = modelled_short(&g);
             break;
         }
         let model = model.map(|m| m.0);
@@ -562,6 +581,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
                      encoder's count hides the response)",
                     pts.len()
                 ));
+                c.short_of_floor = modelled_short(&g);
                 break;
             }
             Err(e) => {
@@ -571,6 +591,14 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
                 let tripped = e.faults().is_some() || check_faults(b).is_err();
                 if !tripped || round == BACK_OFF.1 {
                     c.lines.push(format!("open loop: not measured ({e})"));
+                    c.short_of_floor = if tripped {
+                        Some(format!(
+                            "the loop tripped at rest after backing off {} times ({e})",
+                            BACK_OFF.1
+                        ))
+                    } else {
+                        modelled_short(&g)
+                    };
                     break;
                 }
                 c.lines.push(format!(
@@ -597,19 +625,29 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
             m.gain_margin_db,
             m.crossover_hz
         ));
-        if m.phase_margin_deg >= MIN_PHASE_MARGIN || m.phase_margin_deg.is_nan() {
+        let pm_ok = m.phase_margin_deg >= MIN_PHASE_MARGIN || m.phase_margin_deg.is_nan();
+        let gm_ok = m.gain_margin_db >= MIN_GAIN_MARGIN;
+        if pm_ok && gm_ok {
+            c.short_of_floor = None;
             break;
         }
+        c.short_of_floor = Some(format!(
+            "the loop's margins at rest, {:.1}° and {:.2} dB, are under the floor of \
+             {MIN_PHASE_MARGIN}° and {MIN_GAIN_MARGIN} dB",
+            m.phase_margin_deg, m.gain_margin_db
+        ));
         if round == BACK_OFF.1 {
             c.lines.push(format!(
-                "  warning: the phase margin is still under {MIN_PHASE_MARGIN}° after backing \
-                 off {} times (a resonance? gms-tune frf --loop open --suggest)",
+                "  warning: the margins are still under {MIN_PHASE_MARGIN}° and \
+                 {MIN_GAIN_MARGIN} dB after backing off {} times (a resonance? gms-tune frf \
+                 --loop open --suggest)",
                 BACK_OFF.1
             ));
             break;
         }
         c.lines.push(format!(
-            "  warning: phase margin under {MIN_PHASE_MARGIN}°: position gains backed off ×{}",
+            "  warning: margins under {MIN_PHASE_MARGIN}° and {MIN_GAIN_MARGIN} dB: position \
+             gains backed off ×{}",
             BACK_OFF.0
         ));
         back_off(&mut g);
@@ -668,6 +706,13 @@ pub(crate) fn position_gains_for(
         num4(g.kd),
         num4(g.d_filter_hz),
         (g.kp / c.inertia).sqrt() / (2.0 * std::f64::consts::PI)
+    ));
+    let (n, w) = (g.nominal, g.worst);
+    c.lines.push(format!(
+        "  modelled margins: at rest {:.1}° and {:.2} dB, sliding {:.1}° and {:.2} dB; the \
+         least over the pre-sliding stiffness ×0.5…×2 and the inertia ±20 %: {:.1}° and {:.2} dB \
+         at rest, {:.1}° and {:.2} dB sliding",
+        n.rest.0, n.rest.1, n.sliding.0, n.sliding.1, w.rest.0, w.rest.1, w.sliding.0, w.sliding.1
     ));
     if g.count_limited {
         c.lines.push(format!(

@@ -19,6 +19,7 @@ pub fn run(
     speed: f64,
     apply: bool,
     save: bool,
+    force: bool,
     json: bool,
 ) -> Result<(), Fail> {
     let mut bar = Bar::new();
@@ -50,6 +51,7 @@ pub fn run(
             "sense_offset_a": c.sense_offset,
             "sense_noise_a": c.sense_noise,
             "lines": c.lines,
+            "short_of_floor": c.short_of_floor,
             "file": out.display().to_string(),
         });
         println!("{v}");
@@ -68,6 +70,13 @@ pub fn run(
             si(c.k_e, "V·s/rad"),
             out.display()
         );
+    }
+    if let (true, false, Some(why)) = (apply || save, force, &c.short_of_floor) {
+        return Err(Fail::Device(format!(
+            "{why}: not applied (--force applies it anyway; {} holds it); the device is as it \
+             was",
+            out.display()
+        )));
     }
     if apply || save {
         let n = load_params(link, &pf).map_err(|e| Fail::Device(e.to_string()))?;

@@ -203,6 +203,9 @@ enum Cmd {
         /// Load it and save it (implies --apply).
         #[arg(long)]
         save: bool,
+        /// Apply (or save) a loop whose margins at rest are under the floor (40°, 6 dB) too.
+        #[arg(long)]
+        force: bool,
         /// Print the result as JSON (the settings found, raw values in SI, and the lines).
         #[arg(long)]
         json: bool,
@@ -553,8 +556,9 @@ fn run(cli: Cli) -> Result<(), Fail> {
             speed,
             apply,
             save,
+            force,
             json,
-        } => commission::run(&mut link, &out, speed, apply, save, json)?,
+        } => commission::run(&mut link, &out, speed, apply, save, force, json)?,
         Cmd::TuneFf {
             amplitude,
             freq,

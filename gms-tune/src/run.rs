@@ -413,7 +413,7 @@ pub fn step_summary(
 }
 
 /// `gms-tune frf`'s readable result: the points above the noise, the margins (and a
-/// warning under `gms_bench::commission::MIN_PHASE_MARGIN`), the pre-sliding stiffness
+/// warning under `gms_bench::commission::MIN_PHASE_MARGIN` or `MIN_GAIN_MARGIN`), the pre-sliding stiffness
 /// beside the device's model, the notch proposed and the margins it would give.
 pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
     let mut out = Vec::new();
@@ -437,12 +437,16 @@ pub fn frf_summary(s: &Sweep, sug: Option<&Suggestion>) -> Vec<String> {
             m.peak_sensitivity_db,
             m.peak_sensitivity_hz
         ));
-        let least = gms_bench::commission::MIN_PHASE_MARGIN;
-        if m.phase_margin_deg < least {
+        let (pm, gm) = (
+            gms_bench::commission::MIN_PHASE_MARGIN,
+            gms_bench::commission::MIN_GAIN_MARGIN,
+        );
+        if m.phase_margin_deg < pm || m.gain_margin_db < gm {
             out.push(format!(
-                "warning: the phase margin {:.1}° is under {least}° (what commissioning leaves): \
-                 the loop rings (--suggest proposes a notch; or lower pos.kp/pos.kd)",
-                m.phase_margin_deg
+                "warning: the margins {:.1}° and {:.2} dB are under the floor of {pm}° and \
+                 {gm} dB (what commissioning leaves): the loop rings, or goes unstable with a \
+                 little more gain (--suggest proposes a notch; or lower pos.kp/pos.kd)",
+                m.phase_margin_deg, m.gain_margin_db
             ));
         }
     }
