@@ -550,11 +550,11 @@ impl Mailbox {
 /// Table 1 compensation, the current loop at 40 kHz, the position loop at 20 kHz.
 ///
 /// The loops are the commissioning rule's for the default motor (`gms_ident::gains`): the
-/// current PI (ω L + R, kp ω / 8 for a 2 kHz crossover; the resistance's drop fed forward), and
-/// the position PID with its kd chosen, and kp lowered, for the margins over the plant
+/// current PI with 4 dB of gain margin against its delay (the resistance's drop fed forward),
+/// and the position PID with its kd chosen, and kp lowered, for the margins over the plant
 /// variations the rule holds them over (the pre-sliding stiffness ×0.5…×2, the inertia ±20 %):
-/// at rest 47.6° and 12.2 dB, sliding 48.4° and 12.5 dB on the default plant, 39.9° and 9.7 dB
-/// at the worst variation (the linear model). The current loop at twice the position loop's
+/// at rest 47.9° and 12.9 dB, sliding 47.4° and 13.3 dB on the default plant, 40.2° and
+/// 10.4 dB at the worst variation (the linear model). The current loop at twice the position loop's
 /// rate halves the delay from a position sample to the winding's voltage, which is what the
 /// margins were short of at 20 kHz (the earlier default had 20° and 2.4 dB at rest).
 ///
@@ -576,17 +576,17 @@ pub fn default_settings() -> Settings {
         // The power stage's INA240A2 (gain 50) over a 68 mΩ shunt (gms-core/src/boards/power_stage.rs).
         sense_v_per_a: 3.4,
         pid: PidParams {
-            kp: 0.57,
-            ki: 880.0,
-            kd: 2.8e-4,
+            kp: 0.49,
+            ki: 700.0,
+            kd: 2.45e-4,
             d_filter_hz: 9000.0,
             i_limit: 1e-3,
         },
         shaping: crate::shaping::ShapingParams::OFF,
         map: crate::posmap::MapParams::DEFAULT,
         current: CurrentParams {
-            kp: 13.0,
-            ki: 2.04e4,
+            kp: 10.85,
+            ki: 1.98e4,
         },
         motor: MotorModel {
             k_m: 6.6e-3,
