@@ -382,19 +382,17 @@ pub(crate) fn commission_steps(
     c.inertia = inertia(b, &mut c, dev, dt, i_fs)?;
     // 7. The inductance: the current loop's step response at standstill.
     c.inductance = inductance(b, &mut c, dt, i_fs)?;
-    // 8. The current loop's PI for a bandwidth of CURRENT_BW_FRACTION of its rate: kp = ω L,
-    //    ki = ω R (the PI's zero on the winding's pole: a first-order loop of bandwidth ω).
+    // 8. The current loop's PI: kp as high as its delay allows with the rule's gain margin
+    //    (the resistance's drop fed forward), the integral's corner five octaves below.
     let cur_hz = get_param(b, "rate.cur_hz")?;
     c.cur_pi = gms_ident::gains::current_pi(c.r, c.inductance, cur_hz);
-    // The loop's delay: the sample, the computation and the update, about 1.5 periods.
-    let margin = 90.0 - 360.0 * CURRENT_BW_FRACTION * 1.5;
     c.lines.push(format!(
-        "current loop: bandwidth {:.0} Hz ({} of its rate): cur.kp {} V/A, cur.ki {} V/(A·s); \
-         phase margin about {margin:.0}° (1.5 periods of delay)",
-        CURRENT_BW_FRACTION * cur_hz,
-        CURRENT_BW_FRACTION,
+        "current loop: cur.kp {} V/A, cur.ki {} V/(A·s) at {} ({:.1} dB of gain margin against \
+         its 1.5 periods of delay)",
         num4(c.cur_pi.0),
-        num4(c.cur_pi.1)
+        num4(c.cur_pi.1),
+        si(cur_hz, "Hz"),
+        -20.0 * gms_ident::gains::CURRENT_GAIN_MARGIN.log10()
     ));
     // 9. A friction model far from the axis scaled to its breakaway (the level measured, the
     //    shape the model's), for the gains below and for the caller to apply.

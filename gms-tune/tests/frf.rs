@@ -22,8 +22,13 @@ fn frf_writes_its_files_suggests_and_applies_a_notch() {
     let _one = support::one_at_a_time();
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    // A derivative gain a fifth above the default's: about 11° of phase margin at rest.
-    let sc = quiet_scenario(d, "[controller.pos]\nkd = 3.2e-4\n");
+    // The earlier default loop (both loops at 20 kHz, the current loop's bandwidth 1 kHz, kp
+    // 0.7) with a derivative gain a fifth above its own: about 11° of phase margin at rest.
+    let sc = quiet_scenario(
+        d,
+        "[controller.rate]\ncur_hz = 20000.0\n[controller.cur]\nkp = 1.5\nki = 6e4\n\
+         [controller.pos]\nkp = 0.7\nki = 600.0\nkd = 3.2e-4\nd_filter_hz = 8000.0\n",
+    );
     let srv = Server::child("tcp", &d.join("flash.img"), 20.0, Some(&sc));
     let (code, out, err) = tune(
         &srv,
@@ -43,7 +48,7 @@ fn frf_writes_its_files_suggests_and_applies_a_notch() {
         d,
     );
     assert_eq!(code, 0, "{out}\n{err}");
-    assert!(err.contains("16 points from 10 to 3000 Hz"), "{err}");
+    assert!(err.contains("16 points from 10 to 5000 Hz"), "{err}");
     let csv = std::fs::read_to_string(d.join("f/frf.csv")).unwrap();
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("f_hz,gain_db,phase_deg,coherence"));

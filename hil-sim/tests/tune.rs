@@ -260,11 +260,11 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
         assert!((c.inertia / j - 1.0).abs() < 0.15, "J {}", c.inertia);
         assert!((c.inductance / l - 1.0).abs() < 0.20, "L {}", c.inductance);
-        // The current PI for 1 kHz: kp = 2π 1000 L, ki = 2π 1000 R (the defaults 1.5 and 6e4
-        // are this for the default motor).
-        let w = 2.0 * std::f64::consts::PI * 1000.0;
-        assert!((c.cur_pi.0 / (w * c.inductance) - 1.0).abs() < 1e-9);
-        assert!((c.cur_pi.1 / (w * c.r) - 1.0).abs() < 1e-9);
+        // The current PI is the rule's for the winding measured, at the loop's rate.
+        let rate = gms_core::device::default_settings().cur_rate_hz as f64;
+        let (kp, ki) = gms_ident::gains::current_pi(c.r, c.inductance, rate);
+        assert!((c.cur_pi.0 / kp - 1.0).abs() < 1e-9);
+        assert!((c.cur_pi.1 / ki - 1.0).abs() < 1e-9);
         // The device's directions are as they were (the caller applies the result).
         assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
     }
