@@ -450,10 +450,10 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
     );
     let per_code = 3.3f32 / 4095.0 / 0.75;
     assert!((after.current - 100.0 * per_code).abs() < 1e-6 * 100.0 * per_code);
-    // The limits follow: the trip under the new sense range (1.5 × 0.5 A; the range is
+    // The limits follow: the trip under the new sense range (1.5 × lim.i_max; the range is
     // 2047 × 1.07 mA = 2.2 A), a following-error limit of at least 64 counts (0.2 rad).
     let l = b.limits(&s);
-    assert!((l.i_trip - 0.75).abs() < 1e-6, "{}", l.i_trip);
+    assert!((l.i_trip - 1.5 * s.i_max).abs() < 1e-6, "{}", l.i_trip);
     assert!((l.max_error - 64.0 * std::f32::consts::TAU / 2000.0).abs() < 1e-6);
     // 100 rad/s over a position period: at 20 kHz 5 mrad = 1.59 counts of 3.14 mrad, so 2
     // (at 10 kHz 3.18, so 4).

@@ -271,8 +271,9 @@ enum Cmd {
         /// Lowest frequency \[Hz\].
         #[arg(long, default_value_t = 10.0)]
         from: f64,
-        /// Highest frequency \[Hz\] (below 0.45 × rate.pos_hz).
-        #[arg(long, default_value_t = 3000.0)]
+        /// Highest frequency \[Hz\] (below 0.45 × rate.pos_hz; the default loop's phase
+        /// crosses −180° near 3.4 kHz).
+        #[arg(long, default_value_t = 5000.0)]
         to: f64,
         /// Frequencies, log-spaced (2 to 1000).
         #[arg(long, default_value_t = 40)]

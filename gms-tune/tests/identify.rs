@@ -277,7 +277,7 @@ fn identify_says_when_the_axis_does_not_move() {
         (
             // Blocked: 100 times the friction the device's compensator (Table 1) expects.
             "[plant.actuator]\nfs = 2.2e-2\nfc = 1.25e-2\n[controller.gms]\nfs = 220e-6\nfc = 125e-6",
-            "did not move with current pulses up to 264.5 mA (0.001746 N·m, 60 % of lim.i_max)",
+            "did not move with current pulses up to 211.6 mA (0.001396 N·m, 60 % of lim.i_max)",
         ),
     ] {
         let dir = tempfile::tempdir().unwrap();

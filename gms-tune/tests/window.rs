@@ -69,7 +69,7 @@ fn the_window_shows_the_device_and_sets_what_it_is_told() {
         .listed
         .value
         == "0.00022"));
-    // A set it refuses (out of range): the error beside the field, the field back at the default 0.57.
+    // A set it refuses (out of range): the error beside the field, the field back at the default 0.49.
     type_param(&mut h, "pos.kp", "5000");
     assert!(step_until(&mut h, srv.wall(0.1, 1.5), |a| row(a, "pos.kp")
         .unwrap()
@@ -82,14 +82,14 @@ fn the_window_shows_the_device_and_sets_what_it_is_told() {
         "{:?}",
         r.error
     );
-    assert_eq!(r.edit, "0.57");
+    assert_eq!(r.edit, "0.49");
     // Beside the field, and in the log below.
     assert_eq!(h.query_all_by_label_contains("err 6").count(), 2);
-    assert_eq!(h.get_by_label("pos.kp").value().as_deref(), Some("0.57"));
+    assert_eq!(h.get_by_label("pos.kp").value().as_deref(), Some("0.49"));
     // The window closed, the device read back by another client.
     drop(h);
     assert_eq!(tune(&srv, &["get", "pos.kd"], d).1.trim(), "0.00022");
-    assert_eq!(tune(&srv, &["get", "pos.kp"], d).1.trim(), "0.57");
+    assert_eq!(tune(&srv, &["get", "pos.kp"], d).1.trim(), "0.49");
 }
 
 /// The device gone: the window says the link is lost (and keeps drawing).

@@ -96,3 +96,9 @@ fn main() {
         nr.0, nr.1, nr.2, ns.0, ns.1, ns.2, w.0, w.1, w.4, w.2, w.3, w.5
     );
 }
+#[allow(dead_code)]
+fn peak(ss: &SmallSignal, s: &gms_core::protocol::Settings) -> (f64, f64) {
+    let lin = LinearAxis::new(ss, s, Operating::Sliding).unwrap();
+    (0..400).map(|i| { let f = 10.0 * (1000.0f64).powf(i as f64 / 399.0); (f, lin.current(f).norm()) })
+        .fold((0.0, 0.0), |a, b| if b.1 > a.1 { b } else { a })
+}

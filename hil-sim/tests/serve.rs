@@ -67,7 +67,7 @@ fn set_save_restart_and_read_back() {
     {
         let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);
         let mut c = connect(&srv);
-        assert_eq!(c.ask("get pos.kp"), "ok 0.57");
+        assert_eq!(c.ask("get pos.kp"), "ok 0.49");
         assert_eq!(c.ask("set pos.kp 0.31"), "ok");
         assert_eq!(c.ask("set ff.mode static"), "ok");
         assert!(c.ask("set gms.fs 1e-6").starts_with("err 7 "));
@@ -86,7 +86,7 @@ fn set_save_restart_and_read_back() {
     assert_eq!(c.ask("get ff.mode"), "ok static");
     assert!(c.ask("status").contains("faults=0"));
     assert_eq!(c.ask("defaults"), "ok");
-    assert_eq!(c.ask("get pos.kp"), "ok 0.57");
+    assert_eq!(c.ask("get pos.kp"), "ok 0.49");
     assert_eq!(c.ask("load"), "ok");
     assert_eq!(c.ask("get pos.kp"), "ok 0.31");
 }
@@ -108,7 +108,7 @@ fn a_corrupt_record_means_defaults_and_a_fault() {
     }
     let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);
     let mut c = connect(&srv);
-    assert_eq!(c.ask("get pos.kp"), "ok 0.57");
+    assert_eq!(c.ask("get pos.kp"), "ok 0.49");
     let st = c.ask("status");
     assert!(
         st.contains("faults=32 ") && st.contains("fault_names=invalid_params "),
@@ -172,7 +172,7 @@ fn garbage_floods_and_dropped_clients_leave_the_device_running() {
     drop(c);
     let mut c2 = connect(&srv);
     assert_eq!(c2.ask("get pos.ki"), "ok 249");
-    assert_eq!(c2.ask("get pos.kp"), "ok 0.57");
+    assert_eq!(c2.ask("get pos.kp"), "ok 0.49");
 }
 
 #[test]
@@ -188,7 +188,7 @@ fn telemetry_lines_start_with_hash_and_never_mix_with_replies() {
         c.s.write_all(b"get pos.kp\n").unwrap();
         c.reply()
     };
-    assert_eq!(lines.last().unwrap(), "ok 0.57");
+    assert_eq!(lines.last().unwrap(), "ok 0.49");
     let telemetry: Vec<&String> = lines.iter().filter(|l| l.starts_with('#')).collect();
     assert!(telemetry.len() >= 20, "{} telemetry lines", telemetry.len());
     for l in &lines[..lines.len() - 1] {

@@ -112,9 +112,9 @@ fn a_dead_current_sense_latches_current_sense_and_keeps_the_bridge_off() {
 
 /// The encoder stops counting in the middle of a move (its cable cut): the loop pushes
 /// against a position that does not change, the current command saturates at `lim.i_max`
-/// (0.5 A by default), and that is above the over-current trip (0.46 A: 95 % of the 0.485 A
-/// the 3.4 V/A sense shows), so `over_current` latches before `following_error` would; the
-/// bridge goes off, and stays off.
+/// (0.4 A by default, under the over-current trip at 0.46 A: 95 % of the 0.485 A the 3.4 V/A
+/// sense shows) until `following_error` latches (or `over_current`, where a board's limit is
+/// set above its trip); the bridge goes off, and stays off.
 #[test]
 fn an_encoder_that_stops_counting_switches_the_bridge_off() {
     let mut m = boot();

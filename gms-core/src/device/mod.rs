@@ -594,7 +594,11 @@ pub fn default_settings() -> Settings {
             k_e: 6.6e-3,
             inertia: 6e-8,
         },
-        i_max: 0.5,
+        // Under the over-current trip, which the sense's range puts at 0.456 A (95 % of the
+        // ±0.485 A it shows): a loop that saturates (a blocked or stalled axis) is then held
+        // at the limit and trips `following_error`, not `over_current` (at 0.5 A it did, once
+        // the current loop tracked its command closely).
+        i_max: 0.4,
         v_supply: 12.0,
         // ±50 rad of the motor: ±0.9 mm of the slide through the gearhead and lead screw.
         pos_min: -50.0,

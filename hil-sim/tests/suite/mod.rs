@@ -217,7 +217,7 @@ pub fn a_refused_set_changes_nothing(d: &mut dyn Dut) {
     assert!(d.ask("set gms.fs 1e-6").starts_with("err 7 "));
     assert_eq!(d.ask("get gms.fs"), "ok 0.00022");
     assert!(d.ask("set pos.kp 5000").starts_with("err 6 "));
-    assert_eq!(d.ask("get pos.kp"), "ok 0.57");
+    assert_eq!(d.ask("get pos.kp"), "ok 0.49");
     assert!(d.ask("set ff.adapt.scale 1.1").starts_with("err 8 "));
 }
 
@@ -263,7 +263,7 @@ pub fn save_restart_load(d: &mut dyn Dut) {
     assert_eq!(d.ask("get pos.kp"), "ok 0.25");
     // defaults and load: the built-in set, then the saved one again.
     assert_eq!(d.ask("defaults"), "ok");
-    assert_eq!(d.ask("get pos.kp"), "ok 0.57");
+    assert_eq!(d.ask("get pos.kp"), "ok 0.49");
     assert_eq!(d.ask("load"), "ok");
     assert_eq!(d.ask("get pos.kp"), "ok 0.25");
     assert_eq!(d.ask("get ff.mode"), "ok gms-adaptive");
