@@ -369,12 +369,12 @@ fn pwm_timer_settings() {
 
 #[test]
 fn limits_from_settings_and_board() {
-    let mut s = selftest::controller_params(); // i_max 0.5 A, 3.8 urad/count
+    let mut s = selftest::controller_params(); // i_max 0.4 A, 3.8 urad/count
     s.pos_min = -38.0;
     s.pos_max = 19.0;
     let b = gms_core::boards::f405::BOARD.limits; // 1.5 × i_max, 10 mrad, 100 rad/s, 168 MHz, 55 %
     let l = drive::limits_for(&s, &b, 0.48);
-    // 1.5 × 0.5 A = 0.75 A exceeds what the sense shows: capped at 95 % of 0.48 A.
+    // 1.5 × 0.4 A = 0.6 A exceeds what the sense shows: capped at 95 % of 0.48 A.
     assert!((l.i_trip - 0.456).abs() < 1e-6);
     assert_eq!(l.max_error, 0.01);
     // 100 rad/s over a position period: at 20 kHz 5 mrad = 1315.8 counts, so 1316 (at
@@ -388,7 +388,7 @@ fn limits_from_settings_and_board() {
     assert_eq!(s.cur_rate_hz, 40_000.0);
     assert_eq!(l.budget_cycles, 2310);
     assert_eq!(l.period_cycles, 4200);
-    assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.75).abs() < 1e-6);
+    assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.6).abs() < 1e-6);
 }
 
 /// The F405 board (gms-core's description) with a two-conversion sense chain (its zero at code
