@@ -32,12 +32,13 @@ pub const POS_NATURAL_FRACTION: f64 = 0.2516;
 pub const POS_INTEGRAL_DIVISOR: f64 = 2.0;
 
 /// The derivative filter's corner over the position loop's natural frequency \[-\], as a cap
-/// on the axis's own corner: 30 (the default tune's 15 kHz is 30 × its 503 Hz). A loop the
-/// encoder's count holds down (a coarse encoder: the natural frequency low) gets a lower
-/// corner, so that each count's step reaches the motor smaller and over more periods: on a
-/// 2000 counts/rev gear motor (85 Hz) 2.5 kHz, where with an 8 kHz corner its sliding friction
-/// read 15 % off (the fit's Fc; the points scatter ±20 % either way).
-pub const D_FILTER_NATURAL: f64 = 30.0;
+/// on the axis's own corner: 24 (the default tune's 9 kHz, 0.45 of the position rate, is
+/// under 24 × its 455 Hz, so it stays). A loop the encoder's count holds down (a coarse
+/// encoder: the natural frequency low) gets a lower corner, so that each count's step reaches
+/// the motor smaller and over more periods: on a 2000 counts/rev gear motor (85 Hz) 2 kHz,
+/// where with an 8 kHz corner its sliding friction read 15 % off (the fit's Fc; the points
+/// scatter ±20 % either way).
+pub const D_FILTER_NATURAL: f64 = 24.0;
 
 /// The current loop's PI at `cur_hz` \[Hz\] on a winding of `r` \[ohm\] and `l` \[H\]:
 /// `(kp [V/A], ki [V/(A·s)])`. The device feeds the resistance's drop forward (`motor.r` × the
