@@ -34,24 +34,43 @@ fn ctrl_buf() -> gms_core::device::CtrlBuf {
 fn rest() -> ControlLoop {
     let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
+    let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
     ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf())
 }
 
+/// The default current loop's PWM period at the F405's 168 MHz \[cycles\].
+fn period_cycles() -> u32 {
+    (168e6 / default_settings().cur_rate_hz) as u32
+}
+
+/// The sum of the board's conversions, each at `code`.
+fn codes(code: u32) -> u32 {
+    board().sense_oversample * code
+}
+
+/// One PWM period at rest, `since_last` cycles after the last; a request is stepped on
+/// until the loop takes it (in the last current step of a position period).
 fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
     let mut req = req.map(leak);
-    let inp = Inputs {
-        encoder: 0,
-        current_codes: 16 * 2048,
-        since_last,
-    };
-    lp.step(inp, |_, _| req.take());
-    lp.finish(1000);
+    let mut since_last = since_last;
+    loop {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: codes(2048),
+            since_last,
+        };
+        lp.step(inp, |_, _| req.take());
+        lp.finish(1000);
+        if req.is_none() {
+            break;
+        }
+        since_last = period_cycles();
+    }
 }
 
 #[test]
 fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     let mut lp = rest();
     // Disabled: steps far apart (a flash erase holds the CPU for seconds) count nothing.
     step(&mut lp, 0, None);
@@ -80,7 +99,7 @@ fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
 /// latched and in the status, and an `enable` refused while it stays latched.
 #[test]
 fn a_halt_from_the_deadman_switches_off_and_says_so() {
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     let mut lp = rest();
     let enable = || Requests {
         enable: true,
@@ -109,19 +128,23 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     let mut b = board();
     b.bridge_wake_s = 1e-3;
     let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, 3.4, || Some(16 * 2048));
+    let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
     let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     let mut req = Some(leak(Requests {
         enable: true,
         ..Requests::default()
     }));
     // The axis reads 5 counts off its hold point: control would drive at once.
     let mut outs = Vec::new();
-    for _ in 0..40 {
+    for _ in 0..80 {
         let inp = Inputs {
-            encoder: if outs.is_empty() { 0 } else { 5 },
-            current_codes: 16 * 2048,
+            encoder: if outs.iter().any(|o: &gms_core::device::Outputs| o.enabled) {
+                5
+            } else {
+                0
+            },
+            current_codes: codes(2048),
             since_last: period,
         };
         let o = lp.step(inp, |_, _| req.take());
@@ -129,9 +152,13 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
         outs.push(o);
     }
     let arr = lp.timing().1;
-    // 1 ms at 20 kHz: 20 periods of brake (both inputs high for the whole period, but for
-    // the single count at the top on the PWM side), duty 0.
-    for (k, o) in outs.iter().enumerate().take(20) {
+    // 1 ms of brake from the step that takes the `enable` (both inputs high for the whole
+    // period, but for the single count at the top on the PWM side), duty 0: 40 periods at
+    // 40 kHz.
+    let wake = (1e-3 * default_settings().cur_rate_hz).round() as usize;
+    let on = outs.iter().position(|o| o.enabled).expect("enabled");
+    assert!(on < 2, "{on}");
+    for (k, o) in outs.iter().enumerate().skip(on).take(wake) {
         assert!(o.enabled, "{k}");
         assert_eq!(o.duty, 0.0, "{k}");
         assert!(
@@ -141,7 +168,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
         );
     }
     // Then the loop controls: the 5-count error gives a duty.
-    assert!(outs[20..].iter().any(|o| o.duty != 0.0));
+    assert!(outs[on + wake..].iter().any(|o| o.duty != 0.0));
     assert_eq!(lp.faults(), Faults::NONE);
 }
 
@@ -163,7 +190,7 @@ fn capture_field_lists() {
 #[test]
 fn a_capture_records_what_the_loop_saw() {
     use gms_core::device::{CaptureRequest, CaptureSpec, CaptureState};
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     let mut lp = rest();
     // Every 2nd position step, pos and current, 10 samples, at once.
     let spec = CaptureSpec {
@@ -196,7 +223,7 @@ fn a_capture_records_what_the_loop_saw() {
     for _ in 0..4 {
         let inp = Inputs {
             encoder: 0,
-            current_codes: 16 * 2048,
+            current_codes: codes(2048),
             since_last: period,
         };
         lp.step(inp, |_, h| {
@@ -267,7 +294,7 @@ fn current_mean_is_the_boxcar_of_the_decimated_steps() {
 #[test]
 fn a_timed_current_ends_on_the_device() {
     let mut lp = rest();
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     step(
         &mut lp,
         period,
@@ -322,7 +349,7 @@ fn a_timed_current_ends_on_the_device() {
 /// encoder jump; one that moved faster than the board allows over that time still is.
 #[test]
 fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
-    let period = 168_000_000 / 20_000;
+    let period = period_cycles();
     let rpc = default_settings().rad_per_count() as f64;
     let stall_s = 2.0;
     let moved = |speed: f64| (speed * stall_s / rpc) as u32;
@@ -338,7 +365,7 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
         for k in 0..2 {
             let inp = Inputs {
                 encoder: far,
-                current_codes: 16 * 2048,
+                current_codes: codes(2048),
                 since_last: if k == 0 {
                     (stall_s * 168e6) as u32
                 } else {
@@ -368,7 +395,7 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
         let inp = Inputs {
             encoder,
             current_codes: codes,
-            since_last: 168_000_000 / 20_000,
+            since_last: period_cycles(),
         };
         while let Some(r) = req.take() {
             let mut once = Some(r);
@@ -384,7 +411,7 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
         ..Requests::default()
     };
     // 100 codes above the zero in each of the 16 conversions.
-    let codes = 16 * 2148;
+    let codes = codes(2148);
     run(&mut lp, 0, codes, Some(enable));
     for _ in 0..4 {
         run(&mut lp, 7, codes, None);
@@ -423,10 +450,10 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
     );
     let per_code = 3.3f32 / 4095.0 / 0.75;
     assert!((after.current - 100.0 * per_code).abs() < 1e-6 * 100.0 * per_code);
-    // The limits follow: the trip under the new sense range (1.5 × 0.5 A; the range is
+    // The limits follow: the trip under the new sense range (1.5 × lim.i_max; the range is
     // 2047 × 1.07 mA = 2.2 A), a following-error limit of at least 64 counts (0.2 rad).
     let l = b.limits(&s);
-    assert!((l.i_trip - 0.75).abs() < 1e-6, "{}", l.i_trip);
+    assert!((l.i_trip - 1.5 * s.i_max).abs() < 1e-6, "{}", l.i_trip);
     assert!((l.max_error - 64.0 * std::f32::consts::TAU / 2000.0).abs() < 1e-6);
     // 100 rad/s over a position period: at 20 kHz 5 mrad = 1.59 counts of 3.14 mrad, so 2
     // (at 10 kHz 3.18, so 4).
@@ -465,13 +492,13 @@ impl gms_core::device::LoopLink for InlineLink {
     fn pause(&mut self) {
         let inp = Inputs {
             encoder: 0,
-            current_codes: 16 * 2048,
-            since_last: 168_000_000 / 20_000,
+            current_codes: codes(2048),
+            since_last: period_cycles(),
         };
         let mb = &mut self.mb;
         self.lp.step(inp, |st, c| mb.exchange(st, c));
         self.lp.finish(1000);
-        self.t_us += 50;
+        self.t_us += (1e6 / default_settings().cur_rate_hz) as u64;
     }
 }
 
@@ -502,7 +529,7 @@ fn board_device(
     let mut store = MemStore(stored);
     let defaults = default_settings();
     let start = startup(store.load(), &defaults, &b).unwrap();
-    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(16 * 2048));
+    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(codes(2048)));
     let lp = ControlLoop::new(
         b,
         start.applied,

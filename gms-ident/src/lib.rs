@@ -17,6 +17,7 @@ pub mod gains;
 pub mod identify;
 pub mod io;
 pub mod linear;
+pub mod margins;
 pub mod optimum;
 pub mod paramfile;
 pub mod plot;
