@@ -267,6 +267,7 @@ fn current_mean_is_the_boxcar_of_the_decimated_steps() {
             dt: 5e-5,
             rad_per_count: 3.8e-6,
             current: current(k),
+            current_period: current(k),
             ..StepValues::default()
         });
     }

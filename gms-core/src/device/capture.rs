@@ -15,7 +15,8 @@ pub const CHUNK_VALUES: usize = 128;
 /// (duty × supply) \[V\], and the current's and the voltage's means over the `every` steps a
 /// sample stands for \[A, V\] (`current` and `volts` are that step's alone: decimated, a
 /// current or a voltage that ripples at the encoder's count rate aliases into its mean;
-/// `current_mean` and `volts_mean` are the boxcar's, every step counted).
+/// `current_mean` and `volts_mean` are the boxcar's, every PWM period counted: with the
+/// current loop faster than the position loop, the periods between position steps too).
 pub const CAPTURE_NAMES: [&str; 10] = [
     "t",
     "pos",
@@ -180,6 +181,11 @@ pub struct StepValues {
     pub friction: f32,
     /// The bridge voltage commanded \[V\] (0 while off).
     pub volts: f32,
+    /// The current's mean over the PWM periods since the last position step \[A\] (with the
+    /// current loop faster than the position loop, `current` is one of them).
+    pub current_period: f32,
+    /// The bridge voltage's mean over those periods \[V\].
+    pub volts_period: f32,
 }
 
 /// A capture in progress over a buffer of `B`.
@@ -274,8 +280,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             return;
         }
         self.sum = (
-            self.sum.0 + v.current,
-            self.sum.1 + v.volts,
+            self.sum.0 + v.current_period,
+            self.sum.1 + v.volts_period,
             self.sum.2.saturating_add(1),
         );
         if self.skip > 0 {

@@ -170,6 +170,9 @@ pub struct ControlLoop {
     last_pos: i64,
     /// PWM periods missed since the last position step (the loop stood still).
     missed_since_pos: u32,
+    /// The current \[A\] and the bridge voltage \[V\] summed over the PWM periods since the
+    /// last position step, and their number (the capture's means count every period).
+    period_sum: (f32, f32, u32),
     sense: CurrentSense,
     faults: Faults,
     enabled: bool,
@@ -250,6 +253,7 @@ impl ControlLoop {
             last_raw: encoder,
             last_pos: 0,
             missed_since_pos: 0,
+            period_sum: (0.0, 0.0, 0),
             sense,
             faults,
             enabled: false,
@@ -665,6 +669,17 @@ impl ControlLoop {
         }
         let mut timing = None;
         let mut sample = None;
+        // This period's current and the voltage it was driven with, for the capture's means.
+        let volts = if self.enabled {
+            self.duty * self.ctrl.params().v_supply
+        } else {
+            0.0
+        };
+        self.period_sum = (
+            self.period_sum.0 + self.current,
+            self.period_sum.1 + volts,
+            self.period_sum.2.saturating_add(1),
+        );
         // Requests are taken in the last current step of a position period: with the current
         // loop faster than the position loop, that step has no position step of its own, and a
         // parameter set's hand-over (the costliest request) does not add to one (at 40 kHz the
@@ -794,6 +809,9 @@ impl ControlLoop {
             let p = self.ctrl.params();
             // The step's values only for a capture armed or recording (not built in every
             // step for nothing).
+            let n = self.period_sum.2.max(1) as f32;
+            let (current_period, volts_period) = (self.period_sum.0 / n, self.period_sum.1 / n);
+            self.period_sum = (0.0, 0.0, 0);
             if matches!(
                 self.capture.state().0,
                 super::CaptureState::Armed | super::CaptureState::Recording
@@ -808,11 +826,9 @@ impl ControlLoop {
                     ff: self.out.ff_friction,
                     current: self.current,
                     friction: p.motor.k_m * self.current - p.motor.inertia * self.r.acc,
-                    volts: if self.enabled {
-                        self.duty * p.v_supply
-                    } else {
-                        0.0
-                    },
+                    volts,
+                    current_period,
+                    volts_period,
                 });
             }
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
