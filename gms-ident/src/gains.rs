@@ -353,24 +353,29 @@ pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
         return None;
     }
     let kd_min = s.negative_slope().max(0.0);
+    let kp0 = kp;
     let mut best: Option<PositionGains> = None;
-    for _ in 0..=KP_STEPS_DOWN {
-        // No loop at this kp that the model finds stable even with little kd: a lower one.
-        let Some(g) = gains_at(axis, s, kp, kd_min) else {
+    // The rule's ki first; only where no kp meets the floor with it, half of it as well.
+    'search: for halve in [false, true] {
+        kp = kp0;
+        for _ in 0..=KP_STEPS_DOWN {
+            // No loop at this kp that the model finds stable even with little kd: a lower one.
+            let Some(g) = gains_at(axis, s, kp, kd_min, halve) else {
+                kp *= 0.95;
+                continue;
+            };
+            let done = g.worst.over_floor() >= 1.0;
+            if best
+                .as_ref()
+                .is_none_or(|b| g.worst.over_floor() > b.worst.over_floor())
+            {
+                best = Some(g);
+            }
+            if done {
+                break 'search;
+            }
             kp *= 0.95;
-            continue;
-        };
-        let done = g.worst.over_floor() >= 1.0;
-        if best
-            .as_ref()
-            .is_none_or(|b| g.worst.over_floor() > b.worst.over_floor())
-        {
-            best = Some(g);
         }
-        if done {
-            break;
-        }
-        kp *= 0.95;
     }
     let by_count = kp_rule > axis.kp_count_limit();
     best.map(|g| PositionGains {
@@ -384,7 +389,13 @@ pub fn position_gains(axis: &Axis, s: &SlidingCurve) -> Option<PositionGains> {
 /// friction's negative damping, where that leaves room; below the stability limit / 1.5 and
 /// the encoder's count limit) whose least margin over [`VARIATIONS`] is the most over
 /// [`AIM`].
-fn gains_at(axis: &Axis, s: &SlidingCurve, kp: f64, kd_min: f64) -> Option<PositionGains> {
+fn gains_at(
+    axis: &Axis,
+    s: &SlidingCurve,
+    kp: f64,
+    kd_min: f64,
+    halve_ki: bool,
+) -> Option<PositionGains> {
     let wn = (kp / axis.inertia).sqrt();
     let ki = kp * wn / POS_INTEGRAL_DIVISOR;
     // The derivative's filter: at most D_FILTER_NATURAL × the natural frequency (and the
@@ -447,7 +458,7 @@ fn gains_at(axis: &Axis, s: &SlidingCurve, kp: f64, kd_min: f64) -> Option<Posit
     };
     let mut ki = ki;
     let (mut kd, mut nominal, mut worst) = best_kd(ki)?;
-    if worst.over_floor() < 1.0 {
+    if halve_ki && worst.over_floor() < 1.0 {
         let (kd2, n2, w2) = best_kd(ki / 2.0)?;
         if w2.over_floor() > worst.over_floor() {
             (ki, kd, nominal, worst) = (ki / 2.0, kd2, n2, w2);
@@ -636,7 +647,11 @@ mod tests {
     #[test]
     fn the_stability_limit_moves_with_the_axis() {
         // At one kp (the rule's own kp is chosen per axis, for its margins).
-        let kd = |a: &Axis| gains_at(a, &SlidingCurve::TABLE1, 0.45, 0.0).unwrap().kd_max;
+        let kd = |a: &Axis| {
+            gains_at(a, &SlidingCurve::TABLE1, 0.45, 0.0, false)
+                .unwrap()
+                .kd_max
+        };
         let base = kd(&Axis::default_motor());
         let heavy = Axis {
             inertia: 1.2e-7,

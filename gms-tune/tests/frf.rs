@@ -74,7 +74,7 @@ fn frf_writes_its_files_suggests_and_applies_a_notch() {
     }
     // At rest the pre-sliding resonance leaves this loop little phase margin.
     assert!(m["phase_margin_deg"].as_float().unwrap() < 20.0);
-    assert!(out.contains("warning: the phase margin"), "{out}");
+    assert!(out.contains("warning: the margins"), "{out}");
     assert!(d.join("f/bode.svg").exists());
     assert!(
         out.contains("notch 1 at") && out.contains("set filt.notch1.f_hz"),
