@@ -99,6 +99,10 @@ fn main() {
 #[allow(dead_code)]
 fn peak(ss: &SmallSignal, s: &gms_core::protocol::Settings) -> (f64, f64) {
     let lin = LinearAxis::new(ss, s, Operating::Sliding).unwrap();
-    (0..400).map(|i| { let f = 10.0 * (1000.0f64).powf(i as f64 / 399.0); (f, lin.current(f).norm()) })
+    (0..400)
+        .map(|i| {
+            let f = 10.0 * (1000.0f64).powf(i as f64 / 399.0);
+            (f, lin.current(f).norm())
+        })
         .fold((0.0, 0.0), |a, b| if b.1 > a.1 { b } else { a })
 }

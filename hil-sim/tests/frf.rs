@@ -239,7 +239,11 @@ fn the_open_loop_margins_are_the_models() {
             "gain margin"
         );
     } else {
-        assert!(model.gain_margin_hz > top, "{} Hz against {top} Hz", model.gain_margin_hz);
+        assert!(
+            model.gain_margin_hz > top,
+            "{} Hz against {top} Hz",
+            model.gain_margin_hz
+        );
     }
     assert!(
         (measured.peak_sensitivity_db - model.peak_sensitivity_db).abs() <= 1.0,

@@ -669,9 +669,10 @@ impl ControlLoop {
         }
         let mut timing = None;
         let mut sample = None;
-        // This period's current and the voltage it was driven with, for the capture's means.
+        // This period's current and the voltage it was driven with (the duty as the timer's
+        // counts apply it: the bridge drives whole counts), for the capture's means.
         let volts = if self.enabled {
-            self.duty * self.ctrl.params().v_supply
+            drive::applied_duty(self.duty, self.arr) * self.ctrl.params().v_supply
         } else {
             0.0
         };

@@ -52,6 +52,18 @@ pub fn bridge_compare(duty: f32, period: u32, enabled: bool) -> (u32, u32) {
     if d >= 0.0 { (high, pwm) } else { (pwm, high) }
 }
 
+/// The duty [-1, 1] that [`bridge_compare`]'s values for `duty` and `period` apply: `duty`
+/// rounded to the timer's counts (|duty| × `period` to the nearest count), what the bridge
+/// really drives (0 for a non-finite duty).
+pub fn applied_duty(duty: f32, period: u32) -> f32 {
+    if !duty.is_finite() || period == 0 {
+        return 0.0;
+    }
+    let low = (abs(duty).min(1.0) * period as f32 + 0.5) as u32;
+    let mag = low.min(period) as f32 / period as f32;
+    if duty >= 0.0 { mag } else { -mag }
+}
+
 /// Prescaler and period (both as the register values, i.e. minus one) of a center-aligned
 /// timer at `clock_hz` \[Hz\] giving `rate_hz` \[Hz\], with a period of at most `max_arr`
 /// (65535 for a 16-bit timer). The period is the largest that fits, so that the duty
