@@ -642,7 +642,8 @@ impl ControlLoop {
     }
 
     /// One PWM period: `inp` as measured now, `exchange` the shell's access to the mailbox
-    /// (called once per position step with what builds the status; returns the pending
+    /// (called once per position period, in its last current step, with what builds the
+    /// status; returns the pending
     /// requests, and publishes the status only when there are none: see
     /// [`Mailbox::exchange`](super::Mailbox)).
     ///

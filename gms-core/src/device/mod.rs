@@ -503,7 +503,8 @@ impl Mailbox {
         self.requests = Some(buf);
     }
 
-    /// The loop's side, once a position step: gives back the requests acted on; then takes
+    /// The loop's side, once a position period (in its last current step, which with both
+    /// loops at one rate is every step): gives back the requests acted on; then takes
     /// the posted requests, if any, or else publishes the status `status` builds (with the
     /// reports handed over). The step that takes requests (a parameter set: the heaviest,
     /// with its hand-over) neither builds nor copies the status; the next one publishes it.
