@@ -153,8 +153,8 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
     }
     let arr = lp.timing().1;
     // 1 ms of brake from the step that takes the `enable` (both inputs high for the whole
-    // period, but for the single count at the top on the PWM side), duty 0: 20 periods at
-    // 20 kHz.
+    // period, but for the single count at the top on the PWM side), duty 0: 40 periods at
+    // the default 40 kHz.
     let wake = (1e-3 * default_settings().cur_rate_hz).round() as usize;
     let on = outs.iter().position(|o| o.enabled).expect("enabled");
     assert!(on < 2, "{on}");

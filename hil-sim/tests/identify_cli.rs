@@ -310,9 +310,11 @@ fn experiments_run_on_the_device_rig_or_the_ideal_one() {
             assert_eq!(code, 0, "{name} on {rig}: {err}");
             // Sliding: the Stribeck curve both ways, every truth the same (the steady
             // sliding friction of a GMS, a LuGre or a static map is s(v) + sigma v): the
-            // slowest run reads near Fs, the fastest near Fc + sigma v. Within 10 %: at the
-            // slowest speed (Vs/10) a static map, discontinuous at rest, lets the speed loop
-            // ripple and reads 7 % low on the device rig.
+            // slowest run reads near Fs, the fastest near Fc + sigma v. Within 10 %, but for
+            // a static map on the device rig at the slowest speed (Vs/10): discontinuous at
+            // rest and with no pre-sliding spring, it sticks and slips under the loop, and
+            // the mean of a stick-slip cycle lies between Fc and Fs (7 % low with the 20 kHz
+            // loop's pos.kp 0.7, 11 % with the 40 kHz current loop's 0.49): within 15 %.
             let text = std::fs::read_to_string(d.join(&out)).unwrap();
             let rows: Vec<(f64, f64)> = text
                 .lines()
@@ -326,8 +328,13 @@ fn experiments_run_on_the_device_rig_or_the_ideal_one() {
             for &(v, f) in &rows {
                 let s = 125e-6 + 95e-6 * (-(v.abs() / 0.2).powf(0.9)).exp();
                 let want = v.signum() * s + 10.5e-6 * v;
+                let within = if name == "static" && rig == "device" && v.abs() < 0.05 {
+                    0.15
+                } else {
+                    0.10
+                };
                 assert!(
-                    (f - want).abs() < 0.10 * want.abs(),
+                    (f - want).abs() < within * want.abs(),
                     "{name} on {rig}: at {v} rad/s {f:e} against s(v) + sigma v = {want:e}"
                 );
             }
