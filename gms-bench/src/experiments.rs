@@ -372,8 +372,10 @@ pub(crate) fn staircase(
     // The start (no torque): the origin of the displacements, not a point of the curve.
     let x0 = settled(b, plan.samples, dt)?.x;
     // A thousandth of the window (20 µrad by default, five counts of a 3.8 µrad
-    // encoder): beyond noise and quantisation.
-    let against = plan.window / 1000.0;
+    // encoder), and never under two counts: beyond noise and quantisation (on a coarse
+    // encoder the settled mean flickers by a fraction of a count as the axis creeps between
+    // two of them: 0.13 of a 3.14 mrad count seen under the first 2.6 mA step).
+    let against = (plan.window / 1000.0).max(2.0 * dev.rad_per_count);
     for k in 1..=plan.max_steps {
         let amps = plan.step * k as f64;
         if amps > dev.i_max {

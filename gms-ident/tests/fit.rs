@@ -98,6 +98,28 @@ fn virgin_fit_rejects_bad_data() {
 }
 
 #[test]
+fn a_stribeck_fit_whose_viscous_term_would_be_negative_is_held_at_zero() {
+    // A curve with no viscous term (fs 3, fc 2, vs 1, delta 1) whose two fastest points read
+    // 2 % low: unconstrained, least squares would take a negative sigma to follow them down.
+    let s = |v: f64| 2e-3 + 1e-3 * (-v).exp();
+    let v: Vec<f64> = (0..20)
+        .map(|i| 2e-2 * 300f64.powf(i as f64 / 19.0))
+        .collect();
+    let f: Vec<f64> = v
+        .iter()
+        .enumerate()
+        .map(|(i, &v)| s(v) * if i >= 18 { 0.98 } else { 1.0 })
+        .collect();
+    let fit = fit_stribeck(&v, &f).unwrap();
+    eprintln!("held fit: {fit:?}");
+    assert_eq!(fit.sigma, 0.0);
+    assert!((fit.fs / 3e-3 - 1.0).abs() < 0.03, "fs {}", fit.fs);
+    assert!((fit.fc / 2e-3 - 1.0).abs() < 0.03, "fc {}", fit.fc);
+    let se = fit.std_err.unwrap();
+    assert!(se[..4].iter().all(|e| e.is_finite() && *e > 0.0) && se[4] == 0.0);
+}
+
+#[test]
 fn stribeck_fit_recovers_table1_within_the_issue_tolerances() {
     let p = presets::table1();
     let (fs, fc, vs, d, sg) = (

@@ -189,6 +189,24 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
         return Err(format!("the move back did not end at 0: {last}"));
     }
     s.ok("set gms.fs 0.00022", 0.5)?;
+    // A capture while holding, every field that is computed rather than copied and a mean,
+    // read back in full chunks (32 samples of four fields: 128 values, the largest copy a
+    // request step makes).
+    if profile {
+        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET - 100);
+    }
+    s.ok("capture t,pos,ref,current_mean 1 200", 0.5)?;
+    s.run_for(0.01)?;
+    if profile {
+        profile_print(
+            s.m,
+            "the control interrupt's runs within 100 instructions of the budget while capturing:",
+        );
+    }
+    for start in [0, 32] {
+        s.ok(&format!("capture read {start} 32"), 0.5)?;
+    }
+    s.ok("capture off", 0.5)?;
     // The window's stream (its seven fields at 1 kHz, about 90 kB/s against the UART's 92):
     // the requests are still read and answered between its batches.
     const WINDOW: f64 = 0.3;

@@ -1108,14 +1108,19 @@ impl Machine {
     fn fire_tim8(&mut self, t: u64) {
         let c = self.chip_mut();
         c.p.tim8.fire(t);
+        // Each event at its own time: one fired by a register write's catch-up (inside a
+        // run, after the event was due) waited here since, and an ADC trigger handled at
+        // this call's `t` instead would start the sequence late (seen: a trigger queued by
+        // the control step's compare write, taken at the next bottom, 1,750 cycles late,
+        // and the sense's DMA interrupt a period late after it: `overrun`).
         let events = c.p.tim8.take_events();
-        for e in events {
+        for (at, e) in events {
             match e {
-                tim::Event::Update { bottom: true } => self.plant_period(t),
+                tim::Event::Update { bottom: true } => self.plant_period(at),
                 tim::Event::Trigger => {
                     let c = self.chip_mut();
                     if c.p.adc.on_tim8_trgo() {
-                        c.p.adc.trigger(t);
+                        c.p.adc.trigger(at);
                     }
                 }
                 _ => {}
@@ -1448,7 +1453,14 @@ fn periph_read(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize) -> u32 {
         }
         a if (base::IWDG..base::IWDG + 0x400).contains(&a) => c.p.iwdg.read(off(base::IWDG)),
         a if (base::PWR..base::PWR + 0x400).contains(&a) => c.p.pwr.read(off(base::PWR)),
-        a if (base::TIM8..base::TIM8 + 0x400).contains(&a) => c.p.tim8.read(off(base::TIM8), now),
+        a if (base::TIM8..base::TIM8 + 0x400).contains(&a) => {
+            let v = c.p.tim8.read(off(base::TIM8), now);
+            // Events the read's catch-up fired: handled at once (see the write's).
+            if c.p.tim8.has_events() {
+                c.stop_soon();
+            }
+            v
+        }
         a if (base::ADC1..base::ADC1 + 0x400).contains(&a) => c.p.adc.read(off(base::ADC1)),
         a if (base::RCC..base::RCC + 0x400).contains(&a) => c.p.rcc.read(off(base::RCC)),
         a if (base::FLASH..base::FLASH + 0x400).contains(&a) => c.p.flash.read(off(base::FLASH)),
@@ -1509,8 +1521,10 @@ fn periph_write(uc: &mut Unicorn<'_, Chip>, addr: u32, size: usize, value: u32) 
             a if (base::TIM8..base::TIM8 + 0x400).contains(&a) => {
                 let o = off(base::TIM8);
                 c.p.tim8.write(o, value, now);
-                // The compare values need no stop; the counter's set-up does.
-                stop = !(0x34..=0x40).contains(&o);
+                // The compare values need no stop; the counter's set-up does, and so do the
+                // events the write's catch-up fired (an ADC trigger due inside this run):
+                // handled at once, at their own times.
+                stop = !(0x34..=0x40).contains(&o) || c.p.tim8.has_events();
             }
             a if (base::ADC1..base::ADC1 + 0x400).contains(&a) => {
                 c.p.adc.write(off(base::ADC1), value, now);

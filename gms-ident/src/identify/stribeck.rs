@@ -30,6 +30,8 @@ struct Problem<'a> {
     v: &'a [f64],
     f: &'a [f64],
     p: Vector5<f64>,
+    /// Sigma held at 0 (the bound of a viscous term that cannot be negative).
+    no_viscous: bool,
 }
 
 impl Problem<'_> {
@@ -46,6 +48,9 @@ impl LeastSquaresProblem<f64, Dyn, U5> for Problem<'_> {
 
     fn set_params(&mut self, p: &Vector5<f64>) {
         self.p = *p;
+        if self.no_viscous {
+            self.p[4] = 0.0;
+        }
     }
 
     fn params(&self) -> Vector5<f64> {
@@ -75,7 +80,7 @@ impl LeastSquaresProblem<f64, Dyn, U5> for Problem<'_> {
             // d/d(ln vs): (fs - fc) e ud d ; d/d(ln delta): -(fs - fc) e ud ln(u) d
             j[(r, 2)] = (fs - fc) * e * ud * d;
             j[(r, 3)] = -(fs - fc) * e * ud * u.ln() * d;
-            j[(r, 4)] = v;
+            j[(r, 4)] = if self.no_viscous { 0.0 } else { v };
         }
         Some(j)
     }
@@ -130,44 +135,16 @@ fn fit_stribeck_inner(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
     if slow <= fc0 {
         return Err("no Stribeck drop: the friction does not fall from low to high speed".into());
     }
-    let problem = Problem {
-        v,
-        f,
-        p: Vector5::new(slow, fc0, vs0.ln(), 0.0, sigma0),
-    };
-    let (solved, report) = LevenbergMarquardt::new().minimize(problem);
-    if !report.termination.was_successful() {
-        return Err(format!(
-            "the sliding fit did not converge ({:?})",
-            report.termination
-        ));
+    let start = Vector5::new(slow, fc0, vs0.ln(), 0.0, sigma0);
+    let mut fit = solve(v, f, start, false)?;
+    if fit.sigma < 0.0 {
+        // The unconstrained optimum has a negative viscous term (a curve still falling at
+        // the fastest speed, or slow points low from stick-slip pulling the knee): the
+        // constrained optimum is then on the bound, sigma = 0, fitted with it held there.
+        let mut start = start;
+        start[4] = 0.0;
+        fit = solve(v, f, start, true)?;
     }
-    let p = solved.p;
-    let res = solved.residuals().ok_or("fit residuals unavailable")?;
-    let dof = (v.len() as f64 - 5.0).max(1.0);
-    let s2 = res.norm_squared() / dof;
-    let std_err = solved.jacobian().and_then(|j| {
-        let jtj = j.transpose() * &j;
-        jtj.try_inverse().map(|inv| {
-            let (vs, d) = (p[2].exp(), p[3].exp());
-            [
-                (s2 * inv[(0, 0)]).sqrt(),
-                (s2 * inv[(1, 1)]).sqrt(),
-                (s2 * inv[(2, 2)]).sqrt() * vs,
-                (s2 * inv[(3, 3)]).sqrt() * d,
-                (s2 * inv[(4, 4)]).sqrt(),
-            ]
-        })
-    });
-    let fit = StribeckFit {
-        fs: p[0],
-        fc: p[1],
-        vs: p[2].exp(),
-        delta: p[3].exp(),
-        sigma: p[4],
-        rms: (res.norm_squared() / v.len() as f64).sqrt(),
-        std_err,
-    };
     if !(fit.fs >= fit.fc && fit.fc >= 0.0 && fit.sigma >= 0.0) {
         return Err(format!(
             "the sliding fit is not physical (fs {:.3e}, fc {:.3e}, sigma {:.3e})",
@@ -181,4 +158,59 @@ fn fit_stribeck_inner(v: &[f64], f: &[f64]) -> Result<StribeckFit, String> {
         ));
     }
     Ok(fit)
+}
+
+/// One Levenberg-Marquardt solve from `start`, sigma held at 0 if `no_viscous`.
+fn solve(
+    v: &[f64],
+    f: &[f64],
+    start: Vector5<f64>,
+    no_viscous: bool,
+) -> Result<StribeckFit, String> {
+    let problem = Problem {
+        v,
+        f,
+        p: start,
+        no_viscous,
+    };
+    let (solved, report) = LevenbergMarquardt::new().minimize(problem);
+    if !report.termination.was_successful() {
+        return Err(format!(
+            "the sliding fit did not converge ({:?})",
+            report.termination
+        ));
+    }
+    let p = solved.p;
+    let res = solved.residuals().ok_or("fit residuals unavailable")?;
+    let free = if no_viscous { 4 } else { 5 };
+    let dof = (v.len() as f64 - free as f64).max(1.0);
+    let s2 = res.norm_squared() / dof;
+    // The standard errors over the free parameters (sigma's 0 when held).
+    let std_err = solved.jacobian().and_then(|j| {
+        let j = j.columns(0, free).into_owned();
+        let jtj = j.transpose() * &j;
+        jtj.try_inverse().map(|inv| {
+            let (vs, d) = (p[2].exp(), p[3].exp());
+            [
+                (s2 * inv[(0, 0)]).sqrt(),
+                (s2 * inv[(1, 1)]).sqrt(),
+                (s2 * inv[(2, 2)]).sqrt() * vs,
+                (s2 * inv[(3, 3)]).sqrt() * d,
+                if no_viscous {
+                    0.0
+                } else {
+                    (s2 * inv[(4, 4)]).sqrt()
+                },
+            ]
+        })
+    });
+    Ok(StribeckFit {
+        fs: p[0],
+        fc: p[1],
+        vs: p[2].exp(),
+        delta: p[3].exp(),
+        sigma: p[4],
+        rms: (res.norm_squared() / v.len() as f64).sqrt(),
+        std_err,
+    })
 }

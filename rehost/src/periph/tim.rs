@@ -49,8 +49,11 @@ pub struct Timer {
     mask: u32,
     /// Whether it has a repetition counter (TIM1/TIM8).
     advanced: bool,
-    /// Events not yet taken by the machine.
-    events: Vec<Event>,
+    /// Events not yet taken by the machine, with their times \[cycles\] (those fired by a
+    /// register access's catch-up come before the access's own time).
+    events: Vec<(u64, Event)>,
+    /// The time of the event being fired \[cycles\].
+    firing: u64,
 }
 
 const CR1: usize = 0;
@@ -87,6 +90,7 @@ impl Timer {
             mask,
             advanced,
             events: Vec::new(),
+            firing: 0,
         }
     }
 
@@ -128,8 +132,13 @@ impl Timer {
         self.regs[SR] & self.regs[DIER] & 1 != 0
     }
 
-    /// The events since the last call.
-    pub fn take_events(&mut self) -> Vec<Event> {
+    /// Whether events wait to be taken.
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    /// The events since the last call, each with its time \[cycles\].
+    pub fn take_events(&mut self) -> Vec<(u64, Event)> {
         core::mem::take(&mut self.events)
     }
 
@@ -230,6 +239,7 @@ impl Timer {
         if !self.running() || t < self.t_ref {
             return;
         }
+        self.firing = t;
         let ticks = (t - self.t_ref) / self.tick();
         let boundary = self.ticks_to_boundary();
         let trigger = self.trigger_ticks();
@@ -246,14 +256,14 @@ impl Timer {
             self.move_by(ticks);
         }
         if trigger == Some(ticks) {
-            self.events.push(Event::Trigger);
+            self.events.push((t, Event::Trigger));
             self.regs[SR] |= 1 << 4; // CC4IF
         }
         for &ch in &matched {
             self.regs[SR] |= 2 << ch;
         }
         if !matched.is_empty() {
-            self.events.push(Event::Compare);
+            self.events.push((t, Event::Compare));
         }
     }
 
@@ -282,7 +292,7 @@ impl Timer {
         }
         self.rep = self.regs[RCR] & 0xFF;
         self.update(false);
-        self.events.push(Event::Update { bottom });
+        self.events.push((self.firing, Event::Update { bottom }));
     }
 
     /// An update event: the preloads become active; UIF unless it came from UG with URS.
@@ -391,7 +401,7 @@ mod tests {
                 break;
             }
             t.fire(at);
-            out.extend(t.take_events().into_iter().map(|e| (at, e)));
+            out.extend(t.take_events());
         }
         out
     }
@@ -456,6 +466,26 @@ mod tests {
         let trig: Vec<_> = ev.iter().filter(|(_, e)| *e == Event::Trigger).collect();
         // Down from 4200 at 4200 cycles; CNT = 99 after 4101 ticks: 100 ticks before the bottom.
         assert_eq!(trig, vec![&(8400 - 99, Event::Trigger)]);
+    }
+
+    #[test]
+    fn a_trigger_fired_by_a_writes_catch_up_keeps_its_own_time() {
+        // As the control step writes the bridge's compare values after the ADC's trigger was
+        // due (the run stops at block boundaries): the trigger is taken with its time, not
+        // the write's or the next event's.
+        let mut t = Timer::new(1, 16, true);
+        t.write(0x00, 3 << 5, 0);
+        t.write(0x2C, 4200, 0);
+        t.write(0x04, 7 << 4, 0);
+        t.write(0x1C, 6 << 12, 0);
+        t.write(0x40, 100, 0);
+        t.write(0x14, 1, 0);
+        t.write(0x00, (3 << 5) | 1, 0);
+        run(&mut t, 8000);
+        assert!(t.take_events().is_empty());
+        t.write(0x34, 2000, 8400 - 50);
+        assert!(t.has_events());
+        assert_eq!(t.take_events(), vec![(8400 - 99, Event::Trigger)]);
     }
 
     /// TIM4 as embassy's time driver runs it: 1 MHz (168 cycles a tick), free-running.
