@@ -6,7 +6,7 @@
 //!
 //! The current is sampled by the hardware, not by the CPU: TIM8's OC4REF (channel 4, no pin)
 //! is its trigger output (TRGO), rising once per PWM period [`SENSE_TIMING`]`.lead` before the
-//! counter's bottom; it starts ADC1's regular sequence of 16 conversions of PC0, which DMA2
+//! counter's bottom; it starts ADC1's regular sequence of 8 conversions of PC0, which DMA2
 //! stream 0 moves into a buffer; the DMA's transfer-complete interrupt is the control
 //! interrupt. The sampling instants are centred on the bottom, the middle of the bridge's
 //! slow-decay (brake) phase (`drive::bridge_compare`: both inputs high around the bottom, the

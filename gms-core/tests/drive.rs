@@ -384,9 +384,9 @@ fn limits_from_settings_and_board() {
     // 38 rad / 3.8 urad = 1e7 counts, 19 rad 5e6 (f32 rounding of 3.8e-6 allows ±1).
     assert!((l.pos_min + 10_000_000).abs() <= 1, "{}", l.pos_min);
     assert!((l.pos_max - 5_000_000).abs() <= 1, "{}", l.pos_max);
-    // 168 MHz / 40 kHz (the current loop's rate) = 4200 cycles, 55 % of it.
+    // 168 MHz / 40 kHz (the current loop's rate) = 4200 cycles, 75 % of it.
     assert_eq!(s.cur_rate_hz, 40_000.0);
-    assert_eq!(l.budget_cycles, 2310);
+    assert_eq!(l.budget_cycles, 3150);
     assert_eq!(l.period_cycles, 4200);
     assert!((drive::limits_for(&s, &b, 10.0).i_trip - 0.6).abs() < 1e-6);
 }
@@ -605,13 +605,18 @@ fn current_sense_trigger_timing() {
 #[test]
 fn rates_the_current_sense_cannot_sample_are_refused() {
     use gms_core::device::{default_settings, prepare};
-    // The F405 board: 16 conversions of 15 + 12 cycles and a 2-cycle latency at 21 MHz.
+    // The F405 board: 8 conversions of 15 + 12 cycles and a 2-cycle latency at 21 MHz.
     let board = gms_core::boards::f405::BOARD;
-    assert!((board.sense.window_s - (2.0 + 16.0 * 27.0) / 21e6).abs() < 1e-9);
-    // 20.67 us of window against 2 × 0.45 × period: 20 kHz (45 us) and 40 kHz (22.5 us) run,
-    // 45 kHz (20 us) does not.
+    assert!((board.sense.window_s - (2.0 + 8.0 * 27.0) / 21e6).abs() < 1e-9);
+    // 10.38 us of window against 2 × 0.25 × period: 20 kHz (25 us), 40 kHz (12.5 us) and
+    // 48 kHz (10.42 us) run, 50 kHz (10 us) does not.
     let mut s = default_settings();
-    for (hz, ok) in [(20_000.0, true), (40_000.0, true), (45_000.0, false)] {
+    for (hz, ok) in [
+        (20_000.0, true),
+        (40_000.0, true),
+        (48_000.0, true),
+        (50_000.0, false),
+    ] {
         s.cur_rate_hz = hz;
         s.pos_rate_hz = hz / 2.0;
         let r = prepare(&s, &board);

@@ -14,8 +14,8 @@
 //!   (±33 uN·m); and their 40 um pre-sliding range is 2.2 rad of motor rotation, so while the
 //!   actuator slides (beyond its 7.8 mrad pre-sliding) the guideways stay in pre-sliding.
 //! - Encoder 3.8 urad/count (paper), on the motor side as docs/design.md#reading-table-1 reads Table 1.
-//! - Current sense: 12-bit ADC over ±0.5 A (0.24 mA/LSB), 0.15 mA rms noise: a shunt
-//!   amplifier's ~0.6 mA rms averaged over 16 conversions per period. It matters: in
+//! - Current sense: 12-bit ADC over ±0.5 A (0.24 mA/LSB), 0.21 mA rms noise: a shunt
+//!   amplifier's ~0.6 mA rms averaged over the board's 8 conversions per period. It matters: in
 //!   pre-sliding the actuator's stiffness (1.25 N·m/rad) turns 0.7 mA into one encoder count,
 //!   so with 0.5 mA of noise the axis dithers by ±2 counts at rest whatever the controller.
 //! - PWM: 20 kHz center-aligned from a 168 MHz timer, 4200 duty steps (2.9 mV at 12 V).
@@ -304,8 +304,8 @@ impl Plant {
     }
 
     /// The sense chain's output now, before its ADC \[A\]: the current as wired, with the
-    /// noise's standard deviation times `noise_scale` (the scenario's `adc_noise` is after 16×
-    /// oversampling: one of 16 conversions that are averaged has 4 times it).
+    /// noise's standard deviation times `noise_scale` (the scenario's `adc_noise` is the
+    /// board's average's: one of the n conversions averaged has √n times it).
     pub fn sense(&mut self, noise_scale: f64) -> f64 {
         self.sense_sign * self.i + noise_scale * self.noise.sample(&mut self.rng)
     }

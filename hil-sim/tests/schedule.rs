@@ -19,14 +19,15 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
     let s = default_settings();
     let applied = device::prepare(&s, &board).unwrap();
     let mut shadow = Schedule::new(applied.ctrl.clone());
-    let zero = calibrate_sense(&board, s.sense_v_per_a, || Some(16 * 2048));
+    // The board's conversions per current sample.
+    let n = board.sense_oversample;
+    let zero = calibrate_sense(&board, s.sense_v_per_a, || Some(n * 2048));
     let sense = zero.sense;
     let buf: &'static mut [f32] = Box::leak(vec![0.0; 8192].into_boxed_slice());
     let ctrl = Box::leak(Box::new(applied.ctrl.clone()));
     let mut lp = ControlLoop::new(board, applied, zero.sense, zero.faults, 0, buf, ctrl);
     let ratio = lp.ratio();
     let rpc = s.rad_per_count();
-    let n = 16u32;
     // A plant stand-in: the axis follows the reference with a lag and a wobble of a few
     // counts, the current wanders over ±0.1 A (codes around the zero).
     let mut count: i64 = 0;

@@ -59,15 +59,19 @@ pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
 /// How far the measured zero may lie from it \[code\] (INA240 offset, resistor tolerances).
 pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
 
-/// How the current is sampled on a board clocked by `clocks`: 16 conversions (the
-/// simulator's 16-fold oversampling) of 15 cycles' sampling (0.71 us at 21 MHz: the INA240's
-/// output drives the pin directly) + 12, from a trigger latency of 2 ADC cycles (DS8626
-/// t_latr, at most 3).
+/// How the current is sampled on a board clocked by `clocks`: 8 conversions of 15 cycles'
+/// sampling (0.71 us at 21 MHz: the INA240's output drives the pin directly) + 12, from a
+/// trigger latency of 2 ADC cycles (DS8626 t_latr, at most 3): 218 ADC cycles, a 10.4 us
+/// window centred on the counter's bottom. Eight, not sixteen: with the current loop at
+/// 40 kHz, sixteen (20.7 us) left the control step 55 % of the 25 us period, and a position
+/// step with a capture and a swept speed starting (1,611 instructions) overran it; eight
+/// leave 75 %. The average's noise is the amplifier's per conversion over √8 (the
+/// simulator's default 0.21 mA for 0.6 mA).
 pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
     SenseTiming {
         adc_hz: clocks.adc_hz(),
         sample_cycles: 15,
-        conversions: 16,
+        conversions: 8,
         latency_cycles: 2,
     }
 }
@@ -94,11 +98,11 @@ pub const fn limits(clocks: &F4Clocks) -> BoardLimits {
         max_error: 0.01,
         max_speed: 100.0,
         clock_hz: clocks.hclk_hz(),
-        // The step starts when the samples are in, half the sense window (10.3 us) after
+        // The step starts when the samples are in, half the sense window (5.2 us) after
         // the bottom, and must end before the next bottom (its compare values are taken
-        // there): 55 % of the period (13.75 us, 2,310 cycles at 168 MHz, at the default 40 kHz
-        // current loop) leaves 0.95 us; at 20 kHz, 27.5 us and 12.2 us.
-        budget_fraction: 0.55,
+        // there): 75 % of the period (18.75 us, 3,150 cycles at 168 MHz, at the default
+        // 40 kHz current loop) leaves 1.06 us; at 20 kHz, 37.5 us and 7.3 us.
+        budget_fraction: 0.75,
     }
 }
 
