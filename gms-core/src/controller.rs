@@ -605,14 +605,16 @@ impl<const N: usize> Controller<N> {
             saturated: o.saturated,
         };
 
-        // Current loop: the same voltage at the last current error.
+        // Current loop: the same voltage for the last command and speed (a new R or k_e
+        // changes the feedforward for as long as they last: the integrator takes the
+        // difference). Not for the last current error: that is the sense's noise and the
+        // last position step's change of command, gone a period later, and a new kp's
+        // difference at it, taken into the integrator, stayed there as an offset until the
+        // integral unwound it (`set cur.kp` live bumped the axis by 0.8 counts).
         let c0 = &old.p;
-        let v_old = c0.current.kp * old.e_cur
-            + old.cur_integ
-            + c0.motor.r * old.i_cmd
-            + c0.motor.k_e * old.w_ref;
-        let v_rest = p.current.kp * old.e_cur + p.motor.r * old.i_cmd + p.motor.k_e * old.w_ref;
-        let cur = v_old - v_rest;
+        let ff_old = c0.motor.r * old.i_cmd + c0.motor.k_e * old.w_ref;
+        let ff_new = p.motor.r * old.i_cmd + p.motor.k_e * old.w_ref;
+        let cur = old.cur_integ + ff_old - ff_new;
         self.cur_integ = clamp(if cur.is_finite() { cur } else { 0.0 }, p.v_supply);
     }
 
