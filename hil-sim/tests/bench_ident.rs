@@ -513,6 +513,14 @@ impl gms_bench::Bench for Stalling {
     }
 }
 
+/// The quiet plant with the sense noise of 16 conversions (0.15 mA), for the guard's tests:
+/// they need a breakaway that runs away under the staircase's held current. With the
+/// default 8 conversions' 0.21 mA the dither lets the axis creep off at 87 % of Fs, where
+/// the staircase sees the creep and holds after 0.024 rad, before any runaway.
+fn runaway_plant() -> String {
+    QUIET.replacen("[plant]\n", "[plant]\nadc_noise = 0.15e-3\n", 1)
+}
+
 /// The staircase's guard: with the host stalling 0.2 s after each step, the current is still
 /// held long after breakaway; the device's narrowed stroke limits stop the axis (bridge off),
 /// which the staircase takes as its end: the data before it kept, the fault cleared, the
@@ -520,7 +528,7 @@ impl gms_bench::Bench for Stalling {
 #[test]
 fn a_stalling_host_cannot_run_the_staircase_away() {
     use gms_bench::{Bench, PreslidingPlan, position, presliding};
-    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let sc = Scenario::parse(&runaway_plant(), "test").unwrap();
     let run = |guard: f64| {
         let mut b = Stalling {
             dev: LocalDevice::new(&sc).unwrap(),
@@ -568,7 +576,7 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
 #[test]
 fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
     use gms_bench::{Bench, position, presliding};
-    let sc = Scenario::parse(QUIET, "test").unwrap();
+    let sc = Scenario::parse(&runaway_plant(), "test").unwrap();
     let mut b = Stalling {
         dev: LocalDevice::new(&sc).unwrap(),
         stall: 2.0,
