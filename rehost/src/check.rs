@@ -209,6 +209,21 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
         s.ok(&format!("capture read {start} 32"), 0.5)?;
     }
     s.ok("capture off", 0.5)?;
+    // A frequency response point, as commissioning's open-loop measurement runs it (the
+    // injection and the demodulation in every position step).
+    if profile {
+        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET - 300);
+    }
+    s.ok("frf current 20 0.003 4 1", 0.5)?;
+    s.run_for(0.3)?;
+    if profile {
+        profile_print(
+            s.m,
+            "the control interrupt's runs within 300 instructions of the budget measuring a frequency response:",
+        );
+    }
+    s.ok("frf off", 0.5)?;
+    s.driving("a frequency response")?;
     // The window's stream (its seven fields at 1 kHz, about 90 kB/s against the UART's 92):
     // the requests are still read and answered between its batches.
     const WINDOW: f64 = 0.3;
