@@ -183,9 +183,19 @@ impl Loop {
             let st = status();
             MAILBOX.lock(|m| {
                 if let Ok(mut m) = m.try_borrow_mut() {
-                    m.publish(st, &h);
+                    m.publish_status(st);
                 }
             });
+            // A report handed over (a frequency response's sums, a table's state) in a
+            // critical section of its own: the status and an frf report copied in one held
+            // PRIMASK for 220 instructions (rehost check), over the 133 the deadman may wait.
+            if h.frf.is_some() || h.table.is_some() {
+                MAILBOX.lock(|m| {
+                    if let Ok(mut m) = m.try_borrow_mut() {
+                        m.publish_reports(&h);
+                    }
+                });
+            }
             None
         });
         if let Some((psc, arr)) = out.timing {

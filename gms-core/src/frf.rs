@@ -14,9 +14,11 @@
 //! (the rounding over a group of n samples stays near n × 1e-7: 1e-4 for a 10 Hz sine at
 //! 10 kHz).
 //!
-//! Sums run in f32 within a period and are added into f64 totals once per period (a board's
-//! FPU has no f64; one f64 addition per channel and period costs little), so a long
-//! measurement keeps its precision.
+//! Sums run in f32 within a period and are added once per period into totals kept as
+//! compensated f32 pairs ([`Sum2`]: the sum and its rounding error), so a long measurement
+//! keeps about twice f32's precision without f64, which a board's FPU does
+//! not have (nine soft-float additions in one control step cost ~1,000 instructions on the
+//! M4F and overran the 40 kHz step).
 //!
 //! quartiq's `idsp` has a lock-in (`idsp::Lockin`), but it demodulates with a low-pass filter
 //! (its output settles and ripples at 2f), in fixed point, for a free-running local
@@ -169,6 +171,38 @@ impl Sine {
     }
 }
 
+/// A running sum kept as an f32 pair, a "float-float": the rounded sum and what it leaves
+/// out, renormalised at every addition so that the second is within half an ulp of the
+/// first (Knuth's two-sum, exact in IEEE arithmetic, then Dekker's fast two-sum: nine f32
+/// operations an addition, about 44 bits). Without the renormalisation the error term grows
+/// with the sum's own drift and loses what it was to keep.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Sum2 {
+    hi: f32,
+    lo: f32,
+}
+
+impl Sum2 {
+    /// No sum yet.
+    pub const ZERO: Sum2 = Sum2 { hi: 0.0, lo: 0.0 };
+
+    /// Adds `x`.
+    pub fn add(&mut self, x: f32) {
+        let s = self.hi + x;
+        let bp = s - self.hi;
+        let err = (self.hi - (s - bp)) + (x - bp);
+        let t = err + self.lo;
+        let h = s + t;
+        self.lo = t - (h - s);
+        self.hi = h;
+    }
+
+    /// The sum.
+    pub fn value(&self) -> f64 {
+        self.hi as f64 + self.lo as f64
+    }
+}
+
 /// The demodulation of [`CHANNELS`] signals against a [`Sine`]'s phase over whole groups of
 /// periods.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -178,11 +212,11 @@ pub struct LockIn {
     /// Σ x cos over the group under way, per channel.
     part_c: [f32; CHANNELS],
     /// Σ x sin over the completed groups.
-    sum_s: [f64; CHANNELS],
+    sum_s: [Sum2; CHANNELS],
     /// Σ x cos over the completed groups.
-    sum_c: [f64; CHANNELS],
+    sum_c: [Sum2; CHANNELS],
     /// Σ over the completed groups of each group's |Σ x sin + j Σ x cos|².
-    sum_sq: [f64; CHANNELS],
+    sum_sq: [Sum2; CHANNELS],
     /// Samples in the completed groups.
     samples: u64,
     /// Completed groups.
@@ -225,9 +259,9 @@ impl LockIn {
         LockIn {
             part_s: [0.0; CHANNELS],
             part_c: [0.0; CHANNELS],
-            sum_s: [0.0; CHANNELS],
-            sum_c: [0.0; CHANNELS],
-            sum_sq: [0.0; CHANNELS],
+            sum_s: [Sum2::ZERO; CHANNELS],
+            sum_c: [Sum2::ZERO; CHANNELS],
+            sum_sq: [Sum2::ZERO; CHANNELS],
             samples: 0,
             groups: 0,
         }
@@ -243,13 +277,13 @@ impl LockIn {
         }
         if group_done {
             for (sum, part) in self.sum_s.iter_mut().zip(&self.part_s) {
-                *sum += *part as f64;
+                sum.add(*part);
             }
             for (sum, part) in self.sum_c.iter_mut().zip(&self.part_c) {
-                *sum += *part as f64;
+                sum.add(*part);
             }
             for ((sq, ps), pc) in self.sum_sq.iter_mut().zip(&self.part_s).zip(&self.part_c) {
-                *sq += (ps * ps + pc * pc) as f64;
+                sq.add(ps * ps + pc * pc);
             }
             self.part_s = [0.0; CHANNELS];
             self.part_c = [0.0; CHANNELS];
@@ -269,9 +303,9 @@ impl LockIn {
     /// second group (one group is always coherent with itself) or for a channel that is 0.
     pub fn coherence(&self, ch: usize) -> Option<f64> {
         let (s, c, sq) = (
-            *self.sum_s.get(ch)?,
-            *self.sum_c.get(ch)?,
-            *self.sum_sq.get(ch)?,
+            self.sum_s.get(ch)?.value(),
+            self.sum_c.get(ch)?.value(),
+            self.sum_sq.get(ch)?.value(),
         );
         if self.groups < 2 || sq.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
             return None;
@@ -286,8 +320,8 @@ impl LockIn {
         }
         let k = 2.0 / self.samples as f64;
         Some(Phasor {
-            re: k * self.sum_s[ch],
-            im: k * self.sum_c[ch],
+            re: k * self.sum_s[ch].value(),
+            im: k * self.sum_c[ch].value(),
         })
     }
 }
@@ -411,6 +445,9 @@ pub struct Frf {
     /// Groups completed (settling included).
     groups_done: u32,
     lock: LockIn,
+    /// The rate \[Hz\] the frequency was last computed for, and it \[Hz\] (in f64, once: not
+    /// in every report).
+    freq: (f32, f64),
 }
 
 /// What a device shows of its measurement (published at the end of each group).
@@ -438,6 +475,7 @@ impl Frf {
             state: FrfState::Settling,
             groups_done: 0,
             lock: LockIn::new(),
+            freq: (0.0, f64::NAN),
         }
     }
 
@@ -503,11 +541,14 @@ impl Frf {
     }
 
     /// The report of it now, the frequency at `rate_hz` \[Hz\].
-    pub fn report(&self, rate_hz: f32) -> FrfReport {
+    pub fn report(&mut self, rate_hz: f32) -> FrfReport {
+        if self.freq.0 != rate_hz {
+            self.freq = (rate_hz, self.spec.sine.freq_hz(rate_hz));
+        }
         FrfReport {
             state: self.state,
             injection: Some(self.spec.injection),
-            freq_hz: self.spec.sine.freq_hz(rate_hz),
+            freq_hz: self.freq.1,
             amp: self.spec.sine.amplitude(),
             lock: self.lock,
             groups: self.spec.groups,

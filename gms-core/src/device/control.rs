@@ -611,7 +611,7 @@ impl ControlLoop {
                 // Only with the position loop running (not in current mode, not off); the
                 // report says `running` from the next exchange.
                 if self.enabled && self.current_mode.is_none() {
-                    let f = Frf::start(spec);
+                    let mut f = Frf::start(spec);
                     self.frf_report = Some(f.report(self.ctrl.params().pos_rate_hz));
                     self.fresh = true;
                     self.frf = Some(f);

@@ -536,7 +536,18 @@ impl Mailbox {
     /// The second half of [`Mailbox::exchange`], when nothing was taken: `status` published,
     /// with the reports `h` hands over.
     pub fn publish(&mut self, status: Status, h: &Handover<'_>) {
+        self.publish_status(status);
+        self.publish_reports(h);
+    }
+
+    /// [`Mailbox::publish`]'s first part: the status alone (a shell may take the two in
+    /// separate critical sections, each holding interrupts off for one copy).
+    pub fn publish_status(&mut self, status: Status) {
         self.status = status;
+    }
+
+    /// [`Mailbox::publish`]'s second part: the reports `h` hands over (none: nothing).
+    pub fn publish_reports(&mut self, h: &Handover<'_>) {
         if let Some(f) = h.frf {
             self.frf = *f;
         }
