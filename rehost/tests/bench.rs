@@ -160,7 +160,25 @@ fn bench(addr: &str, dir: &Path, log: &dyn Fn() -> String) -> Figures {
     let dev = pf.device.expect("a [device] table");
     let get = |p: &str| dev[p].as_float().unwrap_or_else(|| panic!("{p} in m.toml"));
     (f.r, f.k_e, f.j) = (get("motor.r"), get("motor.k_e"), get("ff.inertia"));
-    f.l = get("cur.kp") / (2.0 * std::f64::consts::PI * 1000.0);
+    // The inductance as commissioning measured it, from the current PI it set by its rule
+    // (`gms_ident::gains::current_pi`, whose kp grows with L): the L that gives that kp at
+    // the measured R, by bisection on a log scale.
+    let kp = get("cur.kp");
+    let cur_hz: f64 = tune(&["send", "get", "rate.cur_hz"])
+        .split_whitespace()
+        .last()
+        .and_then(|v| v.parse().ok())
+        .expect("rate.cur_hz");
+    let (mut lo, mut hi) = (1e-7f64, 1.0f64);
+    for _ in 0..100 {
+        let mid = (lo * hi).sqrt();
+        if gms_ident::gains::current_pi(f.r, mid, cur_hz).0 < kp {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    f.l = (lo * hi).sqrt();
     // Identification, a reduced plan.
     let (t0, w0) = (device_t(&tune), Instant::now());
     tune(&[
