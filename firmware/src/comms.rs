@@ -36,7 +36,13 @@ pub struct IrqLink;
 
 impl LoopLink for IrqLink {
     fn with_mailbox<R>(&mut self, f: impl FnOnce(&mut Mailbox) -> R) -> R {
-        MAILBOX.lock(|m| f(&mut m.borrow_mut()))
+        MAILBOX.lock(|m| {
+            let mut m = m.borrow_mut();
+            // A stall the deadman or the NMI found (they do not touch the mailbox), shown in
+            // the status the front reads.
+            crate::control::show_stall(&mut m.status);
+            f(&mut m)
+        })
     }
     fn now_us(&self) -> u64 {
         Instant::now().as_micros()
@@ -49,7 +55,9 @@ pub type Dev = Front<IrqLink, Store>;
 
 /// The latest status of the loop.
 pub fn status() -> Status {
-    MAILBOX.lock(|m| m.borrow().status)
+    let mut s = MAILBOX.lock(|m| m.borrow().status);
+    crate::control::show_stall(&mut s);
+    s
 }
 
 /// A fixed buffer that `fmt::Write` fills; past its end it reports an error.

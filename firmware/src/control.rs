@@ -19,10 +19,8 @@
 //! cause stays in [`STALL`], the status says `control_stall`, a step that still runs halts its
 //! core, and the supervisor stops feeding the watchdog.
 
-use core::cell::RefCell;
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
-use embassy_sync::blocking_mutex::Mutex;
 use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
 use gms_core::drive::{Faults, Stall};
 use static_cell::StaticCell;
@@ -32,11 +30,11 @@ use f4_regs::{pwm, sense};
 use gms_core::drive::Deadman;
 
 use crate::board::ControlHw;
-use crate::irq::IrqOffRawMutex;
+use crate::irq::LoopShared;
 
-/// Requests and status, with every interrupt masked while held (for a copy, never for a step).
-pub static MAILBOX: Mutex<IrqOffRawMutex, RefCell<Mailbox>> =
-    Mutex::new(RefCell::new(Mailbox::new()));
+/// Requests and status: thread mode holds the control interrupt off while it copies (never
+/// for longer), the control interrupt reaches it freely (`irq::LoopShared`).
+pub static MAILBOX: LoopShared<Mailbox> = LoopShared::new(Mailbox::new());
 
 /// Telemetry samples from the loop to the comms task: a lock-free queue (heapless's MPMC
 /// one, used by one producer and one consumer), so that the loop never wakes a task — an
@@ -86,23 +84,25 @@ pub fn trip(cause: Stall) {
         Ordering::Relaxed,
         Ordering::Relaxed,
     );
-    // `try_borrow_mut`, not `borrow_mut`: the lock masks every interrupt, so the mailbox is
-    // never borrowed when an interrupt runs, and no panicking borrow is linked into the
-    // handlers (`cargo xtask check-elf` holds them free of any panic).
-    MAILBOX.lock(|m| {
-        if let Ok(mut m) = m.try_borrow_mut() {
-            m.status.faults.latch(Faults::CONTROL_STALL);
-            m.status.enabled = false;
-        }
-    });
+    // Not into the mailbox: the deadman and the NMI never touch it (`irq::LoopShared`). The
+    // status the host reads shows the stall from `STALL` ([`show_stall`]), and a loop that
+    // still runs latches it itself.
+}
+
+/// A stall the deadman or the NMI found shown in `status`: `control_stall` latched, disabled
+/// (the loop may never run again to say it).
+pub fn show_stall(status: &mut gms_core::device::Status) {
+    if stall() != Stall::None {
+        status.faults.latch(Faults::CONTROL_STALL);
+        status.enabled = false;
+    }
 }
 
 /// The loop's state, handed to the interrupt once at start: a reference to it in its
 /// [`StaticCell`] (`None` is a null pointer, so this static and the interrupt's slot are
 /// zero-initialised, in .bss: a `Loop` held by value here and there would be 2.9 KB of
 /// initialiser each in the flash's .data).
-static HANDOFF: Mutex<IrqOffRawMutex, RefCell<Option<&'static mut Loop>>> =
-    Mutex::new(RefCell::new(None));
+static HANDOFF: LoopShared<Option<&'static mut Loop>> = LoopShared::new(None);
 
 /// The control loop and the hardware it owns.
 pub struct Loop {
@@ -173,30 +173,12 @@ impl Loop {
             current_codes: self.hw.current_codes(),
             since_last,
         };
-        // Two short critical sections, the status built between them (and only when no
-        // requests were taken): PRIMASK is held for a copy, not for the build.
-        let out = self.core.step(inp, |status, mut h| {
-            let taken = MAILBOX.lock(|m| m.try_borrow_mut().ok()?.take(&mut h));
-            if taken.is_some() {
-                return taken;
-            }
-            let st = status();
-            MAILBOX.lock(|m| {
-                if let Ok(mut m) = m.try_borrow_mut() {
-                    m.publish_status(st);
-                }
-            });
-            // A report handed over (a frequency response's sums, a table's state) in a
-            // critical section of its own: the status and an frf report copied in one held
-            // PRIMASK for 220 instructions (rehost check), over the 133 the deadman may wait.
-            if h.frf.is_some() || h.table.is_some() {
-                MAILBOX.lock(|m| {
-                    if let Ok(mut m) = m.try_borrow_mut() {
-                        m.publish_reports(&h);
-                    }
-                });
-            }
-            None
+        // The exchange with nothing masked (`irq::LoopShared`): the status built and a
+        // report copied here hold off neither thread mode's users of the mailbox (they cannot
+        // run meanwhile anyway) nor the deadman.
+        // SAFETY: in the control interrupt.
+        let out = self.core.step(inp, |status, h| unsafe {
+            MAILBOX.in_loop(|m| m.try_borrow_mut().ok()?.exchange(status, h))
         });
         if let Some((psc, arr)) = out.timing {
             self.hw.set_bridge(0, 0);
@@ -220,7 +202,8 @@ impl Loop {
 #[inline(always)]
 pub fn on_sample(slot: &mut Option<&'static mut Loop>) {
     if slot.is_none()
-        && let Some(l) = HANDOFF.lock(|h| h.try_borrow_mut().ok()?.take())
+        // SAFETY: called by the control interrupt alone.
+        && let Some(l) = unsafe { HANDOFF.in_loop(|h| h.try_borrow_mut().ok()?.take()) }
     {
         // A reference: nothing is dropped here, so no drop glue of the loop's drivers (which
         // take the global critical section) is reachable from this interrupt (`cargo xtask

@@ -12,14 +12,18 @@
 //! every interrupt: it excludes everything but the deadman and the control interrupt, so no
 //! driver, task or log line can hold the loop off (ARMv7-M ARM B1.4.3, BASEPRI_MAX only
 //! raises the mask; the F4 implements the top 4 priority bits, PM0214 §4.3.7). Data the
-//! control interrupt shares with thread mode is behind [`IrqOffRawMutex`] instead (PRIMASK:
-//! everything masked, held for a copy of a few hundred cycles, well under a PWM period, so
-//! the deadman never sees two periods without a step because of it), so that the loop and
-//! the thread never see it half-written.
+//! control interrupt shares with thread mode is a [`LoopShared`]: thread mode reaches it with
+//! BASEPRI raised to [`CONTROL`], which excludes the control interrupt and everything below
+//! it, so that the loop and the thread never see it half-written, and leaves the deadman
+//! free; the control interrupt, the most urgent of its users, reaches it with nothing masked
+//! (nothing at the deadman's level, nor the NMI, touches it), so a copy there (a frequency
+//! response's 136-byte report) delays nothing. In thread mode the lock holds the loop off
+//! for the copy (`rehost check` measures it: "the control interrupt held off").
+
+use core::cell::RefCell;
 
 use critical_section::RawRestoreState;
 use embassy_stm32::interrupt::Priority;
-use embassy_sync::blocking_mutex::raw::RawMutex;
 
 /// The deadman's priority (above the loop).
 pub const DEADMAN: Priority = Priority::P0;
@@ -62,15 +66,52 @@ unsafe impl critical_section::Impl for BasepriCriticalSection {
     }
 }
 
-/// A raw mutex for data shared with the control interrupt: every interrupt masked (PRIMASK)
-/// while held.
-pub struct IrqOffRawMutex(());
+/// Data shared by the control interrupt and the contexts below it (thread mode), and by
+/// nothing at the deadman's level or the NMI: the control interrupt, the most urgent of its
+/// users, reaches it without masking anything ([`LoopShared::in_loop`]); the others with the
+/// control interrupt and everything below it masked ([`LoopShared::lock`]: BASEPRI raised to
+/// [`CONTROL`], the deadman left free). The priority ceiling protocol, for two levels.
+pub struct LoopShared<T>(RefCell<T>);
 
-// SAFETY: the lock masks every interrupt on this single core, so `f` runs alone.
-unsafe impl RawMutex for IrqOffRawMutex {
-    const INIT: Self = IrqOffRawMutex(());
+// SAFETY: single core. The data is reached only through `lock` (never from the deadman or
+// the NMI: `cargo xtask check-elf` finds any BASEPRI access in their chains, and in the
+// control interrupt's) and `in_loop` (only from the control interrupt). Under `lock` no user
+// can preempt the holder: BASEPRI at CONTROL holds off every exception whose group priority is
+// not more urgent (ARMv7-M ARM B1.5.4), and the only more urgent ones are the deadman and the
+// NMI. In the control interrupt no user can preempt it either. So the `RefCell` is never
+// reached from two contexts at once.
+unsafe impl<T: Send> Sync for LoopShared<T> {}
 
-    fn lock<R>(&self, f: impl FnOnce() -> R) -> R {
-        cortex_m::interrupt::free(|_| f())
+impl<T> LoopShared<T> {
+    /// `value`, shared.
+    pub const fn new(value: T) -> Self {
+        LoopShared(RefCell::new(value))
+    }
+
+    /// `f` with the data, the control interrupt and everything below it masked: from thread
+    /// mode, or an interrupt below the loop (never from the control interrupt, the deadman
+    /// or the NMI).
+    pub fn lock<R>(&self, f: impl FnOnce(&RefCell<T>) -> R) -> R {
+        let old = cortex_m::register::basepri::read();
+        // Both writes are compiler barriers and end with an ISB (cortex-m 0.7.10,
+        // `register::basepri_max`, `register::basepri`): `f`'s accesses stay between them,
+        // and the new mask acts from the next instruction. BASEPRI_MAX only raises the mask,
+        // so inside the global critical section (P2) this raises it to P1, and the restore
+        // puts P2 back.
+        cortex_m::register::basepri_max::write(CONTROL as u8);
+        let r = f(&self.0);
+        // SAFETY: restores the mask read above.
+        unsafe { cortex_m::register::basepri::write(old) };
+        r
+    }
+
+    /// `f` with the data, nothing masked.
+    ///
+    /// # Safety
+    ///
+    /// Only from the control interrupt, at [`CONTROL`]: no other user of the data can
+    /// preempt it.
+    pub unsafe fn in_loop<R>(&self, f: impl FnOnce(&RefCell<T>) -> R) -> R {
+        f(&self.0)
     }
 }

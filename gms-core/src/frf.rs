@@ -292,6 +292,17 @@ impl LockIn {
         }
     }
 
+    /// Channel `ch`'s sums copied from `src` (nothing for a channel out of range).
+    fn copy_channel(&mut self, src: &LockIn, ch: usize) {
+        if ch < CHANNELS {
+            self.part_s[ch] = src.part_s[ch];
+            self.part_c[ch] = src.part_c[ch];
+            self.sum_s[ch] = src.sum_s[ch];
+            self.sum_c[ch] = src.sum_c[ch];
+            self.sum_sq[ch] = src.sum_sq[ch];
+        }
+    }
+
     /// Completed groups of whole periods.
     pub fn groups(&self) -> u32 {
         self.groups
@@ -465,6 +476,31 @@ pub struct FrfReport {
     pub lock: LockIn,
     /// Groups to be summed in all.
     pub groups: u32,
+}
+
+impl FrfReport {
+    /// The parts [`FrfReport::copy_part`] copies a report in.
+    pub const PARTS: usize = 1 + CHANNELS;
+
+    /// Part `part` of `src` copied into `self`: 0 the state, injection, frequency, amplitude
+    /// and counts; `1 + k` channel k's sums; nothing past [`FrfReport::PARTS`]. Each part is
+    /// at most 32 bytes, where the whole report is 136: a shell whose critical sections
+    /// hold a control loop off copies a report a part at a time (the device front does,
+    /// checking that no report was published in between).
+    pub fn copy_part(&mut self, src: &FrfReport, part: usize) {
+        match part.checked_sub(1) {
+            None => {
+                self.state = src.state;
+                self.injection = src.injection;
+                self.freq_hz = src.freq_hz;
+                self.amp = src.amp;
+                self.groups = src.groups;
+                self.lock.samples = src.lock.samples;
+                self.lock.groups = src.lock.groups;
+            }
+            Some(ch) => self.lock.copy_channel(&src.lock, ch),
+        }
+    }
 }
 
 impl Frf {

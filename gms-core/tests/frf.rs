@@ -135,3 +135,37 @@ fn a_compensated_f32_sum_keeps_what_an_f64_one_keeps() {
         pair.value()
     );
 }
+
+#[test]
+fn a_report_copied_a_part_at_a_time_is_the_report() {
+    use gms_core::frf::{FrfReport, FrfState, Injection};
+    // A report with every field distinct from the default, every channel its own sums (a
+    // part copied into the wrong place, or one left out, shows).
+    let mut lock = LockIn::new();
+    let mut sine = Sine::new(37.0, 20_000.0, 0.3).unwrap();
+    let mut k = 0.0f32;
+    while lock.groups() < 3 {
+        let phase = sine.phase();
+        let done = sine.advance();
+        k += 1.0;
+        lock.add(&[k, 2.0 * k + 1.0, -0.5 * k], phase, done, sine.samples());
+    }
+    let src = FrfReport {
+        state: FrfState::Measuring,
+        injection: Some(Injection::Position),
+        freq_hz: 37.0001,
+        amp: 0.3,
+        lock,
+        groups: 7,
+    };
+    let mut dst = FrfReport::default();
+    assert_ne!(dst, src);
+    for part in 0..FrfReport::PARTS {
+        dst.copy_part(&src, part);
+    }
+    assert_eq!(dst, src);
+    // Beyond the parts, nothing.
+    let before = dst;
+    dst.copy_part(&FrfReport::default(), FrfReport::PARTS);
+    assert_eq!(dst, before);
+}

@@ -193,6 +193,17 @@ pub struct Chip {
     /// Where the longest hold began (the first block run with PRIMASK set).
     pub primask_max_at: u64,
     primask_from: u64,
+    /// The exception whose hold-off by a mask is measured (the control interrupt), if any:
+    /// [`Chip::held_max`]. Cleared at a reset.
+    pub watch: Option<u32>,
+    held_since: Option<u64>,
+    held_from: u64,
+    /// The longest time \[instructions\] the watched exception was held off by PRIMASK or
+    /// BASEPRI in a context it would otherwise preempt (thread mode, or a handler below it):
+    /// the delay a critical section adds to its start.
+    pub held_max: u64,
+    /// Where that longest hold began.
+    pub held_max_at: u64,
     /// An interrupt is pending and masked, by these PRIMASK and BASEPRI values: the run stops
     /// at the first block where they differ, to take it there.
     masked_pending: Option<(u32, u32)>,
@@ -338,6 +349,11 @@ impl Machine {
             primask_max: 0,
             primask_max_at: 0,
             primask_from: 0,
+            watch: None,
+            held_since: None,
+            held_from: 0,
+            held_max: 0,
+            held_max_at: 0,
             masked_pending: None,
             bad_flash_write: None,
             inject: Inject::default(),
@@ -478,11 +494,42 @@ impl Machine {
             };
             let sp = uc.reg_read(R::SP).unwrap_or(0) as u32;
             let primask = uc.reg_read(R::PRIMASK).unwrap_or(0) & 1 != 0;
+            let basepri = uc.reg_read(R::BASEPRI).unwrap_or(0) as u32 & 0xFF;
             // An interrupt held pending by a mask: the run stops where the mask changes.
-            let unmasked = uc.get_data().masked_pending.is_some_and(|m| {
-                m != (primask as u32, uc.reg_read(R::BASEPRI).unwrap_or(0) as u32)
-            });
+            let unmasked = uc
+                .get_data()
+                .masked_pending
+                .is_some_and(|m| m != (primask as u32, basepri));
             let c = uc.get_data_mut();
+            if let Some(w) = c.watch {
+                // Held off by a mask alone: enabled, the active exceptions would let it in
+                // (B1.5.4), PRIMASK or BASEPRI (a non-zero one at or above its priority) does
+                // not.
+                let enabled = w < exc::IRQ0 || c.core.enabled[(w - exc::IRQ0) as usize];
+                let p = c.core.group_priority(w);
+                let active = c
+                    .active
+                    .iter()
+                    .map(|a| c.core.group_priority(a.exc))
+                    .min()
+                    .unwrap_or(256);
+                let held =
+                    enabled && p < active && (primask || (basepri != 0 && basepri as i32 <= p));
+                match (held, c.held_since) {
+                    (true, None) => {
+                        c.held_since = Some(c.instructions);
+                        c.held_from = addr;
+                    }
+                    (false, Some(s)) => {
+                        if c.instructions - s > c.held_max {
+                            c.held_max = c.instructions - s;
+                            c.held_max_at = c.held_from;
+                        }
+                        c.held_since = None;
+                    }
+                    _ => {}
+                }
+            }
             if sp < c.sp_min {
                 c.sp_min = sp;
                 c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
@@ -656,6 +703,10 @@ impl Machine {
         c.active.clear();
         c.guard = None;
         c.primask_since = None;
+        // The watch is armed once the image's loop runs (its interrupt at its priority); a
+        // reset ends it (the start-up's drivers run that interrupt's line at theirs).
+        c.held_since = None;
+        c.watch = None;
         Ok(())
     }
 

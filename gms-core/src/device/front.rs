@@ -172,6 +172,8 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     upload: Upload,
     /// The requests' storage and the spare controller's, while not with the loop.
     bufs: Bufs,
+    /// The last frequency-response report read whole ([`read_frf`]).
+    frf: crate::frf::FrfReport,
 }
 
 /// The protocol side's share of the storage the two halves hand each other: the requests'
@@ -258,6 +260,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             defaults_configured: false,
             has_table: false,
             upload: Upload::default(),
+            frf: crate::frf::FrfReport::default(),
         }
     }
 
@@ -1069,7 +1072,10 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
     }
 
     fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
-        let f = self.link.with_mailbox(|m| m.frf);
+        if let Some(f) = read_frf(&mut self.link) {
+            self.frf = f;
+        }
+        let f = &self.frf;
         write!(out, "state={}", f.state.name())?;
         let Some(inj) = f.injection else {
             return Ok(());
@@ -1098,6 +1104,29 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         }
         Ok(())
     }
+}
+
+/// Reads of the loop's frequency-response report before [`read_frf`] gives up.
+const FRF_READS: usize = 4;
+
+/// The loop's frequency-response report, copied a part at a time (each part a short hold of
+/// the mailbox: the whole report under one held the firmware's loop off 164 instructions in
+/// `rehost check`), and read again while the loop published another between the first part
+/// and the last. `None` after [`FRF_READS`] reads that each saw a new report (the loop
+/// publishes one per group of whole periods of the sine, many steps apart; the caller keeps
+/// its last whole read).
+fn read_frf<L: LoopLink>(link: &mut L) -> Option<crate::frf::FrfReport> {
+    let mut f = crate::frf::FrfReport::default();
+    for _ in 0..FRF_READS {
+        let seq = link.with_mailbox(|m| m.frf_seq);
+        for part in 0..crate::frf::FrfReport::PARTS {
+            link.with_mailbox(|m| f.copy_part(&m.frf, part));
+        }
+        if link.with_mailbox(|m| m.frf_seq) == seq {
+            return Some(f);
+        }
+    }
+    None
 }
 
 /// [`Front::post`] on a link: the requests `f` fills in (in the protocol side's storage)

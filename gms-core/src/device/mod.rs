@@ -436,6 +436,9 @@ pub struct Mailbox {
     pub taken_at: u64,
     /// The frequency-response measurement's last report.
     pub frf: crate::frf::FrfReport,
+    /// Reports published into [`Mailbox::frf`] (wrapping): a reader that copies it in parts
+    /// ([`crate::frf::FrfReport::copy_part`]) compares it before and after.
+    pub frf_seq: u32,
     /// The table motion's last report.
     pub table: crate::table::TableReport,
 }
@@ -479,6 +482,7 @@ impl Mailbox {
                 lock: crate::frf::LockIn::new(),
                 groups: 0,
             },
+            frf_seq: 0,
             table: crate::table::TableReport {
                 state: crate::table::TableState::Empty,
                 geometry: None,
@@ -536,20 +540,10 @@ impl Mailbox {
     /// The second half of [`Mailbox::exchange`], when nothing was taken: `status` published,
     /// with the reports `h` hands over.
     pub fn publish(&mut self, status: Status, h: &Handover<'_>) {
-        self.publish_status(status);
-        self.publish_reports(h);
-    }
-
-    /// [`Mailbox::publish`]'s first part: the status alone (a shell may take the two in
-    /// separate critical sections, each holding interrupts off for one copy).
-    pub fn publish_status(&mut self, status: Status) {
         self.status = status;
-    }
-
-    /// [`Mailbox::publish`]'s second part: the reports `h` hands over (none: nothing).
-    pub fn publish_reports(&mut self, h: &Handover<'_>) {
         if let Some(f) = h.frf {
             self.frf = *f;
+            self.frf_seq = self.frf_seq.wrapping_add(1);
         }
         if let Some(t) = h.table {
             self.table = *t;
