@@ -52,6 +52,25 @@ impl Session<'_> {
     }
 
     /// Sends `line`; its reply must end `ok`.
+    /// Runs `f`; with `profile`, prints where the control interrupt's runs of more than
+    /// `over` instructions went meanwhile, under `title`.
+    fn profiled<T>(
+        &mut self,
+        profile: bool,
+        over: u64,
+        title: &str,
+        f: impl FnOnce(&mut Self) -> Result<T, String>,
+    ) -> Result<T, String> {
+        if profile {
+            self.m.start_profile_over(Some(CONTROL), over);
+        }
+        let r = f(self)?;
+        if profile {
+            profile_print(self.m, title);
+        }
+        Ok(r)
+    }
+
     fn ok(&mut self, line: &str, seconds: f64) -> Result<Vec<String>, String> {
         let from = self.m.chip().cycles;
         let reply = self.m.request(line, seconds)?;
@@ -161,28 +180,22 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     s.ok("enable", 0.5)?;
     s.run_for(0.05)?;
     let moving_from = s.m.chip().cycles;
-    if profile {
-        s.m.start_profile_over(Some(CONTROL), 1700);
-    }
-    s.ok("move 0.02", 0.5)?;
-    s.run_for(0.05)?;
-    if profile {
-        profile_print(
-            s.m,
-            "the control interrupt's runs over 1,700 instructions while moving:",
-        );
-    }
+    s.profiled(
+        profile,
+        1700,
+        "the control interrupt's runs over 1,700 instructions while moving:",
+        |s| {
+            s.ok("move 0.02", 0.5)?;
+            s.run_for(0.05)
+        },
+    )?;
     s.driving("a `move`")?;
-    if profile {
-        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET);
-    }
-    s.ok("set pos.kp 0.65", 0.5)?;
-    if profile {
-        profile_print(
-            s.m,
-            "the control interrupt's runs over the step budget while the `set` is taken:",
-        );
-    }
+    s.profiled(
+        profile,
+        STEP_BUDGET,
+        "the control interrupt's runs over the step budget while the `set` is taken:",
+        |s| s.ok("set pos.kp 0.65", 0.5),
+    )?;
     s.run_for(0.1)?;
     let last = s.driving("a `set` while moving")?;
     if !last.contains("pos=0.0199") && !last.contains("pos=0.02") {
@@ -203,17 +216,15 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     // A capture while holding, every field that is computed rather than copied and a mean,
     // read back in full chunks (32 samples of four fields: 128 values, the largest copy a
     // request step makes).
-    if profile {
-        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET - 100);
-    }
-    s.ok("capture t,pos,ref,current_mean 1 200", 0.5)?;
-    s.run_for(0.01)?;
-    if profile {
-        profile_print(
-            s.m,
-            "the control interrupt's runs within 100 instructions of the budget while capturing:",
-        );
-    }
+    s.profiled(
+        profile,
+        STEP_BUDGET - 100,
+        "the control interrupt's runs within 100 instructions of the budget while capturing:",
+        |s| {
+            s.ok("capture t,pos,ref,current_mean 1 200", 0.5)?;
+            s.run_for(0.01)
+        },
+    )?;
     for start in [0, 32] {
         s.ok(&format!("capture read {start} 32"), 0.5)?;
     }

@@ -52,8 +52,6 @@ pub struct Timer {
     /// Events not yet taken by the machine, with their times \[cycles\] (those fired by a
     /// register access's catch-up come before the access's own time).
     events: Vec<(u64, Event)>,
-    /// The time of the event being fired \[cycles\].
-    firing: u64,
 }
 
 const CR1: usize = 0;
@@ -90,7 +88,6 @@ impl Timer {
             mask,
             advanced,
             events: Vec::new(),
-            firing: 0,
         }
     }
 
@@ -239,7 +236,6 @@ impl Timer {
         if !self.running() || t < self.t_ref {
             return;
         }
-        self.firing = t;
         let ticks = (t - self.t_ref) / self.tick();
         let boundary = self.ticks_to_boundary();
         let trigger = self.trigger_ticks();
@@ -251,7 +247,7 @@ impl Timer {
         self.t_ref += ticks * self.tick();
         if ticks >= boundary {
             self.move_by(boundary);
-            self.turning_point();
+            self.turning_point(t);
         } else {
             self.move_by(ticks);
         }
@@ -268,8 +264,8 @@ impl Timer {
     }
 
     /// An overflow (edge-aligned: the counter wraps to 0; centre: top, counting down from
-    /// now) or underflow (centre: bottom).
-    fn turning_point(&mut self) {
+    /// now) or underflow (centre: bottom), at `t` \[cycles\].
+    fn turning_point(&mut self, t: u64) {
         let bottom;
         if self.centre() {
             if self.down {
@@ -292,7 +288,7 @@ impl Timer {
         }
         self.rep = self.regs[RCR] & 0xFF;
         self.update(false);
-        self.events.push((self.firing, Event::Update { bottom }));
+        self.events.push((t, Event::Update { bottom }));
     }
 
     /// An update event: the preloads become active; UIF unless it came from UG with URS.
@@ -452,8 +448,9 @@ mod tests {
         assert_eq!(t.read(0x00, 4 * 8400 + 100) & DIR, 0);
     }
 
-    #[test]
-    fn oc4ref_triggers_counting_down_as_it_passes_below_ccr4() {
+    /// TIM8 centre-aligned over ARR 4200 with OC4REF (PWM mode 1, CCR4 = 100) as its trigger
+    /// output, started from a UG at 0 (the firmware's sense trigger).
+    fn oc4ref_trigger_at_100() -> Timer {
         let mut t = Timer::new(1, 16, true);
         t.write(0x00, 3 << 5, 0);
         t.write(0x2C, 4200, 0);
@@ -462,6 +459,12 @@ mod tests {
         t.write(0x40, 100, 0); // CCR4
         t.write(0x14, 1, 0);
         t.write(0x00, (3 << 5) | 1, 0);
+        t
+    }
+
+    #[test]
+    fn oc4ref_triggers_counting_down_as_it_passes_below_ccr4() {
+        let mut t = oc4ref_trigger_at_100();
         let ev = run(&mut t, 8400);
         let trig: Vec<_> = ev.iter().filter(|(_, e)| *e == Event::Trigger).collect();
         // Down from 4200 at 4200 cycles; CNT = 99 after 4101 ticks: 100 ticks before the bottom.
@@ -473,14 +476,7 @@ mod tests {
         // As the control step writes the bridge's compare values after the ADC's trigger was
         // due (the run stops at block boundaries): the trigger is taken with its time, not
         // the write's or the next event's.
-        let mut t = Timer::new(1, 16, true);
-        t.write(0x00, 3 << 5, 0);
-        t.write(0x2C, 4200, 0);
-        t.write(0x04, 7 << 4, 0);
-        t.write(0x1C, 6 << 12, 0);
-        t.write(0x40, 100, 0);
-        t.write(0x14, 1, 0);
-        t.write(0x00, (3 << 5) | 1, 0);
+        let mut t = oc4ref_trigger_at_100();
         run(&mut t, 8000);
         assert!(t.take_events().is_empty());
         t.write(0x34, 2000, 8400 - 50);
