@@ -51,7 +51,6 @@ impl Session<'_> {
         Ok(last)
     }
 
-    /// Sends `line`; its reply must end `ok`.
     /// Runs `f`; with `profile`, prints where the control interrupt's runs of more than
     /// `over` instructions went meanwhile, under `title`.
     fn profiled<T>(
@@ -71,6 +70,7 @@ impl Session<'_> {
         Ok(r)
     }
 
+    /// Sends `line`; its reply must end `ok`.
     fn ok(&mut self, line: &str, seconds: f64) -> Result<Vec<String>, String> {
         let from = self.m.chip().cycles;
         let reply = self.m.request(line, seconds)?;
@@ -231,21 +231,19 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     s.ok("capture off", 0.5)?;
     // A frequency response point, as commissioning's open-loop measurement runs it (the
     // injection and the demodulation in every position step).
-    if profile {
-        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET - 300);
-    }
-    s.ok("frf current 20 0.003 4 1", 0.5)?;
-    s.run_for(0.15)?;
-    // Its report read while it runs (thread mode copies the loop's report under the
-    // mailbox's lock).
-    s.ok("frf", 0.5)?;
-    s.run_for(0.15)?;
-    if profile {
-        profile_print(
-            s.m,
-            "the control interrupt's runs within 300 instructions of the budget measuring a frequency response:",
-        );
-    }
+    s.profiled(
+        profile,
+        STEP_BUDGET - 300,
+        "the control interrupt's runs within 300 instructions of the budget measuring a frequency response:",
+        |s| {
+            s.ok("frf current 20 0.003 4 1", 0.5)?;
+            s.run_for(0.15)?;
+            // Its report read while it runs (thread mode copies the loop's report under the
+            // mailbox's lock).
+            s.ok("frf", 0.5)?;
+            s.run_for(0.15)
+        },
+    )?;
     s.ok("frf off", 0.5)?;
     s.driving("a frequency response")?;
     // The window's stream (its seven fields at 1 kHz, about 90 kB/s against the UART's 92):
@@ -288,16 +286,12 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     // from the hold its gains were set in), then a hold: the steps that take them within
     // the budget, no fault.
     s.ok("capture t,pos,current_mean,volts_mean 3 100 next", 0.5)?;
-    if profile {
-        s.m.start_profile_over(Some(CONTROL), STEP_BUDGET - 150);
-    }
-    s.ok("velocity 1 0 1 1 0.2", 0.5)?;
-    if profile {
-        profile_print(
-            s.m,
-            "the control interrupt's runs within 150 instructions of the budget as a swept speed starts:",
-        );
-    }
+    s.profiled(
+        profile,
+        STEP_BUDGET - 150,
+        "the control interrupt's runs within 150 instructions of the budget as a swept speed starts:",
+        |s| s.ok("velocity 1 0 1 1 0.2", 0.5),
+    )?;
     s.run_for(0.05)?;
     s.ok("capture off", 0.5)?;
     s.ok("hold", 0.5)?;
