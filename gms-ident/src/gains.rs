@@ -98,8 +98,8 @@ pub struct MeasuringLoop {
 /// velocity loop of bandwidth ω_d = kd / J (the derivative gain alone), its derivative
 /// filtered at that bandwidth (the beats above it do not reach the motor), and a position
 /// correction weak enough to leave it overdamped, damping ratio [`MEASURE_DAMPING`]: ω_n =
-/// ω_d / (2 ζ), kp = J ω_n², ki = kp ω_n / 4 (the integral's corner two octaves below, as in
-/// [`position_gains`]). It only softens: kp and the filter's corner are at most the loop's,
+/// ω_d / (2 ζ), kp = J ω_n², ki = kp ω_n / 4 (the integral's corner two octaves below ω_n:
+/// softer than [`position_gains`]' octave). It only softens: kp and the filter's corner are at most the loop's,
 /// and the corner below 0.45 of the position rate.
 pub fn measuring_loop(
     kp: f64,
@@ -203,10 +203,10 @@ pub struct Axis {
 pub const COUNT_SHARE: (f64, f64) = (0.1, 0.25);
 
 impl Axis {
-    /// The default motor and loops — R 10 Ω, L 0.24 mH (what the default `cur.kp` 1.5 is
-    /// designed for), k 6.6 mN·m/A, J 6e-8 kg·m², the current PI of [`current_pi`], both
-    /// loops at 20 kHz, the derivative filter at 8 kHz, 12 V — with Table 1's pre-sliding
-    /// stiffness (1.2501 N·m/rad).
+    /// The default motor and loops — R 10 Ω, L 0.24 mH, k 6.6 mN·m/A, J 6e-8 kg·m², the
+    /// current PI of [`current_pi`] at 40 kHz, the position loop at 20 kHz, the derivative
+    /// filter's cap at 15 kHz (the rule's 24 × ω_n and 0.45 of the position rate bind
+    /// first), 12 V, a 0.5 A limit — with Table 1's pre-sliding stiffness (1.2501 N·m/rad).
     pub fn default_motor() -> Axis {
         Axis {
             r: 10.0,
@@ -246,10 +246,12 @@ pub struct PositionGains {
     /// `pos.kp` [N·m/rad]: J ω_n², ω_n = [`POS_NATURAL_FRACTION`] × the current bandwidth,
     /// or lower where the encoder's count limits it ([`Axis::kp_count_limit`]).
     pub kp: f64,
-    /// `pos.ki` [N·m/(rad·s)]: kp ω_n / 4 (the integral's corner two octaves below ω_n).
+    /// `pos.ki` [N·m/(rad·s)]: kp ω_n / [`POS_INTEGRAL_DIVISOR`] (the integral's corner an
+    /// octave below ω_n), halved where that alone leaves no kp over the floor.
     pub ki: f64,
-    /// `pos.kd` [N·m·s/rad]: the geometric mean of `kd_min` and `kd_max` when they leave
-    /// room, else `kd_max` / 1.5 (stability first); at most [`Axis::kd_count_limit`].
+    /// `pos.kd` [N·m·s/rad]: of a log-spaced set between 0.5 and 4 × J ω_n (above `kd_min`
+    /// where that leaves room; below `kd_max` / 1.5 and [`Axis::kd_count_limit`]), the one
+    /// whose least margin over [`VARIATIONS`] is the most over [`AIM`].
     pub kd: f64,
     /// `pos.d_filter_hz` \[Hz\]: [`D_FILTER_NATURAL`] × the natural frequency, at most the
     /// axis's (and 0.45 of its position rate).

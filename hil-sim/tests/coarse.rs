@@ -251,12 +251,16 @@ fn tell(sc: &mut Scenario, table: &str, key: &str, value: f64) {
 /// finds R and k_e within 5 %, J within 15 %, L within 20 % (k_e read 4-18 % low before its
 /// runs averaged the current and the voltage over each sample's steps).
 ///
-/// Ignored until issue 41's gain rule: the measurements hold on every case tried, but on a
-/// heavy motor of little torque constant (k 8.6 mN·m/A, J 4.0e-6 kg·m², the device's friction
-/// model's pre-sliding stiffness 15 N·m/rad) `position_gains` finds no kd that the loop model
-/// calls stable, and commissioning ends with "no position-loop gains for the measured motor".
+/// Ignored: one case of the ten is over its bounds. Since issue 41's gain rule every case
+/// commissions (the rule used to find no kd for a heavy motor of little torque constant), but
+/// on R 4.19 Ω, k 9.56 mN·m/A, J 2.69e-6 kg·m², L/R 385 µs, Fs 2.2 mN·m (the device told R
+/// ×1.14) k_e reads +5.2 % and J +7.0 %, against 5 % and 15 %. Its back-EMF at the runs'
+/// 5-15 rad/s is a twentieth of its R i, so that R's −0.28 % accounts for about 2 % of it;
+/// fitting R with k_e over the runs instead made it +13.7 % (the mean currents vary with the
+/// speed by more than the friction does). The two cases before it: R within 0.17 %, k_e
+/// 1.7 %, J 1.6 %, L 0.2 %.
 #[test]
-#[ignore = "issue 41: the position-gain rule finds no gains for a heavy motor of little torque constant"]
+#[ignore = "issue 41: one random motor's k_e reads +5.2 % against the 5 % asked"]
 fn commissioning_holds_on_random_coarse_encoder_motors() {
     use proptest::test_runner::{Config, RngSeed, TestRunner};
     let mut runner = TestRunner::new(Config {
@@ -283,7 +287,8 @@ fn commissioning_holds_on_random_coarse_encoder_motors() {
             p.actuator.fs = Some(fs);
             p.actuator.fc = Some(fs * 2.0 / 3.0);
             let (rt, lt) = (r * fr, r * tau * fr);
-            let (kp, ki) = gms_ident::gains::current_pi(rt, lt, 20_000.0);
+            let cur_hz = f64::from(gms_core::device::default_settings().cur_rate_hz);
+            let (kp, ki) = gms_ident::gains::current_pi(rt, lt, cur_hz);
             tell(&mut sc, "motor", "r", rt);
             tell(&mut sc, "motor", "k_m", k * fk);
             tell(&mut sc, "motor", "k_e", k * fk);

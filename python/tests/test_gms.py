@@ -149,12 +149,12 @@ def server():
 
 def test_device_against_the_virtual_device(server):
     d = gms.Device(tcp=server, timeout=2.0)
-    assert d.get("pos.kp") == 0.7
+    assert d.get("pos.kp") == 0.49
     d.set("pos.kd", 2.2e-4)
     assert d.get("pos.kd") == pytest.approx(2.2e-4)
     with pytest.raises(gms.GmsError, match="err 6"):
         d.set("pos.kp", 5000)
-    assert d.get("pos.kp") == 0.7
+    assert d.get("pos.kp") == 0.49
     assert d.get("ff.mode") == "gms"
     paths = [p["path"] for p in d.list()]
     assert "gms.fs" in paths and "pos.kp" in paths
@@ -274,8 +274,11 @@ def test_device_runs_the_bench_experiments(tmp_path):
 def test_device_frf_returns_arrays_and_margins(tmp_path):
     # The default plant, nominal, 20 x real time: the plant at rest shows the pre-sliding
     # spring (the actuator's blocks, Σk 1.2477 N·m/rad, and the guideway's, 2e-4 reflected);
-    # the open loop its margins (the default gains: about 20° and 2.4 dB, at the pre-sliding
-    # resonance).
+    # the open loop its margins (the default gains: the linear model's 47.9° at rest, its
+    # phase crossing near 3.4 kHz, above this sweep's 3 kHz: no gain margin in the band).
+    # The inertia is the fit's curvature over the few points below half the resonance: with
+    # 12 points and 3 mA the default loop holds the axis within a few counts there and the
+    # fit reads it 14 % low (hil-sim's frf test holds the estimator to 8 % on 40 points).
     sc = tmp_path / "nominal.toml"
     sc.write_text("[plant]\nvariability = 0.0\n")
     p, addr = serve("--speed", 20, "--scenario", sc)
@@ -287,18 +290,18 @@ def test_device_frf_returns_arrays_and_margins(tmp_path):
         assert np.sum(pl["coherence"] > 0.9) >= 10
         k, j = pl["presliding"]
         assert k == pytest.approx(1.2477 + 2.0e-4, rel=0.03)
-        assert j == pytest.approx(6e-8, rel=0.1)
+        assert j == pytest.approx(6e-8, rel=0.25)
         assert pl["margins"] is None
         ol = d.frf("open", start=20.0, stop=3000.0, points=16, amplitude=0.003)
         m = ol["margins"]
-        assert 10.0 < m["phase_margin_deg"] < 30.0 and 1.0 < m["gain_margin_db"] < 4.0
+        assert abs(m["phase_margin_deg"] - 47.9) < 5.0 and m["gain_margin_db"] > 6.0
         assert len(ol["gain_db"]) > 16  # the refinement around the crossings
         with pytest.raises(gms.GmsError, match="Nyquist"):
             d.frf("open", stop=9500.0)
         with pytest.raises(gms.GmsError, match="lim.i_max"):
             d.frf("plant", amplitude=5.0)
         assert d.status()["enabled"] == 0
-        assert d.get("pos.kp") == 0.7
+        assert d.get("pos.kp") == 0.49
     finally:
         p.kill()
         p.wait()

@@ -108,8 +108,8 @@ fn cost(mut step: impl FnMut(u32), mut base: impl FnMut(u32)) -> u32 {
 /// two periods' ends among the steps counted, with a correction, each period's error kept) —
 /// `device_period_table`.
 fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: bool) {
-    // The F405 board as the firmware links it (gms-core's description: 16 conversions per
-    // current sample, a 60 % step budget), its bridge driving at once on `enable`.
+    // The F405 board as the firmware links it (gms-core's description: 8 conversions per
+    // current sample, a 75 % step budget), its bridge driving at once on `enable`.
     let board = Board {
         bridge_wake_s: 0.0,
         ..gms_core::boards::f405::BOARD
@@ -141,11 +141,18 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
         (false, true, _) => "device_period_map",
         (false, false, _) => "device_period",
     };
-    let Ok(a) = device::prepare(&settings, &board) else {
-        return;
+    let a = match device::prepare(&settings, &board) {
+        Ok(a) => a,
+        Err(e) => {
+            writeln!(out, "{name}: the defaults do not run on the board: {e:?}").ok();
+            return;
+        }
     };
     let zero = device::calibrate_sense(&board, 3.4, || Some(board.sense_oversample * 2048));
     let rpc = settings.rad_per_count();
+    // One current-loop period in core cycles (the DWT's, at the timer's 168 MHz): each step
+    // on time, as the board's interrupt is (twice it reads as a missed period: `overrun`).
+    let period = (board.pwm_timer_hz as f32 / settings.cur_rate_hz) as u32;
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the benchmark's references to the buffer, one per call, never alive together.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
@@ -179,16 +186,21 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
         stream_every: Some(10),
         ..Requests::default()
     }));
-    lp.step(
-        Inputs {
-            encoder: 0,
-            current_codes: codes,
-            since_last: 0,
-        },
-        |_, _| first.take(),
-    );
+    // Requests are taken in the last current step of a position period: a whole period's
+    // steps (two at the default 40 kHz current loop under the 20 kHz position loop).
+    for _ in 0..lp.ratio() {
+        lp.step(
+            Inputs {
+                encoder: 0,
+                current_codes: codes,
+                since_last: 0,
+            },
+            |_, _| first.take(),
+        );
+    }
     let st = lp.status();
     let Ok(plan) = Motion::plan(st.reference, 0.5, Some(0.3), rpc) else {
+        writeln!(out, "{name}: no move planned").ok();
         return;
     };
     let frf = gms_core::frf::FrfSpec::new(
@@ -258,7 +270,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                     Inputs {
                         encoder: black_box(encoder),
                         current_codes: black_box(codes),
-                        since_last: black_box(8400),
+                        since_last: black_box(period),
                     },
                     |st, c| {
                         let r = mb.exchange(st, c);
