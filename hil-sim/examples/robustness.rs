@@ -4,9 +4,10 @@
 //! device told the nominal axis). For each plant: the linear model's margins at rest and
 //! sliding (`gms_ident::linear`), and with `--measure` the device's own measurement, as
 //! `gms-tune frf --loop open --amplitude 0.02` (and `--velocity 3`) runs it, on the simulated
-//! axis (margins from the points above the noise).
+//! axis (margins from the points above the noise). Then the same for the compliant stages of
+//! issue 41 (the screw's axial mode under a 2 kg and a 50 kg slide).
 //!
-//! `cargo run --release -p hil-sim --example robustness [--measure]`
+//! `cargo run --release -p hil-sim --example robustness [--measure] [--stages-only]`
 
 use gms_bench::frf::{self, Loop, Plan};
 use gms_bench::settings;
@@ -29,6 +30,15 @@ const PLANTS: [(f64, f64, f64); 11] = [
     (2.0, 1.2, 1.0),
     (1.0, 1.0, 0.85),
     (1.0, 1.0, 1.15),
+];
+
+/// Compliant stages (the screw's axial mode under the slide): anti-resonance \[Hz\],
+/// damping ratio, slide \[kg\] — `examples/scenarios/real-stage.toml`'s, the same screw under
+/// 50 kg, and a stiff screw under 50 kg.
+const STAGES: [(f64, f64, f64); 3] = [
+    (700.0, 0.03, 2.0),
+    (700.0, 0.03, 50.0),
+    (3000.0, 0.01, 50.0),
 ];
 
 /// The simulated axis with its friction's stiffness ×`kx`, inertia ×`jx`, friction ×`fx`
@@ -76,10 +86,18 @@ fn model(lin: &LinearAxis) -> Margins {
 /// margins of its points above the noise, and how many there were of how many.
 fn measure(sc: &Scenario, velocity: Option<f64>) -> Result<(Margins, usize, usize), String> {
     let mut dev = LocalDevice::new(sc)?;
+    measure_on(&mut dev, velocity)
+}
+
+/// [`measure`] on a device as it is set.
+fn measure_on(
+    dev: &mut LocalDevice,
+    velocity: Option<f64>,
+) -> Result<(Margins, usize, usize), String> {
     let mut plan = Plan::new(Loop::Open, 0.02);
     plan.velocity = velocity;
     let mut pts = Vec::new();
-    let sweep = frf::run(&mut dev, &plan, &mut pts, |_, _| {}).map_err(|e| e.to_string())?;
+    let sweep = frf::run(dev, &plan, &mut pts, |_, _| {}).map_err(|e| e.to_string())?;
     let good: Vec<(f64, Complex64)> = sweep
         .points
         .iter()
@@ -99,6 +117,8 @@ fn cell(m: &Margins) -> String {
 
 fn main() -> Result<(), String> {
     let measuring = std::env::args().any(|a| a == "--measure");
+    // The compliant stages alone (their measurement is the long part).
+    let stages_only = std::env::args().any(|a| a == "--stages-only");
     println!(
         "| Σk | J | friction | rest, model | sliding, model |{}",
         if measuring {
@@ -112,7 +132,7 @@ fn main() -> Result<(), String> {
         if measuring { "---|---|" } else { "" }
     );
     let mut worst: Option<(f64, String)> = None;
-    for (kx, jx, fx) in PLANTS {
+    for (kx, jx, fx) in PLANTS.iter().copied().filter(|_| !stages_only) {
         let sc = plant(kx, jx, fx)?;
         let mut dev = LocalDevice::new(&sc)?;
         let ss = dev.plant().small_signal();
@@ -140,5 +160,84 @@ fn main() -> Result<(), String> {
     if let Some((_, w)) = worst {
         println!("worst (the model's, against 45° and 8 dB): {w}");
     }
+    println!();
+    println!(
+        "| stage | rest, model | sliding, model |{}",
+        if measuring {
+            " rest, measured | sliding (3 rad/s), measured |"
+        } else {
+            ""
+        }
+    );
+    println!("|---|---|---|{}", if measuring { "---|---|" } else { "" });
+    for (f_hz, zeta, kg) in STAGES {
+        let mut sc = plant(1.0, 1.0, 1.0)?;
+        sc.plant.compliance.f_hz = f_hz;
+        sc.plant.compliance.zeta = zeta;
+        sc.plant.compliance.slide_mass = kg;
+        let mut dev = LocalDevice::new(&sc)?;
+        let ss = dev.plant().small_signal();
+        let s = settings::read(&mut dev).map_err(|e| e.to_string())?;
+        let rest = model(&LinearAxis::new(&ss, &s, Operating::Rest).map_err(|e| e.to_string())?);
+        let slide =
+            model(&LinearAxis::new(&ss, &s, Operating::Sliding).map_err(|e| e.to_string())?);
+        let mut line = format!(
+            "| {f_hz} Hz, ζ {zeta}, {kg} kg | {} | {} |",
+            cell(&rest),
+            cell(&slide)
+        );
+        if measuring {
+            let mut short = false;
+            for v in [None, Some(3.0)] {
+                line += &match measure(&sc, v) {
+                    Ok((m, n, of)) => {
+                        short |= m.phase_margin_deg < 40.0 || m.gain_margin_db < 6.0;
+                        format!(" {} ({n}/{of} coherent) |", cell(&m))
+                    }
+                    Err(e) => {
+                        short = true;
+                        format!(" {e} |")
+                    }
+                };
+            }
+            if short {
+                line += &with_notch(&sc)?;
+            }
+        }
+        println!("{line}");
+    }
     Ok(())
+}
+
+/// Under the floor: the notch `gms-tune frf --loop open --suggest` would set (from a sliding
+/// sweep of 0.003 A, 100 Hz-4.4 kHz), set, and the loop measured again at rest and sliding.
+fn with_notch(sc: &Scenario) -> Result<String, String> {
+    let mut dev = LocalDevice::new(sc)?;
+    let s = settings::read(&mut dev).map_err(|e| e.to_string())?;
+    let mut plan = Plan::new(Loop::Open, 0.003);
+    plan.velocity = Some(3.0);
+    plan.from_hz = 100.0;
+    plan.to_hz = 4400.0;
+    let mut pts = Vec::new();
+    let before = match frf::run(&mut dev, &plan, &mut pts, |_, _| {}) {
+        Ok(b) => b,
+        Err(e) => return Ok(format!(" no notch: {e} |")),
+    };
+    let sug = match frf::suggest_notch(&before.points, &s.shaping, s.pos_rate_hz as f64) {
+        Ok(g) => g,
+        Err(e) => return Ok(format!(" no notch: {e} |")),
+    };
+    settings::apply(&mut dev, &sug.sets(), false).map_err(|e| e.to_string())?;
+    let mut out = format!(
+        " with a notch at {:.0} Hz (q {}, {} dB):",
+        sug.notch.f_hz, sug.notch.q, sug.notch.depth_db
+    );
+    for v in [None, Some(3.0)] {
+        out += &match measure_on(&mut dev, v) {
+            Ok((m, n, of)) => format!(" {} ({n}/{of});", cell(&m)),
+            Err(e) => format!(" {e};"),
+        };
+    }
+    out.push_str(" |");
+    Ok(out)
 }
