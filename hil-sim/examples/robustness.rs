@@ -82,6 +82,19 @@ fn model(lin: &LinearAxis) -> Margins {
     gms_ident::margins::margins(&l)
 }
 
+/// The model's margins of the device's loop on `sc`'s axis, at rest and sliding.
+fn models(sc: &Scenario) -> Result<(Margins, Margins), String> {
+    let mut dev = LocalDevice::new(sc)?;
+    let ss = dev.plant().small_signal();
+    let s = settings::read(&mut dev).map_err(|e| e.to_string())?;
+    let at = |op| {
+        LinearAxis::new(&ss, &s, op)
+            .map(|lin| model(&lin))
+            .map_err(|e| e.to_string())
+    };
+    Ok((at(Operating::Rest)?, at(Operating::Sliding)?))
+}
+
 /// The device's measurement of its open loop (at rest, or sliding at `velocity`): the
 /// margins of its points above the noise, and how many there were of how many.
 fn measure(sc: &Scenario, velocity: Option<f64>) -> Result<(Margins, usize, usize), String> {
@@ -134,12 +147,7 @@ fn main() -> Result<(), String> {
     let mut worst: Option<(f64, String)> = None;
     for (kx, jx, fx) in PLANTS.iter().copied().filter(|_| !stages_only) {
         let sc = plant(kx, jx, fx)?;
-        let mut dev = LocalDevice::new(&sc)?;
-        let ss = dev.plant().small_signal();
-        let s = settings::read(&mut dev).map_err(|e| e.to_string())?;
-        let rest = model(&LinearAxis::new(&ss, &s, Operating::Rest).map_err(|e| e.to_string())?);
-        let slide =
-            model(&LinearAxis::new(&ss, &s, Operating::Sliding).map_err(|e| e.to_string())?);
+        let (rest, slide) = models(&sc)?;
         let name = format!("×{kx} | ×{jx} | ×{fx}");
         for (what, m) in [("rest", &rest), ("sliding", &slide)] {
             // The least of PM/45° and GM/8 dB: the aim.
@@ -175,12 +183,7 @@ fn main() -> Result<(), String> {
         sc.plant.compliance.f_hz = f_hz;
         sc.plant.compliance.zeta = zeta;
         sc.plant.compliance.slide_mass = kg;
-        let mut dev = LocalDevice::new(&sc)?;
-        let ss = dev.plant().small_signal();
-        let s = settings::read(&mut dev).map_err(|e| e.to_string())?;
-        let rest = model(&LinearAxis::new(&ss, &s, Operating::Rest).map_err(|e| e.to_string())?);
-        let slide =
-            model(&LinearAxis::new(&ss, &s, Operating::Sliding).map_err(|e| e.to_string())?);
+        let (rest, slide) = models(&sc)?;
         let mut line = format!(
             "| {f_hz} Hz, ζ {zeta}, {kg} kg | {} | {} |",
             cell(&rest),

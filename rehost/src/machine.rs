@@ -150,6 +150,31 @@ impl Inject {
     }
 }
 
+/// A condition's runs of blocks (a mask held): where the current one began.
+#[derive(Debug, Default, Clone, Copy)]
+struct Hold {
+    /// Since this many instructions, from this address; `None` when not held.
+    since: Option<(u64, u64)>,
+}
+
+impl Hold {
+    /// The condition at a block starting at `addr` after `instructions`: when a run ends
+    /// here, its length \[instructions\] and where it began.
+    fn update(&mut self, held: bool, instructions: u64, addr: u64) -> Option<(u64, u64)> {
+        match (held, self.since) {
+            (true, None) => {
+                self.since = Some((instructions, addr));
+                None
+            }
+            (false, Some((from, at))) => {
+                self.since = None;
+                Some((instructions - from, at))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// The state the engine's hooks reach.
 pub struct Chip {
     /// The core's registers.
@@ -186,18 +211,17 @@ pub struct Chip {
     guard: Option<(u32, u32)>,
     /// The SP that entered the guard.
     pub guard_hit: Option<u32>,
-    /// PRIMASK set since this many instructions, and the longest run \[instructions\].
-    primask_since: Option<u64>,
+    /// PRIMASK's holds.
+    primask: Hold,
     /// The longest time PRIMASK was held \[instructions\].
     pub primask_max: u64,
     /// Where the longest hold began (the first block run with PRIMASK set).
     pub primask_max_at: u64,
-    primask_from: u64,
     /// The exception whose hold-off by a mask is measured (the control interrupt), if any:
     /// [`Chip::held_max`]. Cleared at a reset.
     pub watch: Option<u32>,
-    held_since: Option<u64>,
-    held_from: u64,
+    /// The watched exception's holds.
+    held: Hold,
     /// The longest time \[instructions\] the watched exception was held off by PRIMASK or
     /// BASEPRI in a context it would otherwise preempt (thread mode, or a handler below it):
     /// the delay a critical section adds to its start.
@@ -345,13 +369,11 @@ impl Machine {
             sp_min_context: Vec::new(),
             guard: None,
             guard_hit: None,
-            primask_since: None,
+            primask: Hold::default(),
             primask_max: 0,
             primask_max_at: 0,
-            primask_from: 0,
             watch: None,
-            held_since: None,
-            held_from: 0,
+            held: Hold::default(),
             held_max: 0,
             held_max_at: 0,
             masked_pending: None,
@@ -515,38 +537,20 @@ impl Machine {
                     .unwrap_or(256);
                 let held =
                     enabled && p < active && (primask || (basepri != 0 && basepri as i32 <= p));
-                match (held, c.held_since) {
-                    (true, None) => {
-                        c.held_since = Some(c.instructions);
-                        c.held_from = addr;
-                    }
-                    (false, Some(s)) => {
-                        if c.instructions - s > c.held_max {
-                            c.held_max = c.instructions - s;
-                            c.held_max_at = c.held_from;
-                        }
-                        c.held_since = None;
-                    }
-                    _ => {}
+                if let Some((n, at)) = c.held.update(held, c.instructions, addr)
+                    && n > c.held_max
+                {
+                    (c.held_max, c.held_max_at) = (n, at);
                 }
             }
             if sp < c.sp_min {
                 c.sp_min = sp;
                 c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
             }
-            match (primask, c.primask_since) {
-                (true, None) => {
-                    c.primask_since = Some(c.instructions);
-                    c.primask_from = addr;
-                }
-                (false, Some(s)) => {
-                    if c.instructions - s > c.primask_max {
-                        c.primask_max = c.instructions - s;
-                        c.primask_max_at = c.primask_from;
-                    }
-                    c.primask_since = None;
-                }
-                _ => {}
+            if let Some((n, at)) = c.primask.update(primask, c.instructions, addr)
+                && n > c.primask_max
+            {
+                (c.primask_max, c.primask_max_at) = (n, at);
             }
             let mut stop = c.cycles >= c.next_stop || unmasked;
             if let Some((g, len)) = c.guard
@@ -702,10 +706,10 @@ impl Machine {
         let c = self.uc.get_data_mut();
         c.active.clear();
         c.guard = None;
-        c.primask_since = None;
+        c.primask = Hold::default();
         // The watch is armed once the image's loop runs (its interrupt at its priority); a
         // reset ends it (the start-up's drivers run that interrupt's line at theirs).
-        c.held_since = None;
+        c.held = Hold::default();
         c.watch = None;
         Ok(())
     }
