@@ -51,7 +51,17 @@ pub struct Commissioned {
     /// it is: measured at rest after backing off, or (where the encoder hides the response)
     /// the model's. `gms-tune commission` does not apply such a loop unless forced.
     pub short_of_floor: Option<String>,
+    /// A notch set for a resonance above the crossover that held the loop under the floor
+    /// (its slot, 0 or 1, and the notch), found by [`crate::frf::suggest_notch`] from a
+    /// sliding sweep of the open loop.
+    pub notch: Option<(usize, gms_core::shaping::Notch)>,
 }
+
+/// The protocol paths of the two notches' settings.
+const NOTCH_KEYS: [[&str; 3]; 2] = [
+    ["filt.notch1.f_hz", "filt.notch1.q", "filt.notch1.depth_db"],
+    ["filt.notch2.f_hz", "filt.notch2.q", "filt.notch2.depth_db"],
+];
 
 impl Commissioned {
     /// The `[device]` settings by protocol path.
@@ -69,6 +79,14 @@ impl Commissioned {
         .into_iter()
         .chain(self.pos.iter().flat_map(|g| g.sets()))
         .chain(self.friction_scaled.iter().copied())
+        .chain(self.notch.iter().flat_map(|(slot, n)| {
+            let k = NOTCH_KEYS[(*slot).min(1)];
+            [
+                (k[0], n.f_hz as f64),
+                (k[1], n.q as f64),
+                (k[2], n.depth_db as f64),
+            ]
+        }))
         .collect()
     }
 }
@@ -513,6 +531,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
     plan.to_hz = 0.4 * pos_hz;
     plan.points = 20;
     plan.seconds = 0.05;
+    let mut notch_tried = false;
     for round in 0..=BACK_OFF.1 {
         let mut sets: Vec<(String, String)> = c
             .settings()
@@ -534,6 +553,9 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
         s.pid.ki = g.ki as f32;
         s.pid.kd = g.kd as f32;
         s.pid.d_filter_hz = g.d_filter_hz as f32;
+        if let Some((slot, n)) = c.notch {
+            s.shaping.notch[slot.min(1)] = n;
+        }
         let model = modelled_margins(c, &s, scale, (plan.from_hz, plan.to_hz), plan.amplitude);
         if let Some((_, counts)) = model
             && counts < 3.0
@@ -634,6 +656,43 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
              {MIN_PHASE_MARGIN}° and {MIN_GAIN_MARGIN} dB",
             m.phase_margin_deg, m.gain_margin_db
         ));
+        // Once, before backing the gains off: a resonance above the crossover (a compliant
+        // stage's mode) that a notch takes out, found from the loop sliding (at rest the
+        // friction's pre-sliding spring makes a bump of its own, which a notch must not take:
+        // it is the sliding loop's crossover region).
+        if !notch_tried && c.notch.is_none() {
+            notch_tried = true;
+            match sliding_notch(b, &s, &plan, pos_hz) {
+                Ok(sug)
+                    if sug.after.phase_margin_deg >= MIN_PHASE_MARGIN
+                        && sug.after.gain_margin_db >= MIN_GAIN_MARGIN =>
+                {
+                    c.lines.push(format!(
+                        "  a resonance at {:.0} Hz ({:+.1} dB) above the crossover: notch {} at \
+                         {:.0} Hz, q {}, {} dB (sliding, predicted {:.1}° and {:.2} dB from \
+                         {:.1}° and {:.2} dB); measured again",
+                        sug.resonance.0,
+                        sug.resonance.1,
+                        sug.slot + 1,
+                        sug.notch.f_hz,
+                        sug.notch.q,
+                        sug.notch.depth_db,
+                        sug.after.phase_margin_deg,
+                        sug.after.gain_margin_db,
+                        sug.before.phase_margin_deg,
+                        sug.before.gain_margin_db
+                    ));
+                    c.notch = Some((sug.slot, sug.notch));
+                    continue;
+                }
+                Ok(sug) => c.lines.push(format!(
+                    "  no notch: the best for the resonance at {:.0} Hz predicts {:.1}° and \
+                     {:.2} dB sliding",
+                    sug.resonance.0, sug.after.phase_margin_deg, sug.after.gain_margin_db
+                )),
+                Err(e) => c.lines.push(format!("  no notch: {e}")),
+            }
+        }
         if round == BACK_OFF.1 {
             c.lines.push(format!(
                 "  warning: the margins are still under {MIN_PHASE_MARGIN}° and \
@@ -653,6 +712,37 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
     // (The caller switches the bridge off after this step.)
     c.pos = Some(g);
     Ok(())
+}
+
+/// The notch `gms-tune frf --loop open --suggest` would give for the loop as set on the
+/// device (`s` its settings): the open loop swept sliding at 1 rad/s (five times the default
+/// friction's Stribeck velocity, within the stroke commissioning leaves) from 200 Hz to 0.22
+/// of the position rate with `rest`'s amplitude.
+fn sliding_notch(
+    b: &mut impl Bench,
+    s: &gms_core::protocol::Settings,
+    rest: &crate::frf::Plan,
+    pos_hz: f64,
+) -> Result<crate::frf::Suggestion, String> {
+    let mut plan = rest.clone();
+    plan.velocity = Some(1.0);
+    plan.from_hz = 200.0;
+    plan.to_hz = 0.22 * pos_hz;
+    plan.points = 40;
+    let mut pts = Vec::new();
+    let swept = (|| {
+        b.disable()?;
+        b.clear()?;
+        b.enable()?;
+        b.wait(0.3)?;
+        crate::frf::sweep(b, &plan, &mut pts, |_, _| {})?;
+        b.disable()
+    })();
+    if let Err(e) = swept {
+        let _ = b.disable();
+        return Err(format!("the sliding sweep did not run ({e})"));
+    }
+    crate::frf::suggest_notch(&pts, &s.shaping, pos_hz)
 }
 
 /// The position loop's gains for the motor `c` measured, the current loop at `cur_hz` with
