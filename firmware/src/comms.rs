@@ -55,9 +55,7 @@ pub type Dev = Front<IrqLink, Store>;
 
 /// The latest status of the loop.
 pub fn status() -> Status {
-    let mut s = MAILBOX.lock(|m| m.borrow().status);
-    crate::control::show_stall(&mut s);
-    s
+    IrqLink.with_mailbox(|m| m.status)
 }
 
 /// A fixed buffer that `fmt::Write` fills; past its end it reports an error.

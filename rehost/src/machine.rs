@@ -318,6 +318,18 @@ fn err(e: uc_error) -> String {
     format!("unicorn: {e:?}")
 }
 
+impl Chip {
+    /// The most urgent group priority of the active exceptions (256, below any, in thread
+    /// mode).
+    fn active_priority(&self) -> i32 {
+        self.active
+            .iter()
+            .map(|a| self.core.group_priority(a.exc))
+            .min()
+            .unwrap_or(256)
+    }
+}
+
 impl Machine {
     /// Loads `elf` for `board`: its segments into flash and RAM, the plant, reset.
     pub fn new(elf: &[u8], board: Board, opts: Options) -> Result<Machine, String> {
@@ -529,14 +541,9 @@ impl Machine {
                 // not.
                 let enabled = w < exc::IRQ0 || c.core.enabled[(w - exc::IRQ0) as usize];
                 let p = c.core.group_priority(w);
-                let active = c
-                    .active
-                    .iter()
-                    .map(|a| c.core.group_priority(a.exc))
-                    .min()
-                    .unwrap_or(256);
-                let held =
-                    enabled && p < active && (primask || (basepri != 0 && basepri as i32 <= p));
+                let held = enabled
+                    && p < c.active_priority()
+                    && (primask || (basepri != 0 && basepri as i32 <= p));
                 if let Some((n, at)) = c.held.update(held, c.instructions, addr)
                     && n > c.held_max
                 {
@@ -764,15 +771,9 @@ impl Machine {
         self.pending_over(self.active_priority()).is_some()
     }
 
-    /// The most urgent group priority of the active exceptions (256, below any, in thread
-    /// mode).
+    /// The most urgent group priority of the active exceptions ([`Chip::active_priority`]).
     fn active_priority(&self) -> i32 {
-        let c = self.chip();
-        c.active
-            .iter()
-            .map(|a| c.core.group_priority(a.exc))
-            .min()
-            .unwrap_or(256)
+        self.chip().active_priority()
     }
 
     /// The pending and enabled exception of the highest priority above `exec`, if any.

@@ -150,9 +150,9 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
     };
     let zero = device::calibrate_sense(&board, 3.4, || Some(board.sense_oversample * 2048));
     let rpc = settings.rad_per_count();
-    // One current-loop period in core cycles (the DWT's, at the timer's 168 MHz): each step
+    // One current-loop period in cycles of the step clock, as the loop reckons it: each step
     // on time, as the board's interrupt is (twice it reads as a missed period: `overrun`).
-    let period = (board.pwm_timer_hz as f32 / settings.cur_rate_hz) as u32;
+    let period = board.limits(&settings).period_cycles;
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the benchmark's references to the buffer, one per call, never alive together.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
