@@ -79,6 +79,15 @@ pub struct PidParams {
     pub d_filter_hz: f32,
     /// Limit of the integral term's torque [N·m], `>= 0` (anti-windup).
     pub i_limit: f32,
+    /// The share of the integral carried as a level of the friction model [-], in [0, 1]:
+    /// while the axis slides, that share of what the integral takes in follows the friction
+    /// feedforward model's sign and level (it flips with the model at a reversal, where a
+    /// plain integral holds the last direction's friction mismatch and must unwind it), the
+    /// rest stays a constant torque (a load, gravity). The integral's action on the error is
+    /// `ki` whatever the share, so the loop's margins do not change with it. 0: a plain
+    /// integral. Optional in a settings file (0 when absent).
+    #[cfg_attr(feature = "serde", serde(default))]
+    pub ki_fric: f32,
 }
 
 /// Current-loop PI gains (on the current error in A, output voltage in V).
@@ -230,7 +239,7 @@ impl<const N: usize> ControllerParams<N> {
         }
         let f = &self.shaping;
         let m = &self.map;
-        let scalars: [(&'static str, f32, (f32, f32)); 38] = [
+        let scalars: [(&'static str, f32, (f32, f32)); 39] = [
             row!("rate.pos_hz", self.pos_rate_hz),
             row!("rate.cur_hz", self.cur_rate_hz),
             row!("pos.kp", self.pid.kp),
@@ -238,6 +247,7 @@ impl<const N: usize> ControllerParams<N> {
             row!("pos.kd", self.pid.kd),
             row!("pos.d_filter_hz", self.pid.d_filter_hz),
             row!("pos.i_limit", self.pid.i_limit),
+            row!("pos.ki_fric", self.pid.ki_fric),
             row!("filt.notch1.f_hz", f.notch[0].f_hz),
             row!("filt.notch1.q", f.notch[0].q),
             row!("filt.notch1.depth_db", f.notch[0].depth_db),
@@ -384,7 +394,14 @@ pub struct Controller<const N: usize> {
     dt_pos: f32,
     dt_cur: f32,
     d_alpha: f32,
+    /// The integral's constant part [N·m].
     integ: f32,
+    /// The integral's friction-level part [N·m at the sliding friction level]: the integral
+    /// torque is `integ + integ_fric · φ`, φ the friction model's output over its sliding
+    /// (Coulomb) level, within ±1 (`pos.ki_fric`).
+    integ_fric: f32,
+    /// 1 / the model's sliding (Coulomb) level [1/(N·m)] (0 without a model).
+    inv_f_norm: f32,
     d_filt: f32,
     last_meas: Option<i64>,
     last_ref: Option<SubCounts>,
@@ -426,6 +443,18 @@ impl<const N: usize> Controller<N> {
                 .guideway
                 .as_ref()
                 .map_or(0.0, |g| p.ff.ratio * g.stribeck.fs);
+        // The sliding level the integral's friction share is weighted by: both sources' Fc
+        // (the model's output sliding above the Stribeck velocity).
+        let f_slide = p.ff.actuator.stribeck.fc
+            + p.ff
+                .guideway
+                .as_ref()
+                .map_or(0.0, |g| p.ff.ratio * g.stribeck.fc);
+        let inv_f_norm = if f_slide.is_finite() && f_slide > 0.0 {
+            1.0 / f_slide
+        } else {
+            0.0
+        };
         let mut adapt = Adaptive::new(f_norm);
         adapt.reset(&p.ff.adapt);
         let shaping = Shaping::try_new(&p.shaping, p.pos_rate_hz)
@@ -440,6 +469,8 @@ impl<const N: usize> Controller<N> {
             d_alpha: 1.0 - math::exp(-2.0 * core::f32::consts::PI * p.pid.d_filter_hz * dt_pos),
             p,
             integ: 0.0,
+            integ_fric: 0.0,
+            inv_f_norm,
             d_filt: 0.0,
             last_meas: None,
             last_ref: None,
@@ -488,8 +519,16 @@ impl<const N: usize> Controller<N> {
     }
 
     /// Sets the feedforward mode and gain (gain clamped to [0, 2]); the friction models keep
-    /// their state.
+    /// their state. The integral's friction-level part is folded into its constant part (the same torque
+    /// now: the level was learned on the model of the old mode).
     pub fn set_feedforward(&mut self, mode: FfMode, gain: f32) {
+        if mode != self.p.ff.mode {
+            self.integ = clamp(
+                self.integ + self.integ_fric * self.phi(),
+                self.p.pid.i_limit,
+            );
+            self.integ_fric = 0.0;
+        }
         self.p.ff.mode = mode;
         self.p.ff.gain = if gain.is_finite() {
             gain.clamp(0.0, 2.0)
@@ -508,6 +547,7 @@ impl<const N: usize> Controller<N> {
     /// Back to rest: integrators, filters, friction models and outputs cleared.
     pub fn reset(&mut self) {
         self.integ = 0.0;
+        self.integ_fric = 0.0;
         self.d_filt = 0.0;
         self.last_meas = None;
         self.last_ref = None;
@@ -592,11 +632,20 @@ impl<const N: usize> Controller<N> {
         let ff_fric = p.ff.gain * ff_scale * self.friction_now() * map_scale + map_offset;
         let ff_inertia = p.motor.inertia * self.a_ref;
         let integ = before - (p_term + d_term + ff_fric + ff_inertia);
-        self.integ = clamp(if integ.is_finite() { integ } else { 0.0 }, p.pid.i_limit);
+        let total = clamp(if integ.is_finite() { integ } else { 0.0 }, p.pid.i_limit);
+        // The friction-level part kept (none where the new set carries none), the constant
+        // part the rest of the same total.
+        let fric = if p.pid.ki_fric > 0.0 {
+            old.integ_fric
+        } else {
+            0.0
+        };
+        self.integ_fric = clamp(if fric.is_finite() { fric } else { 0.0 }, p.pid.i_limit);
+        self.integ = clamp(total - self.integ_fric * self.phi(), p.pid.i_limit);
         self.out = PositionOutput {
             error: o.error,
             p: p_term,
-            i: self.integ,
+            i: total,
             d: d_term,
             ff_friction: ff_fric,
             ff_scale,
@@ -616,6 +665,12 @@ impl<const N: usize> Controller<N> {
         let ff_new = p.motor.r * old.i_cmd + p.motor.k_e * old.w_ref;
         let cur = old.cur_integ + ff_old - ff_new;
         self.cur_integ = clamp(if cur.is_finite() { cur } else { 0.0 }, p.v_supply);
+    }
+
+    /// The friction model's output now over its sliding level, within ±1 [-]: the weight of
+    /// the integral's friction-level part.
+    fn phi(&self) -> f32 {
+        clamp(self.friction_now() * self.inv_f_norm, 1.0)
     }
 
     /// The friction feedforward model's output now (before the gain and scale) for the mode
@@ -691,21 +746,34 @@ impl<const N: usize> Controller<N> {
         let (map_offset, map_scale) = self.map_sample;
         let ff_fric = self.p.ff.gain * ff_scale * ff_model * map_scale;
         let ff_inertia = self.p.motor.inertia * r.acc;
-        // Conditional integration: the integrator stops when the command is saturated in the
-        // direction the error would push it further.
-        let integ_new = clamp(self.integ + pid.ki * error * self.dt_pos, pid.i_limit);
+        // The integral: `integ + integ_fric · φ`, φ the friction model's output over its
+        // sliding (Coulomb) level, within ±1. Of what it takes in, the share `ki_fric · φ²` goes to the friction
+        // level (times φ, so that it adds `ki_fric · φ² · δ` to the torque now) and the rest
+        // to the constant: the torque grows by `ki · error · dt` whatever φ, and a reversal
+        // of the model turns the level's torque over with it. Conditional integration: both
+        // stop when the command is saturated in the direction the error would push it further.
+        let phi = clamp(ff_model * self.inv_f_norm, 1.0);
+        let delta = pid.ki * error * self.dt_pos;
+        let share = pid.ki_fric * phi;
+        let fric_new = clamp(self.integ_fric + share * delta, pid.i_limit);
+        let const_new = clamp(self.integ + (1.0 - share * phi) * delta, pid.i_limit);
+        let integ_new = clamp(const_new + fric_new * phi, pid.i_limit);
         let torque = p_term + integ_new + d_term + ff_fric + map_offset + ff_inertia;
         // The loop-shaping filters act on the whole command (feedback and feedforward alike:
         // a resonance is excited by either); the limit comes after them.
         let i_unsat = self.shaping.run(torque / self.p.motor.k_m);
         let i_cmd = clamp(i_unsat, self.p.i_max);
         let saturated = i_cmd != i_unsat;
-        if !saturated || (error > 0.0) != (i_unsat > 0.0) {
-            self.integ = integ_new;
-        }
+        let integ = if !saturated || (error > 0.0) != (i_unsat > 0.0) {
+            self.integ = const_new;
+            self.integ_fric = fric_new;
+            integ_new
+        } else {
+            clamp(self.integ + self.integ_fric * phi, pid.i_limit)
+        };
         if adaptive {
             let input = AdaptInput {
-                feedback: p_term + self.integ + d_term,
+                feedback: p_term + integ + d_term,
                 applied: ff_fric,
                 model: ff_model,
                 v_ref: r.vel,
@@ -719,7 +787,7 @@ impl<const N: usize> Controller<N> {
         self.out = PositionOutput {
             error,
             p: p_term,
-            i: self.integ,
+            i: integ,
             d: d_term,
             ff_friction: ff_fric + map_offset,
             ff_scale,

@@ -70,6 +70,13 @@ pub const SPECS: &[Spec] = &[
         integer: false,
     },
     Spec {
+        path: "pos.ki_fric",
+        unit: "-",
+        min: 0.0,
+        max: 1.0,
+        integer: false,
+    },
+    Spec {
         path: "filt.notch1.f_hz",
         unit: "Hz",
         min: 0.0,

@@ -14,20 +14,34 @@ use hil_sim::commands;
 use hil_sim::scenario::Scenario;
 
 /// A tune: its name, `pos.kp` [N·m/rad], `pos.ki` [N·m/(rad·s)], `pos.kd` [N·m·s/rad],
-/// `ff.gain` [-].
-type Tune = (&'static str, f64, f64, f64, f64);
+/// `ff.gain` [-], `pos.ki_fric` [-].
+type Tune = (&'static str, f64, f64, f64, f64, f64);
 
-const TUNES: [Tune; 10] = [
-    ("default", 0.49, 700.0, 2.45e-4, 0.94),
-    ("ff 0.88", 0.49, 700.0, 2.45e-4, 0.88),
-    ("ki x1.25", 0.49, 875.0, 2.45e-4, 0.94),
-    ("ki x1.25, ff 0.88", 0.49, 875.0, 2.45e-4, 0.88),
-    ("ki x1.5", 0.49, 1050.0, 2.45e-4, 0.94),
-    ("ki x2", 0.49, 1400.0, 2.45e-4, 0.94),
-    ("kp 0.6", 0.6, 860.0, 2.45e-4, 0.94),
-    ("kp 0.6, ki x2", 0.6, 1720.0, 2.45e-4, 0.94),
-    ("20 kHz round's pos loop", 0.7, 600.0, 2.7e-4, 0.94),
-    ("kd 3e-4", 0.49, 700.0, 3.0e-4, 0.94),
+const TUNES: [Tune; 17] = [
+    ("default", 0.49, 700.0, 2.45e-4, 0.94, 0.5),
+    ("plain integral", 0.49, 700.0, 2.45e-4, 0.94, 0.0),
+    ("ki_fric 0.25", 0.49, 700.0, 2.45e-4, 0.94, 0.25),
+    ("ki_fric 0.75", 0.49, 700.0, 2.45e-4, 0.94, 0.75),
+    ("ki_fric 1", 0.49, 700.0, 2.45e-4, 0.94, 1.0),
+    ("ki_fric 1, ff 0.88", 0.49, 700.0, 2.45e-4, 0.88, 1.0),
+    ("ki_fric 1, ff 1", 0.49, 700.0, 2.45e-4, 1.0, 1.0),
+    ("ki_fric 0.5, ff 0.88", 0.49, 700.0, 2.45e-4, 0.88, 0.5),
+    ("ff 0.88, plain", 0.49, 700.0, 2.45e-4, 0.88, 0.0),
+    ("ki x1.25, plain", 0.49, 875.0, 2.45e-4, 0.94, 0.0),
+    ("ki x1.25, ff 0.88, plain", 0.49, 875.0, 2.45e-4, 0.88, 0.0),
+    ("ki x1.5, plain", 0.49, 1050.0, 2.45e-4, 0.94, 0.0),
+    ("ki x2, plain", 0.49, 1400.0, 2.45e-4, 0.94, 0.0),
+    ("kp 0.6, plain", 0.6, 860.0, 2.45e-4, 0.94, 0.0),
+    ("kp 0.6, ki x2, plain", 0.6, 1720.0, 2.45e-4, 0.94, 0.0),
+    (
+        "20 kHz round's pos loop, plain",
+        0.7,
+        600.0,
+        2.7e-4,
+        0.94,
+        0.0,
+    ),
+    ("kd 3e-4", 0.49, 700.0, 3.0e-4, 0.94, 0.5),
 ];
 
 fn main() -> Result<(), String> {
@@ -44,11 +58,17 @@ fn main() -> Result<(), String> {
     let sigma = SlidingCurve::TABLE1.sigma;
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
-        "| tune | kp | ki | kd | ff.gain | rest PM/GM (worst) | sliding PM/GM (worst) | GMS sine RMS | GMS \
+        "| tune | kp | ki | kd | ff.gain | ki_fric | rest PM/GM (worst) | sliding PM/GM (worst) | GMS sine RMS | GMS \
          reversal | adaptive sine RMS | adaptive reversal |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for (name, kp, ki, kd, ff) in TUNES {
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let only: Option<Vec<String>> = std::env::var("TUNES")
+        .ok()
+        .map(|v| v.split(';').map(str::to_string).collect());
+    for (name, kp, ki, kd, ff, share) in TUNES {
+        if only.as_ref().is_some_and(|o| !o.iter().any(|n| n == name)) {
+            continue;
+        }
         let (nom, worst) = robust_margins(&axis, sigma, kp, ki, kd)
             .ok_or_else(|| format!("{name}: no linear model"))?;
         let mut sc = Scenario::default();
@@ -56,6 +76,7 @@ fn main() -> Result<(), String> {
         pos.insert("kp".into(), toml::Value::Float(kp));
         pos.insert("ki".into(), toml::Value::Float(ki));
         pos.insert("kd".into(), toml::Value::Float(kd));
+        pos.insert("ki_fric".into(), toml::Value::Float(share));
         sc.controller.insert("pos".into(), toml::Value::Table(pos));
         let ff_table = sc
             .controller
@@ -76,7 +97,7 @@ fn main() -> Result<(), String> {
                 })
         };
         println!(
-            "| {name} | {kp} | {ki} | {kd:e} | {ff} | {:.1}°/{:.1} dB ({:.1}°/{:.1} dB) | {:.1}°/{:.1} dB \
+            "| {name} | {kp} | {ki} | {kd:e} | {ff} | {share} | {:.1}°/{:.1} dB ({:.1}°/{:.1} dB) | {:.1}°/{:.1} dB \
              ({:.1}°/{:.1} dB) | {} | {} | {} | {} |",
             nom.rest.0,
             nom.rest.1,

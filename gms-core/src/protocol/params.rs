@@ -75,6 +75,7 @@ pub const PARAMS: &[Param] = &[
     num!("pos.kd", |s| s.pid.kd),
     num!("pos.d_filter_hz", |s| s.pid.d_filter_hz),
     num!("pos.i_limit", |s| s.pid.i_limit),
+    num!("pos.ki_fric", |s| s.pid.ki_fric),
     num!("filt.notch1.f_hz", |s| s.shaping.notch[0].f_hz),
     num!("filt.notch1.q", |s| s.shaping.notch[0].q),
     num!("filt.notch1.depth_db", |s| s.shaping.notch[0].depth_db),
