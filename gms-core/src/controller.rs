@@ -79,13 +79,14 @@ pub struct PidParams {
     pub d_filter_hz: f32,
     /// Limit of the integral term's torque [N·m], `>= 0` (anti-windup).
     pub i_limit: f32,
-    /// The share of the integral carried as a level of the friction model [-], in [0, 1]:
-    /// while the axis slides, that share of what the integral takes in follows the friction
-    /// feedforward model's sign and level (it flips with the model at a reversal, where a
-    /// plain integral holds the last direction's friction mismatch and must unwind it), the
-    /// rest stays a constant torque (a load, gravity). The integral's action on the error is
-    /// `ki` whatever the share, so the loop's margins do not change with it. 0: a plain
-    /// integral. Optional in a settings file (0 when absent).
+    /// The share of the integral carried as a level of the friction model [-], in [0, 1]
+    /// (modes `gms` and `gms-adaptive`): of what the integral takes in, the share
+    /// `ki_fric · φ²` follows the model's sign and level (φ its output over its Coulomb level,
+    /// within ±1: it turns over with the model at a reversal, where a plain integral holds
+    /// the last direction's friction mismatch and must unwind it); the rest stays a constant
+    /// torque (a load, gravity). The integral's action on the error is `ki` whatever the
+    /// share, so the loop's margins do not change with it. 0 (the default): a plain
+    /// integral. Optional in a settings file.
     #[cfg_attr(feature = "serde", serde(default))]
     pub ki_fric: f32,
 }
@@ -670,7 +671,16 @@ impl<const N: usize> Controller<N> {
     /// The friction model's output now over its sliding level, within ±1 [-]: the weight of
     /// the integral's friction-level part.
     fn phi(&self) -> f32 {
-        clamp(self.friction_now() * self.inv_f_norm, 1.0)
+        self.phi_of(self.friction_now())
+    }
+
+    /// φ for the friction model's output `f` [N·m]: 0 unless the mode is a GMS one (the
+    /// static map turns over within a velocity band, not where the friction does).
+    fn phi_of(&self, f: f32) -> f32 {
+        match self.p.ff.mode {
+            FfMode::Gms | FfMode::GmsAdaptive => clamp(f * self.inv_f_norm, 1.0),
+            FfMode::None | FfMode::Static => 0.0,
+        }
     }
 
     /// The friction feedforward model's output now (before the gain and scale) for the mode
@@ -747,12 +757,13 @@ impl<const N: usize> Controller<N> {
         let ff_fric = self.p.ff.gain * ff_scale * ff_model * map_scale;
         let ff_inertia = self.p.motor.inertia * r.acc;
         // The integral: `integ + integ_fric · φ`, φ the friction model's output over its
-        // sliding (Coulomb) level, within ±1. Of what it takes in, the share `ki_fric · φ²` goes to the friction
-        // level (times φ, so that it adds `ki_fric · φ² · δ` to the torque now) and the rest
-        // to the constant: the torque grows by `ki · error · dt` whatever φ, and a reversal
-        // of the model turns the level's torque over with it. Conditional integration: both
-        // stop when the command is saturated in the direction the error would push it further.
-        let phi = clamp(ff_model * self.inv_f_norm, 1.0);
+        // sliding (Coulomb) level, within ±1. Of what it takes in, the share `ki_fric · φ²`
+        // goes to the friction level (times φ, so that it adds `ki_fric · φ² · δ` to the
+        // torque now) and the rest to the constant: the torque grows by `ki · error · dt`
+        // whatever φ, and a reversal of the model turns the level's torque over with it.
+        // Conditional integration: both stop when the command is saturated in the direction
+        // the error would push it further.
+        let phi = self.phi_of(ff_model);
         let delta = pid.ki * error * self.dt_pos;
         let share = pid.ki_fric * phi;
         let fric_new = clamp(self.integ_fric + share * delta, pid.i_limit);
