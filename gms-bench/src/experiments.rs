@@ -110,8 +110,10 @@ pub fn sliding(
 /// Runs `f` with the position loop set to the measuring loop
 /// ([`gms_ident::gains::measuring_loop`]: the device's `pos.kd` kept, `pos.kp`, `pos.ki` and
 /// `pos.d_filter_hz` softened for an overdamped velocity loop on its `ff.inertia`; the loop
-/// as it is where none can be built on it), the device's settings put back after (and the
-/// bridge off), however `f` ended.
+/// as it is where none can be built on it) with a plain integral (`pos.ki_fric` 0: the
+/// experiments measure the friction the compensator's model is fitted to, and an integral
+/// that turns over with the old model would carry that model into the data), the device's
+/// settings put back after (and the bridge off), however `f` ended.
 pub(crate) fn measuring<B: Bench, T>(
     b: &mut B,
     f: impl FnOnce(&mut B) -> Result<T, Error>,
@@ -136,6 +138,9 @@ pub(crate) fn measuring<B: Bench, T>(
             b.set("pos.kp", m.kp)?;
             b.set("pos.ki", m.ki)?;
             b.set("pos.d_filter_hz", m.d_filter_hz)?;
+        }
+        if get_param_if_known(b, "pos.ki_fric")?.is_some() {
+            b.set("pos.ki_fric", 0.0)?;
         }
         f(b)
     })

@@ -18,6 +18,8 @@ fn default_device(noise: u64) -> LocalDevice {
 /// The RMS error [counts] of the sine test at every gain of `gains`, `repeats` times, on one
 /// device: (gain, each test's RMS).
 fn sweep(dev: &mut LocalDevice, gains: &[f64], repeats: usize) -> Vec<(f64, Vec<f64>)> {
+    // As `tune-ff` measures: the feedforward alone, a plain integral.
+    dev.request("set pos.ki_fric 0").unwrap();
     gains
         .iter()
         .map(|&g| {

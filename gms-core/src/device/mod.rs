@@ -587,7 +587,7 @@ pub fn default_settings() -> Settings {
             kd: 2.45e-4,
             d_filter_hz: 9000.0,
             i_limit: 1e-3,
-            ki_fric: 0.0,
+            ki_fric: crate::controller::DEFAULT_KI_FRIC,
         },
         shaping: crate::shaping::ShapingParams::OFF,
         map: crate::posmap::MapParams::DEFAULT,
