@@ -112,6 +112,9 @@ async fn main(spawner: Spawner) {
         }
     };
     info!("{}", start.note);
+    for line in start.report.lines() {
+        warn!("{}", line);
+    }
     info!(
         "encoder {} counts/rev, current sense {} V/A (the power stage as built: {} V/A){}",
         start.settings.counts_per_rev,

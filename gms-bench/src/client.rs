@@ -11,22 +11,17 @@ use gms_core::protocol::{CaptureCmd, Command, ErrorCode};
 
 /// A device speaking the bench protocol.
 pub trait Bench {
-    /// Sends one request line; returns the lines before its `ok` and the text after `ok`, or
-    /// the device's `err` line as [`Error::Device`].
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error>;
+    /// Sends a typed request (`gms_core::protocol::Command`: its line is the one the device's
+    /// parser reads back as the same command); returns the lines before its `ok` and the
+    /// text after `ok`, or the device's `err` as [`Error::Refused`].
+    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error>;
     /// Lets at least `seconds` of device time pass; fails when the run must stop (the link
     /// is lost, the user interrupted it).
     fn wait(&mut self, seconds: f64) -> Result<(), Error>;
     /// Sends a request that ends a run safely (the bridge off, the settings put back): unlike
-    /// [`Bench::request`] it goes out even after the run was stopped. By default the same.
-    fn request_to_end(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        self.request(line)
-    }
-
-    /// Sends a typed request: its line is the one the device's parser reads back as the same
-    /// command (`gms_core::protocol::Command`, written and parsed side by side).
-    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
-        self.request(&c.to_string())
+    /// [`Bench::send`] it goes out even after the run was stopped. By default the same.
+    fn send_to_end(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
+        self.send(c)
     }
 
     /// `set PATH VALUE` with a number (sent in f64's shortest decimal; the device rounds it
@@ -140,7 +135,7 @@ pub fn capture_rows(b: &mut impl Bench) -> Result<Vec<Vec<f64>>, Error> {
         )));
     }
     read_rows(b, st.samples, "capture", |start, count| {
-        Command::Capture(CaptureCmd::Read { start, count }).to_string()
+        Command::Capture(CaptureCmd::Read { start, count })
     })
 }
 
@@ -151,13 +146,13 @@ pub fn read_rows(
     b: &mut impl Bench,
     n: u32,
     what: &str,
-    request: impl Fn(u32, u32) -> String,
+    request: impl Fn(u32, u32) -> Command<'static>,
 ) -> Result<Vec<Vec<f64>>, Error> {
     let mut rows = Vec::with_capacity(n as usize);
     let mut start = 0;
     while start < n {
         let count = (n - start).min(gms_core::protocol::MAX_READ);
-        let (lines, _) = b.request(&request(start, count))?;
+        let (lines, _) = b.send(request(start, count))?;
         if lines.is_empty() {
             return Err(Error::Device(format!("{what} read {start}: nothing read")));
         }
@@ -329,7 +324,7 @@ pub fn guarded<B: Bench, T>(
                 },
                 (_, _) => e,
             };
-            let _ = b.request_to_end(&Command::Disable.to_string());
+            let _ = b.send_to_end(Command::Disable);
             Err(e)
         }
     }

@@ -598,22 +598,29 @@ pub fn lag_csv(t: &[f64], x: &[f64], f: &[f64]) -> String {
 }
 
 /// The experiments' ranges as a user gives them; `None`: derived from the device's
-/// parameters (its compensator's Fs and Vs).
-#[derive(Debug, Clone, Default)]
+/// parameters (its compensator's Fs and Vs). The same options on every command that runs the
+/// experiments (`gms-tune identify`, `hil-sim experiment`), so that an error can name them.
+#[derive(Debug, Clone, Default, clap::Args)]
 pub struct Ranges {
-    /// The staircase's torque step [N·m] (default: the device's Fs / 100).
+    /// The staircase's torque step [N·m] (default: the device's gms.fs / 100).
+    #[arg(long)]
     pub torque_step: Option<f64>,
-    /// The slowest sliding speed [rad/s] (default: the device's Vs / 10).
+    /// The slowest sliding speed [rad/s] (default: the device's gms.vs / 10).
+    #[arg(long)]
     pub v_min: Option<f64>,
-    /// The fastest sliding speed [rad/s] (default: 30 × the device's Vs).
+    /// The fastest sliding speed [rad/s] (default: 30 × the device's gms.vs).
+    #[arg(long)]
     pub v_max: Option<f64>,
-    /// The number of sliding speeds (default 10).
+    /// The number of sliding speeds, log-spaced (4 to 50; default 10).
+    #[arg(long)]
     pub speeds: Option<usize>,
-    /// The stroke window around the start, each way \\[rad\\] (default 5): the device's stroke
+    /// The stroke window around the start, each way \[rad\] (default 5): the device's stroke
     /// limits are narrowed to it while the experiments run.
+    #[arg(long)]
     pub window: Option<f64>,
     /// Skip the erase of the friction's memory before the staircase (right after power-up
     /// the state is virgin already; the erase takes about 35 s).
+    #[arg(long)]
     pub no_erase: bool,
 }
 
@@ -644,28 +651,28 @@ impl Plans {
                 Err(bad(what, v))
             }
         };
-        let step_t = pos("torque step", ranges.torque_step.unwrap_or(dev.fs / 100.0))?;
+        let step_t = pos("--torque-step", ranges.torque_step.unwrap_or(dev.fs / 100.0))?;
         let steps_to_fs = dev.fs / step_t;
         if !(10.0..=1000.0).contains(&steps_to_fs) {
             return Err(Error::Params(format!(
-                "torque step {step_t:.3e} N·m: the staircase would take {steps_to_fs:.0} steps to \
-                 the expected Fs {:.3e} N·m (10 to 1000)",
+                "--torque-step {step_t:.3e} N·m: the staircase would take {steps_to_fs:.0} steps \
+                 to the expected Fs {:.3e} N·m (10 to 1000)",
                 dev.fs
             )));
         }
-        let v_min = pos("slowest speed", ranges.v_min.unwrap_or(dev.vs / 10.0))?;
-        let v_max = pos("fastest speed", ranges.v_max.unwrap_or(30.0 * dev.vs))?;
+        let v_min = pos("--v-min", ranges.v_min.unwrap_or(dev.vs / 10.0))?;
+        let v_max = pos("--v-max", ranges.v_max.unwrap_or(30.0 * dev.vs))?;
         if v_min >= v_max || v_max > 20.0 {
             return Err(Error::Params(format!(
-                "speeds {v_min} to {v_max} rad/s: the slowest must be below the fastest, the \
-                 fastest at most 20 rad/s"
+                "--v-min {v_min} and --v-max {v_max} rad/s: the slowest speed must be below the \
+                 fastest, the fastest at most 20 rad/s"
             )));
         }
         let n = ranges.speeds.unwrap_or(10);
         if !(4..=50).contains(&n) {
-            return Err(Error::Params(format!("{n} speeds: 4 to 50")));
+            return Err(Error::Params(format!("--speeds {n}: 4 to 50")));
         }
-        let window = pos("stroke window", ranges.window.unwrap_or(5.0))?;
+        let window = pos("--window", ranges.window.unwrap_or(5.0))?;
         let mut presliding =
             PreslidingPlan::new(step_t / dev.k_m, 0).for_encoder(dev.rad_per_count, dev.dt());
         // Up to three times the expected breakaway: an axis that holds more is blocked.
@@ -677,7 +684,7 @@ impl Plans {
         if need > window {
             return Err(Error::Params(format!(
                 "the sliding run at {v_max} rad/s needs {need:.2} rad of stroke, more than the \
-                 window {window} rad: lower the fastest speed or widen the window"
+                 window {window} rad: lower --v-max or widen --window"
             )));
         }
         Ok(Plans {

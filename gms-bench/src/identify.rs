@@ -69,7 +69,7 @@ pub fn identify_on<B: Bench>(
         }
         if plan.stroke() > plans.window {
             return Err(Error::Params(format!(
-                "the lag run needs {:.2} rad of stroke, more than the window {} rad: widen it",
+                "the lag run needs {:.2} rad of stroke, more than the window {} rad: widen --window",
                 plan.stroke(),
                 plans.window
             )));

@@ -30,6 +30,9 @@
 use gms_ident::Error;
 use gms_ident::linear::PositionController;
 
+use gms_core::protocol::{Command, TableCmd};
+use gms_core::table::{Geometry, Which};
+
 use crate::client::{Bench, check_faults, guarded, status};
 use crate::ilc::{Iteration, Learner, LearningFilter, QFilter, Stop};
 
@@ -303,7 +306,7 @@ pub struct TableStatus {
 
 /// Reads the device's `table` status.
 pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
-    let (_, text) = b.request("table")?;
+    let (_, text) = b.send(Command::Table(TableCmd::Status))?;
     let mut s = TableStatus::default();
     let mut done = (None, None, None, None);
     for kv in text.split_ascii_whitespace() {
@@ -339,22 +342,41 @@ pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
 
 /// Writes `values` to the device's table `which` (`ref` or `corr`), as many a line as the
 /// protocol's line carries (eight at most).
-fn write_values(b: &mut impl Bench, which: &str, values: &[f64]) -> Result<(), Error> {
+fn write_values(b: &mut impl Bench, which: Which, values: &[f64]) -> Result<(), Error> {
     let max_line = gms_core::protocol::MAX_LINE - 1;
     let mut at = 0;
     while at < values.len() {
-        let mut line = format!("table {which} {at}");
+        let start = at as u32;
+        // The line's length without its values (`table ref START`).
+        let head = Command::Table(TableCmd::Write {
+            which,
+            start,
+            values: "",
+        })
+        .to_string()
+        .len();
+        let mut text = String::new();
         let mut n = 0;
         while let Some(v) = values.get(at + n) {
             // f32's shortest decimal: the device reads back the same value.
-            let word = format!(" {}", *v as f32);
-            if n == gms_core::table::TABLE_WRITE_VALUES || line.len() + word.len() > max_line {
+            let word = format!("{}", *v as f32);
+            let sep = usize::from(!text.is_empty());
+            if n == gms_core::table::TABLE_WRITE_VALUES
+                || head + text.len() + sep + word.len() > max_line
+            {
                 break;
             }
-            line.push_str(&word);
+            if sep == 1 {
+                text.push(' ');
+            }
+            text.push_str(&word);
             n += 1;
         }
-        b.request(&line)?;
+        b.send(Command::Table(TableCmd::Write {
+            which,
+            start,
+            values: &text,
+        }))?;
         at += n.max(1);
     }
     Ok(())
@@ -363,21 +385,29 @@ fn write_values(b: &mut impl Bench, which: &str, values: &[f64]) -> Result<(), E
 /// Uploads the reference and sets it (the device checks it whole: continuous, within the
 /// speed limit and the soft limits; nothing moves if it refuses).
 pub fn set_table(b: &mut impl Bench, t: &Table) -> Result<(), Error> {
-    write_values(b, "ref", &t.values)?;
-    b.request(&format!("table set {} {} {}", t.points, t.steps, t.origin))
-        .map(drop)
+    write_values(b, Which::Ref, &t.values)?;
+    let g = Geometry {
+        points: t.points,
+        steps: t.steps,
+        origin: t.origin,
+    };
+    b.send(Command::Table(TableCmd::Set(g))).map(drop)
 }
 
 /// Uploads a correction \[N·m at the points\] and has it played from the next period's start.
 pub fn use_correction(b: &mut impl Bench, u: &[f64]) -> Result<(), Error> {
-    write_values(b, "corr", u)?;
-    b.request("table use").map(drop)
+    write_values(b, Which::Corr, u)?;
+    b.send(Command::Table(TableCmd::Use)).map(drop)
 }
 
 /// Reads `n` values of the device's table `which` (`ref`, `corr` or `err`).
-pub fn read_values(b: &mut impl Bench, which: &str, n: u32) -> Result<Vec<f64>, Error> {
+pub fn read_values(b: &mut impl Bench, which: Which, n: u32) -> Result<Vec<f64>, Error> {
     let rows = crate::client::read_rows(b, n, "table", |start, count| {
-        format!("table read {which} {start} {count}")
+        Command::Table(TableCmd::Read {
+            which,
+            start,
+            count,
+        })
     })?;
     rows.iter()
         .map(|r| match r.as_slice() {
@@ -480,7 +510,7 @@ fn read_period(
     generation: u32,
 ) -> Result<(u32, f64, f64, Vec<f64>), Error> {
     let (p, rms, peak) = wait_period(b, t.period(), after, generation)?;
-    let e = read_values(b, "err", t.points)?;
+    let e = read_values(b, Which::Err, t.points)?;
     // Held: nothing but this host's own requests replaces it (checked all the same).
     if table_status(b)?.done.map(|d| d.0) != Some(p) {
         return Err(Error::Device(format!(
@@ -588,12 +618,12 @@ pub fn learn(
         };
         // Played until stopped (a host that reads, learns and uploads slower than a period
         // costs periods, not the run); a lost link ends it at its period's end.
-        b.request(&format!("table run {}", gms_core::table::TABLE_MAX_PERIODS))?;
+        b.send(Command::Table(TableCmd::Run(gms_core::table::TABLE_MAX_PERIODS)))?;
         out.started = table_status(b)?.started;
         // The first period starts from rest: the first pass is the next one held, in the
         // periodic state the learning works on.
         let (first, _, _) = wait_period(b, t.period(), None, 0)?;
-        b.request("table next")?;
+        b.send(Command::Table(TableCmd::Next))?;
         let mut last = Some(first);
         for i in 0..=plan.iterations {
             // The correction learned after iteration i − 1 is generation i.
@@ -617,7 +647,7 @@ pub fn learn(
             }
             use_correction(b, learner.correction())?;
         }
-        b.request("table stop")?;
+        b.send(Command::Table(TableCmd::Stop))?;
         for _ in 0..200 {
             if !table_status(b)?.playing {
                 break;
@@ -630,7 +660,7 @@ pub fn learn(
         if apply {
             use_correction(b, &out.correction)?;
         } else {
-            b.request("table corr off")?;
+            b.send(Command::Table(TableCmd::CorrOff))?;
         }
         Ok(out)
     })

@@ -7,6 +7,7 @@
 //! is friction, expressed as a **scale** of the device's model's sliding friction at that
 //! speed. A map measured one way only cannot tell the two apart.
 
+use gms_core::protocol::{Command, MapCmd};
 use gms_ident::Error;
 use nalgebra::{DMatrix, DVector};
 
@@ -309,7 +310,10 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
         let pairs: Vec<String> = (start..end)
             .map(|i| format!("{:e},{:e}", map.offset[i] as f32, map.scale[i] as f32))
             .collect();
-        b.request(&format!("map write {start} {}", pairs.join(" ")))?;
+        b.send(Command::Map(MapCmd::Write {
+            start: start as u32,
+            pairs: &pairs.join(" "),
+        }))?;
         start = end;
     }
     if enable {
@@ -322,7 +326,7 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
 pub fn read(b: &mut impl Bench) -> Result<Vec<(f64, f64)>, Error> {
     let bins = get_param(b, "map.bins")? as u32;
     let rows = crate::client::read_rows(b, bins, "map", |start, count| {
-        format!("map read {start} {count}")
+        Command::Map(MapCmd::Read { start, count })
     })?;
     rows.iter()
         .map(|r| match r.as_slice() {

@@ -13,7 +13,7 @@ use crate::client::Bench;
 /// firmware's) are skipped; parameters the device does not list (an older firmware's) keep
 /// their built-in defaults, so they never differ between two reads.
 pub fn read(b: &mut impl Bench) -> Result<Settings, Error> {
-    let (lines, _) = b.request_to_end(&Command::List.to_string())?;
+    let (lines, _) = b.send_to_end(Command::List)?;
     parse_list(&lines)
 }
 
@@ -54,7 +54,7 @@ pub fn changes(from: &Settings, to: &Settings) -> Vec<(&'static str, String)> {
 
 /// Makes the device's settings `to`: reads them, then sends every difference as one set
 /// ([`apply`]). Returns how many parameters changed. Goes out even after a run was stopped
-/// ([`Bench::request_to_end`]).
+/// ([`Bench::send_to_end`]).
 pub fn write(b: &mut impl Bench, to: &Settings) -> Result<usize, Error> {
     let now = read(b)?;
     let diff: Vec<(String, String)> = changes(&now, to)
@@ -74,11 +74,10 @@ pub fn write(b: &mut impl Bench, to: &Settings) -> Result<usize, Error> {
 /// stopped. Returns how many were sent.
 pub fn apply(b: &mut impl Bench, sets: &[(String, String)], to_end: bool) -> Result<usize, Error> {
     let send = |b: &mut _, c: Command<'_>| {
-        let line = c.to_string();
         if to_end {
-            Bench::request_to_end(b, &line)
+            Bench::send_to_end(b, c)
         } else {
-            Bench::request(b, &line)
+            Bench::send(b, c)
         }
     };
     match send(b, Command::Discard) {
@@ -142,7 +141,7 @@ impl Snapshot {
     /// Switches the bridge off and puts the settings back as they were (one staged set);
     /// returns how many parameters it put back.
     pub fn restore(&self, b: &mut impl Bench) -> Result<usize, Error> {
-        b.request_to_end(&Command::Disable.to_string())?;
+        b.send_to_end(Command::Disable)?;
         write(b, &self.settings)
     }
 }

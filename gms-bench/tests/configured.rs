@@ -14,9 +14,10 @@ struct Fake {
 }
 
 impl Bench for Fake {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        self.asked.push(line.to_string());
-        match line {
+    fn send(&mut self, c: gms_core::protocol::Command<'_>) -> Result<(Vec<String>, String), Error> {
+        let line = c.to_string();
+        self.asked.push(line.clone());
+        match line.as_str() {
             "status" => {
                 // The device core's own reply at rest, with `configured` as given (or left out).
                 let mut text = String::new();

@@ -1,5 +1,5 @@
 //! The parameter store on NOR flash, one format for the board and the virtual device: one
-//! record ([`crate::drive::encode_settings`]: version, layout id, values, CRC-32) under one
+//! record ([`crate::drive::encode_settings`]: version, each setting under its id, CRC-32) under one
 //! key of a `sequential-storage` map over two or more flash sectors ([`STORE_RANGE`] on the
 //! F405 board and in the simulator's store image; each board says where). The firmware runs it on the
 //! STM32F405's internal flash; `hil-sim serve --store FILE` on a file holding the image of the
@@ -41,8 +41,7 @@ const KEY_MAP: u8 = 2;
 pub const MAP_BUFFER_LEN: usize = 2 * (crate::posmap::MAP_RECORD_LEN + 32);
 
 /// The buffer holds one record plus sequential-storage's key and alignment.
-const BUF: usize = 512;
-const _: () = assert!(RECORD_LEN + 16 <= BUF);
+const BUF: usize = RECORD_LEN + 32;
 
 type Map<F> = MapStorage<u8, F, Cache<Uncached, Uncached, Uncached, u8>>;
 
@@ -122,11 +121,14 @@ impl<F: NorFlash> ParamStore for FlashStore<F> {
         let Some(bytes) = item else {
             return Ok(None);
         };
+        // A record of an earlier version may be shorter: zero-padded, as the decoder reads it.
         let mut rec = [0u8; RECORD_LEN];
-        if bytes.len() != RECORD_LEN {
+        if bytes.len() > RECORD_LEN {
             return Err(StoreError::Length);
         }
-        rec.copy_from_slice(bytes);
+        for (d, s) in rec.iter_mut().zip(bytes) {
+            *d = *s;
+        }
         Ok(Some(rec))
     }
 

@@ -3,7 +3,7 @@
 
 use gms_core::drive::{
     self, CountExtender, CurrentSense, Faults, Limits, Measured, OffsetCalibration, RECORD_LEN,
-    RecordError, StepStats, bridge_compare, decode_settings, encode_settings, pwm_timing,
+    RecordError, ReportLine, StepStats, bridge_compare, decode_settings, encode_settings, pwm_timing,
     wrapping_delta,
 };
 use gms_core::protocol::{self, Access, PARAMS};
@@ -55,7 +55,8 @@ proptest! {
             }
         }
         let rec = encode_settings(&s);
-        prop_assert_eq!(decode_settings(&rec, &base), Ok(s));
+        let back = decode_settings(&rec, &base).map(|l| (l.settings, l.report.is_clean()));
+        prop_assert_eq!(back, Ok((s, true)));
     }
 
     /// Any corrupted byte is caught (the CRC), never half applied.
@@ -104,22 +105,44 @@ fn bad_records_name_why() {
     v[0] = 99;
     resign(&mut v);
     assert_eq!(decode_settings(&v, &base), Err(RecordError::Version));
-    let mut l = good;
-    l[1] ^= 1;
-    resign(&mut l);
+    // A version-1 record (no ids) of another table.
+    let mut l = [0u8; RECORD_LEN];
+    l[0] = 1;
+    l[1..5].copy_from_slice(&(drive::layout_id() ^ 1).to_le_bytes());
+    let crc = drive::crc32(&l[..266 - 4]);
+    l[266 - 4..266].copy_from_slice(&crc.to_le_bytes());
     assert_eq!(decode_settings(&l, &base), Err(RecordError::Layout));
-    let mut m = good;
-    m[5] = 7; // no such mode
-    resign(&mut m);
-    assert_eq!(decode_settings(&m, &base), Err(RecordError::Invalid));
-    // The first number is rate.pos_hz: NaN, then out of range, then a valid value that makes
-    // the set invalid (cur_hz no longer a multiple).
-    for v in [f32::NAN, 1e9, 7_777.0] {
+    // The entries: the first is rate.pos_hz's. A value that makes the set invalid (cur_hz no
+    // longer a multiple): refused whole. Out of range: clamped and named. Not a number:
+    // dropped and named. No such mode (the mode's entry): dropped, the default kept.
+    let pos_hz = drive::param_id("rate.pos_hz");
+    assert_eq!(u32::from_le_bytes(good[2..6].try_into().unwrap()), pos_hz);
+    let with = |at: usize, v: f32| {
         let mut r = good;
-        r[6..10].copy_from_slice(&v.to_le_bytes());
+        r[at..at + 4].copy_from_slice(&v.to_le_bytes());
         resign(&mut r);
-        assert_eq!(decode_settings(&r, &base), Err(RecordError::Invalid), "{v}");
-    }
+        decode_settings(&r, &base)
+    };
+    assert_eq!(with(6, 7_777.0), Err(RecordError::Invalid));
+    assert_eq!(with(6, 1e9), Err(RecordError::Invalid), "clamped to 50 kHz: not a divisor");
+    let nan = with(6, f32::NAN).unwrap();
+    assert_eq!(nan.settings, base);
+    assert_eq!(nan.report.lines().collect::<Vec<_>>(), [ReportLine::Dropped(pos_hz)]);
+    let mode_at = (0..good[1] as usize)
+        .map(|i| 2 + 8 * i)
+        .find(|&a| u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("ff.mode"))
+        .unwrap();
+    let m = with(mode_at + 4, 7.0).unwrap();
+    assert_eq!(m.settings.ff.mode, base.ff.mode);
+    assert_eq!(m.report.dropped, 1);
+    // pos.kp out of range: clamped to its maximum, named.
+    let kp_at = (0..good[1] as usize)
+        .map(|i| 2 + 8 * i)
+        .find(|&a| u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("pos.kp"))
+        .unwrap();
+    let k = with(kp_at + 4, 5e3).unwrap();
+    assert_eq!(k.settings.pid.kp, 1e3);
+    assert_eq!(k.report.lines().collect::<Vec<_>>(), [ReportLine::Clamped("pos.kp")]);
 }
 
 #[test]

@@ -56,32 +56,35 @@ pub enum Error {
 /// A device's `err CODE REASON` reply.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Refusal {
-    /// The protocol's error code (`gms_core::protocol::ErrorCode` as a number).
-    pub code: u8,
+    /// The protocol's error code.
+    pub code: ErrorCode,
     /// The reason the device gave.
     pub reason: String,
 }
 
 impl Refusal {
-    /// Reads an `err CODE REASON` line; `None` when the line is not one.
+    /// Reads an `err CODE REASON` line ([`gms_core::protocol::Reply`]); `None` when the line
+    /// is not one.
     pub fn parse(line: &str) -> Option<Refusal> {
-        let rest = line.trim().strip_prefix("err ")?;
-        let (code, reason) = rest.split_once(' ').unwrap_or((rest, ""));
-        Some(Refusal {
-            code: code.parse().ok()?,
-            reason: reason.to_string(),
-        })
+        match gms_core::protocol::Reply::parse(line.trim()) {
+            Ok(Some(gms_core::protocol::Reply::Err(code, reason))) => Some(Refusal {
+                code,
+                reason: reason.to_string(),
+            }),
+            _ => None,
+        }
     }
 
     /// True when the device refused with `code`.
     pub fn is(&self, code: ErrorCode) -> bool {
-        self.code == code as u8
+        self.code == code
     }
 }
 
 impl fmt::Display for Refusal {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "device answered: err {} {}", self.code, self.reason)
+        let line = gms_core::protocol::Reply::Err(self.code, &self.reason);
+        write!(f, "device answered: {line}")
     }
 }
 

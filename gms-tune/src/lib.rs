@@ -8,7 +8,7 @@ pub mod run;
 pub mod ui;
 
 use gms_core::device::StatusReply;
-use gms_core::protocol::Command;
+use gms_core::protocol::{Command, Reply};
 use std::io::{ErrorKind, Read, Write};
 use std::time::{Duration, Instant};
 
@@ -38,8 +38,14 @@ pub struct Link {
 pub enum LinkError {
     /// No reply within the timeout.
     Timeout(Duration),
-    /// The device answered `err …` (the whole line).
-    Device(String),
+    /// The device refused the request (`err CODE REASON`, read by
+    /// [`gms_core::protocol::Reply`]).
+    Device(gms_ident::Refusal),
+    /// The device answered, but not as the protocol reads (an `err` without a known code,
+    /// a `status` that does not parse): the link is up, the reply is wrong.
+    Reply(String),
+    /// A bench step on the link failed (its own message: [`gms_ident::Error`]).
+    Bench(gms_ident::Error),
     /// The connection failed or closed.
     Io(String),
 }
@@ -48,7 +54,9 @@ impl std::fmt::Display for LinkError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             LinkError::Timeout(d) => write!(f, "timeout: no reply within {} ms", d.as_millis()),
-            LinkError::Device(l) => write!(f, "device answered: {l}"),
+            LinkError::Device(r) => r.fmt(f),
+            LinkError::Reply(m) => write!(f, "unreadable reply: {m}"),
+            LinkError::Bench(e) => e.fmt(f),
             LinkError::Io(e) => write!(f, "link: {e}"),
         }
     }
@@ -58,11 +66,10 @@ impl LinkError {
     /// As a bench error: the device's `err` reply typed ([`gms_ident::Error::Refused`]), a
     /// timeout or a failed link as [`gms_ident::Error::Link`].
     pub fn into_bench(self) -> gms_ident::Error {
-        match &self {
-            LinkError::Device(line) => match gms_ident::Refusal::parse(line) {
-                Some(r) => gms_ident::Error::Refused(r),
-                None => gms_ident::Error::Device(self.to_string()),
-            },
+        match self {
+            LinkError::Device(r) => gms_ident::Error::Refused(r),
+            LinkError::Bench(e) => e,
+            LinkError::Reply(_) => gms_ident::Error::Device(self.to_string()),
             LinkError::Timeout(_) | LinkError::Io(_) => gms_ident::Error::Link(self.to_string()),
         }
     }
@@ -154,12 +161,14 @@ impl Link {
         }
     }
 
-    /// Sends `line` and returns the reply's lines before `ok` and the text after `ok`. A
+    /// The console passthrough (the window's console, `gms-tune send`, tests): sends one raw
+    /// `line` and returns the reply's lines before `ok` and the text after `ok`; every other
+    /// request goes typed through [`Link::ask`]. A
     /// `save` gets at least [`gms_core::protocol::SAVE_REPLY_MS`] (a board erases flash); on a
     /// device slower than real time ([`Link::speed`] below 1) every request gets the timeout
     /// stretched by its pace. A reply that misses its timeout is owed: read and dropped when
     /// it comes, before the next request's.
-    pub fn request(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
+    pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
         let base = if line.split_whitespace().next() == Some("save") {
             self.timeout.max(Duration::from_millis(
@@ -184,7 +193,8 @@ impl Link {
                 self.owed += 1;
                 return Err(LinkError::Timeout(wait));
             };
-            let end = is_reply_end(&l);
+            let reply = Reply::parse(&l);
+            let end = !matches!(reply, Ok(None));
             if self.owed > 0 {
                 // An earlier request's late reply (its lines, then its end): not ours.
                 if end {
@@ -193,13 +203,17 @@ impl Link {
                 }
                 continue;
             }
-            if l.starts_with("err") {
-                return Err(LinkError::Device(l));
+            match reply {
+                Ok(None) => body.push(l),
+                Ok(Some(Reply::Ok(text))) => return Ok((body, text.to_string())),
+                Ok(Some(Reply::Err(code, reason))) => {
+                    return Err(LinkError::Device(gms_ident::Refusal {
+                        code,
+                        reason: reason.to_string(),
+                    }));
+                }
+                Err(e) => return Err(LinkError::Reply(format!("{e}: {l}"))),
             }
-            if end {
-                return Ok((body, l.get(3..).unwrap_or("").to_string()));
-            }
-            body.push(l);
         }
     }
 
@@ -209,15 +223,15 @@ impl Link {
     }
 
     /// Sends a typed request (its line is the one the device's parser reads back as the same
-    /// command) and waits for its reply, as [`Link::request`].
+    /// command) and waits for its reply, as [`Link::console`].
     pub fn ask(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), LinkError> {
-        self.request(&c.to_string())
+        self.console(&c.to_string())
     }
 
-    /// [`Link::request`]'s reply as one text: the lines before `ok`, then the text after it,
+    /// [`Link::console`]'s reply as one text: the lines before `ok`, then the text after it,
     /// newline-separated (empty parts left out).
-    pub fn request_text(&mut self, line: &str) -> Result<String, LinkError> {
-        let (body, text) = self.request(line)?;
+    pub fn console_text(&mut self, line: &str) -> Result<String, LinkError> {
+        let (body, text) = self.console(line)?;
         let mut out = body.join("\n");
         if !text.is_empty() {
             if !out.is_empty() {
@@ -231,7 +245,7 @@ impl Link {
     /// The device's `status`, read (the device core's own format).
     pub fn status(&mut self) -> Result<StatusReply, LinkError> {
         let (_, text) = self.ask(Command::Status)?;
-        StatusReply::parse(&text).map_err(|e| LinkError::Io(format!("{e}: {text}")))
+        StatusReply::parse(&text).map_err(|e| LinkError::Reply(format!("status: {e}: {text}")))
     }
 
     /// The device's clock (`status` key `t`) \[s\].
@@ -324,7 +338,7 @@ impl Link {
         let deadline = Instant::now() + d;
         while let Some(l) = self.next_line(deadline)? {
             // A reply while listening: one owed (a late one) is paid; any other is stray.
-            if self.owed > 0 && is_reply_end(&l) {
+            if self.owed > 0 && !matches!(Reply::parse(&l), Ok(None)) {
                 self.owed -= 1;
             }
         }
@@ -336,8 +350,8 @@ impl Link {
 /// back with `gms_bench::capture_rows`, the sliding experiment, …). Waiting is in
 /// device time ([`Link::wait_device`]).
 impl gms_bench::Bench for Link {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        Link::request(self, line).map_err(LinkError::into_bench)
+    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), gms_ident::Error> {
+        Link::ask(self, c).map_err(LinkError::into_bench)
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
@@ -345,10 +359,6 @@ impl gms_bench::Bench for Link {
     }
 }
 
-/// Whether `line` ends a reply (`ok`, `ok …` or `err …`): the lines before it are its body.
-fn is_reply_end(line: &str) -> bool {
-    line == "ok" || line.starts_with("ok ") || line.starts_with("err")
-}
 
 /// Parses a telemetry line `name=value name=value …`.
 pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
@@ -399,11 +409,11 @@ mod tests {
         // within its own timeout (from 200 ms to 400 ms).
         let addr = device(|l| Some(if l.starts_with("slow") { 300 } else { 0 }));
         let mut link = Link::tcp(&addr, Duration::from_millis(200)).unwrap();
-        assert!(matches!(link.request("slow 1"), Err(LinkError::Timeout(_))));
-        assert_eq!(link.request("get b").unwrap().1, "get b");
-        assert!(matches!(link.request("slow 2"), Err(LinkError::Timeout(_))));
+        assert!(matches!(link.console("slow 1"), Err(LinkError::Timeout(_))));
+        assert_eq!(link.console("get b").unwrap().1, "get b");
+        assert!(matches!(link.console("slow 2"), Err(LinkError::Timeout(_))));
         link.listen(Duration::from_millis(600)).unwrap();
-        assert_eq!(link.request("get c").unwrap().1, "get c");
+        assert_eq!(link.console("get c").unwrap().1, "get c");
     }
 
     /// Two requests in a row unanswered: the link is out of step or the device gone, an I/O
@@ -412,7 +422,7 @@ mod tests {
     fn two_unanswered_requests_are_a_lost_link() {
         let addr = device(|l| (!l.starts_with("lost")).then_some(0));
         let mut link = Link::tcp(&addr, Duration::from_millis(50)).unwrap();
-        assert!(matches!(link.request("lost 1"), Err(LinkError::Timeout(_))));
-        assert!(matches!(link.request("lost 2"), Err(LinkError::Io(_))));
+        assert!(matches!(link.console("lost 1"), Err(LinkError::Timeout(_))));
+        assert!(matches!(link.console("lost 2"), Err(LinkError::Io(_))));
     }
 }

@@ -160,26 +160,8 @@ enum Cmd {
         /// Load it and save it on the device (implies --apply).
         #[arg(long)]
         save: bool,
-        /// Skip the erase before the staircase (about 35 s): right after power-up the friction
-        /// is in its virgin state already.
-        #[arg(long)]
-        no_erase: bool,
-        /// The staircase's torque step [N·m] (default: the device's gms.fs / 100).
-        #[arg(long)]
-        torque_step: Option<f64>,
-        /// The slowest sliding speed [rad/s] (default: the device's gms.vs / 10).
-        #[arg(long)]
-        v_min: Option<f64>,
-        /// The fastest sliding speed [rad/s] (default: 30 × the device's gms.vs).
-        #[arg(long)]
-        v_max: Option<f64>,
-        /// Sliding speeds, log-spaced (4 to 50).
-        #[arg(long, default_value_t = 10)]
-        speeds: usize,
-        /// Stroke window around the start, each way \[rad\]: the device's stroke limits are
-        /// narrowed to it while the experiments run.
-        #[arg(long, default_value_t = 5.0)]
-        window: f64,
+        #[command(flatten)]
+        ranges: gms_bench::Ranges,
         /// Print the result as JSON (the identified [friction] table, raw values in SI, and
         /// the report's lines) instead of the readable report.
         #[arg(long)]
@@ -401,10 +383,7 @@ fn dump(link: &mut Link) -> Result<String, Fail> {
 
 /// The device's parameters as a parameter file ([`gms_tune::params::read`]).
 pub(crate) fn device_params(link: &mut Link) -> Result<ParamFile, Fail> {
-    gms_tune::params::read(link).map_err(|e| match e {
-        LinkError::Device(m) | LinkError::Io(m) => Fail::Device(m),
-        e => Fail::Device(e.to_string()),
-    })
+    gms_tune::params::read(link).map_err(Fail::from)
 }
 
 /// `params load FILE`: the file sent as one set ([`gms_tune::params::load`]).
@@ -474,7 +453,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             link.ask(Command::Save)?;
         }
         Cmd::Send { words } => {
-            let text = link.request_text(&words.join(" "))?;
+            let text = link.console_text(&words.join(" "))?;
             if !text.is_empty() {
                 println!("{text}");
             }
@@ -701,12 +680,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
             asymmetric,
             apply,
             save,
-            torque_step,
-            v_min,
-            v_max,
-            speeds,
-            window,
-            no_erase,
+            ranges,
             json,
         } => identify::run(
             &mut link,
@@ -718,14 +692,7 @@ fn run(cli: Cli) -> Result<(), Fail> {
                 apply,
                 save,
                 json,
-                ranges: gms_bench::Ranges {
-                    torque_step,
-                    v_min,
-                    v_max,
-                    speeds: Some(speeds),
-                    window: Some(window),
-                    no_erase,
-                },
+                ranges,
             },
         )?,
     }

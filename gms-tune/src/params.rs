@@ -57,7 +57,7 @@ pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
 /// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
 /// and `[device]` (everything else settable, by protocol path) ([`gms_bench::paramfile`]).
 pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
-    gms_bench::paramfile::dump(link).map_err(|e| LinkError::Device(e.to_string()))
+    gms_bench::paramfile::dump(link).map_err(LinkError::Bench)
 }
 
 /// The parameter file of a `list` (read-only estimates left out): the rows read into the

@@ -62,13 +62,13 @@ impl<'a, 'h> RunBench<'a, 'h> {
 }
 
 impl Bench for RunBench<'_, '_> {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
+    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
         self.stopped()?;
-        Bench::request(&mut *self.link, line)
+        Bench::send(&mut *self.link, c)
     }
 
-    fn request_to_end(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        Bench::request(&mut *self.link, line)
+    fn send_to_end(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
+        Bench::send(&mut *self.link, c)
     }
 
     /// Waits in device time, the progress told as it passes and the stop flag looked at
@@ -210,7 +210,7 @@ pub fn step_test(
     crate::LinkError,
 > {
     let rpc =
-        gms_bench::rad_per_count(link).map_err(|e| crate::LinkError::Device(e.to_string()))?;
+        gms_bench::rad_per_count(link).map_err(crate::LinkError::Bench)?;
     link.ask(Command::Enable { current: false })?;
     let pos0 = link
         .record("pos", 100.0, 0.05)?

@@ -246,10 +246,10 @@ fn the_library_captures_a_velocity_run() {
     let srv = Server::child("tcp", &dir.path().join("flash.img"), 4.0, None);
     use gms_bench::{capture_rows, capture_status, capture_wait};
     let mut link = gms_tune::Link::tcp(&srv.addr, Duration::from_secs(2)).unwrap();
-    link.request("enable").unwrap();
-    link.request("capture t,pos,current 1 2000 next").unwrap();
+    link.console("enable").unwrap();
+    link.console("capture t,pos,current 1 2000 next").unwrap();
     assert_eq!(capture_status(&mut link).unwrap().state, "armed");
-    link.request("velocity 0.3").unwrap();
+    link.console("velocity 0.3").unwrap();
     let st = capture_wait(&mut link, 0.02, 500).unwrap();
     assert_eq!((st.samples, st.capacity), (2000, 8192));
     let rows = capture_rows(&mut link).unwrap();
@@ -263,7 +263,7 @@ fn the_library_captures_a_velocity_run() {
     // After the 6 ms ramp the axis follows 0.3 rad/s.
     let speed = (rows[1999][1] - rows[1000][1]) / (999.0 * dt);
     assert!((speed - 0.3).abs() < 0.03, "speed {speed}");
-    link.request("hold").unwrap();
+    link.console("hold").unwrap();
     // A second read of the same capture gives the same data.
     assert_eq!(capture_rows(&mut link).unwrap(), rows);
 }

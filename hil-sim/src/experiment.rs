@@ -282,14 +282,16 @@ pub enum Rig {
 /// formats of [`run`]. The experiments' ranges come from the device's parameters, as on a
 /// bench from the values the user set: the device starts from the truth's nominal friction
 /// where it can hold it (`ff.start = "plant"`: a GMS of up to 6 blocks exactly, otherwise
-/// the Stribeck curve), and from its default model for a GMS of more blocks.
+/// the Stribeck curve), and from its default model for a GMS of more blocks; `ranges` as
+/// `gms-tune identify` takes them (`Ranges::default()`: from those parameters).
 pub fn run_on_device(
     kind: Kind,
     spec: &FrictionSpec,
     variability: f64,
     seed: u64,
+    ranges: &gms_bench::Ranges,
 ) -> Result<String, Error> {
-    use gms_bench::{self, DeviceInfo, LagPlan, Plans, Ranges};
+    use gms_bench::{self, DeviceInfo, LagPlan, Plans};
     if kind == Kind::Guideway {
         return Err(Error::Run(
             "the guideway experiment needs the slide's rig (--rig ideal)".into(),
@@ -326,7 +328,7 @@ pub fn run_on_device(
     }
     let mut dev = crate::device::LocalDevice::new(&sc).map_err(|e| Error::Run(e.to_string()))?;
     let info = DeviceInfo::read(&mut dev).map_err(|e| Error::Run(e.to_string()))?;
-    let plans = Plans::new(&info, &Ranges::default()).map_err(|e| Error::Run(e.to_string()))?;
+    let plans = Plans::new(&info, ranges).map_err(|e| Error::Run(e.to_string()))?;
     let run = |e: gms_ident::Error| Error::Run(e.to_string());
     Ok(match kind {
         Kind::Presliding => {

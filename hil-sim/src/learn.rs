@@ -80,7 +80,10 @@ fn scatter(dev: &mut LocalDevice, t: &Table) -> Result<Scatter, Error> {
     let run = |e: gms_ident::Error| Error::Run(format!("scatter: {e}"));
     dev.record_truth();
     let periods = SCATTER_PERIODS + 1;
-    dev.request(&format!("table run {periods}")).map_err(run)?;
+    dev.send(gms_core::protocol::Command::Table(
+        gms_core::protocol::TableCmd::Run(periods),
+    ))
+    .map_err(run)?;
     let st = gms_bench::learn::table_status(dev).map_err(run)?;
     dev.wait(f64::from(periods) * t.period() + 0.05)
         .map_err(run)?;

@@ -162,6 +162,9 @@ enum Cmd {
         /// idealised set-up on the friction model alone (any model; always for guideway).
         #[arg(long, default_value = "device", value_parser = ["device", "ideal"])]
         rig: String,
+        /// The experiments' ranges on the device rig (as `gms-tune identify` takes them).
+        #[command(flatten)]
+        ranges: gms_bench::Ranges,
     },
     /// Identify GMS parameters from experiment data; writes a parameter file.
     Identify {
@@ -350,6 +353,7 @@ fn main() -> ExitCode {
             seed,
             variability,
             rig,
+            ranges,
         } => (|| {
             use hil_sim::experiment::{Kind, Setup, run, run_on_device};
             if !(0.0..0.9).contains(&variability) {
@@ -366,8 +370,18 @@ fn main() -> ExitCode {
                 _ => Kind::Guideway,
             };
             let text = if rig == "device" && k != Kind::Guideway {
-                run_on_device(k, &pf.friction, variability, seed)?
+                run_on_device(k, &pf.friction, variability, seed, &ranges)?
             } else {
+                let r = &ranges;
+                let given = [r.torque_step, r.v_min, r.v_max, r.window].iter().any(Option::is_some)
+                    || r.speeds.is_some()
+                    || r.no_erase;
+                if given {
+                    return Err("--torque-step, --v-min, --v-max, --speeds, --window and \
+                                --no-erase plan the device rig's experiments: not with --rig \
+                                ideal or the guideway"
+                        .into());
+                }
                 run(
                     k,
                     &pf.friction,

@@ -196,7 +196,7 @@ fn the_sine_test_repeats_and_sees_the_compensation() {
     let mut dev = LocalDevice::new(&sc).unwrap();
     let a = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
     let b = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
-    dev.request("set ff.mode none").unwrap();
+    dev.console("set ff.mode none").unwrap();
     let none = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
     let rpc = 3.8e-6;
     eprintln!(
@@ -442,8 +442,11 @@ struct Tracking<'a> {
 }
 
 impl gms_bench::Bench for Tracking<'_> {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        self.dev.request(line)
+    fn send(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+        self.dev.send(c)
     }
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
         // In slices, so that a run's far end is seen.
@@ -502,11 +505,14 @@ struct Stalling {
 }
 
 impl gms_bench::Bench for Stalling {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        if line == self.on {
+    fn send(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+        if c.to_string() == self.on {
             self.dev.wait(self.stall)?;
         }
-        self.dev.request(line)
+        self.dev.send(c)
     }
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
         self.dev.wait(seconds)
@@ -539,7 +545,7 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
         plan.guard = guard;
         let mut pre = Vec::new();
         let r = presliding(&mut b, &plan, &mut pre);
-        let (_, st) = b.request("status").unwrap();
+        let (_, st) = b.dev.console("status").unwrap();
         // The axis at rest where it stopped.
         b.wait(0.5).unwrap();
         (r, pre.len(), position(&mut b).unwrap(), st, b)
@@ -552,7 +558,7 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
     assert!(x > 0.5 && x < 0.55, "x {x}");
     assert!(st.contains("faults=0") && st.contains("enabled=0"), "{st}");
     let lim = |b: &mut Stalling, p: &str| {
-        let (_, v) = b.request(&format!("get {p}")).unwrap();
+        let (_, v) = b.dev.console(&format!("get {p}")).unwrap();
         v.trim().parse::<f64>().unwrap()
     };
     assert_eq!(
@@ -591,7 +597,7 @@ fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
     let r = presliding(&mut b, &plan, &mut pre);
     b.dev.wait(0.5).unwrap();
     let x = position(&mut b).unwrap();
-    let (_, st) = b.dev.request("status").unwrap();
+    let (_, st) = b.dev.console("status").unwrap();
     eprintln!("{} steps, stopped at {x:.3} rad; {st}", pre.len());
     r.unwrap();
     assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());

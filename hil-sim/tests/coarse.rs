@@ -25,16 +25,16 @@ fn the_device_runs_in_the_plants_encoder_counts_and_sense_scale() {
     assert_eq!(get_param(&mut dev, "enc.counts_per_rev").unwrap(), 2000.0);
     // 1.65 V over ±2 A.
     assert!((get_param(&mut dev, "sense.v_per_a").unwrap() - 0.825).abs() < 1e-6);
-    let (_, status) = gms_bench::Bench::request(&mut dev, "status").unwrap();
+    let (_, status) = dev.console("status").unwrap();
     assert!(status.contains(" configured=1"), "{status}");
     // A move of 100 counts ends within a count of 100 × 2π/2000 rad.
     let rpc = std::f64::consts::TAU / 2000.0;
     let bench = &mut dev;
     use gms_bench::Bench;
-    bench.request("enable").unwrap();
-    bench.request(&format!("move {}", 100.0 * rpc)).unwrap();
+    bench.console("enable").unwrap();
+    bench.console(&format!("move {}", 100.0 * rpc)).unwrap();
     bench.wait(2.0).unwrap();
-    let (_, status) = bench.request("status").unwrap();
+    let (_, status) = bench.console("status").unwrap();
     let field = |k: &str| -> f64 {
         status
             .split_whitespace()
@@ -127,9 +127,9 @@ fn commissioning_measures_the_gear_motor() {
 fn move_counts(dev: &mut LocalDevice, counts: f64) -> (f64, f64, String) {
     use gms_bench::Bench;
     let rpc = std::f64::consts::TAU / 2000.0;
-    dev.request("enable").unwrap();
+    dev.console("enable").unwrap();
     let x0 = gms_bench::position(dev).unwrap();
-    dev.request(&format!("move {}", x0 + counts * rpc)).unwrap();
+    dev.console(&format!("move {}", x0 + counts * rpc)).unwrap();
     dev.wait(2.0).unwrap();
     let status = dev.ask("status");
     let field = |k: &str| -> f64 {

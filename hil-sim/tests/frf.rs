@@ -25,7 +25,7 @@ fn scenario(extra: &str, tables: &str) -> Scenario {
 /// Enables, lets the loop settle, sweeps.
 fn sweep(dev: &mut LocalDevice, plan: &Plan) -> Vec<Point> {
     let mut pts = Vec::new();
-    dev.request("enable").unwrap();
+    dev.console("enable").unwrap();
     dev.wait(0.2).unwrap();
     frf::sweep(dev, plan, &mut pts, |_, _| {}).unwrap();
     pts
@@ -262,14 +262,14 @@ fn the_open_loop_margins_are_the_models() {
 /// [counts]: a move of `counts` from where the axis holds, recorded at the position rate.
 fn step_overshoot(dev: &mut LocalDevice, counts: f64) -> (f64, f64) {
     let rpc = gms_bench::rad_per_count(dev).unwrap();
-    dev.request("enable").unwrap();
+    dev.console("enable").unwrap();
     dev.wait(0.3).unwrap();
     let x0 = gms_bench::position(dev).unwrap();
     dev.capture("t,pos", 1, 1000, true).unwrap();
-    dev.request(&format!("move {}", x0 + counts * rpc)).unwrap();
+    dev.console(&format!("move {}", x0 + counts * rpc)).unwrap();
     dev.wait(0.12).unwrap();
     let rows = gms_bench::capture_rows(dev).unwrap();
-    dev.request("disable").unwrap();
+    dev.console("disable").unwrap();
     // Positions relative to the trigger [counts].
     let pos: Vec<f64> = rows.iter().map(|r| r[1] / rpc).collect();
     let over = pos.iter().fold(f64::MIN, |a, p| a.max(*p)) - counts;
@@ -352,27 +352,27 @@ fn disable_and_a_lost_link_end_a_measurement() {
     let sc = scenario("", "");
     let mut dev = LocalDevice::new(&sc).unwrap();
     let state = |dev: &mut LocalDevice| {
-        let (_, text) = dev.request("frf").unwrap();
+        let (_, text) = dev.console("frf").unwrap();
         frf::Reply::parse(&text).unwrap()
     };
-    dev.request("enable").unwrap();
-    dev.request("frf current 100 0.003 1000 2").unwrap();
+    dev.console("enable").unwrap();
+    dev.console("frf current 100 0.003 1000 2").unwrap();
     dev.wait(0.1).unwrap();
     assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Measuring);
-    dev.request("disable").unwrap();
+    dev.console("disable").unwrap();
     dev.wait(0.01).unwrap();
     let r = state(&mut dev);
     assert_eq!(r.state, gms_core::frf::FrfState::Stopped);
     assert!(r.groups > 0 && r.phasors[0].norm() > 0.0029, "{r:?}");
-    dev.request("enable").unwrap();
-    dev.request("frf current 100 0.003 1000 2").unwrap();
+    dev.console("enable").unwrap();
+    dev.console("frf current 100 0.003 1000 2").unwrap();
     dev.wait(0.1).unwrap();
     dev.disconnect();
     dev.wait(0.01).unwrap();
     assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Stopped);
     let st = gms_bench::status(&mut dev).unwrap();
     assert!(st.enabled, "the position loop goes on holding");
-    dev.request("current 0").unwrap();
-    let e = dev.request("frf current 100 0.003 8 2").unwrap_err();
+    dev.console("current 0").unwrap();
+    let e = dev.console("frf current 100 0.003 8 2").unwrap_err();
     assert!(e.to_string().contains("current mode"), "{e}");
 }

@@ -341,3 +341,40 @@ fn experiments_run_on_the_device_rig_or_the_ideal_one() {
         }
     }
 }
+
+/// A fast friction (Vs 0.35 rad/s) makes the default sweep (up to 30 Vs) longer than the
+/// stroke window: `hil-sim experiment` refuses in one line naming its own options, and runs
+/// with them (the same ranges as `gms-tune identify` takes).
+#[test]
+fn experiment_refusals_name_the_options_the_command_has() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("fast.toml"),
+        "[friction]\nmodel = \"gms\"\nfs = 220e-6\nfc = 125e-6\nvs = 0.35\ndelta = 0.9\n\
+         sigma = 10.5e-6\nc = 5e-3\nblocks = [{ k = 1.2, alpha = 0.6 }, { k = 0.05, alpha = 0.2 }, \
+         { k = 0.01, alpha = 0.1 }, { k = 0.002, alpha = 0.1 }]\n",
+    )
+    .unwrap();
+    let base = ["experiment", "presliding", "--params", "fast.toml", "--out", "pre.csv"];
+    let (code, err) = hil(&base, d);
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("needs 6.") && err.contains("lower --v-max or widen --window"),
+        "{err}"
+    );
+    assert!(!d.join("pre.csv").exists());
+    // Both options it names are the command's.
+    let mut args = base.to_vec();
+    args.extend(["--v-max", "3", "--no-erase"]);
+    let (code, err) = hil(&args, d);
+    assert_eq!(code, 0, "{err}");
+    assert!(std::fs::read_to_string(d.join("pre.csv")).unwrap().starts_with("x,f,dir\n"));
+    let (code, err) = hil(&[&base[..], &["--window", "8", "--no-erase"]].concat(), d);
+    assert_eq!(code, 0, "{err}");
+    // The ranges plan the device rig: refused with the ideal one.
+    let (code, err) = hil(&[&base[..], &["--rig", "ideal", "--v-max", "3"]].concat(), d);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--rig ideal"), "{err}");
+}

@@ -188,9 +188,12 @@ struct SlowLink<'a> {
 }
 
 impl gms_bench::Bench for SlowLink<'_> {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+    fn send(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_ident::Error> {
         self.dev.run(self.delay);
-        self.dev.request(line)
+        self.dev.send(c)
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {

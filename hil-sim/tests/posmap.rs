@@ -202,13 +202,13 @@ fn switching_the_map_is_bumpless() {
     };
     posmap::write(&mut dev, &map, false).unwrap();
     use gms_bench::Bench;
-    dev.request("enable").unwrap();
+    dev.console("enable").unwrap();
     dev.wait(0.3).unwrap();
     let mut steps = Vec::new();
     for on in ["0", "1", "0"] {
         dev.capture("t,current", 1, 400, false).unwrap();
         dev.wait(0.01).unwrap();
-        dev.request(&format!("set map.enable {on}")).unwrap();
+        dev.console(&format!("set map.enable {on}")).unwrap();
         dev.wait(0.05).unwrap();
         let rows = gms_bench::capture_rows(&mut dev).unwrap();
         let d: Vec<f64> = rows.windows(2).map(|w| (w[1][1] - w[0][1]).abs()).collect();

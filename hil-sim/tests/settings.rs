@@ -37,7 +37,7 @@ fn the_settings_read_whole_are_the_device_s() {
         ("ff.gain", "0.875"),
         ("lim.pos_max", "3.5"),
     ] {
-        dev.request(&format!("set {p} {v}")).unwrap();
+        dev.console(&format!("set {p} {v}")).unwrap();
     }
     let s = settings::read(&mut dev).unwrap();
     assert_eq!((s.pid.kp, s.ff.gain, s.pos_max), (0.25, 0.875, 3.5));
@@ -92,18 +92,21 @@ struct Stopping<'a> {
 }
 
 impl Bench for Stopping<'_> {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
+    fn send(&mut self, c: gms_core::protocol::Command<'_>) -> Result<(Vec<String>, String), Error> {
         if self.left == 0 {
             return Err(Error::Link("interrupted".into()));
         }
         self.left -= 1;
-        self.dev.request(line)
+        self.dev.send(c)
     }
     fn wait(&mut self, seconds: f64) -> Result<(), Error> {
         self.dev.wait(seconds)
     }
-    fn request_to_end(&mut self, line: &str) -> Result<(Vec<String>, String), Error> {
-        self.dev.request(line)
+    fn send_to_end(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), Error> {
+        self.dev.send(c)
     }
 }
 
@@ -114,10 +117,10 @@ fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
     let snap = Snapshot::take(&mut dev).unwrap();
     // Done: what the run set is undone, the bridge off.
     let r = restoring(&mut dev, |b| {
-        b.request("set lim.pos_min -0.1")?;
-        b.request("set pos.kp 0.125")?;
-        b.request("set ff.gain 0.3")?;
-        b.request("enable")?;
+        b.console("set lim.pos_min -0.1")?;
+        b.console("set pos.kp 0.125")?;
+        b.console("set ff.gain 0.3")?;
+        b.console("enable")?;
         b.wait(0.05)?;
         Ok(7)
     });
@@ -126,8 +129,8 @@ fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
     assert!(!gms_bench::status(&mut dev).unwrap().enabled);
     // Failed half-way: the run's error, the settings back.
     let r: Result<(), Error> = restoring(&mut dev, |b| {
-        b.request("set lim.pos_max 0.1")?;
-        b.request("set pos.nonsense 1")?;
+        b.console("set lim.pos_max 0.1")?;
+        b.console("set pos.nonsense 1")?;
         Ok(())
     });
     assert!(r.unwrap_err().to_string().contains("unknown parameter"));
@@ -138,10 +141,10 @@ fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
         left: 3,
     };
     let r: Result<(), Error> = restoring(&mut stopping, |b| {
-        b.request("set ff.gain 0.2")?;
-        b.request("set enc.dir -1")?;
-        b.request("set ff.gain 0.1")?;
-        b.request("set pos.kp 9")?;
+        b.console("set ff.gain 0.2")?;
+        b.console("set enc.dir -1")?;
+        b.console("set ff.gain 0.1")?;
+        b.console("set pos.kp 9")?;
         Ok(())
     });
     assert_eq!(r, Err(Error::Link("interrupted".into())));

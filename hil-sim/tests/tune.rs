@@ -23,7 +23,7 @@ fn sweep(dev: &mut LocalDevice, gains: &[f64], repeats: usize) -> Vec<(f64, Vec<
     gains
         .iter()
         .map(|&g| {
-            dev.request(&format!("set ff.gain {g}")).unwrap();
+            dev.console(&format!("set ff.gain {g}")).unwrap();
             let rms = (0..repeats)
                 .map(|_| gms_bench::sine_test(dev, 2e-3, 1.0, 3.0).unwrap() / 3.8e-6)
                 .collect();
@@ -368,18 +368,18 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
     use gms_bench::{capture_rows, capture_wait};
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut d = LocalDevice::new(&sc).unwrap();
-    d.request("set ff.mode none").unwrap();
-    d.request(&format!("set pos.kd {kd}")).unwrap();
-    d.request("enable").unwrap();
+    d.console("set ff.mode none").unwrap();
+    d.console(&format!("set pos.kd {kd}")).unwrap();
+    d.console("enable").unwrap();
     // The error at 5 kHz (every other step of a 10 kHz loop, every fourth of a 20 kHz one).
     let pos_hz = gms_bench::get_param(&mut d, "rate.pos_hz").unwrap();
     let every = (pos_hz / 5e3).round().max(1.0);
     let n = (seconds * pos_hz / every) as u32;
-    d.request(&format!("capture error {every} {n} next"))
+    d.console(&format!("capture error {every} {n} next"))
         .unwrap();
     match speed {
-        Some(v) => d.request(&format!("velocity {v} 0 1 1 {seconds}")).unwrap(),
-        None => d.request("move 7.6e-5").unwrap(),
+        Some(v) => d.console(&format!("velocity {v} 0 1 1 {seconds}")).unwrap(),
+        None => d.console("move 7.6e-5").unwrap(),
     };
     d.wait(seconds).unwrap();
     // An unstable loop trips over_current: the bridge off, the error frozen.

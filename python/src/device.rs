@@ -38,7 +38,7 @@ impl Device {
     /// request(line) -> str: one protocol line; the text after `ok` (with the lines before it,
     /// newline-separated); an `err` reply raises GmsError with the device's line.
     fn request(&mut self, line: &str) -> PyResult<String> {
-        self.link.request_text(line).map_err(link_err)
+        self.link.console_text(line).map_err(link_err)
     }
 
     /// get(path) -> float | str: a parameter's value (a number where it is one).

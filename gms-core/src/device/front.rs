@@ -100,6 +100,9 @@ pub struct Startup {
     pub faults: Faults,
     /// What happened, for the log.
     pub note: &'static str,
+    /// What loading the stored record clamped, dropped or left at a default (empty when
+    /// nothing was loaded): one log line each ([`drive::LoadReport::lines`]).
+    pub report: drive::LoadReport,
     /// True when the settings came from the store (someone configured this axis and saved);
     /// false on the built-in defaults (the status reply's `configured`).
     pub configured: bool,
@@ -121,6 +124,7 @@ pub fn startup(
             faults,
             note,
             configured: false,
+            report: drive::LoadReport::default(),
         })
     };
     match stored {
@@ -134,13 +138,19 @@ pub fn startup(
                 Faults::INVALID_PARAMS,
                 "stored parameters invalid: running the defaults",
             ),
-            Ok(s) => match prepare(&s, board) {
+            Ok(loaded) => match prepare(&loaded.settings, board) {
                 Ok(applied) => Ok(Startup {
-                    settings: s,
+                    settings: loaded.settings,
                     applied,
                     faults: Faults::NONE,
-                    note: "parameters loaded from the store",
+                    note: if loaded.report.is_clean() {
+                        "parameters loaded from the store"
+                    } else {
+                        "parameters loaded from the store (of another firmware: what it \
+                         clamped, dropped or left at a default follows)"
+                    },
                     configured: true,
+                    report: loaded.report,
                 }),
                 Err(_) => fallback(
                     Faults::INVALID_PARAMS,
@@ -521,7 +531,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             Err(_) => return Err("store read failed"),
         };
         let s = drive::decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
-        self.apply(s)?;
+        self.apply(s.settings)?;
         self.load_map()
     }
 

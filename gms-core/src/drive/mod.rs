@@ -13,8 +13,9 @@
 //!   the timer setting for a PWM rate, switching off from any context).
 //! - `deadman`: [`Deadman`], [`Stall`] (the check above the control interrupt that switches
 //!   the bridge off when the step stops running or the sense chain fails).
-//! - `record`: [`encode_settings`], [`decode_settings`] (the parameter record kept in flash,
-//!   with a version, a layout id and a checksum).
+//! - `record`: [`encode_settings`], [`decode_settings`] (the parameter record kept in flash:
+//!   each setting under a stable id of its path, a version and a checksum; a record of
+//!   another parameter table loads what this one knows, with a [`LoadReport`]).
 
 mod bridge;
 mod deadman;

@@ -142,12 +142,12 @@ table [ref|corr START V ... | corr off | set POINTS STEPS ORIGIN | use | run PER
 read ref|corr|err START COUNT | clear]";
 
 fn err(out: &mut impl Write, code: ErrorCode, reason: &str) -> fmt::Result {
-    writeln!(out, "err {} {}", code as u8, reason)
+    writeln!(out, "{}", Reply::Err(code, reason))
 }
 
 fn done(out: &mut impl Write, r: Result<(), &'static str>) -> fmt::Result {
     match r {
-        Ok(()) => writeln!(out, "ok"),
+        Ok(()) => writeln!(out, "{}", Reply::Ok("")),
         Err(reason) => err(out, ErrorCode::Refused, reason),
     }
 }

@@ -28,6 +28,7 @@
 //! - `params`: [`PARAMS`] (the one parameter table: each path's field in the settings; its units
 //!   and ranges from the leaf [`crate::settings`]), [`with_value`].
 //! - `exec`: [`Device`] (what a device offers), [`execute`] (a line to its reply).
+//! - `reply`: [`Reply`] (a reply's last line, `ok …` or `err CODE REASON`, written and read).
 
 use core::fmt::{self, Write};
 
@@ -38,11 +39,13 @@ mod command;
 mod exec;
 mod params;
 mod reader;
+mod reply;
 
 pub use command::*;
 pub use exec::*;
 pub use params::*;
 pub use reader::*;
+pub use reply::*;
 
 /// How long a device may take to answer `save` \[ms\]: a board's flash erases a sector during a
 /// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing

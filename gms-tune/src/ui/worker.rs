@@ -50,8 +50,10 @@ pub enum Cmd {
         /// The value as typed.
         value: String,
     },
-    /// One request line as it is (`enable`, `clear`, `move 0.1`, `save`, …).
-    Request(String),
+    /// A typed request (`enable`, `clear`, `move 0.1`, `save`, …).
+    Send(gms_core::protocol::Command<'static>),
+    /// The console passthrough: one request line as the user typed it.
+    Console(String),
     /// Read `list` again.
     List,
     /// Write the device's parameters to a parameter file (`params dump`).
@@ -329,7 +331,7 @@ fn run(
                         };
                         if let Some(l) = link.as_mut() {
                             for line in first.drain(..) {
-                                if let Ok(evs) = execute(l, Cmd::Request(line)) {
+                                if let Ok(evs) = execute(l, Cmd::Console(line)) {
                                     for e in evs {
                                         send(e);
                                     }
@@ -405,6 +407,14 @@ fn run(
                 // Late, not gone: the device still talks (or has not been silent long).
                 Err(e @ LinkError::Timeout(_)) if l.silent_for() < SILENT_LOST => {
                     send(Event::Late(e.to_string()));
+                    any = true;
+                }
+                // A reply that does not read: the device talks, the link is kept.
+                Err(e) if !gone(&e) => {
+                    send(Event::Reply {
+                        line: "status".into(),
+                        result: Err(e.to_string()),
+                    });
                     any = true;
                 }
                 Err(e) => lost = Some(e.to_string()),
@@ -531,7 +541,10 @@ fn refused(c: &Cmd, why: &str) -> Event {
 
 /// Whether a link error means the link is gone (not just a refusal).
 fn gone(e: &LinkError) -> bool {
-    matches!(e, LinkError::Io(_) | LinkError::Timeout(_))
+    matches!(
+        e,
+        LinkError::Io(_) | LinkError::Timeout(_) | LinkError::Bench(gms_ident::Error::Link(_))
+    )
 }
 
 /// Runs one command; `Err` when the link is lost on the way.
@@ -556,8 +569,29 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
                 value,
             });
         }
-        Cmd::Request(line) => {
-            let result = match l.request_text(&line) {
+        Cmd::Send(c) => {
+            use gms_core::protocol::Command;
+            let result = match l.ask(c) {
+                Ok((body, text)) => Ok([body.join("\n"), text]
+                    .into_iter()
+                    .filter(|s| !s.is_empty())
+                    .collect::<Vec<_>>()
+                    .join("\n")),
+                Err(e) if gone(&e) => return Err(e.to_string()),
+                Err(e) => Err(e.to_string()),
+            };
+            let reread =
+                result.is_ok() && matches!(c, Command::Load | Command::Defaults | Command::Commit);
+            out.push(Event::Reply {
+                line: c.to_string(),
+                result,
+            });
+            if reread {
+                out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+            }
+        }
+        Cmd::Console(line) => {
+            let result = match l.console_text(&line) {
                 Ok(t) => Ok(t),
                 Err(e) if gone(&e) => return Err(e.to_string()),
                 Err(e) => Err(e.to_string()),

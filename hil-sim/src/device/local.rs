@@ -79,7 +79,29 @@ impl LocalDevice {
         })
     }
 
-    /// Sends one request line; returns the reply (its lines, the last `ok …` or `err …`).
+    /// The console passthrough, typed: one raw request line (a test's, a console's: host
+    /// code sends [`gms_core::protocol::Command`]s through [`gms_bench::Bench::send`]); the
+    /// lines before its `ok` and the text after it, or the device's `err` as
+    /// [`gms_ident::Error::Refused`].
+    pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+        use gms_core::protocol::Reply;
+        let reply = self.ask(line);
+        let mut lines: Vec<String> = reply.lines().map(String::from).collect();
+        let last = lines.pop().unwrap_or_default();
+        match Reply::parse(&last) {
+            Ok(Some(Reply::Ok(text))) => Ok((lines, text.to_string())),
+            Ok(Some(Reply::Err(code, reason))) => Err(gms_ident::Error::Refused(gms_ident::Refusal {
+                code,
+                reason: reason.to_string(),
+            })),
+            Ok(None) | Err(_) => Err(gms_ident::Error::Device(format!(
+                "the reply did not end with `ok` or `err`: {last:?}"
+            ))),
+        }
+    }
+
+    /// The console passthrough, raw: one request line; the reply as the device wrote it (its
+    /// lines, the last `ok …` or `err …`).
     pub fn ask(&mut self, line: &str) -> String {
         let mut out = String::new();
         let mut reader = LineReader::default();
@@ -141,19 +163,11 @@ impl LocalDevice {
 /// The device as an abstract bench (`gms_bench`): experiments run on it in simulated
 /// time, through the same protocol as on a board.
 impl gms_bench::Bench for LocalDevice {
-    fn request(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
-        let reply = self.ask(line);
-        let mut lines: Vec<String> = reply.lines().map(String::from).collect();
-        match lines.pop() {
-            Some(l) if l == "ok" || l.starts_with("ok ") => {
-                Ok((lines, l.get(3..).unwrap_or("").to_string()))
-            }
-            Some(l) => Err(match gms_ident::Refusal::parse(&l) {
-                Some(r) => gms_ident::Error::Refused(r),
-                None => gms_ident::Error::Device(format!("device answered: {l}")),
-            }),
-            None => Err(gms_ident::Error::Device("no reply".into())),
-        }
+    fn send(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+        self.console(&c.to_string())
     }
 
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {

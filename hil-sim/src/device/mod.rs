@@ -223,6 +223,10 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     ));
     let start = device::startup(store.load(), &defaults, &board)
         .map_err(|e| format!("the scenario's controller: {e}"))?;
+    // The device's log of a record from another firmware, as the board's defmt log.
+    for line in start.report.lines() {
+        eprintln!("device: {line}");
+    }
     // The position map's table: the stored map for these settings, or none (a stored map of
     // another geometry is left out, as on the board).
     let table = Box::leak(vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice());

@@ -9,6 +9,7 @@ use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
 use gms_core::device::StatusReply;
 use gms_core::model::FrictionModel;
+use gms_core::protocol::Command;
 
 mod experiments;
 mod frf;
@@ -446,16 +447,16 @@ impl App {
                 }
             }
             ui.separator();
-            for (label, line) in [
-                ("Enable", "enable"),
-                ("Disable", "disable"),
-                ("Clear", "clear"),
-                ("Save", "save"),
-                ("Load", "load"),
-                ("Defaults", "defaults"),
+            for (label, c) in [
+                ("Enable", Command::Enable { current: false }),
+                ("Disable", Command::Disable),
+                ("Clear", Command::Clear),
+                ("Save", Command::Save),
+                ("Load", Command::Load),
+                ("Defaults", Command::Defaults),
             ] {
                 if ui.button(label).clicked() {
-                    self.send(Cmd::Request(line.into()));
+                    self.send(Cmd::Send(c));
                 }
             }
             ui.separator();

@@ -3,6 +3,27 @@
 use super::*;
 
 impl App {
+    /// `move POS [VEL]` to `pos` \[rad\] at the speed typed in the move field (none: the
+    /// device's own); a speed that is not a positive number is refused with a note.
+    fn move_to(&mut self, pos: f64) {
+        let v = self.move_vel.trim();
+        let vel = if v.is_empty() {
+            None
+        } else {
+            match v.parse::<f32>() {
+                Ok(x) if x.is_finite() && x > 0.0 => Some(x),
+                _ => {
+                    self.note(format!("move: {v:?} is not a speed"));
+                    return;
+                }
+            }
+        };
+        self.send(Cmd::Send(Command::Move {
+            pos: pos as f32,
+            vel,
+        }));
+    }
+
     pub(super) fn motion(&mut self, ui: &mut egui::Ui) {
         let rpc = self.rad_per_count();
         let pos = self.status.map(|s| s.pos);
@@ -14,11 +35,7 @@ impl App {
                 if ui.button(label).clicked()
                     && let (Some(p), Ok(j)) = (pos, self.jog.trim().parse::<f64>())
                 {
-                    self.send(Cmd::Request(format!(
-                        "move {} {}",
-                        p + sign * j,
-                        self.move_vel.trim()
-                    )));
+                    self.move_to(p + sign * j);
                 }
             }
         });
@@ -30,11 +47,10 @@ impl App {
             ui.add(egui::TextEdit::singleline(&mut self.move_vel).desired_width(60.0))
                 .labelled_by(l.id);
             if ui.button("Move").clicked() {
-                self.send(Cmd::Request(format!(
-                    "move {} {}",
-                    self.move_pos.trim(),
-                    self.move_vel.trim()
-                )));
+                match self.move_pos.trim().parse::<f64>() {
+                    Ok(p) if p.is_finite() => self.move_to(p),
+                    _ => self.note(format!("move: {:?} is not a position", self.move_pos.trim())),
+                }
             }
         });
         ui.separator();
@@ -50,7 +66,10 @@ impl App {
                 )
             {
                 self.step_pending = Some((d, last.t));
-                self.send(Cmd::Request(format!("move {}", p + d)));
+                self.send(Cmd::Send(Command::Move {
+                    pos: (p + d) as f32,
+                    vel: None,
+                }));
             }
         });
         if let Some(s) = &self.step {
