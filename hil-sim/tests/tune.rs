@@ -19,7 +19,7 @@ fn default_device(noise: u64) -> LocalDevice {
 /// device: (gain, each test's RMS).
 fn sweep(dev: &mut LocalDevice, gains: &[f64], repeats: usize) -> Vec<(f64, Vec<f64>)> {
     // As `tune-ff` measures: the feedforward alone, a plain integral.
-    dev.request("set pos.ki_fric 0").unwrap();
+    dev.console("set pos.ki_fric 0").unwrap();
     gains
         .iter()
         .map(|&g| {
