@@ -651,7 +651,10 @@ impl Plans {
                 Err(bad(what, v))
             }
         };
-        let step_t = pos("--torque-step", ranges.torque_step.unwrap_or(dev.fs / 100.0))?;
+        let step_t = pos(
+            "--torque-step",
+            ranges.torque_step.unwrap_or(dev.fs / 100.0),
+        )?;
         let steps_to_fs = dev.fs / step_t;
         if !(10.0..=1000.0).contains(&steps_to_fs) {
             return Err(Error::Params(format!(

@@ -618,7 +618,9 @@ pub fn learn(
         };
         // Played until stopped (a host that reads, learns and uploads slower than a period
         // costs periods, not the run); a lost link ends it at its period's end.
-        b.send(Command::Table(TableCmd::Run(gms_core::table::TABLE_MAX_PERIODS)))?;
+        b.send(Command::Table(TableCmd::Run(
+            gms_core::table::TABLE_MAX_PERIODS,
+        )))?;
         out.started = table_status(b)?.started;
         // The first period starts from rest: the first pass is the next one held, in the
         // periodic state the learning works on.

@@ -3,8 +3,8 @@
 
 use gms_core::drive::{
     self, CountExtender, CurrentSense, Faults, Limits, Measured, OffsetCalibration, RECORD_LEN,
-    RecordError, ReportLine, StepStats, bridge_compare, decode_settings, encode_settings, pwm_timing,
-    wrapping_delta,
+    RecordError, ReportLine, StepStats, bridge_compare, decode_settings, encode_settings,
+    pwm_timing, wrapping_delta,
 };
 use gms_core::protocol::{self, Access, PARAMS};
 use gms_core::selftest;
@@ -124,13 +124,22 @@ fn bad_records_name_why() {
         decode_settings(&r, &base)
     };
     assert_eq!(with(6, 7_777.0), Err(RecordError::Invalid));
-    assert_eq!(with(6, 1e9), Err(RecordError::Invalid), "clamped to 50 kHz: not a divisor");
+    assert_eq!(
+        with(6, 1e9),
+        Err(RecordError::Invalid),
+        "clamped to 50 kHz: not a divisor"
+    );
     let nan = with(6, f32::NAN).unwrap();
     assert_eq!(nan.settings, base);
-    assert_eq!(nan.report.lines().collect::<Vec<_>>(), [ReportLine::Dropped(pos_hz)]);
+    assert_eq!(
+        nan.report.lines().collect::<Vec<_>>(),
+        [ReportLine::Dropped(pos_hz)]
+    );
     let mode_at = (0..good[1] as usize)
         .map(|i| 2 + 8 * i)
-        .find(|&a| u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("ff.mode"))
+        .find(|&a| {
+            u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("ff.mode")
+        })
         .unwrap();
     let m = with(mode_at + 4, 7.0).unwrap();
     assert_eq!(m.settings.ff.mode, base.ff.mode);
@@ -138,11 +147,16 @@ fn bad_records_name_why() {
     // pos.kp out of range: clamped to its maximum, named.
     let kp_at = (0..good[1] as usize)
         .map(|i| 2 + 8 * i)
-        .find(|&a| u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("pos.kp"))
+        .find(|&a| {
+            u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("pos.kp")
+        })
         .unwrap();
     let k = with(kp_at + 4, 5e3).unwrap();
     assert_eq!(k.settings.pid.kp, 1e3);
-    assert_eq!(k.report.lines().collect::<Vec<_>>(), [ReportLine::Clamped("pos.kp")]);
+    assert_eq!(
+        k.report.lines().collect::<Vec<_>>(),
+        [ReportLine::Clamped("pos.kp")]
+    );
 }
 
 #[test]

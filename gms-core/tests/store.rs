@@ -368,8 +368,12 @@ fn a_cut_first_save_after_an_update_leaves_the_old_firmwares_record_or_the_new()
         .expect("save on a healthy flash");
     drop(store);
     let image = flash.image();
-    let up = startup(load(image.clone()), &default_settings(), &gms_core::boards::f405::BOARD)
-        .expect("defaults run");
+    let up = startup(
+        load(image.clone()),
+        &default_settings(),
+        &gms_core::boards::f405::BOARD,
+    )
+    .expect("defaults run");
     assert_eq!(up.settings.pid.kp, 0.37);
     assert_eq!(up.settings.pid.ki_fric, default_settings().pid.ki_fric);
     assert_eq!(up.report.missing, 1);

@@ -359,7 +359,6 @@ impl gms_bench::Bench for Link {
     }
 }
 
-
 /// Parses a telemetry line `name=value name=value …`.
 pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
     line.split_whitespace()

@@ -209,8 +209,7 @@ pub fn step_test(
     ),
     crate::LinkError,
 > {
-    let rpc =
-        gms_bench::rad_per_count(link).map_err(crate::LinkError::Bench)?;
+    let rpc = gms_bench::rad_per_count(link).map_err(crate::LinkError::Bench)?;
     link.ask(Command::Enable { current: false })?;
     let pos0 = link
         .record("pos", 100.0, 0.05)?

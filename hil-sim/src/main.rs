@@ -373,7 +373,9 @@ fn main() -> ExitCode {
                 run_on_device(k, &pf.friction, variability, seed, &ranges)?
             } else {
                 let r = &ranges;
-                let given = [r.torque_step, r.v_min, r.v_max, r.window].iter().any(Option::is_some)
+                let given = [r.torque_step, r.v_min, r.v_max, r.window]
+                    .iter()
+                    .any(Option::is_some)
                     || r.speeds.is_some()
                     || r.no_erase;
                 if given {

@@ -191,7 +191,7 @@ fn the_frictional_lag_run_on_the_device_finds_the_hidden_c() {
 /// compensation: without the feedforward the error is clearly larger.
 #[test]
 fn the_sine_test_repeats_and_sees_the_compensation() {
-    use gms_bench::{Bench, sine_test};
+    use gms_bench::sine_test;
     let sc = Scenario::parse(QUIET, "test").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     let a = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();

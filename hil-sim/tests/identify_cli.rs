@@ -356,7 +356,14 @@ fn experiment_refusals_name_the_options_the_command_has() {
          { k = 0.01, alpha = 0.1 }, { k = 0.002, alpha = 0.1 }]\n",
     )
     .unwrap();
-    let base = ["experiment", "presliding", "--params", "fast.toml", "--out", "pre.csv"];
+    let base = [
+        "experiment",
+        "presliding",
+        "--params",
+        "fast.toml",
+        "--out",
+        "pre.csv",
+    ];
     let (code, err) = hil(&base, d);
     assert_eq!(code, 2, "{err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
@@ -370,11 +377,18 @@ fn experiment_refusals_name_the_options_the_command_has() {
     args.extend(["--v-max", "3", "--no-erase"]);
     let (code, err) = hil(&args, d);
     assert_eq!(code, 0, "{err}");
-    assert!(std::fs::read_to_string(d.join("pre.csv")).unwrap().starts_with("x,f,dir\n"));
+    assert!(
+        std::fs::read_to_string(d.join("pre.csv"))
+            .unwrap()
+            .starts_with("x,f,dir\n")
+    );
     let (code, err) = hil(&[&base[..], &["--window", "8", "--no-erase"]].concat(), d);
     assert_eq!(code, 0, "{err}");
     // The ranges plan the device rig: refused with the ideal one.
-    let (code, err) = hil(&[&base[..], &["--rig", "ideal", "--v-max", "3"]].concat(), d);
+    let (code, err) = hil(
+        &[&base[..], &["--rig", "ideal", "--v-max", "3"]].concat(),
+        d,
+    );
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--rig ideal"), "{err}");
 }

@@ -141,10 +141,10 @@ fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
         left: 3,
     };
     let r: Result<(), Error> = restoring(&mut stopping, |b| {
-        b.console("set ff.gain 0.2")?;
-        b.console("set enc.dir -1")?;
-        b.console("set ff.gain 0.1")?;
-        b.console("set pos.kp 9")?;
+        b.set("ff.gain", 0.2)?;
+        b.set("enc.dir", -1.0)?;
+        b.set("ff.gain", 0.1)?;
+        b.set("pos.kp", 9.0)?;
         Ok(())
     });
     assert_eq!(r, Err(Error::Link("interrupted".into())));

@@ -107,7 +107,10 @@ impl fmt::Display for ReportLine {
         match self {
             ReportLine::Clamped(p) => write!(f, "stored {p}: clamped into its range"),
             ReportLine::Dropped(id) => {
-                write!(f, "stored setting {id:#010x}: dropped (not a parameter here)")
+                write!(
+                    f,
+                    "stored setting {id:#010x}: dropped (not a parameter here)"
+                )
             }
             ReportLine::Missing(p) => write!(f, "{p}: not in the store, at its default"),
         }
@@ -124,7 +127,9 @@ impl defmt::Format for ReportLine {
                 "stored setting {=u32:#010x}: dropped (not a parameter here)",
                 id
             ),
-            ReportLine::Missing(p) => defmt::write!(f, "{=str}: not in the store, at its default", p),
+            ReportLine::Missing(p) => {
+                defmt::write!(f, "{=str}: not in the store, at its default", p)
+            }
         }
     }
 }
@@ -304,7 +309,11 @@ pub fn decode_settings_with(
     } else {
         RECORD_LEN
     };
-    if rec.len() < len || rec.get(len..).is_some_and(|rest| rest.iter().any(|&b| b != 0)) {
+    if rec.len() < len
+        || rec
+            .get(len..)
+            .is_some_and(|rest| rest.iter().any(|&b| b != 0))
+    {
         return Err(RecordError::Length);
     }
     let (body, tail) = rec.split_at(len - 4);

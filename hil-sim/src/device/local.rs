@@ -90,10 +90,12 @@ impl LocalDevice {
         let last = lines.pop().unwrap_or_default();
         match Reply::parse(&last) {
             Ok(Some(Reply::Ok(text))) => Ok((lines, text.to_string())),
-            Ok(Some(Reply::Err(code, reason))) => Err(gms_ident::Error::Refused(gms_ident::Refusal {
-                code,
-                reason: reason.to_string(),
-            })),
+            Ok(Some(Reply::Err(code, reason))) => {
+                Err(gms_ident::Error::Refused(gms_ident::Refusal {
+                    code,
+                    reason: reason.to_string(),
+                }))
+            }
             Ok(None) | Err(_) => Err(gms_ident::Error::Device(format!(
                 "the reply did not end with `ok` or `err`: {last:?}"
             ))),

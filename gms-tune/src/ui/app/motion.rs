@@ -49,7 +49,10 @@ impl App {
             if ui.button("Move").clicked() {
                 match self.move_pos.trim().parse::<f64>() {
                     Ok(p) if p.is_finite() => self.move_to(p),
-                    _ => self.note(format!("move: {:?} is not a position", self.move_pos.trim())),
+                    _ => self.note(format!(
+                        "move: {:?} is not a position",
+                        self.move_pos.trim()
+                    )),
                 }
             }
         });
