@@ -101,7 +101,8 @@ async fn main(spawner: Spawner) {
         ConstStaticCell::new([0; gms_core::store::MAP_BUFFER_LEN]);
     let mut store = storage::new(rest.flash).with_map_buffer(STORE_MAP.take());
     let defaults = device::default_settings();
-    let start = match device::startup(store.load(), &defaults, &board::BOARD) {
+    let mut log = |line: gms_core::drive::ReportLine| warn!("{}", line);
+    let start = match device::startup(store.load(), &defaults, &board::BOARD, &mut log) {
         Ok(s) => s,
         Err(e) => {
             // The built-in set always passes; stop rather than run without one.
@@ -112,9 +113,6 @@ async fn main(spawner: Spawner) {
         }
     };
     info!("{}", start.note);
-    for line in start.report.lines() {
-        warn!("{}", line);
-    }
     info!(
         "encoder {} counts/rev, current sense {} V/A (the power stage as built: {} V/A){}",
         start.settings.counts_per_rev,

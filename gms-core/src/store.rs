@@ -114,6 +114,9 @@ impl<F: NorFlash> FlashStore<F> {
 }
 
 impl<F: NorFlash> ParamStore for FlashStore<F> {
+    // Not inlined: the record's copy in this frame, not in the caller's task frame (a task's
+    // frame must step the stack by less than the board's guard: `cargo xtask check-elf`).
+    #[inline(never)]
     fn load(&mut self) -> Result<Option<[u8; RECORD_LEN]>, StoreError> {
         let (map, scratch) = self.parts()?;
         let item: Option<&[u8]> =
@@ -132,6 +135,8 @@ impl<F: NorFlash> ParamStore for FlashStore<F> {
         Ok(Some(rec))
     }
 
+    // Not inlined, as `load`.
+    #[inline(never)]
     fn save(&mut self, rec: &[u8; RECORD_LEN]) -> Result<(), StoreError> {
         let (map, scratch) = self.parts()?;
         let value: &[u8] = rec;

@@ -529,7 +529,7 @@ fn board_device(
     let b = board();
     let mut store = MemStore(stored);
     let defaults = default_settings();
-    let start = startup(store.load(), &defaults, &b).unwrap();
+    let start = startup(store.load(), &defaults, &b, &mut |_| {}).unwrap();
     let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(codes(2048)));
     let lp = ControlLoop::new(
         b,

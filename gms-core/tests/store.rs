@@ -19,7 +19,7 @@ use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 use gms_core::device::{ParamStore, default_settings, startup};
-use gms_core::drive::{Faults, RECORD_LEN, encode_settings, encode_settings_with};
+use gms_core::drive::{Faults, RECORD_LEN, ReportLine, encode_settings, encode_settings_with};
 use gms_core::protocol::{PARAMS, Param, Settings};
 use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
@@ -272,7 +272,8 @@ fn cut_everywhere(image: &[u8], new: &[u8; RECORD_LEN]) -> Found {
                 Err(e) => panic!("{what}: the restart could not read the store: {e:?}"),
             }
             // The start-up decision runs one of the two sets, without a fault.
-            let up = startup(load(after.clone()), &defaults, &board).expect("defaults run");
+            let up =
+                startup(load(after.clone()), &defaults, &board, &mut |_| {}).expect("defaults run");
             assert_eq!(up.faults, Faults::NONE, "{what}: {}", up.note);
             // And the store takes the next save.
             let next = record(9999);
@@ -368,15 +369,17 @@ fn a_cut_first_save_after_an_update_leaves_the_old_firmwares_record_or_the_new()
         .expect("save on a healthy flash");
     drop(store);
     let image = flash.image();
+    let mut lines = Vec::new();
     let up = startup(
         load(image.clone()),
         &default_settings(),
         &gms_core::boards::f405::BOARD,
+        &mut |l| lines.push(l),
     )
     .expect("defaults run");
     assert_eq!(up.settings.pid.kp, 0.37);
     assert_eq!(up.settings.pid.ki_fric, default_settings().pid.ki_fric);
-    assert_eq!(up.report.missing, 1);
+    assert_eq!(lines, [ReportLine::Missing("pos.ki_fric")]);
     let f = cut_everywhere(&image, &record(7));
     assert_eq!(f.old + f.new, f.tried);
 }

@@ -100,9 +100,6 @@ pub struct Startup {
     pub faults: Faults,
     /// What happened, for the log.
     pub note: &'static str,
-    /// What loading the stored record clamped, dropped or left at a default (empty when
-    /// nothing was loaded): one log line each ([`drive::LoadReport::lines`]).
-    pub report: drive::LoadReport,
     /// True when the settings came from the store (someone configured this axis and saved);
     /// false on the built-in defaults (the status reply's `configured`).
     pub configured: bool,
@@ -111,11 +108,18 @@ pub struct Startup {
 /// The start-up decision: the stored set if it is valid and the board runs it; the defaults
 /// and a latched `invalid_params` fault if a stored set is unreadable, invalid or not
 /// runnable; the defaults without a fault if nothing was ever saved. `Err` only if the
-/// defaults themselves cannot run on `board`.
+/// defaults themselves cannot run on `board`. A record of another firmware's parameter table
+/// loads what this one knows; `log` gets a line for each setting it clamped, dropped or left
+/// at its default ([`drive::LoadReport`]).
+// Not inlined: the stored record, the decoded set and the loaded report stay in this frame, out
+// of the start-up task's poll frame (a task's frame must step the stack by less than the
+// board's guard: `cargo xtask check-elf`).
+#[inline(never)]
 pub fn startup(
     stored: Result<Option<[u8; RECORD_LEN]>, StoreError>,
     defaults: &Settings,
     board: &Board,
+    log: &mut dyn FnMut(drive::ReportLine),
 ) -> Result<Startup, &'static str> {
     let fallback = |faults: Faults, note: &'static str| -> Result<Startup, &'static str> {
         Ok(Startup {
@@ -124,7 +128,6 @@ pub fn startup(
             faults,
             note,
             configured: false,
-            report: drive::LoadReport::default(),
         })
     };
     match stored {
@@ -139,18 +142,25 @@ pub fn startup(
                 "stored parameters invalid: running the defaults",
             ),
             Ok(loaded) => match prepare(&loaded.settings, board) {
+                // What the record of another firmware clamped, dropped or left at a default,
+                // a line each for the log (once the set runs).
+                Ok(applied) if !loaded.report.is_clean() => {
+                    loaded.report.lines().for_each(&mut *log);
+                    Ok(Startup {
+                        settings: loaded.settings,
+                        applied,
+                        faults: Faults::NONE,
+                        note: "parameters loaded from the store (of another firmware: what it \
+                               clamped, dropped or left at a default is logged)",
+                        configured: true,
+                    })
+                }
                 Ok(applied) => Ok(Startup {
                     settings: loaded.settings,
                     applied,
                     faults: Faults::NONE,
-                    note: if loaded.report.is_clean() {
-                        "parameters loaded from the store"
-                    } else {
-                        "parameters loaded from the store (of another firmware: what it \
-                         clamped, dropped or left at a default follows)"
-                    },
+                    note: "parameters loaded from the store",
                     configured: true,
-                    report: loaded.report,
                 }),
                 Err(_) => fallback(
                     Faults::INVALID_PARAMS,
@@ -507,6 +517,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         Ok(())
     }
 
+    // Not inlined, as `startup`: the record in this frame, not the link task's.
+    #[inline(never)]
     fn save(&mut self) -> Result<(), &'static str> {
         if self.status_now().enabled {
             return Err("disable before save");
@@ -521,6 +533,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         m
     }
 
+    // Not inlined, as `save`.
+    #[inline(never)]
     fn load(&mut self) -> Result<(), &'static str> {
         if self.status_now().enabled {
             return Err("disable before load");

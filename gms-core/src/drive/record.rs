@@ -241,6 +241,9 @@ pub fn encode_settings(s: &Settings) -> [u8; RECORD_LEN] {
 
 /// The record of `s` under the parameter table `table`: one entry per number and the mode
 /// (the first [`MAX_ENTRIES`]; `the_table_fits_a_record` checks the firmware's fits).
+// Not inlined: the record and its scratch stay in this frame, out of the frame of the task
+// that saves (a task's poll frame must step the stack by less than the board's guard).
+#[inline(never)]
 pub fn encode_settings_with(s: &Settings, table: &[Param]) -> [u8; RECORD_LEN] {
     let mut out = [0u8; RECORD_LEN];
     let mut n = 0usize;
@@ -296,6 +299,8 @@ pub fn decode_settings(rec: &[u8], base: &Settings) -> Result<Loaded, RecordErro
 /// runs or the error says why none of it does. Stored values out of their range are clamped
 /// into it, entries the table does not know are dropped; the report names both, and the
 /// parameters the record did not hold.
+// Not inlined, as `encode_settings_with`.
+#[inline(never)]
 pub fn decode_settings_with(
     rec: &[u8],
     base: &Settings,

@@ -221,12 +221,10 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let mut store = FlashStore::new(flash).with_map_buffer(Box::leak(
         vec![0u8; gms_core::store::MAP_BUFFER_LEN].into_boxed_slice(),
     ));
-    let start = device::startup(store.load(), &defaults, &board)
-        .map_err(|e| format!("the scenario's controller: {e}"))?;
     // The device's log of a record from another firmware, as the board's defmt log.
-    for line in start.report.lines() {
-        eprintln!("device: {line}");
-    }
+    let mut log = |line: gms_core::drive::ReportLine| eprintln!("device: {line}");
+    let start = device::startup(store.load(), &defaults, &board, &mut log)
+        .map_err(|e| format!("the scenario's controller: {e}"))?;
     // The position map's table: the stored map for these settings, or none (a stored map of
     // another geometry is left out, as on the board).
     let table = Box::leak(vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice());

@@ -144,7 +144,9 @@ fn main() -> ! {
     let mut faults = drive::Faults::NONE;
     let defaults = device::default_settings();
     let mut store = RamStore(None);
-    let Ok(start) = device::startup(store.load(), &defaults, black_box(&board)) else {
+    let Ok(start) = device::startup(store.load(), &defaults, black_box(&board), &mut |l| {
+        black_box(l);
+    }) else {
         loop {
             cortex_m::asm::wfi();
         }
