@@ -9,47 +9,96 @@ use gms_core::protocol::{self, Device, LineReader, Settings};
 use gms_core::selftest;
 use libfuzzer_sys::fuzz_target;
 
-struct Dev(Settings, bool);
+/// A device that keeps its settings and staging as the real one does (every set that reaches
+/// it must be valid) and accepts every motion.
+struct Dev {
+    s: Settings,
+    staged: Option<Settings>,
+    enabled: bool,
+}
 
 impl Device for Dev {
     fn settings(&self) -> &Settings {
-        &self.0
+        &self.s
     }
-    fn apply(&mut self, new: Settings) {
+    fn staged(&mut self) -> &mut Option<Settings> {
+        &mut self.staged
+    }
+    fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         assert!(new.validate().is_ok(), "an invalid set reached the device");
-        self.0 = new;
+        self.s = new;
+        Ok(())
     }
     fn save(&mut self) -> Result<(), &'static str> {
-        if self.1 { Err("disable first") } else { Ok(()) }
+        if self.enabled { Err("disable before save") } else { Ok(()) }
     }
     fn load(&mut self) -> Result<(), &'static str> {
         Ok(())
     }
-    fn defaults(&mut self) {
-        self.0 = selftest::controller_params();
+    fn defaults(&mut self) -> Result<(), &'static str> {
+        self.s = selftest::controller_params();
+        Ok(())
     }
     fn enable(&mut self) -> Result<(), &'static str> {
-        self.1 = true;
+        self.enabled = true;
         Ok(())
     }
-    fn disable(&mut self) {
-        self.1 = false;
+    fn enable_current(&mut self) -> Result<(), &'static str> {
+        self.enabled = true;
+        Ok(())
     }
-    fn status(&self, out: &mut dyn Write) -> core::fmt::Result {
-        write!(out, "enabled={}", self.1)
+    fn disable(&mut self) -> Result<(), &'static str> {
+        self.enabled = false;
+        Ok(())
     }
-    fn clear(&mut self) {}
+    fn status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
+        write!(out, "enabled={}", u8::from(self.enabled))
+    }
+    fn clear(&mut self) -> Result<(), &'static str> {
+        Ok(())
+    }
     fn move_to(&mut self, _: f32, _: Option<f32>) -> Result<(), &'static str> {
         Ok(())
+    }
+    fn current(&mut self, _: f32, _: Option<f32>) -> Result<(), &'static str> {
+        Ok(())
+    }
+    fn velocity(
+        &mut self,
+        _: f32,
+        _: Option<gms_core::reference::Sweep>,
+    ) -> Result<(), &'static str> {
+        Ok(())
+    }
+    fn hold(&mut self) -> Result<(), &'static str> {
+        Ok(())
+    }
+    fn capture_arm(&mut self, _: &str, _: u32, _: u32, _: bool) -> Result<(), &'static str> {
+        Ok(())
+    }
+    fn capture_off(&mut self) -> Result<(), &'static str> {
+        Ok(())
+    }
+    fn capture_status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
+        write!(out, "state=off")
+    }
+    fn capture_read(&mut self, _: u32, _: u32, _: &mut dyn Write) -> Result<(), &'static str> {
+        Err("no capture")
     }
     fn stream(&mut self, _: &str, _: f32) -> Result<(), &'static str> {
         Ok(())
     }
-    fn stream_off(&mut self) {}
+    fn stream_off(&mut self) -> Result<(), &'static str> {
+        Ok(())
+    }
 }
 
 fuzz_target!(|data: &[u8]| {
-    let mut dev = Dev(selftest::controller_params(), false);
+    let mut dev = Dev {
+        s: selftest::controller_params(),
+        staged: None,
+        enabled: false,
+    };
     let mut rd = LineReader::default();
     for &b in data {
         if let Some(line) = rd.push(b) {
