@@ -135,23 +135,20 @@ fn bad_records_name_why() {
         nan.report.lines().collect::<Vec<_>>(),
         [ReportLine::Dropped(pos_hz)]
     );
-    let mode_at = (0..good[1] as usize)
-        .map(|i| 2 + 8 * i)
-        .find(|&a| {
-            u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("ff.mode")
-        })
-        .unwrap();
-    let m = with(mode_at + 4, 7.0).unwrap();
+    // The byte offset of `path`'s entry in the record.
+    let entry_at = |path: &str| {
+        (0..good[1] as usize)
+            .map(|i| 2 + 8 * i)
+            .find(|&a| {
+                u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id(path)
+            })
+            .unwrap()
+    };
+    let m = with(entry_at("ff.mode") + 4, 7.0).unwrap();
     assert_eq!(m.settings.ff.mode, base.ff.mode);
     assert_eq!(m.report.dropped, 1);
     // pos.kp out of range: clamped to its maximum, named.
-    let kp_at = (0..good[1] as usize)
-        .map(|i| 2 + 8 * i)
-        .find(|&a| {
-            u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id("pos.kp")
-        })
-        .unwrap();
-    let k = with(kp_at + 4, 5e3).unwrap();
+    let k = with(entry_at("pos.kp") + 4, 5e3).unwrap();
     assert_eq!(k.settings.pid.kp, 1e3);
     assert_eq!(
         k.report.lines().collect::<Vec<_>>(),

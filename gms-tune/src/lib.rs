@@ -232,14 +232,13 @@ impl Link {
     /// newline-separated (empty parts left out).
     pub fn console_text(&mut self, line: &str) -> Result<String, LinkError> {
         let (body, text) = self.console(line)?;
-        let mut out = body.join("\n");
-        if !text.is_empty() {
-            if !out.is_empty() {
-                out.push('\n');
-            }
-            out.push_str(&text);
-        }
-        Ok(out)
+        Ok(reply_text(body, &text))
+    }
+
+    /// [`Link::ask`]'s reply as one text, as [`Link::console_text`].
+    pub fn ask_text(&mut self, c: Command<'_>) -> Result<String, LinkError> {
+        let (body, text) = self.ask(c)?;
+        Ok(reply_text(body, &text))
     }
 
     /// The device's `status`, read (the device core's own format).
@@ -357,6 +356,19 @@ impl gms_bench::Bench for Link {
     fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
         self.wait_device(seconds).map_err(LinkError::into_bench)
     }
+}
+
+/// A reply as one text: the lines before `ok`, then the text after it, newline-separated
+/// (empty parts left out).
+fn reply_text(body: Vec<String>, text: &str) -> String {
+    let mut out = body.join("\n");
+    if !text.is_empty() {
+        if !out.is_empty() {
+            out.push('\n');
+        }
+        out.push_str(text);
+    }
+    out
 }
 
 /// Parses a telemetry line `name=value name=value …`.

@@ -539,6 +539,34 @@ fn refused(c: &Cmd, why: &str) -> Event {
     }
 }
 
+/// Whether a request changes the settings wholesale (`load`, `defaults`, `commit`): `list` is
+/// read again after it.
+fn wholesale(c: Command<'_>) -> bool {
+    matches!(c, Command::Load | Command::Defaults | Command::Commit)
+}
+
+/// A request's reply as an event, and `list` read again after one that changed the settings
+/// wholesale; `Err` when the link is lost.
+fn replied(
+    l: &mut Link,
+    out: &mut Vec<Event>,
+    line: String,
+    result: Result<String, LinkError>,
+    changes: bool,
+) -> Result<(), String> {
+    let result = match result {
+        Ok(t) => Ok(t),
+        Err(e) if gone(&e) => return Err(e.to_string()),
+        Err(e) => Err(e.to_string()),
+    };
+    let reread = result.is_ok() && changes;
+    out.push(Event::Reply { line, result });
+    if reread {
+        out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
+    }
+    Ok(())
+}
+
 /// Whether a link error means the link is gone (not just a refusal).
 fn gone(e: &LinkError) -> bool {
     matches!(
@@ -570,41 +598,13 @@ fn execute(l: &mut Link, c: Cmd) -> Result<Vec<Event>, String> {
             });
         }
         Cmd::Send(c) => {
-            use gms_core::protocol::Command;
-            let result = match l.ask(c) {
-                Ok((body, text)) => Ok([body.join("\n"), text]
-                    .into_iter()
-                    .filter(|s| !s.is_empty())
-                    .collect::<Vec<_>>()
-                    .join("\n")),
-                Err(e) if gone(&e) => return Err(e.to_string()),
-                Err(e) => Err(e.to_string()),
-            };
-            let reread =
-                result.is_ok() && matches!(c, Command::Load | Command::Defaults | Command::Commit);
-            out.push(Event::Reply {
-                line: c.to_string(),
-                result,
-            });
-            if reread {
-                out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
-            }
+            let result = l.ask_text(c);
+            replied(l, &mut out, c.to_string(), result, wholesale(c))?;
         }
         Cmd::Console(line) => {
-            let result = match l.console_text(&line) {
-                Ok(t) => Ok(t),
-                Err(e) if gone(&e) => return Err(e.to_string()),
-                Err(e) => Err(e.to_string()),
-            };
-            let reread = result.is_ok()
-                && matches!(
-                    line.split_whitespace().next(),
-                    Some("load" | "defaults" | "commit")
-                );
-            out.push(Event::Reply { line, result });
-            if reread {
-                out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?));
-            }
+            let result = l.console_text(&line);
+            let changes = gms_core::protocol::parse(&line).is_ok_and(wholesale);
+            replied(l, &mut out, line, result, changes)?;
         }
         Cmd::List => out.push(Event::Listed(params::list(l).map_err(|e| e.to_string())?)),
         Cmd::Dump(path) => {
