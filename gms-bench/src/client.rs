@@ -3,10 +3,12 @@
 //! simulated plant (`hil-sim`'s `LocalDevice`) — and the primitives every workflow uses:
 //! parameters, `status`, the capture, moves, the bridge off on failure.
 
+use gms_core::protocol::ParamId;
 use gms_ident::Error;
 use gms_ident::units::si;
 
-use gms_core::device::StatusReply;
+use gms_core::device::{CaptureState, StatusReply};
+use gms_core::protocol::CaptureStatus;
 use gms_core::protocol::{CaptureCmd, Command, ErrorCode};
 
 /// A device speaking the bench protocol.
@@ -26,8 +28,9 @@ pub trait Bench {
 
     /// `set PATH VALUE` with a number (sent in f64's shortest decimal; the device rounds it
     /// to its f32).
-    fn set(&mut self, path: &str, value: f64) -> Result<(), Error> {
-        self.send(Command::Set(path, &format!("{value}"))).map(drop)
+    fn set(&mut self, param: ParamId, value: f64) -> Result<(), Error> {
+        self.send(Command::Set(param.path(), &format!("{value}")))
+            .map(drop)
     }
 
     /// `enable`: position control, holding where the axis is.
@@ -79,37 +82,10 @@ pub trait Bench {
     }
 }
 
-/// A capture's state as `capture` reports it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CaptureStatus {
-    /// `idle`, `armed`, `recording` or `done`.
-    pub state: String,
-    /// Samples recorded.
-    pub samples: u32,
-    /// The buffer's size (values).
-    pub capacity: u32,
-    /// The position the captured positions are relative to \[rad\], once recording began.
-    pub origin: Option<f64>,
-}
-
-/// The capture's state.
+/// The capture's state ([`CaptureStatus::parse`]: the device core's own format).
 pub fn capture_status(b: &mut impl Bench) -> Result<CaptureStatus, Error> {
     let (_, text) = b.send(Command::Capture(CaptureCmd::Status))?;
-    let get = |k: &str| {
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix(k)?.strip_prefix('='))
-            .map(String::from)
-    };
-    let num = |k: &str| get(k).and_then(|v| v.parse().ok());
-    match (get("state"), num("samples"), num("capacity")) {
-        (Some(state), Some(samples), Some(capacity)) => Ok(CaptureStatus {
-            state,
-            samples,
-            capacity,
-            origin: get("origin").and_then(|v| v.parse().ok()),
-        }),
-        _ => Err(Error::Device(format!("unexpected capture reply: {text}"))),
-    }
+    CaptureStatus::parse(&text).map_err(|e| Error::Device(format!("{e}: {text}")))
 }
 
 /// Waits until the capture is `done`, letting `step` seconds of device time pass between
@@ -117,7 +93,7 @@ pub fn capture_status(b: &mut impl Bench) -> Result<CaptureStatus, Error> {
 pub fn capture_wait(b: &mut impl Bench, step: f64, tries: u32) -> Result<CaptureStatus, Error> {
     for _ in 0..tries {
         let st = capture_status(b)?;
-        if st.state == "done" {
+        if st.state == CaptureState::Done {
             return Ok(st);
         }
         b.wait(step)?;
@@ -128,10 +104,10 @@ pub fn capture_wait(b: &mut impl Bench, step: f64, tries: u32) -> Result<Capture
 /// Every sample of a finished capture, as rows of its fields (SI), read 64 at a time.
 pub fn capture_rows(b: &mut impl Bench) -> Result<Vec<Vec<f64>>, Error> {
     let st = capture_status(b)?;
-    if st.state != "done" {
+    if st.state != CaptureState::Done {
         return Err(Error::Device(format!(
             "no finished capture (state {})",
-            st.state
+            st.state.name()
         )));
     }
     read_rows(b, st.samples, "capture", |start, count| {
@@ -157,7 +133,7 @@ pub fn read_rows(
             return Err(Error::Device(format!("{what} read {start}: nothing read")));
         }
         for l in &lines {
-            let row: Result<Vec<f64>, _> = l.split(',').map(|v| v.trim().parse()).collect();
+            let row: Result<Vec<f64>, _> = gms_core::protocol::row(l).collect();
             rows.push(row.map_err(|_| Error::Device(format!("bad {what} line: {l}")))?);
         }
         start += lines.len() as u32;
@@ -179,17 +155,17 @@ pub fn capture_now(
 }
 
 /// A numeric parameter of the device (`get PATH`).
-pub fn get_param(b: &mut impl Bench, path: &str) -> Result<f64, Error> {
-    let (_, v) = b.send(Command::Get(path))?;
+pub fn get_param(b: &mut impl Bench, param: ParamId) -> Result<f64, Error> {
+    let (_, v) = b.send(Command::Get(param.path()))?;
     v.trim()
         .parse()
-        .map_err(|_| Error::Device(format!("{path}: not a number: {v}")))
+        .map_err(|_| Error::Device(format!("{param}: not a number: {v}")))
 }
 
 /// A numeric parameter of the device, `None` when the device does not know the path (a
 /// firmware older than the parameter).
-pub fn get_param_if_known(b: &mut impl Bench, path: &str) -> Result<Option<f64>, Error> {
-    match get_param(b, path) {
+pub fn get_param_if_known(b: &mut impl Bench, param: ParamId) -> Result<Option<f64>, Error> {
+    match get_param(b, param) {
         Ok(v) => Ok(Some(v)),
         Err(e) if e.refused_with(ErrorCode::UnknownPath) => Ok(None),
         Err(e) => Err(e),
@@ -205,7 +181,7 @@ pub const PAPER_RAD_PER_COUNT: f64 = 3.8e-6;
 /// that predates the parameter).
 pub fn rad_per_count(b: &mut impl Bench) -> Result<f64, Error> {
     // A firmware from before the resolution was a parameter ran the paper's encoder.
-    let Some(counts) = get_param_if_known(b, "enc.counts_per_rev")? else {
+    let Some(counts) = get_param_if_known(b, ParamId::EncCountsPerRev)? else {
         return Ok(PAPER_RAD_PER_COUNT);
     };
     if !(counts.is_finite() && counts > 0.0) {
@@ -240,11 +216,11 @@ impl DeviceInfo {
     /// Reads the parameters from the device.
     pub fn read(b: &mut impl Bench) -> Result<DeviceInfo, Error> {
         let info = DeviceInfo {
-            k_m: get_param(b, "motor.k_m")?,
-            pos_hz: get_param(b, "rate.pos_hz")?,
-            i_max: get_param(b, "lim.i_max")?,
-            fs: get_param(b, "gms.fs")?,
-            vs: get_param(b, "gms.vs")?,
+            k_m: get_param(b, ParamId::MotorKM)?,
+            pos_hz: get_param(b, ParamId::RatePosHz)?,
+            i_max: get_param(b, ParamId::LimIMax)?,
+            fs: get_param(b, ParamId::GmsFs)?,
+            vs: get_param(b, ParamId::GmsVs)?,
             rad_per_count: rad_per_count(b)?,
         };
         let ok = |v: f64| v.is_finite() && v > 0.0;
@@ -279,9 +255,9 @@ pub fn check_configured(b: &mut impl Bench) -> Result<(), Error> {
 /// The device's encoder and current sense as one line for a report: counts per revolution,
 /// radians per count, volts per ampere.
 pub fn scales_line(b: &mut impl Bench) -> Result<String, Error> {
-    let counts = get_param(b, "enc.counts_per_rev")?;
+    let counts = get_param(b, ParamId::EncCountsPerRev)?;
     let rpc = rad_per_count(b)?;
-    let v_per_a = get_param(b, "sense.v_per_a")?;
+    let v_per_a = get_param(b, ParamId::SenseVPerA)?;
     Ok(format!(
         "encoder: {counts} counts/rev ({}/count); current sense: {} V/A",
         si(rpc, "rad"),
@@ -356,7 +332,7 @@ pub(crate) fn primitive(b: &mut impl Bench, c: Command<'_>) -> Result<(), Error>
             Err(Error::Device(format!(
                 "the device does not know `{}` ({e}): its firmware predates the bench experiments; \
              update it",
-                c.to_string().split_whitespace().next().unwrap_or("")
+                c.name()
             )))
         }
         Err(e) => Err(e),
@@ -424,7 +400,10 @@ pub fn position(b: &mut impl Bench) -> Result<f64, Error> {
 
 /// The device's soft stroke limits `(lim.pos_min, lim.pos_max)` \[rad\].
 pub fn soft_limits(b: &mut impl Bench) -> Result<(f64, f64), Error> {
-    Ok((get_param(b, "lim.pos_min")?, get_param(b, "lim.pos_max")?))
+    Ok((
+        get_param(b, ParamId::LimPosMin)?,
+        get_param(b, ParamId::LimPosMax)?,
+    ))
 }
 
 /// The device's stroke limits narrowed to `window` each way around where the axis is;
@@ -434,8 +413,8 @@ pub fn narrow_limits(b: &mut impl Bench, window: f64) -> Result<(f64, f64), Erro
     let x = position(b)?;
     let (nlo, nhi) = ((x - window).max(lo), (x + window).min(hi));
     // Narrowing each side keeps pos_min < pos_max after each set.
-    b.set("lim.pos_min", nlo)?;
-    b.set("lim.pos_max", nhi)?;
+    b.set(ParamId::LimPosMin, nlo)?;
+    b.set(ParamId::LimPosMax, nhi)?;
     Ok((lo, hi))
 }
 

@@ -3,6 +3,7 @@
 
 use gms_core::drive::Faults;
 use gms_core::protocol::Command;
+use gms_core::protocol::ParamId;
 use gms_ident::Error;
 use gms_ident::units::{num4, si};
 
@@ -40,7 +41,7 @@ pub struct Commissioned {
     /// at more than 1.5 × (or less than 1/1.5 of) what the model expects: `gms.fs`, `gms.fc`,
     /// `gms.sigma`, `gms.c` and the block stiffnesses times one factor (the shape stays the
     /// model's until `identify`; the experiments that plan from the model then fit the axis).
-    pub friction_scaled: Vec<(&'static str, f64)>,
+    pub friction_scaled: Vec<(ParamId, f64)>,
     /// Current-loop PI from the bandwidth (`cur.kp` [V/A], `cur.ki` [V/(A·s)]).
     pub cur_pi: (f64, f64),
     /// The position loop's gains and their bounds (once that step has run).
@@ -57,24 +58,32 @@ pub struct Commissioned {
     pub notch: Option<(usize, gms_core::shaping::Notch)>,
 }
 
-/// The protocol paths of the two notches' settings.
-const NOTCH_KEYS: [[&str; 3]; 2] = [
-    ["filt.notch1.f_hz", "filt.notch1.q", "filt.notch1.depth_db"],
-    ["filt.notch2.f_hz", "filt.notch2.q", "filt.notch2.depth_db"],
+/// The two notches' settings.
+const NOTCH_KEYS: [[ParamId; 3]; 2] = [
+    [
+        ParamId::FiltNotch1FHz,
+        ParamId::FiltNotch1Q,
+        ParamId::FiltNotch1DepthDb,
+    ],
+    [
+        ParamId::FiltNotch2FHz,
+        ParamId::FiltNotch2Q,
+        ParamId::FiltNotch2DepthDb,
+    ],
 ];
 
 impl Commissioned {
-    /// The `[device]` settings by protocol path.
-    pub fn settings(&self) -> Vec<(&'static str, f64)> {
+    /// The `[device]` settings, each with its parameter (its path: `.path()` or `Display`).
+    pub fn settings(&self) -> Vec<(ParamId, f64)> {
         vec![
-            ("sense.dir", self.sense_dir),
-            ("enc.dir", self.enc_dir),
-            ("motor.r", self.r),
-            ("motor.k_e", self.k_e),
-            ("motor.k_m", self.k_e),
-            ("ff.inertia", self.inertia),
-            ("cur.kp", self.cur_pi.0),
-            ("cur.ki", self.cur_pi.1),
+            (ParamId::SenseDir, self.sense_dir),
+            (ParamId::EncDir, self.enc_dir),
+            (ParamId::MotorR, self.r),
+            (ParamId::MotorKE, self.k_e),
+            (ParamId::MotorKM, self.k_e),
+            (ParamId::FfInertia, self.inertia),
+            (ParamId::CurKp, self.cur_pi.0),
+            (ParamId::CurKi, self.cur_pi.1),
         ]
         .into_iter()
         .chain(self.pos.iter().flat_map(|g| g.sets()))
@@ -190,15 +199,18 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
     let dev = DeviceInfo::read(b)?;
     let dt = dev.dt();
     check_faults(b)?;
-    let dirs0 = (get_param(b, "sense.dir")?, get_param(b, "enc.dir")?);
+    let dirs0 = (
+        get_param(b, ParamId::SenseDir)?,
+        get_param(b, ParamId::EncDir)?,
+    );
     // The device's own stroke guard around the start: the farthest speed run each way, and
     // half a radian for the rest; an axis that runs away stops there with the bridge off.
     let v = 3.0 * speed;
     let window = 1.2 * (v * KE_RUN + v * v / VELOCITY_ACC) + 0.5;
     let gains0 = (
-        get_param(b, "pos.kp")?,
-        get_param(b, "pos.ki")?,
-        get_param(b, "pos.kd")?,
+        get_param(b, ParamId::PosKp)?,
+        get_param(b, ParamId::PosKi)?,
+        get_param(b, ParamId::PosKd)?,
     );
     // The limits, the position gains (the back-EMF runs soften them) and the directions as
     // they were after, whatever happens: the caller applies what was found.
@@ -270,7 +282,7 @@ pub(crate) fn commission_steps(
             {
                 c.sense_dir = -c.sense_dir;
                 b.clear()?;
-                b.set("sense.dir", c.sense_dir)?;
+                b.set(ParamId::SenseDir, c.sense_dir)?;
                 c.lines.push(
                     "current sense: reversed (the current loop ran away: over_current); sense.dir flipped"
                         .into(),
@@ -317,7 +329,7 @@ pub(crate) fn commission_steps(
     if moved < 0.0 {
         c.enc_dir = -c.enc_dir;
         // The bridge goes off with the change; back into current mode.
-        b.set("enc.dir", c.enc_dir)?;
+        b.set(ParamId::EncDir, c.enc_dir)?;
         primitive(b, Command::Enable { current: true })?;
         c.lines.push(format!(
             "encoder: counted {} under a positive current: reversed; enc.dir flipped",
@@ -360,13 +372,13 @@ pub(crate) fn commission_steps(
     //    still holding the last run's friction, unwinds it into the next run's samples (k_e
     //    read +5.2 % on a 2000-count motor of `hil-sim/tests/coarse.rs`). Half the integral
     //    carried as a friction level (`pos.ki_fric`) turns over with the direction.
-    let d_filter = get_param(b, "pos.d_filter_hz")?;
-    let share = get_param(b, "pos.ki_fric")?;
-    b.set("pos.ki_fric", KE_RUN_FRICTION_SHARE)?;
-    b.set("pos.kd", kd / 2.0)?;
-    b.set("pos.kp", kp / 4.0)?;
-    b.set("pos.ki", ki / 8.0)?;
-    b.set("pos.d_filter_hz", d_filter / 4.0)?;
+    let d_filter = get_param(b, ParamId::PosDFilterHz)?;
+    let share = get_param(b, ParamId::PosKiFric)?;
+    b.set(ParamId::PosKiFric, KE_RUN_FRICTION_SHARE)?;
+    b.set(ParamId::PosKd, kd / 2.0)?;
+    b.set(ParamId::PosKp, kp / 4.0)?;
+    b.set(ParamId::PosKi, ki / 8.0)?;
+    b.set(ParamId::PosDFilterHz, d_filter / 4.0)?;
     b.hold()?;
     let mut pts = Vec::new();
     for k in 1..=3 {
@@ -395,8 +407,8 @@ pub(crate) fn commission_steps(
         }
     }
     // The derivative's filter back: the position gains' rule below starts from it.
-    b.set("pos.d_filter_hz", d_filter)?;
-    b.set("pos.ki_fric", share)?;
+    b.set(ParamId::PosDFilterHz, d_filter)?;
+    b.set(ParamId::PosKiFric, share)?;
     let (w, e): (Vec<f64>, Vec<f64>) = pts.iter().copied().unzip();
     c.k_e = match ls_slope(&w, &e, f64::MIN_POSITIVE) {
         Some(k) if w.iter().any(|x| *x != w[0]) => k,
@@ -414,7 +426,7 @@ pub(crate) fn commission_steps(
     c.inductance = inductance(b, &mut c, dt, i_fs)?;
     // 8. The current loop's PI: kp as high as its delay allows with the rule's gain margin
     //    (the resistance's drop fed forward), the integral's corner five octaves below.
-    let cur_hz = get_param(b, "rate.cur_hz")?;
+    let cur_hz = get_param(b, ParamId::RateCurHz)?;
     c.cur_pi = gms_ident::gains::current_pi(c.r, c.inductance, cur_hz);
     c.lines.push(format!(
         "current loop: cur.kp {} V/A, cur.ki {} V/(A·s) at {} ({:.1} dB of gain margin against \
@@ -428,9 +440,10 @@ pub(crate) fn commission_steps(
     //    shape the model's), for the gains below and for the caller to apply.
     let ratio = if off { sl.amps * c.k_e / dev.fs } else { 1.0 };
     if off {
-        let mut paths = vec!["gms.fs", "gms.fc", "gms.sigma", "gms.c"];
-        paths.extend(["gms.k1", "gms.k2", "gms.k3", "gms.k4", "gms.k5", "gms.k6"]);
-        for p in paths {
+        use ParamId::*;
+        for p in [
+            GmsFs, GmsFc, GmsSigma, GmsC, GmsK1, GmsK2, GmsK3, GmsK4, GmsK5, GmsK6,
+        ] {
             let v = get_param(b, p)?;
             c.friction_scaled.push((p, v * ratio));
         }
@@ -536,8 +549,8 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
     let Some(mut g) = c.pos else {
         return Ok(());
     };
-    let i_max = get_param(b, "lim.i_max")?;
-    let pos_hz = get_param(b, "rate.pos_hz")?;
+    let i_max = get_param(b, ParamId::LimIMax)?;
+    let pos_hz = get_param(b, ParamId::RatePosHz)?;
     let mut plan = Plan::new(Loop::Open, 0.01 * i_max);
     plan.from_hz = 20.0;
     plan.to_hz = 0.4 * pos_hz;
@@ -548,7 +561,7 @@ fn loop_check(b: &mut impl Bench, c: &mut Commissioned, scale: f64) -> Result<()
         let mut sets: Vec<(String, String)> = c
             .settings()
             .into_iter()
-            .filter(|(k, _)| !k.starts_with("pos."))
+            .filter(|(k, _)| !k.path().starts_with("pos."))
             .map(|(k, v)| (k.to_string(), format!("{v}")))
             .collect();
         sets.extend(g.sets().map(|(k, v)| (k.to_string(), format!("{v}"))));
@@ -768,8 +781,9 @@ pub(crate) fn position_gains_for(
 ) -> Result<gms_ident::gains::PositionGains, Error> {
     use gms_ident::gains::{Axis, SlidingCurve, position_gains};
     let mut k0 = 0.0;
-    for i in 1..=6 {
-        k0 += scale * get_param(b, &format!("gms.k{i}"))?;
+    use ParamId::*;
+    for p in [GmsK1, GmsK2, GmsK3, GmsK4, GmsK5, GmsK6] {
+        k0 += scale * get_param(b, p)?;
     }
     let axis = Axis {
         r: c.r,
@@ -778,19 +792,19 @@ pub(crate) fn position_gains_for(
         inertia: c.inertia,
         cur_pi: c.cur_pi,
         cur_hz,
-        pos_hz: get_param(b, "rate.pos_hz")?,
-        d_filter_hz: get_param(b, "pos.d_filter_hz")?,
-        v_supply: get_param(b, "lim.v_supply")?,
+        pos_hz: get_param(b, ParamId::RatePosHz)?,
+        d_filter_hz: get_param(b, ParamId::PosDFilterHz)?,
+        v_supply: get_param(b, ParamId::LimVSupply)?,
         k_presliding: k0,
         rad_per_count: rad_per_count(b)?,
-        i_max: get_param(b, "lim.i_max")?,
+        i_max: get_param(b, ParamId::LimIMax)?,
     };
     let s = SlidingCurve {
-        fs: scale * get_param(b, "gms.fs")?,
-        fc: scale * get_param(b, "gms.fc")?,
-        vs: get_param(b, "gms.vs")?,
-        delta: get_param(b, "gms.delta")?,
-        sigma: scale * get_param(b, "gms.sigma")?,
+        fs: scale * get_param(b, ParamId::GmsFs)?,
+        fc: scale * get_param(b, ParamId::GmsFc)?,
+        vs: get_param(b, ParamId::GmsVs)?,
+        delta: get_param(b, ParamId::GmsDelta)?,
+        sigma: scale * get_param(b, ParamId::GmsSigma)?,
     };
     let g = position_gains(&axis, &s).ok_or_else(|| {
         Error::Device(format!(
@@ -988,12 +1002,12 @@ pub(crate) fn inductance(
     b.current(0.0)?;
     // The device's current loop, as it runs.
     let mut p = gms_core::device::default_settings();
-    p.current.kp = get_param(b, "cur.kp")? as f32;
-    p.current.ki = get_param(b, "cur.ki")? as f32;
-    p.cur_rate_hz = get_param(b, "rate.cur_hz")? as f32;
-    p.pos_rate_hz = get_param(b, "rate.pos_hz")? as f32;
-    p.v_supply = get_param(b, "lim.v_supply")? as f32;
-    p.motor.r = get_param(b, "motor.r")? as f32;
+    p.current.kp = get_param(b, ParamId::CurKp)? as f32;
+    p.current.ki = get_param(b, ParamId::CurKi)? as f32;
+    p.cur_rate_hz = get_param(b, ParamId::RateCurHz)? as f32;
+    p.pos_rate_hz = get_param(b, ParamId::RatePosHz)? as f32;
+    p.v_supply = get_param(b, ParamId::LimVSupply)? as f32;
+    p.motor.r = get_param(b, ParamId::MotorR)? as f32;
     let r = c.r;
     let h = 1.0 / p.cur_rate_hz as f64;
     let l = inductance_from_step(&avg, amps, r, &p).map_err(|e| Error::Device(e.into()))?;

@@ -11,6 +11,7 @@ use crate::commission::slide;
 use crate::settings::restoring;
 use gms_core::drive::Faults;
 use gms_core::protocol::Command;
+use gms_core::protocol::ParamId;
 use gms_ident::Error;
 
 /// The sliding experiment's settings.
@@ -120,13 +121,13 @@ pub(crate) fn measuring<B: Bench, T>(
 ) -> Result<T, Error> {
     restoring(b, |b| {
         // A firmware that does not know one of them (an older one): the loop as it is.
-        let mut read = |path: &str| get_param_if_known(b, path);
+        let mut read = |p: ParamId| get_param_if_known(b, p);
         let figures = [
-            read("pos.kp")?,
-            read("pos.kd")?,
-            read("pos.d_filter_hz")?,
-            read("ff.inertia")?,
-            read("rate.pos_hz")?,
+            read(ParamId::PosKp)?,
+            read(ParamId::PosKd)?,
+            read(ParamId::PosDFilterHz)?,
+            read(ParamId::FfInertia)?,
+            read(ParamId::RatePosHz)?,
         ];
         let m = match figures {
             [Some(kp), Some(kd), Some(f), Some(j), Some(hz)] => {
@@ -135,12 +136,12 @@ pub(crate) fn measuring<B: Bench, T>(
             _ => None,
         };
         if let Some(m) = m {
-            b.set("pos.kp", m.kp)?;
-            b.set("pos.ki", m.ki)?;
-            b.set("pos.d_filter_hz", m.d_filter_hz)?;
+            b.set(ParamId::PosKp, m.kp)?;
+            b.set(ParamId::PosKi, m.ki)?;
+            b.set(ParamId::PosDFilterHz, m.d_filter_hz)?;
         }
-        if get_param_if_known(b, "pos.ki_fric")?.is_some() {
-            b.set("pos.ki_fric", 0.0)?;
+        if get_param_if_known(b, ParamId::PosKiFric)?.is_some() {
+            b.set(ParamId::PosKiFric, 0.0)?;
         }
         f(b)
     })
@@ -305,9 +306,7 @@ pub(crate) struct Settled {
 /// The means of a `samples`-step capture taken now.
 pub(crate) fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<Settled, Error> {
     let rows = capture_now(b, "pos,current", samples.max(2), dt)?;
-    let origin = capture_status(b)?
-        .origin
-        .ok_or_else(|| Error::Device("the capture reply has no origin".into()))?;
+    let origin = capture_status(b)?.origin;
     let mean =
         |r: &[Vec<f64>], c: usize| r.iter().map(|r| r[c]).sum::<f64>() / r.len().max(1) as f64;
     let half = rows.len() / 2;
@@ -633,6 +632,8 @@ pub struct Plans {
     pub sliding: SlidingPlan,
     /// The stroke window each way \\[rad\\].
     pub window: f64,
+    /// The stroke the sweep's fastest run needs \\[rad\\] ([`Plans::check_sliding`]).
+    pub sliding_stroke: f64,
 }
 
 impl Plans {
@@ -683,17 +684,35 @@ impl Plans {
         presliding.erase = !ranges.no_erase;
         presliding.window = presliding.window.min(window);
         let sliding = SlidingPlan::log_spaced(v_min, v_max, n).for_encoder(dev.rad_per_count);
-        let need = sliding.stroke(dev.dt());
-        if need > window {
-            return Err(Error::Params(format!(
-                "the sliding run at {v_max} rad/s needs {need:.2} rad of stroke, more than the \
-                 window {window} rad: lower --v-max or widen --window"
-            )));
-        }
+        let sliding_stroke = sliding.stroke(dev.dt());
         Ok(Plans {
             presliding,
             sliding,
             window,
+            sliding_stroke,
         })
+    }
+
+    /// Refuses a sliding sweep whose fastest run needs more stroke than the window, naming
+    /// the options that change it (`--v-max`, `--window`). The sweep's callers check it
+    /// before anything moves (`gms-tune identify`, `hil-sim experiment sliding`); the
+    /// staircase alone (`hil-sim experiment presliding`) does not need it.
+    pub fn check_sliding(&self) -> Result<(), Error> {
+        let need = self.sliding_stroke;
+        if need > self.window {
+            let v_max = self
+                .sliding
+                .speeds
+                .iter()
+                .fold(0.0, |a: f64, v| a.max(v.abs()));
+            // Rounded: the log-spaced speeds end at the asked one within a rounding.
+            let v_max = (v_max * 1e6).round() / 1e6;
+            return Err(Error::Params(format!(
+                "the sliding run at {v_max} rad/s needs {need:.2} rad of stroke, more than the \
+                 window {} rad: lower --v-max or widen --window",
+                self.window
+            )));
+        }
+        Ok(())
     }
 }

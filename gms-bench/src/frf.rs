@@ -14,7 +14,8 @@
 //! - `closed`: `pos / in` (the sine at the position reference).
 
 use gms_core::frf::{FrfState, Injection};
-use gms_core::protocol::{Command, FrfCmd};
+use gms_core::protocol::ParamId;
+use gms_core::protocol::{self, Command, FrfCmd};
 use gms_ident::Error;
 use num_complex::Complex64;
 
@@ -83,78 +84,42 @@ pub struct Reply {
     pub coherence: [f64; 4],
 }
 
-impl Reply {
-    /// Reads the text after `ok` of an `frf` reply.
-    pub fn parse(text: &str) -> Result<Reply, String> {
-        let mut r = Reply {
-            state: FrfState::Idle,
-            injection: None,
-            f_hz: f64::NAN,
-            amp: f64::NAN,
-            groups: 0,
-            total: 0,
-            phasors: [Complex64::new(f64::NAN, f64::NAN); 4],
-            coherence: [f64::NAN; 4],
-        };
-        let mut state = None;
-        let num = |v: &str| {
-            v.parse::<f64>()
-                .map_err(|_| format!("frf: not a number: {v}"))
-        };
-        for word in text.split_ascii_whitespace() {
-            let (k, v) = word
-                .split_once('=')
-                .ok_or_else(|| format!("frf: not key=value: {word}"))?;
-            let pair = |v: &str| -> Result<Complex64, String> {
-                let (a, b) = v
-                    .split_once(',')
-                    .ok_or_else(|| format!("frf: {k} is not RE,IM"))?;
-                Ok(Complex64::new(num(a)?, num(b)?))
-            };
-            match k {
-                "state" => {
-                    state = Some(match v {
-                        "idle" => FrfState::Idle,
-                        "settling" => FrfState::Settling,
-                        "measuring" => FrfState::Measuring,
-                        "done" => FrfState::Done,
-                        "stopped" => FrfState::Stopped,
-                        _ => return Err(format!("frf: unknown state {v}")),
-                    })
-                }
-                "inj" => {
-                    r.injection = Some(
-                        Injection::from_name(v).ok_or_else(|| format!("frf: unknown inj {v}"))?,
-                    )
-                }
-                "f_hz" => r.f_hz = num(v)?,
-                "amp" => r.amp = num(v)?,
-                "groups" => {
-                    let (a, b) = v
-                        .split_once('/')
-                        .ok_or_else(|| format!("frf: groups is not G/N: {v}"))?;
-                    r.groups = a.parse().map_err(|_| format!("frf: groups {v}"))?;
-                    r.total = b.parse().map_err(|_| format!("frf: groups {v}"))?;
-                }
-                "in" => r.phasors[0] = pair(v)?,
-                "cmd" => r.phasors[1] = pair(v)?,
-                "cur" => r.phasors[2] = pair(v)?,
-                "pos" => r.phasors[3] = pair(v)?,
-                "coh" => {
-                    let c: Vec<&str> = v.split(',').collect();
-                    if c.len() != 4 {
-                        return Err(format!("frf: coh needs four values: {v}"));
-                    }
-                    for (slot, w) in r.coherence.iter_mut().zip(c) {
-                        *slot = num(w)?;
-                    }
-                }
-                // Keys a later firmware adds are skipped.
-                _ => {}
-            }
+impl From<protocol::FrfStatus> for Reply {
+    fn from(st: protocol::FrfStatus) -> Reply {
+        let nan = Complex64::new(f64::NAN, f64::NAN);
+        match st.measure {
+            None => Reply {
+                state: st.state,
+                injection: None,
+                f_hz: f64::NAN,
+                amp: f64::NAN,
+                groups: 0,
+                total: 0,
+                phasors: [nan; 4],
+                coherence: [f64::NAN; 4],
+            },
+            Some(m) => Reply {
+                state: st.state,
+                injection: Some(m.injection),
+                f_hz: f64::from(m.f_hz),
+                amp: f64::from(m.amp),
+                groups: m.groups_done,
+                total: m.groups,
+                phasors: m
+                    .phasors
+                    .map(|[re, im]| Complex64::new(f64::from(re), f64::from(im))),
+                coherence: m.coherence.map(f64::from),
+            },
         }
-        r.state = state.ok_or("frf: no state")?;
-        Ok(r)
+    }
+}
+
+impl Reply {
+    /// Reads the text after `ok` of an `frf` reply ([`protocol::FrfStatus::parse`]: the device
+    /// core's own format); without a measurement, the figures are NaN and the counts 0.
+    pub fn parse(text: &str) -> Result<Reply, String> {
+        let st = protocol::FrfStatus::parse(text).map_err(|e| format!("{e}: {text}"))?;
+        Ok(st.into())
     }
 
     /// The transfer function of `lp` from these phasors, and its coherence (the lower of the
@@ -509,9 +474,9 @@ pub fn run<B: Bench>(
     out: &mut Vec<Point>,
     on_point: impl FnMut(usize, &Point),
 ) -> Result<Sweep, Error> {
-    let pos_hz = crate::client::get_param(b, "rate.pos_hz")?;
-    let i_max = crate::client::get_param(b, "lim.i_max")?;
-    let k_m = crate::client::get_param(b, "motor.k_m")?;
+    let pos_hz = crate::client::get_param(b, ParamId::RatePosHz)?;
+    let i_max = crate::client::get_param(b, ParamId::LimIMax)?;
+    let k_m = crate::client::get_param(b, ParamId::MotorKM)?;
     plan.check(pos_hz, i_max)?;
     let dev = crate::settings::read(b)?;
     // The GMS model the protocol shows (`gms.k1` … `gms.k6`: the actuator's).

@@ -30,8 +30,8 @@
 use gms_ident::Error;
 use gms_ident::linear::PositionController;
 
-use gms_core::protocol::{Command, TableCmd};
-use gms_core::table::{Geometry, Which};
+use gms_core::protocol::{self, Command, TableCmd};
+use gms_core::table::{Geometry, TableReport, TableState, Which};
 
 use crate::client::{Bench, check_faults, guarded, status};
 use crate::ilc::{Iteration, Learner, LearningFilter, QFilter, Stop};
@@ -304,40 +304,34 @@ pub struct TableStatus {
     pub held: bool,
 }
 
-/// Reads the device's `table` status.
-pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
-    let (_, text) = b.send(Command::Table(TableCmd::Status))?;
-    let mut s = TableStatus::default();
-    let mut done = (None, None, None, None);
-    for kv in text.split_ascii_whitespace() {
-        let Some((k, v)) = kv.split_once('=') else {
-            continue;
-        };
-        let int = || v.parse::<u32>().ok();
-        match k {
-            "state" => {
-                s.playing = v == "playing";
-                s.ready = v == "ready" || v == "playing";
-                if v == "none" {
-                    return Err(Error::Device("the device has no table motion".into()));
-                }
-            }
-            "period" => s.period = int().unwrap_or(0),
-            "gen" => s.generation = int().unwrap_or(0),
-            "pending" => s.pending = v == "1",
-            "started" => s.started = v.parse().unwrap_or(0),
-            "done" => done.0 = int(),
-            "done_gen" => done.1 = int(),
-            "rms" => done.2 = v.parse::<f64>().ok(),
-            "peak" => done.3 = v.parse::<f64>().ok(),
-            "held" => s.held = v == "1",
-            _ => {}
+impl From<TableReport> for TableStatus {
+    fn from(t: TableReport) -> TableStatus {
+        TableStatus {
+            playing: t.state == TableState::Playing,
+            ready: t.state != TableState::Empty,
+            period: t.period,
+            generation: t.generation,
+            pending: t.pending,
+            started: t.started,
+            done: t
+                .done
+                .map(|d| (d.period, d.generation, f64::from(d.rms), f64::from(d.peak))),
+            held: t.held,
         }
     }
-    if let (Some(a), Some(g), Some(r), Some(p)) = done {
-        s.done = Some((a, g, r, p));
+}
+
+/// Reads the device's `table` status ([`protocol::TableStatus::parse`]: the device core's own
+/// format).
+pub fn table_status(b: &mut impl Bench) -> Result<TableStatus, Error> {
+    let (_, text) = b.send(Command::Table(TableCmd::Status))?;
+    match protocol::TableStatus::parse(&text) {
+        Ok(protocol::TableStatus(Some(t))) => Ok(t.into()),
+        Ok(protocol::TableStatus(None)) => {
+            Err(Error::Device("the device has no table motion".into()))
+        }
+        Err(e) => Err(Error::Device(format!("{e}: {text}"))),
     }
-    Ok(s)
 }
 
 /// Writes `values` to the device's table `which` (`ref` or `corr`), as many a line as the

@@ -7,6 +7,7 @@
 //! is friction, expressed as a **scale** of the device's model's sliding friction at that
 //! speed. A map measured one way only cannot tell the two apart.
 
+use gms_core::protocol::ParamId;
 use gms_core::protocol::{Command, MapCmd};
 use gms_ident::Error;
 use nalgebra::{DMatrix, DVector};
@@ -97,7 +98,7 @@ pub struct MapData {
 /// were after it, however it ended.
 pub fn measure(b: &mut impl Bench, plan: &MapPlan) -> Result<MapData, Error> {
     plan.check()?;
-    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
+    let dt = 1.0 / get_param(b, ParamId::RatePosHz)?;
     let acc = crate::client::VELOCITY_ACC;
     let t_acc = plan.speed / acc;
     // Half a second more than the periods: the settling before the samples kept.
@@ -112,7 +113,7 @@ pub fn measure(b: &mut impl Bench, plan: &MapPlan) -> Result<MapData, Error> {
             };
             for dir in [1.0, -1.0] {
                 crate::client::timed_run(b, dir * plan.speed, seconds, "t,pos,friction", dt)?;
-                let origin = capture_status(b)?.origin.unwrap_or(0.0);
+                let origin = capture_status(b)?.origin;
                 let rows = capture_rows(b)?;
                 let kept: Vec<(f64, f64)> = rows
                     .iter()
@@ -293,7 +294,7 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
             gms_core::posmap::MAP_BINS_MAX
         )));
     }
-    b.set("map.enable", 0.0)?;
+    b.set(ParamId::MapEnable, 0.0)?;
     crate::settings::apply(
         b,
         &[
@@ -317,14 +318,14 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
         start = end;
     }
     if enable {
-        b.set("map.enable", 1.0)?;
+        b.set(ParamId::MapEnable, 1.0)?;
     }
     Ok(n)
 }
 
 /// The device's table: `(offset [N·m], scale [-])` per bin of its `map.bins`.
 pub fn read(b: &mut impl Bench) -> Result<Vec<(f64, f64)>, Error> {
-    let bins = get_param(b, "map.bins")? as u32;
+    let bins = get_param(b, ParamId::MapBins)? as u32;
     let rows = crate::client::read_rows(b, bins, "map", |start, count| {
         Command::Map(MapCmd::Read { start, count })
     })?;
@@ -340,7 +341,7 @@ pub fn read(b: &mut impl Bench) -> Result<Vec<(f64, f64)>, Error> {
 /// timed run from where it holds, captured whole; the ramp and half a second after it left
 /// out). The bridge is off after it.
 pub fn run_error_rms(b: &mut impl Bench, speed: f64, seconds: f64) -> Result<f64, Error> {
-    let dt = 1.0 / get_param(b, "rate.pos_hz")?;
+    let dt = 1.0 / get_param(b, ParamId::RatePosHz)?;
     let t_acc = speed.abs() / crate::client::VELOCITY_ACC;
     guarded(b, |b| {
         b.enable()?;

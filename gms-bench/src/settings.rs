@@ -17,24 +17,27 @@ pub fn read(b: &mut impl Bench) -> Result<Settings, Error> {
     parse_list(&lines)
 }
 
-/// The settings in `list`'s reply lines (`PATH VALUE UNIT [MIN, MAX]`).
+/// The settings in `list`'s reply lines ([`protocol::ListRow::parse`]: `PATH VALUE UNIT
+/// [RANGE]`).
 pub fn parse_list(lines: &[String]) -> Result<Settings, Error> {
     let mut s = gms_core::device::default_settings();
     for line in lines {
-        let mut words = line.split_whitespace();
-        let (Some(path), Some(value)) = (words.next(), words.next()) else {
-            return Err(Error::Device(format!(
-                "unexpected line in the list: {line}"
-            )));
-        };
-        match protocol::find(path).map(|p| p.access) {
-            None | Some(Access::Estimate(_)) => continue,
-            Some(_) => {}
-        }
-        s = protocol::with_value_staged(&s, path, value)
-            .map_err(|e| Error::Device(format!("the list's {path} {value}: {}", e.reason)))?;
+        let row =
+            protocol::ListRow::parse(line).map_err(|e| Error::Device(format!("{e}: {line}")))?;
+        s = with_listed(&s, row.path, &row.value.to_string())?;
     }
     Ok(s)
+}
+
+/// `s` with one listed parameter's value (its text as `list` prints it) set; an estimate, or
+/// a parameter the host does not know (a newer firmware's), leaves it as it is.
+pub fn with_listed(s: &Settings, path: &str, value: &str) -> Result<Settings, Error> {
+    match protocol::find(path).map(|p| p.access) {
+        None | Some(Access::Estimate(_)) => return Ok(*s),
+        Some(_) => {}
+    }
+    protocol::with_value_staged(s, path, value)
+        .map_err(|e| Error::Device(format!("the list's {path} {value}: {}", e.reason)))
 }
 
 /// The parameters whose values differ between `from` and `to`, as `(path, value of to)`, in

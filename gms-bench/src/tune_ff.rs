@@ -6,6 +6,7 @@ use crate::client::{
     Bench, DeviceInfo, capture_rows, capture_wait, check_faults, get_param, guarded, primitive,
     rad_per_count,
 };
+use gms_core::protocol::ParamId;
 use gms_ident::Error;
 
 use crate::settings::restoring;
@@ -183,7 +184,7 @@ pub fn tune_ff(
 ) -> Result<TuneFf, Error> {
     use gms_ident::optimum::fit_minimum;
     plan.check()?;
-    let before = get_param(b, "ff.gain")?;
+    let before = get_param(b, ParamId::FfGain)?;
     let rpc = rad_per_count(b)?;
     // The gain as it was after, whatever happens.
     let r = restoring(b, |b| {
@@ -191,7 +192,7 @@ pub fn tune_ff(
         // part of a gain's mismatch at every reversal and flatten the curve whose minimum
         // is sought (with the share at 0.5 a plant at 40 % of the model read 0.505, at the
         // edge of the range, where a dense sweep without it finds its optimum lower).
-        b.set("pos.ki_fric", 0.0)?;
+        b.set(ParamId::PosKiFric, 0.0)?;
         guarded(b, |b| {
             let mut curve: Vec<(f64, f64)> = Vec::new();
             let mut notes = Vec::new();
@@ -331,5 +332,5 @@ pub fn decide(
 
 /// `set ff.gain G`.
 pub(crate) fn b_set_gain(b: &mut impl Bench, g: f64) -> Result<(), Error> {
-    b.set("ff.gain", g).map(|_| ())
+    b.set(ParamId::FfGain, g).map(|_| ())
 }

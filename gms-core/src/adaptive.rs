@@ -71,21 +71,21 @@ impl AdaptiveParams {
     /// Checks the ranges (the settings table, [`crate::settings::SPECS`]) and that
     /// `min <= max`; the error names the field by its protocol path.
     pub fn validate(&self) -> Result<(), &'static str> {
-        use crate::settings::range;
+        use crate::settings::ParamId;
         let ok = |v: f32, (lo, hi): (f32, f32)| v.is_finite() && v >= lo && v <= hi;
-        if !ok(self.gain, const { range("ff.adapt.gain") }) {
+        if !ok(self.gain, const { ParamId::FfAdaptGain.range() }) {
             return Err("ff.adapt.gain");
         }
-        if !ok(self.min, const { range("ff.adapt.min") }) || self.min > self.max {
+        if !ok(self.min, const { ParamId::FfAdaptMin.range() }) || self.min > self.max {
             return Err("ff.adapt.min");
         }
-        if !ok(self.max, const { range("ff.adapt.max") }) {
+        if !ok(self.max, const { ParamId::FfAdaptMax.range() }) {
             return Err("ff.adapt.max");
         }
-        if !ok(self.deadzone, const { range("ff.adapt.deadzone") }) {
+        if !ok(self.deadzone, const { ParamId::FfAdaptDeadzone.range() }) {
             return Err("ff.adapt.deadzone");
         }
-        if !ok(self.v_min, const { range("ff.adapt.vmin") }) {
+        if !ok(self.v_min, const { ParamId::FfAdaptVmin.range() }) {
             return Err("ff.adapt.vmin");
         }
         Ok(())

@@ -11,6 +11,7 @@ use crate::gms::{Gms, GmsParams};
 use crate::math::{self, clamp, i64_to_f32};
 use crate::model::FrictionModel;
 use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::settings::ParamId;
 use crate::shaping::{Shaping, ShapingParams};
 use crate::static_map::StaticMap;
 
@@ -250,58 +251,27 @@ impl<const N: usize> ControllerParams<N> {
     /// (`pos.kp`, `gms.fs`, …). The ranges are the settings table ([`crate::settings::SPECS`]),
     /// the one range table of the project: a set runs here exactly when the protocol accepts it.
     pub fn validate(&self) -> Result<(), ControllerError> {
-        use crate::settings::range;
         let a = &self.ff.actuator;
-        // One row per parameter: its path, its value, its range from the protocol's table.
-        macro_rules! row {
-            ($path:literal, $v:expr) => {
-                ($path, $v, const { range($path) })
-            };
-        }
         let f = &self.shaping;
         let m = &self.map;
-        let scalars: [(&'static str, f32, (f32, f32)); 39] = [
-            row!("rate.pos_hz", self.pos_rate_hz),
-            row!("rate.cur_hz", self.cur_rate_hz),
-            row!("pos.kp", self.pid.kp),
-            row!("pos.ki", self.pid.ki),
-            row!("pos.kd", self.pid.kd),
-            row!("pos.d_filter_hz", self.pid.d_filter_hz),
-            row!("pos.i_limit", self.pid.i_limit),
-            row!("pos.ki_fric", self.pid.ki_fric),
-            row!("filt.notch1.f_hz", f.notch[0].f_hz),
-            row!("filt.notch1.q", f.notch[0].q),
-            row!("filt.notch1.depth_db", f.notch[0].depth_db),
-            row!("filt.notch2.f_hz", f.notch[1].f_hz),
-            row!("filt.notch2.q", f.notch[1].q),
-            row!("filt.notch2.depth_db", f.notch[1].depth_db),
-            row!("filt.lp.f_hz", f.lp_hz),
-            row!("cur.kp", self.current.kp),
-            row!("cur.ki", self.current.ki),
-            row!("motor.k_m", self.motor.k_m),
-            row!("motor.r", self.motor.r),
-            row!("motor.k_e", self.motor.k_e),
-            row!("lim.i_max", self.i_max),
-            row!("lim.v_supply", self.v_supply),
-            row!("lim.pos_min", self.pos_min),
-            row!("lim.pos_max", self.pos_max),
-            row!("enc.counts_per_rev", self.counts_per_rev),
-            row!("sense.v_per_a", self.sense_v_per_a),
-            row!("ff.gain", self.ff.gain),
-            row!("ff.inertia", self.motor.inertia),
-            row!("ff.static_band", self.ff.static_band),
-            row!("map.enable", m.enable),
-            row!("map.period", m.period),
-            row!("map.bins", m.bins),
-            row!("map.origin", m.origin),
-            row!("gms.fs", a.stribeck.fs),
-            row!("gms.fc", a.stribeck.fc),
-            row!("gms.vs", a.stribeck.vs),
-            row!("gms.delta", a.stribeck.delta),
-            row!("gms.sigma", a.sigma),
-            row!("gms.c", a.c),
-        ];
-        for (name, v, (lo, hi)) in scalars {
+        // The `checked` rows of the parameters' table: each one's path, value and range.
+        let this = self;
+        macro_rules! checked {
+            ($($id:ident $path:literal $unit:literal [$min:expr, $max:expr] $num:ident
+               $kind:ident |$s:ident| $field:expr;)*) => {
+                [$(checked!(@row $kind $path [$min, $max] |$s| $field)),*]
+            };
+            (@row checked $path:literal [$min:expr, $max:expr] |$s:ident| $field:expr) => {
+                Some(($path, { let $s = this; $field }, ($min, $max)))
+            };
+            (@row $other:ident $path:literal [$min:expr, $max:expr] |$s:ident| $field:expr) => {
+                None
+            };
+        }
+        /// A checked parameter: its path, its value and its range.
+        type Row = (&'static str, f32, (f32, f32));
+        let scalars: [Option<Row>; crate::settings::SPECS.len()] = crate::for_each_param!(checked);
+        for (name, v, (lo, hi)) in scalars.into_iter().flatten() {
             if !(v.is_finite() && v >= lo && v <= hi) {
                 return Err(ControllerError::Invalid(name));
             }
@@ -338,8 +308,8 @@ impl<const N: usize> ControllerParams<N> {
         }
         // The protocol's ranges admit 0 (an unused block); a block in use needs at least
         // these (the model's structure, used blocks first, is checked by its own validate).
-        const K: (f32, f32) = (MIN_BLOCK_K, range("gms.k1").1);
-        const ALPHA: (f32, f32) = (MIN_BLOCK_ALPHA, range("gms.a1").1);
+        const K: (f32, f32) = (MIN_BLOCK_K, ParamId::GmsK1.range().1);
+        const ALPHA: (f32, f32) = (MIN_BLOCK_ALPHA, ParamId::GmsA1.range().1);
         for b in a.blocks.iter().take(a.blocks_used()) {
             if !(b.k.is_finite() && b.k >= K.0 && b.k <= K.1) {
                 return Err(ControllerError::Invalid("gms.k"));

@@ -4,6 +4,7 @@
 use core::fmt::Write;
 
 use gms_core::controller::FfMode;
+use gms_core::device::{CaptureState, StatusReply};
 use gms_core::protocol::{self, Access, Device, Line, LineReader, PARAMS, Settings};
 use gms_core::selftest;
 use proptest::prelude::*;
@@ -73,8 +74,11 @@ impl Device for Mock {
         self.enabled = false;
         Ok(())
     }
-    fn status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
-        write!(out, "enabled={}", self.enabled)
+    fn status(&mut self) -> StatusReply {
+        StatusReply {
+            enabled: self.enabled,
+            ..StatusReply::default()
+        }
     }
     fn clear(&mut self) -> Result<(), &'static str> {
         Ok(())
@@ -117,8 +121,13 @@ impl Device for Mock {
         self.experiments.push("capture off".into());
         Ok(())
     }
-    fn capture_status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
-        write!(out, "state=idle")
+    fn capture_status(&mut self) -> protocol::CaptureStatus {
+        protocol::CaptureStatus {
+            state: CaptureState::Idle,
+            samples: 0,
+            capacity: 100,
+            origin: 0.5,
+        }
     }
     fn capture_read(
         &mut self,
@@ -227,9 +236,26 @@ fn list_help_and_device_commands() {
     assert_eq!(lines.len(), PARAMS.len() + 1);
     assert_eq!(*lines.last().unwrap(), "ok");
     for (l, p) in lines.iter().zip(PARAMS) {
-        let w: Vec<&str> = l.split(' ').collect();
-        assert_eq!(w[0], p.path);
-        assert!(l.contains('[') && l.ends_with(']'), "{l}");
+        let row = protocol::ListRow::parse(l).unwrap();
+        assert_eq!(row.path, p.path);
+        assert_eq!(row.unit, p.unit);
+        match (p.access, row.range) {
+            (
+                Access::Number { get, min, max, .. },
+                protocol::ListRange::Number { min: a, max: b },
+            ) => {
+                assert_eq!((a, b), (min, max), "{l}");
+                assert_eq!(row.value, protocol::ListValue::Number(get(&d.s)), "{l}");
+            }
+            (Access::Mode, protocol::ListRange::Names(n)) => {
+                assert_eq!(row.value, protocol::ListValue::Name(d.s.ff.mode.name()));
+                for m in FfMode::ALL {
+                    assert!(n.split(", ").any(|x| x == m.name()), "{l}");
+                }
+            }
+            (Access::Estimate(_), protocol::ListRange::ReadOnly) => {}
+            _ => panic!("{l}: the range is not the parameter's kind"),
+        }
     }
     assert!(ask(&mut d, "help").ends_with("\nok\n"));
     assert_eq!(ask(&mut d, "save"), "ok\n");
@@ -238,7 +264,9 @@ fn list_help_and_device_commands() {
     assert_eq!(d.s.pid.kp, gms_core::device::default_settings().pid.kp);
     assert_eq!(ask(&mut d, "enable"), "ok\n");
     assert!(ask(&mut d, "save").starts_with("err 8 disable first"));
-    assert_eq!(ask(&mut d, "status"), "ok enabled=true\n");
+    let st = ask(&mut d, "status");
+    let st = StatusReply::parse(st.strip_prefix("ok ").unwrap().trim_end()).unwrap();
+    assert!(st.enabled);
     assert_eq!(ask(&mut d, "move 0.5"), "ok\n");
     assert_eq!(ask(&mut d, "move -1e-3 0.2"), "ok\n");
     assert_eq!(d.moves, vec![(0.5, None), (-1e-3, Some(0.2))]);
@@ -398,7 +426,10 @@ fn experiment_commands_parse() {
 #[test]
 fn capture_commands_parse() {
     let mut d = Mock::new();
-    assert_eq!(ask(&mut d, "capture"), "ok state=idle\n");
+    assert_eq!(
+        ask(&mut d, "capture"),
+        "ok state=idle samples=0 capacity=100 origin=0.5\n"
+    );
     assert_eq!(ask(&mut d, "capture t,pos,current 2 500"), "ok\n");
     assert_eq!(ask(&mut d, "capture pos 1 100 next"), "ok\n");
     assert_eq!(ask(&mut d, "capture off"), "ok\n");
@@ -617,24 +648,49 @@ proptest! {
         };
         let line = c.to_string();
         prop_assert_eq!(parse(&line), Ok(c), "{}", line);
+        // Its name is the line's first word.
+        prop_assert_eq!(line.split(' ').next().unwrap_or(""), c.name());
     }
 }
 
-/// The protocol's table and the settings table (units and ranges, below the models) name the
-/// same numeric parameters in the same order, with the same units and ranges.
+/// The protocol's table, the specs and the typed ids are one table: the same parameters in
+/// the same order, each path once, each id naming its own row; the specs' kinds are the
+/// protocol's accesses.
 #[test]
-fn the_protocol_table_takes_every_spec_once() {
-    use gms_core::settings::SPECS;
-    let numeric: Vec<_> = PARAMS
-        .iter()
-        .filter_map(|p| match p.access {
-            Access::Number { min, max, .. } => Some((p.path, p.unit, min, max)),
-            _ => None,
-        })
-        .collect();
-    let specs: Vec<_> = SPECS
-        .iter()
-        .map(|s| (s.path, s.unit, s.min, s.max))
-        .collect();
-    assert_eq!(numeric, specs);
+fn the_protocol_table_the_specs_and_the_ids_are_one() {
+    use gms_core::settings::{Kind, ParamId, SPECS};
+    assert_eq!(PARAMS.len(), SPECS.len());
+    assert_eq!(PARAMS.len(), ParamId::ALL.len());
+    let mut paths: Vec<&str> = PARAMS.iter().map(|p| p.path).collect();
+    paths.sort();
+    paths.dedup();
+    assert_eq!(paths.len(), PARAMS.len(), "a path twice");
+    for ((p, s), &id) in PARAMS.iter().zip(SPECS).zip(ParamId::ALL) {
+        assert_eq!((p.path, p.unit), (s.path, s.unit));
+        assert_eq!(id.path(), p.path);
+        assert_eq!(id.param().path, p.path);
+        assert_eq!(ParamId::from_path(p.path), Some(id));
+        assert_eq!(id.to_string(), p.path);
+        match (p.access, s.kind) {
+            (
+                Access::Number {
+                    min, max, integer, ..
+                },
+                Kind::Number,
+            ) => {
+                assert_eq!((min, max, integer), (s.min, s.max, s.integer), "{}", p.path);
+                assert!(min <= max, "{}", p.path);
+            }
+            (Access::Mode, Kind::Mode) | (Access::Estimate(_), Kind::Estimate) => {}
+            _ => panic!("{}: the access is not the spec's kind", p.path),
+        }
+    }
+    assert_eq!(ParamId::from_path("pos.nothing"), None);
+    // The defaults are in range: the table's ranges and the settings' type agree.
+    let d = gms_core::device::default_settings();
+    for p in PARAMS {
+        if let Access::Number { get, min, max, .. } = p.access {
+            assert!((min..=max).contains(&get(&d)), "{} = {}", p.path, get(&d));
+        }
+    }
 }

@@ -128,6 +128,7 @@ fn a_reply_without_a_key_is_refused_naming_it_and_unknown_keys_are_ignored() {
     assert_eq!(
         e,
         StatusError {
+            reply: "status",
             key: "enabled",
             bad_value: true
         }

@@ -9,6 +9,7 @@
 //! 700, pos.kd 2.45e-4, pos.d_filter_hz 9000.
 
 use gms_core::controller::{ControllerParams, FfMode};
+use gms_core::settings::ParamId;
 
 /// The current loop's gain margin against its own delay \[-\]: its loop gain through the
 /// winding is this at the frequency where the delay and the winding turn its phase by 180°
@@ -324,13 +325,13 @@ pub const AIM: (f64, f64) = (45.0, 8.0);
 pub const KP_STEPS_DOWN: usize = 24;
 
 impl PositionGains {
-    /// The device's parameters these set, by their protocol paths (SI).
-    pub fn sets(&self) -> [(&'static str, f64); 4] {
+    /// The device's parameters these set (SI).
+    pub fn sets(&self) -> [(ParamId, f64); 4] {
         [
-            ("pos.kp", self.kp),
-            ("pos.ki", self.ki),
-            ("pos.kd", self.kd),
-            ("pos.d_filter_hz", self.d_filter_hz),
+            (ParamId::PosKp, self.kp),
+            (ParamId::PosKi, self.ki),
+            (ParamId::PosKd, self.kd),
+            (ParamId::PosDFilterHz, self.d_filter_hz),
         ]
     }
 

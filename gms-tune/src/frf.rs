@@ -3,6 +3,7 @@
 //! point, written (`frf.csv`, `bode.svg`, `margins.toml`), and for the open loop a notch
 //! proposed for the largest resonance above the crossover (`--suggest`) and set (`--apply`).
 
+use gms_core::protocol::ParamId;
 use std::path::PathBuf;
 
 use gms_bench::frf::{Loop, MIN_COHERENCE, Plan, Point, suggest_notch};
@@ -37,9 +38,9 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
         ));
     }
     let dev = |e: gms_ident::Error| Fail::Device(e.to_string());
-    let i_max = gms_bench::get_param(link, "lim.i_max").map_err(dev)?;
+    let i_max = gms_bench::get_param(link, ParamId::LimIMax).map_err(dev)?;
     let rpc = gms_bench::rad_per_count(link).map_err(dev)?;
-    let pos_hz = gms_bench::get_param(link, "rate.pos_hz").map_err(dev)?;
+    let pos_hz = gms_bench::get_param(link, ParamId::RatePosHz).map_err(dev)?;
     let mut plan = a.plan.clone();
     // By default 1 % of the current limit at the current command, 20 counts at the reference.
     plan.amplitude = a.amplitude.unwrap_or(match plan.lp {

@@ -71,6 +71,7 @@ fn make_dir(out: Option<&Path>) -> Result<(), Error> {
 pub fn identify_plans(link: &mut Link, ranges: &Ranges) -> Result<(DeviceInfo, Plans), Error> {
     let dev = DeviceInfo::read(link)?;
     let plans = Plans::new(&dev, ranges)?;
+    plans.check_sliding()?;
     Ok((dev, plans))
 }
 

@@ -371,13 +371,10 @@ fn reply_text(body: Vec<String>, text: &str) -> String {
     out
 }
 
-/// Parses a telemetry line `name=value name=value …`.
+/// Parses a telemetry line `name=value name=value …` ([`gms_core::protocol::telemetry`]).
 pub fn parse_telemetry(line: &str) -> Vec<(String, f64)> {
-    line.split_whitespace()
-        .filter_map(|kv| {
-            let (k, v) = kv.split_once('=')?;
-            Some((k.to_string(), v.parse().ok()?))
-        })
+    gms_core::protocol::telemetry(line)
+        .map(|(k, v)| (k.to_string(), v))
         .collect()
 }
 

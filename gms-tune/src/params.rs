@@ -1,7 +1,7 @@
 //! The device's parameters as a parameter file, and a file sent back as one set: shared by
 //! `gms-tune params dump/load`, `commission`, `identify` and the window.
 
-use gms_core::protocol::Command;
+use gms_core::protocol::{Command, ListRange, ListRow};
 use std::path::Path;
 
 use gms_ident::paramfile::ParamFile;
@@ -15,43 +15,52 @@ pub struct Listed {
     pub path: String,
     /// The device's value, as printed.
     pub value: String,
+    /// The value as a number, where it is one.
+    pub number: Option<f64>,
     /// Unit (`-` for none).
     pub unit: String,
     /// The range as printed (`[0, 1000]`, `[none, static, gms, gms-adaptive]`, `[read-only]`).
     pub range: String,
+    /// An estimate: the device refuses sets of it.
+    estimate: bool,
 }
 
 impl Listed {
     /// Whether the device refuses sets of it (an estimate).
     pub fn read_only(&self) -> bool {
-        self.range == "[read-only]"
+        self.estimate
     }
 }
 
-/// Parses one line of `list` (`path value unit [range]`).
+impl From<&ListRow<'_>> for Listed {
+    fn from(r: &ListRow<'_>) -> Listed {
+        Listed {
+            path: r.path.to_string(),
+            value: r.value.to_string(),
+            number: r.value.number().map(f64::from),
+            unit: r.unit.to_string(),
+            range: r.range.to_string(),
+            estimate: r.range == ListRange::ReadOnly,
+        }
+    }
+}
+
+/// Parses one line of `list` ([`ListRow::parse`]: `path value unit [range]`).
 pub fn parse_list_line(line: &str) -> Option<Listed> {
-    let mut w = line.splitn(2, ' ');
-    let path = w.next()?.to_string();
-    let rest = w.next()?;
-    let (head, range) = match rest.find('[') {
-        Some(i) => (&rest[..i], rest[i..].trim().to_string()),
-        None => (rest, String::new()),
-    };
-    let mut h = head.split_whitespace();
-    let value = h.next()?.to_string();
-    let unit = h.next().unwrap_or("-").to_string();
-    Some(Listed {
-        path,
-        value,
-        unit,
-        range,
-    })
+    ListRow::parse(line).ok().map(|r| Listed::from(&r))
 }
 
 /// Every parameter `list` prints, read-only estimates included.
 pub fn list(link: &mut Link) -> Result<Vec<Listed>, LinkError> {
     let (lines, _) = link.ask(Command::List)?;
-    Ok(lines.iter().filter_map(|l| parse_list_line(l)).collect())
+    lines
+        .iter()
+        .map(|l| {
+            ListRow::parse(l)
+                .map(|r| Listed::from(&r))
+                .map_err(|e| LinkError::Reply(format!("{e}: {l}")))
+        })
+        .collect()
 }
 
 /// The device's parameters as a parameter file: `[friction]` (the compensator's GMS model)
@@ -63,12 +72,10 @@ pub fn read(link: &mut Link) -> Result<ParamFile, LinkError> {
 /// The parameter file of a `list` (read-only estimates left out): the rows read into the
 /// device core's settings, then [`gms_bench::paramfile::file_of`].
 pub fn to_file(listed: &[Listed]) -> Result<ParamFile, String> {
-    let lines: Vec<String> = listed
-        .iter()
-        .filter(|p| !p.read_only())
-        .map(|p| format!("{} {}", p.path, p.value))
-        .collect();
-    let s = gms_bench::settings::parse_list(&lines).map_err(|e| e.to_string())?;
+    let mut s = gms_core::device::default_settings();
+    for p in listed {
+        s = gms_bench::settings::with_listed(&s, &p.path, &p.value).map_err(|e| e.to_string())?;
+    }
     Ok(gms_bench::paramfile::file_of(&s))
 }
 

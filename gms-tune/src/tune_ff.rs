@@ -94,7 +94,10 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
             Some(g) => {
                 // To the 3 decimals printed: the interval is a hundredth wide or more.
                 let g = (g * 1e3).round() / 1e3;
-                link.ask(Command::Set("ff.gain", &format!("{g}")))?;
+                link.ask(Command::Set(
+                    gms_core::protocol::ParamId::FfGain.path(),
+                    &format!("{g}"),
+                ))?;
                 if !a.json {
                     println!("set ff.gain {g:.3}");
                 }

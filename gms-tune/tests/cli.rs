@@ -5,6 +5,7 @@
 //! One test at a time (each starts a virtual device, most of them faster than real time);
 //! the devices are this binary itself (`serve_child`, `hil_sim::harness`).
 
+use gms_core::protocol::ParamId;
 use std::path::Path;
 use std::process::Command;
 
@@ -248,14 +249,17 @@ fn the_library_captures_a_velocity_run() {
     let mut link = gms_tune::Link::tcp(&srv.addr, Duration::from_secs(2)).unwrap();
     link.console("enable").unwrap();
     link.console("capture t,pos,current 1 2000 next").unwrap();
-    assert_eq!(capture_status(&mut link).unwrap().state, "armed");
+    assert_eq!(
+        capture_status(&mut link).unwrap().state,
+        gms_core::device::CaptureState::Armed
+    );
     link.console("velocity 0.3").unwrap();
     let st = capture_wait(&mut link, 0.02, 500).unwrap();
     assert_eq!((st.samples, st.capacity), (2000, 8192));
     let rows = capture_rows(&mut link).unwrap();
     assert_eq!(rows.len(), 2000);
     // Every position step: 50 µs at the default 20 kHz.
-    let dt = 1.0 / gms_bench::get_param(&mut link, "rate.pos_hz").unwrap();
+    let dt = 1.0 / gms_bench::get_param(&mut link, ParamId::RatePosHz).unwrap();
     for (k, r) in rows.iter().enumerate() {
         assert_eq!(r.len(), 3);
         assert!((r[0] - k as f64 * dt).abs() < 1e-7, "row {k}: {r:?}");

@@ -15,6 +15,7 @@
 //!   |s(v)|/C, which is what identifies C.
 
 use crate::Error;
+use gms_core::protocol::ParamId;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -316,19 +317,24 @@ pub fn run_on_device(
         let base = gms_core::device::default_settings().ff.actuator;
         let p = crate::scenario::compensator_from_plant(&g, &base).map_err(Error::Run)?;
         for (path, v) in [
-            ("gms.fs", p.stribeck.fs),
-            ("gms.fc", p.stribeck.fc),
-            ("gms.vs", p.stribeck.vs),
-            ("gms.delta", p.stribeck.delta),
-            ("gms.sigma", p.sigma),
+            (ParamId::GmsFs, p.stribeck.fs),
+            (ParamId::GmsFc, p.stribeck.fc),
+            (ParamId::GmsVs, p.stribeck.vs),
+            (ParamId::GmsDelta, p.stribeck.delta),
+            (ParamId::GmsSigma, p.sigma),
         ] {
-            sc.set_controller(path, toml::Value::Float(v as f64));
+            sc.set_controller(path.path(), toml::Value::Float(v as f64));
         }
         sc.set_controller("ff.start", toml::Value::String("device".into()));
     }
     let mut dev = crate::device::LocalDevice::new(&sc).map_err(|e| Error::Run(e.to_string()))?;
     let info = DeviceInfo::read(&mut dev).map_err(|e| Error::Run(e.to_string()))?;
     let plans = Plans::new(&info, ranges).map_err(|e| Error::Run(e.to_string()))?;
+    if kind == Kind::Sliding {
+        plans
+            .check_sliding()
+            .map_err(|e| Error::Run(e.to_string()))?;
+    }
     let run = |e: gms_ident::Error| Error::Run(e.to_string());
     Ok(match kind {
         Kind::Presliding => {

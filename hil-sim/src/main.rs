@@ -482,7 +482,10 @@ fn main() -> ExitCode {
             compare_and_write(&sc, runs, 1, &out.join("compare.json"), threads(None))?;
             for mode in FfMode::ALL {
                 let mut one = sc.clone();
-                one.set_controller("ff.mode", toml::Value::String(mode.name().into()));
+                one.set_controller(
+                    gms_core::protocol::ParamId::FfMode.path(),
+                    toml::Value::String(mode.name().into()),
+                );
                 commands::run(&one, &out.join(format!("run-{}", mode.name())))?;
             }
             let dirs: Vec<String> = FfMode::ALL

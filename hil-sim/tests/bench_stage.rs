@@ -6,6 +6,7 @@
 mod common;
 use common::{QUIET, identification_errors};
 use gms_bench::{DeviceInfo, Plans, Ranges, get_param, identify_on, load_params, sine_test};
+use gms_core::protocol::ParamId;
 use gms_ident::paramfile::{FrictionSpec, ParamFile};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
@@ -76,15 +77,15 @@ fn a_four_block_plant_is_identified_and_applied_as_four_blocks() {
         },
     )
     .unwrap();
-    assert_eq!(get_param(&mut dev, "gms.blocks").unwrap(), 4.0);
-    assert_eq!(get_param(&mut dev, "gms.k5").unwrap(), 0.0);
+    assert_eq!(get_param(&mut dev, ParamId::GmsBlocks).unwrap(), 4.0);
+    assert_eq!(get_param(&mut dev, ParamId::GmsK5).unwrap(), 0.0);
     let identified = sine_test(&mut dev, 2e-3, 1.0, 3.0).unwrap();
     let truth_text = text.replace(
         "[controller.ff]\nguideway = false\n",
         "[controller.ff]\nguideway = false\nstart = \"plant\"\n",
     );
     let mut truth = LocalDevice::new(&Scenario::parse(&truth_text, "test").unwrap()).unwrap();
-    assert_eq!(get_param(&mut truth, "gms.blocks").unwrap(), 4.0);
+    assert_eq!(get_param(&mut truth, ParamId::GmsBlocks).unwrap(), 4.0);
     let true_set = sine_test(&mut truth, 2e-3, 1.0, 3.0).unwrap();
     eprintln!(
         "sine RMS error: true 4-block set {:.3} counts, identified {:.3} counts ({:+.1} %)",
@@ -139,5 +140,5 @@ fn an_asymmetric_set_is_refused_whole() {
     .unwrap_err()
     .to_string();
     assert!(err.contains("[friction.negative]"), "{err}");
-    assert_eq!(get_param(&mut dev, "gms.fs").unwrap(), 220e-6);
+    assert_eq!(get_param(&mut dev, ParamId::GmsFs).unwrap(), 220e-6);
 }

@@ -7,6 +7,7 @@
 mod common;
 use common::identification_errors;
 use gms_bench::{DeviceInfo, Plans, Ranges, commission, get_param, identify_on};
+use gms_core::protocol::ParamId;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -22,9 +23,12 @@ fn scenario(extra: &str) -> Scenario {
 fn the_device_runs_in_the_plants_encoder_counts_and_sense_scale() {
     let sc = scenario("");
     let mut dev = LocalDevice::new(&sc).unwrap();
-    assert_eq!(get_param(&mut dev, "enc.counts_per_rev").unwrap(), 2000.0);
+    assert_eq!(
+        get_param(&mut dev, ParamId::EncCountsPerRev).unwrap(),
+        2000.0
+    );
     // 1.65 V over ±2 A.
-    assert!((get_param(&mut dev, "sense.v_per_a").unwrap() - 0.825).abs() < 1e-6);
+    assert!((get_param(&mut dev, ParamId::SenseVPerA).unwrap() - 0.825).abs() < 1e-6);
     let (_, status) = dev.console("status").unwrap();
     assert!(status.contains(" configured=1"), "{status}");
     // A move of 100 counts ends within a count of 100 × 2π/2000 rad.

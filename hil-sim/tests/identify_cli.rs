@@ -343,8 +343,9 @@ fn experiments_run_on_the_device_rig_or_the_ideal_one() {
 }
 
 /// A fast friction (Vs 0.35 rad/s) makes the default sweep (up to 30 Vs) longer than the
-/// stroke window: `hil-sim experiment` refuses in one line naming its own options, and runs
-/// with them (the same ranges as `gms-tune identify` takes).
+/// stroke window: `hil-sim experiment sliding` refuses in one line naming its own options, and
+/// runs with them (the same ranges as `gms-tune identify` takes); the staircase, which does
+/// not slide, runs on the defaults.
 #[test]
 fn experiment_refusals_name_the_options_the_command_has() {
     let dir = tempfile::tempdir().unwrap();
@@ -356,34 +357,38 @@ fn experiment_refusals_name_the_options_the_command_has() {
          { k = 0.01, alpha = 0.1 }, { k = 0.002, alpha = 0.1 }]\n",
     )
     .unwrap();
-    let base = [
-        "experiment",
-        "presliding",
-        "--params",
-        "fast.toml",
-        "--out",
-        "pre.csv",
-    ];
-    let (code, err) = hil(&base, d);
-    assert_eq!(code, 2, "{err}");
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("needs 6.") && err.contains("lower --v-max or widen --window"),
-        "{err}"
+    let exp = |kind: &'static str, out: &'static str| {
+        ["experiment", kind, "--params", "fast.toml", "--out", out]
+    };
+    // The staircase alone: the sweep's stroke is not its business.
+    let (code, err) = hil(
+        &[&exp("presliding", "pre.csv")[..], &["--no-erase"]].concat(),
+        d,
     );
-    assert!(!d.join("pre.csv").exists());
-    // Both options it names are the command's.
-    let mut args = base.to_vec();
-    args.extend(["--v-max", "3", "--no-erase"]);
-    let (code, err) = hil(&args, d);
     assert_eq!(code, 0, "{err}");
     assert!(
         std::fs::read_to_string(d.join("pre.csv"))
             .unwrap()
             .starts_with("x,f,dir\n")
     );
-    let (code, err) = hil(&[&base[..], &["--window", "8", "--no-erase"]].concat(), d);
-    assert_eq!(code, 0, "{err}");
+    let base = exp("sliding", "sl.csv");
+    let (code, err) = hil(&base, d);
+    assert_eq!(code, 2, "{err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("sliding run at 10.5 rad/s needs 6.")
+            && err.contains("lower --v-max or widen --window"),
+        "{err}"
+    );
+    assert!(!d.join("sl.csv").exists());
+    // Both options it names are the command's.
+    for fix in [&["--v-max", "3"][..], &["--window", "8"][..]] {
+        let (code, err) = hil(&[&base[..], fix].concat(), d);
+        assert_eq!(code, 0, "{fix:?}: {err}");
+        assert!(d.join("sl.csv").exists());
+        std::fs::remove_file(d.join("sl.csv")).unwrap();
+    }
+    let base = exp("presliding", "pre.csv");
     // The ranges plan the device rig: refused with the ideal one.
     let (code, err) = hil(
         &[&base[..], &["--rig", "ideal", "--v-max", "3"]].concat(),

@@ -5,6 +5,7 @@
 
 use gms_bench::posmap::{self, MapPlan};
 use gms_bench::settings;
+use gms_core::protocol::ParamId;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -171,8 +172,14 @@ fn the_map_survives_save_and_a_power_cycle() {
     // A power cycle on the same flash.
     let flash = dev.into_flash();
     let mut dev = LocalDevice::with_flash(&sc, flash).unwrap();
-    assert_eq!(gms_bench::get_param(&mut dev, "map.enable").unwrap(), 1.0);
-    assert_eq!(gms_bench::get_param(&mut dev, "map.bins").unwrap(), 128.0);
+    assert_eq!(
+        gms_bench::get_param(&mut dev, ParamId::MapEnable).unwrap(),
+        1.0
+    );
+    assert_eq!(
+        gms_bench::get_param(&mut dev, ParamId::MapBins).unwrap(),
+        128.0
+    );
     assert_eq!(posmap::read(&mut dev).unwrap(), before);
     // Cleared, then `load`: the saved table again.
     assert!(dev.ask("set map.enable 0").starts_with("ok"));

@@ -4,6 +4,7 @@
 
 use gms_bench::settings::{self, Snapshot, changes, restoring};
 use gms_bench::{Bench, get_param};
+use gms_core::protocol::ParamId;
 use gms_ident::Error;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
@@ -13,20 +14,20 @@ fn device() -> LocalDevice {
 }
 
 /// `get` of parameters as the device answers them (f32 values written in decimal).
-fn got(dev: &mut LocalDevice, paths: &[&str]) -> Vec<f32> {
+fn got(dev: &mut LocalDevice, paths: &[ParamId]) -> Vec<f32> {
     paths
         .iter()
-        .map(|p| get_param(dev, p).unwrap() as f32)
+        .map(|p| get_param(dev, *p).unwrap() as f32)
         .collect()
 }
 
-const PATHS: [&str; 6] = [
-    "pos.kp",
-    "lim.pos_min",
-    "lim.pos_max",
-    "ff.gain",
-    "gms.fs",
-    "enc.counts_per_rev",
+const PATHS: [ParamId; 6] = [
+    ParamId::PosKp,
+    ParamId::LimPosMin,
+    ParamId::LimPosMax,
+    ParamId::FfGain,
+    ParamId::GmsFs,
+    ParamId::EncCountsPerRev,
 ];
 
 #[test]
@@ -43,9 +44,10 @@ fn the_settings_read_whole_are_the_device_s() {
     assert_eq!((s.pid.kp, s.ff.gain, s.pos_max), (0.25, 0.875, 3.5));
     // Every number read back as `get` gives it.
     let mut text = String::new();
-    for p in gms_core::protocol::PARAMS {
+    for &id in ParamId::ALL {
+        let p = id.param();
         if let gms_core::protocol::Access::Number { get, .. } = p.access {
-            let on_device = get_param(&mut dev, p.path).unwrap() as f32;
+            let on_device = get_param(&mut dev, id).unwrap() as f32;
             assert_eq!(get(&s), on_device, "{}", p.path);
             text.push_str(p.path);
         }
@@ -69,7 +71,12 @@ fn a_written_set_is_all_or_nothing() {
     assert_eq!(
         got(
             &mut dev,
-            &["pos.kp", "lim.pos_min", "lim.pos_max", "ff.gain"]
+            &[
+                ParamId::PosKp,
+                ParamId::LimPosMin,
+                ParamId::LimPosMax,
+                ParamId::FfGain
+            ]
         ),
         [before.pid.kp * 2.0, -2.0, 2.0, 0.5]
     );
@@ -141,14 +148,14 @@ fn a_run_leaves_the_settings_as_they_were_however_it_ends() {
         left: 3,
     };
     let r: Result<(), Error> = restoring(&mut stopping, |b| {
-        b.set("ff.gain", 0.2)?;
-        b.set("enc.dir", -1.0)?;
-        b.set("ff.gain", 0.1)?;
-        b.set("pos.kp", 9.0)?;
+        b.set(ParamId::FfGain, 0.2)?;
+        b.set(ParamId::EncDir, -1.0)?;
+        b.set(ParamId::FfGain, 0.1)?;
+        b.set(ParamId::PosKp, 9.0)?;
         Ok(())
     });
     assert_eq!(r, Err(Error::Link("interrupted".into())));
     assert_eq!(got(&mut dev, &PATHS), before);
-    assert_eq!(got(&mut dev, &["enc.dir"]), [1.0]);
+    assert_eq!(got(&mut dev, &[ParamId::EncDir]), [1.0]);
     assert!(changes(snap.settings(), &settings::read(&mut dev).unwrap()).is_empty());
 }

@@ -4,6 +4,7 @@
 mod common;
 use common::QUIET;
 use gms_bench::{Bench, TuneFfPlan, get_param, tune_ff};
+use gms_core::protocol::ParamId;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -127,7 +128,7 @@ fn tune_ff_is_repeatable_and_knows_how_sure_it_is() {
     for noise in 1..=5 {
         let mut dev = default_device(noise);
         let t = tune_ff(&mut dev, &plan, |_, _, _| {}).unwrap();
-        assert_eq!(get_param(&mut dev, "ff.gain").unwrap(), t.before);
+        assert_eq!(get_param(&mut dev, ParamId::FfGain).unwrap(), t.before);
         let o = t.optimum.unwrap();
         eprintln!(
             "run {noise}: ff.gain {:.4} ± {:.4} (repeat ±{:.4}), {} tests, window {:.3}-{:.3}, \
@@ -268,7 +269,7 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         assert!((c.cur_pi.0 / kp - 1.0).abs() < 1e-9);
         assert!((c.cur_pi.1 / ki - 1.0).abs() < 1e-9);
         // The device's directions are as they were (the caller applies the result).
-        assert_eq!(get_param(&mut dev, "enc.dir").unwrap(), 1.0);
+        assert_eq!(get_param(&mut dev, ParamId::EncDir).unwrap(), 1.0);
     }
 }
 
@@ -317,7 +318,7 @@ fn commission_then_identify_tracks_like_the_true_parameters() {
     for (k, v) in c.settings() {
         device.insert(k.to_string(), toml::Value::Float(v));
     }
-    let motor: f64 = get_param(&mut dev, "motor.r").unwrap();
+    let motor: f64 = get_param(&mut dev, ParamId::MotorR).unwrap();
     assert_eq!(motor, 10.0);
     let dir = tempfile::tempdir().unwrap();
     let (_, id) = {
@@ -372,7 +373,7 @@ fn error_swing(kd: f64, speed: Option<f64>, seconds: f64) -> f64 {
     d.console(&format!("set pos.kd {kd}")).unwrap();
     d.console("enable").unwrap();
     // The error at 5 kHz (every other step of a 10 kHz loop, every fourth of a 20 kHz one).
-    let pos_hz = gms_bench::get_param(&mut d, "rate.pos_hz").unwrap();
+    let pos_hz = gms_bench::get_param(&mut d, ParamId::RatePosHz).unwrap();
     let every = (pos_hz / 5e3).round().max(1.0);
     let n = (seconds * pos_hz / every) as u32;
     d.console(&format!("capture error {every} {n} next"))

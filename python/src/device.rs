@@ -1,5 +1,6 @@
 //! The bench client: a device over a serial port or TCP, and the bench workflows on it.
 
+use gms_core::protocol::ParamId;
 use super::*;
 
 /// Two numpy arrays of f64 (the position map's offset and scale).
@@ -47,10 +48,13 @@ impl Device {
             .link
             .ask(gms_core::protocol::Command::Get(path))
             .map_err(link_err)?;
-        let v = v.trim().to_string();
-        Ok(match v.parse::<f64>() {
-            Ok(x) => x.into_pyobject(py)?.into_any(),
-            Err(_) => v.into_pyobject(py)?.into_any(),
+        Ok(match gms_core::protocol::ListValue::parse(v.trim()) {
+            gms_core::protocol::ListValue::Number(x) => {
+                // The f64 of its decimal text, as the device printed it.
+                let x: f64 = v.trim().parse().unwrap_or(f64::from(x));
+                x.into_pyobject(py)?.into_any()
+            }
+            gms_core::protocol::ListValue::Name(n) => n.into_pyobject(py)?.into_any(),
         })
     }
 
@@ -206,7 +210,7 @@ impl Device {
         d.set_item("lines", c.lines.clone())?;
         let s = PyDict::new(py);
         for (k, v) in c.settings() {
-            s.set_item(k, v)?;
+            s.set_item(k.path(), v)?;
         }
         d.set_item("settings", s)?;
         Ok(d)
@@ -236,7 +240,7 @@ impl Device {
         use gms_bench::frf::{Loop, Plan};
         let lp = Loop::from_name(r#loop)
             .ok_or_else(|| err(format!("loop {loop:?}: plant, open or closed", loop = r#loop)))?;
-        let i_max = gms_bench::get_param(&mut self.link, "lim.i_max").map_err(err)?;
+        let i_max = gms_bench::get_param(&mut self.link, ParamId::LimIMax).map_err(err)?;
         let rpc = gms_bench::rad_per_count(&mut self.link).map_err(err)?;
         let mut plan = Plan::new(
             lp,

@@ -51,8 +51,11 @@ impl Device for Dev {
         self.enabled = false;
         Ok(())
     }
-    fn status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
-        write!(out, "enabled={}", u8::from(self.enabled))
+    fn status(&mut self) -> gms_core::device::StatusReply {
+        gms_core::device::StatusReply {
+            enabled: self.enabled,
+            ..Default::default()
+        }
     }
     fn clear(&mut self) -> Result<(), &'static str> {
         Ok(())
@@ -79,8 +82,13 @@ impl Device for Dev {
     fn capture_off(&mut self) -> Result<(), &'static str> {
         Ok(())
     }
-    fn capture_status(&mut self, out: &mut dyn Write) -> core::fmt::Result {
-        write!(out, "state=off")
+    fn capture_status(&mut self) -> protocol::CaptureStatus {
+        protocol::CaptureStatus {
+            state: gms_core::device::CaptureState::Idle,
+            samples: 0,
+            capacity: 0,
+            origin: 0.0,
+        }
     }
     fn capture_read(&mut self, _: u32, _: u32, _: &mut dyn Write) -> Result<(), &'static str> {
         Err("no capture")

@@ -4,7 +4,6 @@
 use core::fmt::{self, Write};
 
 use crate::drive::{self, Faults, RECORD_LEN};
-use crate::numtext::Num;
 use crate::protocol::{self, Device, Settings};
 use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
@@ -372,13 +371,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             let n = c.nfields as usize;
             for s in 0..c.samples as usize {
                 let row = c.values.get(s * n..(s + 1) * n).unwrap_or(&[]);
-                for (k, v) in row.iter().enumerate() {
-                    if k > 0 {
-                        out.write_str(",").map_err(|_| "reply too long")?;
-                    }
-                    write!(out, "{}", Num(*v)).map_err(|_| "reply too long")?;
-                }
-                writeln!(out).map_err(|_| "reply too long")?;
+                protocol::write_row(out, row).map_err(|_| "reply too long")?;
             }
             at += c.samples;
         }
@@ -466,8 +459,8 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// One telemetry line (`# t=… pos=…\n`) of the fields streamed, SI units.
     pub fn telemetry_line(&self, out: &mut impl Write, s: &Sample) -> fmt::Result {
         let rpc = self.settings.rad_per_count();
-        out.write_char('#')?;
-        for &f in self.fields.get(..self.nfields).unwrap_or(&[]) {
+        let fields = self.fields.get(..self.nfields).unwrap_or(&[]);
+        let pairs = fields.iter().map(|&f| {
             let v = match f {
                 0 => (s.steps as f64 / self.settings.pos_rate_hz as f64) as f32,
                 1 => (s.pos as f64 * rpc as f64) as f32,
@@ -478,10 +471,9 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
                 6 => s.friction,
                 _ => s.friction_true,
             };
-            let name = FIELDS.get(f as usize).copied().unwrap_or("?");
-            write!(out, " {name}={}", Num(v))?;
-        }
-        out.write_char('\n')
+            (FIELDS.get(f as usize).copied().unwrap_or("?"), v)
+        });
+        protocol::write_telemetry(out, pairs)
     }
 }
 
@@ -589,7 +581,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         self.post(|r| r.disable = true)
     }
 
-    fn status(&mut self, out: &mut dyn Write) -> fmt::Result {
+    fn status(&mut self) -> StatusReply {
         let st = self.status_now();
         let rpc = self.settings.rad_per_count();
         let clock = self.board.limits.clock_hz;
@@ -611,7 +603,6 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             drive: st.drive.kind(),
             configured: self.configured,
         }
-        .write(out)
     }
 
     fn clear(&mut self) -> Result<(), &'static str> {
@@ -643,17 +634,14 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         self.post(|r| r.capture = Some(CaptureRequest::Off))
     }
 
-    fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+    fn capture_status(&mut self) -> protocol::CaptureStatus {
         let st = self.status_now();
-        let origin = st.capture_origin as f64 * self.settings.rad_per_count() as f64;
-        write!(
-            out,
-            "state={} samples={} capacity={} origin={}",
-            st.capture.name(),
-            st.captured,
-            self.board.capture_values,
-            Num(origin as f32)
-        )
+        protocol::CaptureStatus {
+            state: st.capture,
+            samples: st.captured,
+            capacity: self.board.capture_values,
+            origin: st.capture_origin as f64 * self.settings.rad_per_count() as f64,
+        }
     }
 
     fn capture_read(
@@ -902,42 +890,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         self.post(|r| r.map = Some(MapRequest::Clear))
     }
 
-    fn table_status(&mut self, out: &mut dyn Write) -> fmt::Result {
-        if !self.has_table {
-            return out.write_str("state=none");
-        }
-        let t = self.table_report();
-        write!(out, "state={}", t.state.name())?;
-        if let Some(g) = t.geometry {
-            write!(
-                out,
-                " points={} steps={} origin={}",
-                g.points,
-                g.steps,
-                crate::numtext::Int(g.origin)
-            )?;
-        }
-        write!(
-            out,
-            " period={} periods={} gen={} pending={} started={}",
-            t.period,
-            t.periods,
-            t.generation,
-            u8::from(t.pending),
-            crate::numtext::Int(t.started as i64)
-        )?;
-        if let Some(d) = t.done {
-            write!(
-                out,
-                " done={} done_gen={} rms={} peak={} held={}",
-                d.period,
-                d.generation,
-                Num(d.rms),
-                Num(d.peak),
-                u8::from(t.held)
-            )?;
-        }
-        Ok(())
+    fn table_status(&mut self) -> protocol::TableStatus {
+        protocol::TableStatus(self.has_table.then(|| self.table_report()))
     }
 
     fn table(&mut self, cmd: TableCmd<'_>, out: &mut dyn Write) -> Result<(), &'static str> {
@@ -1095,38 +1049,35 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         self.post(|r| r.frf = Some(FrfRequest::Stop))
     }
 
-    fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
+    fn frf_status(&mut self) -> protocol::FrfStatus {
         if let Some(f) = read_frf(&mut self.link) {
             self.frf = f;
         }
         let f = &self.frf;
-        write!(out, "state={}", f.state.name())?;
-        let Some(inj) = f.injection else {
-            return Ok(());
-        };
-        write!(
-            out,
-            " inj={} f_hz={} amp={} groups={}/{}",
-            inj.name(),
-            Num(f.freq_hz as f32),
-            Num(f.amp),
-            f.lock.groups(),
-            f.groups
-        )?;
-        // The sine injected is known exactly: its amplitude, in phase, coherent.
-        write!(out, " in={},0", Num(f.amp))?;
-        let names = ["cmd", "cur", "pos"];
-        let chans = [Channel::Command, Channel::Current, Channel::Position];
-        for (name, ch) in names.iter().zip(chans) {
-            let p = f.lock.phasor(ch as usize).unwrap_or_default();
-            write!(out, " {name}={},{}", Num(p.re as f32), Num(p.im as f32))?;
+        protocol::FrfStatus {
+            state: f.state,
+            measure: f.injection.map(|injection| {
+                let chans = [Channel::Command, Channel::Current, Channel::Position];
+                // The sine injected is known exactly: its amplitude, in phase, coherent.
+                let mut phasors = [[f.amp, 0.0]; 4];
+                let mut coherence = [1.0; 4];
+                let slots = phasors.iter_mut().zip(coherence.iter_mut()).skip(1);
+                for ((ph, coh), ch) in slots.zip(chans) {
+                    let p = f.lock.phasor(ch as usize).unwrap_or_default();
+                    *ph = [p.re as f32, p.im as f32];
+                    *coh = f.lock.coherence(ch as usize).unwrap_or(f64::NAN) as f32;
+                }
+                protocol::FrfMeasure {
+                    injection,
+                    f_hz: f.freq_hz as f32,
+                    amp: f.amp,
+                    groups_done: f.lock.groups(),
+                    groups: f.groups,
+                    phasors,
+                    coherence,
+                }
+            }),
         }
-        out.write_str(" coh=1")?;
-        for ch in chans {
-            let c = f.lock.coherence(ch as usize).unwrap_or(f64::NAN);
-            write!(out, ",{}", Num(c as f32))?;
-        }
-        Ok(())
     }
 }
 

@@ -11,6 +11,7 @@ use core::fmt::{self, Write};
 use crate::controller::FfMode;
 use crate::drive::Faults;
 use crate::numtext::Num;
+use crate::protocol::Words;
 
 /// What the loop drives while the bridge is on, as `status` names it (`drive=`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -44,7 +45,7 @@ impl DriveKind {
 }
 
 /// The device's state as `status` reports it.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StatusReply {
     /// The friction feedforward's mode (`ff.mode`).
     pub mode: FfMode,
@@ -82,53 +83,8 @@ pub struct StatusReply {
     pub configured: bool,
 }
 
-/// Why a `status` reply could not be read: the key that is missing or whose value does not
-/// parse.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct StatusError {
-    /// The key.
-    pub key: &'static str,
-    /// True when the key is there but its value does not parse.
-    pub bad_value: bool,
-}
-
-impl fmt::Display for StatusError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.bad_value {
-            write!(f, "the status reply's {} does not parse", self.key)
-        } else {
-            write!(f, "the status reply has no {}", self.key)
-        }
-    }
-}
-
-/// The value of `key` in a line of `key=value` words.
-fn value<'a>(text: &'a str, key: &'static str) -> Result<&'a str, StatusError> {
-    text.split_whitespace()
-        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
-        .ok_or(StatusError {
-            key,
-            bad_value: false,
-        })
-}
-
-fn number<T: core::str::FromStr>(text: &str, key: &'static str) -> Result<T, StatusError> {
-    value(text, key)?.parse().map_err(|_| StatusError {
-        key,
-        bad_value: true,
-    })
-}
-
-fn flag(text: &str, key: &'static str) -> Result<bool, StatusError> {
-    match value(text, key)? {
-        "0" => Ok(false),
-        "1" => Ok(true),
-        _ => Err(StatusError {
-            key,
-            bad_value: true,
-        }),
-    }
-}
+/// Why a `status` reply could not be read (the reply named `status`).
+pub type StatusError = crate::protocol::ReplyError;
 
 impl StatusReply {
     /// Writes the reply (without the leading `ok `) on one line.
@@ -165,27 +121,24 @@ impl StatusReply {
     /// Reads a reply (the text after `ok`). Keys it does not know are ignored; `fault_names`
     /// is not read (it follows from `faults`).
     pub fn parse(text: &str) -> Result<StatusReply, StatusError> {
-        let bad = |key| StatusError {
-            key,
-            bad_value: true,
-        };
+        let w = Words::new(text, "status");
         Ok(StatusReply {
-            mode: FfMode::from_name(value(text, "mode")?).ok_or(bad("mode"))?,
-            enabled: flag(text, "enabled")?,
-            faults: Faults(number(text, "faults")?),
-            t: number(text, "t")?,
-            pos: number(text, "pos")?,
-            error_counts: number(text, "error_counts")?,
-            moving: flag(text, "moving")?,
-            current: number(text, "current")?,
-            ff: number(text, "ff")?,
-            duty: number(text, "duty")?,
-            step_us_worst: number(text, "step_us_worst")?,
-            step_us_mean: number(text, "step_us_mean")?,
-            sense_offset: number(text, "sense_offset")?,
-            missed: number(text, "missed")?,
-            drive: DriveKind::from_name(value(text, "drive")?).ok_or(bad("drive"))?,
-            configured: flag(text, "configured")?,
+            mode: w.named("mode", FfMode::from_name)?,
+            enabled: w.flag("enabled")?,
+            faults: Faults(w.number("faults")?),
+            t: w.number("t")?,
+            pos: w.number("pos")?,
+            error_counts: w.number("error_counts")?,
+            moving: w.flag("moving")?,
+            current: w.number("current")?,
+            ff: w.number("ff")?,
+            duty: w.number("duty")?,
+            step_us_worst: w.number("step_us_worst")?,
+            step_us_mean: w.number("step_us_mean")?,
+            sense_offset: w.number("sense_offset")?,
+            missed: w.number("missed")?,
+            drive: w.named("drive", DriveKind::from_name)?,
+            configured: w.flag("configured")?,
         })
     }
 }

@@ -267,6 +267,38 @@ pub enum Command<'a> {
     Table(TableCmd<'a>),
 }
 
+impl Command<'_> {
+    /// The command's first word (`move`, `table`, …; empty for [`Command::Empty`]).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Command::Empty => "",
+            Command::Help => "help",
+            Command::List => "list",
+            Command::Get(_) => "get",
+            Command::Set(..) => "set",
+            Command::Stage(..) => "stage",
+            Command::Commit => "commit",
+            Command::Discard => "discard",
+            Command::Save => "save",
+            Command::Load => "load",
+            Command::Defaults => "defaults",
+            Command::Enable { .. } => "enable",
+            Command::Disable => "disable",
+            Command::Status => "status",
+            Command::Clear => "clear",
+            Command::Move { .. } => "move",
+            Command::Current { .. } => "current",
+            Command::Velocity { .. } => "velocity",
+            Command::Hold => "hold",
+            Command::Capture(_) => "capture",
+            Command::Stream { .. } | Command::StreamOff => "stream",
+            Command::Frf(_) => "frf",
+            Command::Map(_) => "map",
+            Command::Table(_) => "table",
+        }
+    }
+}
+
 /// The request line of a command (without the line end): what a host sends, read back by
 /// [`parse`] as the same command (numbers in the shortest decimal that reads back exactly).
 /// `Empty` writes nothing.

@@ -28,8 +28,8 @@ pub trait Device {
     fn enable_current(&mut self) -> Result<(), &'static str>;
     /// Switches the bridge off.
     fn disable(&mut self) -> Result<(), &'static str>;
-    /// Writes the status (without the leading `ok `) on one line.
-    fn status(&mut self, out: &mut dyn Write) -> fmt::Result;
+    /// The device's state (`status`).
+    fn status(&mut self) -> crate::device::StatusReply;
     /// Clears latched faults.
     fn clear(&mut self) -> Result<(), &'static str>;
     /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
@@ -56,8 +56,8 @@ pub trait Device {
     ) -> Result<(), &'static str>;
     /// Stops the capture and drops its data.
     fn capture_off(&mut self) -> Result<(), &'static str>;
-    /// Writes the capture's state (without the leading `ok `) on one line.
-    fn capture_status(&mut self, out: &mut dyn Write) -> fmt::Result;
+    /// The capture's state (`capture`).
+    fn capture_status(&mut self) -> CaptureStatus;
     /// Writes samples `start`.. (`count` at most) of the capture, one line each, values
     /// comma-separated in SI units.
     fn capture_read(
@@ -87,10 +87,12 @@ pub trait Device {
     fn frf_off(&mut self) -> Result<(), &'static str> {
         Err("no frequency response on this device")
     }
-    /// Writes the frequency-response measurement's state and result (without the leading
-    /// `ok `) on one line.
-    fn frf_status(&mut self, out: &mut dyn Write) -> fmt::Result {
-        out.write_str("state=idle")
+    /// The frequency-response measurement's state and result (`frf`).
+    fn frf_status(&mut self) -> FrfStatus {
+        FrfStatus {
+            state: crate::frf::FrfState::Idle,
+            measure: None,
+        }
     }
     /// Writes bins `start`.. of the position map from `pairs` (`offset,scale` separated by
     /// spaces): all or none.
@@ -112,9 +114,9 @@ pub trait Device {
     fn map_clear(&mut self) -> Result<(), &'static str> {
         Err("no position map on this device")
     }
-    /// Writes the table motion's state (without the leading `ok `) on one line.
-    fn table_status(&mut self, out: &mut dyn Write) -> fmt::Result {
-        out.write_str("state=none")
+    /// The table motion's state (`table`; none on a device without one).
+    fn table_status(&mut self) -> TableStatus {
+        TableStatus(None)
     }
     /// Acts on a table motion's command (a read writes its values, one a line, to `out`).
     fn table(&mut self, cmd: TableCmd<'_>, out: &mut dyn Write) -> Result<(), &'static str> {
@@ -176,18 +178,25 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::List => {
             let s = *dev.settings();
             for p in PARAMS {
-                write!(out, "{} ", p.path)?;
-                match p.access {
-                    Access::Number { min, max, .. } => {
-                        write_value(p, &s, out)?;
-                        writeln!(out, " {} [{}, {}]", p.unit, Num(min), Num(max))?
+                let (value, range) = match p.access {
+                    Access::Number { get, min, max, .. } => {
+                        (ListValue::Number(get(&s)), ListRange::Number { min, max })
                     }
-                    Access::Mode => {
-                        write_value(p, &s, out)?;
-                        writeln!(out, " - [none, static, gms, gms-adaptive]")?
+                    Access::Mode => (
+                        ListValue::Name(s.ff.mode.name()),
+                        ListRange::Names(MODE_NAMES),
+                    ),
+                    Access::Estimate(e) => {
+                        (ListValue::Number(dev.estimate(e)), ListRange::ReadOnly)
                     }
-                    Access::Estimate(e) => writeln!(out, "{} - [read-only]", Num(dev.estimate(e)))?,
+                };
+                ListRow {
+                    path: p.path,
+                    value,
+                    unit: p.unit,
+                    range,
                 }
+                .write(out)?;
             }
             writeln!(out, "ok")
         }
@@ -245,8 +254,9 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::Enable { current: true } => done(out, dev.enable_current()),
         Command::Disable => done(out, dev.disable()),
         Command::Status => {
+            let st = dev.status();
             out.write_str("ok ")?;
-            dev.status(out)?;
+            st.write(out)?;
             writeln!(out)
         }
         Command::Clear => done(out, dev.clear()),
@@ -256,8 +266,9 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::Hold => done(out, dev.hold()),
         Command::Capture(c) => match c {
             CaptureCmd::Status => {
+                let st = dev.capture_status();
                 out.write_str("ok ")?;
-                dev.capture_status(out)?;
+                st.write(out)?;
                 writeln!(out)
             }
             CaptureCmd::Off => done(out, dev.capture_off()),
@@ -281,8 +292,9 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Command::Map(MapCmd::Write { start, pairs }) => done(out, dev.map_write(start, pairs)),
         Command::Map(MapCmd::Clear) => done(out, dev.map_clear()),
         Command::Table(TableCmd::Status) => {
+            let st = dev.table_status();
             out.write_str("ok ")?;
-            dev.table_status(out)?;
+            st.write(out)?;
             writeln!(out)
         }
         Command::Table(t) => {
@@ -290,8 +302,9 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             done(out, r)
         }
         Command::Frf(FrfCmd::Status) => {
+            let st = dev.frf_status();
             out.write_str("ok ")?;
-            dev.frf_status(out)?;
+            st.write(out)?;
             writeln!(out)
         }
         Command::Frf(FrfCmd::Off) => done(out, dev.frf_off()),

@@ -29,6 +29,8 @@
 //!   and ranges from the leaf [`crate::settings`]), [`with_value`].
 //! - `exec`: [`Device`] (what a device offers), [`execute`] (a line to its reply).
 //! - `reply`: [`Reply`] (a reply's last line, `ok …` or `err CODE REASON`, written and read).
+//! - `replies`: the replies that carry data ([`CaptureStatus`], [`FrfStatus`],
+//!   [`TableStatus`], [`ListRow`], rows and telemetry), each written and read by one type.
 
 use core::fmt::{self, Write};
 
@@ -39,13 +41,18 @@ mod command;
 mod exec;
 mod params;
 mod reader;
+mod replies;
 mod reply;
 
 pub use command::*;
 pub use exec::*;
 pub use params::*;
 pub use reader::*;
+pub use replies::*;
 pub use reply::*;
+
+/// The friction modes as `list` prints their range.
+pub const MODE_NAMES: &str = "none, static, gms, gms-adaptive";
 
 /// How long a device may take to answer `save` \[ms\]: a board's flash erases a sector during a
 /// save (up to 2 s on the STM32F405, two when the store repairs itself), and answers nothing

@@ -1,8 +1,9 @@
-//! The parameter table: every settable path with its unit, range and access; reading and setting one, and a whole set validated.
+//! The parameter table: every parameter's path, unit, range and access (made from the one
+//! table of rows, [`crate::for_each_param!`]); reading and setting one, and a whole set
+//! validated.
 
 use super::*;
-pub use crate::settings::range;
-use crate::settings::spec;
+pub use crate::settings::ParamId;
 
 /// The controller settings the protocol edits (the firmware's whole parameter set).
 pub type Settings = ControllerParams<6>;
@@ -36,7 +37,8 @@ pub enum Estimate {
     AdaptScale,
 }
 
-/// One parameter of the table: its path, unit and access.
+/// One parameter of a table (this firmware's, [`PARAMS`], or in a test another's): its
+/// path, unit and access.
 #[derive(Clone, Copy)]
 pub struct Param {
     /// The path, e.g. `pos.kp`.
@@ -47,111 +49,58 @@ pub struct Param {
     pub access: Access,
 }
 
-/// A numeric parameter: its unit and range from [`crate::settings::SPECS`], its field here.
-macro_rules! num {
-    ($path:literal, |$s:ident| $field:expr) => {
-        Param {
-            path: $path,
-            unit: spec($path).unit,
-            access: Access::Number {
-                get: |$s: &Settings| $field,
-                set: |$s: &mut Settings, v: f32| $field = v,
-                min: spec($path).min,
-                max: spec($path).max,
-                integer: spec($path).integer,
+/// [`PARAMS`] from the parameters' rows ([`crate::for_each_param!`]): each row's field read
+/// and written by its access.
+macro_rules! params {
+    ($($id:ident $path:literal $unit:literal [$min:expr, $max:expr] $num:ident $kind:ident
+       |$s:ident| $field:expr;)*) => {
+        /// Every parameter, in `list` order (indexed by [`ParamId`]): its path and field, its
+        /// unit and range from [`crate::settings::SPECS`]; the whole set must also pass
+        /// [`ControllerParams::validate`].
+        pub const PARAMS: &[Param] = &[$(
+            Param {
+                path: $path,
+                unit: $unit,
+                access: params!(@access $kind $id |$s| $field),
             },
-        }
+        )*];
     };
-}
-
-/// Every parameter, in `list` order: its path and field (units and ranges are
-/// [`crate::settings::SPECS`]'s); the whole set must also pass
-/// [`ControllerParams::validate`].
-pub const PARAMS: &[Param] = &[
-    num!("rate.pos_hz", |s| s.pos_rate_hz),
-    num!("rate.cur_hz", |s| s.cur_rate_hz),
-    num!("pos.kp", |s| s.pid.kp),
-    num!("pos.ki", |s| s.pid.ki),
-    num!("pos.kd", |s| s.pid.kd),
-    num!("pos.d_filter_hz", |s| s.pid.d_filter_hz),
-    num!("pos.i_limit", |s| s.pid.i_limit),
-    num!("pos.ki_fric", |s| s.pid.ki_fric),
-    num!("filt.notch1.f_hz", |s| s.shaping.notch[0].f_hz),
-    num!("filt.notch1.q", |s| s.shaping.notch[0].q),
-    num!("filt.notch1.depth_db", |s| s.shaping.notch[0].depth_db),
-    num!("filt.notch2.f_hz", |s| s.shaping.notch[1].f_hz),
-    num!("filt.notch2.q", |s| s.shaping.notch[1].q),
-    num!("filt.notch2.depth_db", |s| s.shaping.notch[1].depth_db),
-    num!("filt.lp.f_hz", |s| s.shaping.lp_hz),
-    num!("cur.kp", |s| s.current.kp),
-    num!("cur.ki", |s| s.current.ki),
-    num!("motor.k_m", |s| s.motor.k_m),
-    num!("motor.r", |s| s.motor.r),
-    num!("motor.k_e", |s| s.motor.k_e),
-    num!("lim.i_max", |s| s.i_max),
-    num!("lim.v_supply", |s| s.v_supply),
-    num!("lim.pos_min", |s| s.pos_min),
-    num!("lim.pos_max", |s| s.pos_max),
-    num!("enc.dir", |s| s.enc_dir),
-    num!("enc.counts_per_rev", |s| s.counts_per_rev),
-    num!("sense.dir", |s| s.sense_dir),
-    num!("sense.v_per_a", |s| s.sense_v_per_a),
-    Param {
-        path: "ff.mode",
-        unit: "-",
-        access: Access::Mode,
-    },
-    num!("ff.gain", |s| s.ff.gain),
-    num!("ff.inertia", |s| s.motor.inertia),
-    num!("ff.static_band", |s| s.ff.static_band),
-    num!("ff.adapt.gain", |s| s.ff.adapt.gain),
-    num!("ff.adapt.min", |s| s.ff.adapt.min),
-    num!("ff.adapt.max", |s| s.ff.adapt.max),
-    num!("ff.adapt.deadzone", |s| s.ff.adapt.deadzone),
-    num!("ff.adapt.vmin", |s| s.ff.adapt.v_min),
-    Param {
-        path: "ff.adapt.scale",
-        unit: "-",
-        access: Access::Estimate(Estimate::AdaptScale),
-    },
-    num!("map.enable", |s| s.map.enable),
-    num!("map.period", |s| s.map.period),
-    num!("map.bins", |s| s.map.bins),
-    num!("map.origin", |s| s.map.origin),
-    num!("gms.fs", |s| s.ff.actuator.stribeck.fs),
-    num!("gms.fc", |s| s.ff.actuator.stribeck.fc),
-    num!("gms.vs", |s| s.ff.actuator.stribeck.vs),
-    num!("gms.delta", |s| s.ff.actuator.stribeck.delta),
-    num!("gms.sigma", |s| s.ff.actuator.sigma),
-    num!("gms.c", |s| s.ff.actuator.c),
-    Param {
-        path: "gms.blocks",
-        unit: spec("gms.blocks").unit,
-        access: Access::Number {
+    (@access mode $id:ident |$s:ident| $field:expr) => { Access::Mode };
+    (@access estimate $id:ident |$s:ident| $field:expr) => {
+        Access::Estimate(Estimate::AdaptScale)
+    };
+    (@access blocks $id:ident |$s:ident| $field:expr) => {
+        Access::Number {
             get: |s: &Settings| s.ff.actuator.blocks_used() as f32,
             // The blocks past the count become unused (k = alpha = 0); those kept keep their
             // values (a count that grows needs its new blocks set before the set validates).
             set: |s: &mut Settings, v: f32| {
                 s.ff.actuator = s.ff.actuator.with_blocks_used(v as usize);
             },
-            min: spec("gms.blocks").min,
-            max: spec("gms.blocks").max,
-            integer: spec("gms.blocks").integer,
-        },
-    },
-    num!("gms.k1", |s| s.ff.actuator.blocks[0].k),
-    num!("gms.k2", |s| s.ff.actuator.blocks[1].k),
-    num!("gms.k3", |s| s.ff.actuator.blocks[2].k),
-    num!("gms.k4", |s| s.ff.actuator.blocks[3].k),
-    num!("gms.k5", |s| s.ff.actuator.blocks[4].k),
-    num!("gms.k6", |s| s.ff.actuator.blocks[5].k),
-    num!("gms.a1", |s| s.ff.actuator.blocks[0].alpha),
-    num!("gms.a2", |s| s.ff.actuator.blocks[1].alpha),
-    num!("gms.a3", |s| s.ff.actuator.blocks[2].alpha),
-    num!("gms.a4", |s| s.ff.actuator.blocks[3].alpha),
-    num!("gms.a5", |s| s.ff.actuator.blocks[4].alpha),
-    num!("gms.a6", |s| s.ff.actuator.blocks[5].alpha),
-];
+            min: ParamId::$id.spec().min,
+            max: ParamId::$id.spec().max,
+            integer: ParamId::$id.spec().integer,
+        }
+    };
+    (@access $other:ident $id:ident |$s:ident| $field:expr) => {
+        Access::Number {
+            get: |$s: &Settings| $field,
+            set: |$s: &mut Settings, v: f32| $field = v,
+            min: ParamId::$id.spec().min,
+            max: ParamId::$id.spec().max,
+            integer: ParamId::$id.spec().integer,
+        }
+    };
+}
+
+crate::for_each_param!(params);
+
+impl ParamId {
+    /// Its entry in [`PARAMS`] (how to read and write it).
+    pub fn param(self) -> &'static Param {
+        &PARAMS[self as usize]
+    }
+}
 
 /// The parameter with this path.
 pub fn find(path: &str) -> Option<&'static Param> {

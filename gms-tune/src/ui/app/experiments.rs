@@ -122,7 +122,7 @@ impl App {
                         .clicked()
                     {
                         apply = Some(Cmd::Set {
-                            path: "ff.gain".into(),
+                            path: ParamId::FfGain.path().into(),
                             value: format!("{}", t.chosen),
                         });
                     }

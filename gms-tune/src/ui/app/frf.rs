@@ -47,16 +47,16 @@ impl App {
     /// current, 20 counts at the reference).
     fn frf_plan(&self) -> Result<Plan, String> {
         let inp = &self.frf_inputs;
-        let listed = |path: &str| {
+        let listed = |p: ParamId| {
             self.rows
                 .iter()
-                .find(|r| r.listed.path == path)
-                .and_then(|r| r.listed.value.parse::<f64>().ok())
+                .find(|r| r.listed.path == p.path())
+                .and_then(|r| r.listed.number)
         };
         let amp = if inp.amplitude.trim().is_empty() {
             match inp.lp {
                 Loop::Closed => 20.0 * self.rad_per_count(),
-                _ => 0.01 * listed("lim.i_max").unwrap_or(0.5),
+                _ => 0.01 * listed(ParamId::LimIMax).unwrap_or(0.5),
             }
         } else {
             num(&inp.amplitude, "amplitude")?
@@ -73,8 +73,8 @@ impl App {
             plan.velocity = Some(num(&inp.velocity, "velocity")?);
         }
         plan.check(
-            listed("rate.pos_hz").unwrap_or(10_000.0),
-            listed("lim.i_max").unwrap_or(0.5),
+            listed(ParamId::RatePosHz).unwrap_or(10_000.0),
+            listed(ParamId::LimIMax).unwrap_or(0.5),
         )
         .map_err(|e| e.to_string())?;
         Ok(plan)
@@ -164,8 +164,8 @@ impl App {
                     let pos_hz = self
                         .rows
                         .iter()
-                        .find(|r| r.listed.path == "rate.pos_hz")
-                        .and_then(|r| r.listed.value.parse::<f64>().ok())
+                        .find(|r| r.listed.path == ParamId::RatePosHz.path())
+                        .and_then(|r| r.listed.number)
                         .unwrap_or(10_000.0);
                     let p = gms_core::shaping::ShapingParams {
                         notch: [s.notch, gms_core::shaping::Notch::OFF],

@@ -62,13 +62,13 @@ impl App {
             let on = self
                 .rows
                 .iter()
-                .find(|r| r.listed.path == "map.enable")
+                .find(|r| r.listed.path == ParamId::MapEnable.path())
                 .is_some_and(|r| r.listed.value == "1");
             let mut want = on;
             ui.checkbox(&mut want, "the map acts (map.enable)");
             if want != on {
                 self.send(Cmd::Set {
-                    path: "map.enable".into(),
+                    path: ParamId::MapEnable.path().into(),
                     value: if want { "1" } else { "0" }.into(),
                 });
             }

@@ -9,7 +9,7 @@ use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
 use gms_core::device::StatusReply;
 use gms_core::model::FrictionModel;
-use gms_core::protocol::Command;
+use gms_core::protocol::{Command, ParamId};
 
 mod experiments;
 mod frf;
@@ -279,8 +279,8 @@ impl App {
     pub fn rad_per_count(&self) -> f64 {
         self.rows
             .iter()
-            .find(|r| r.listed.path == "enc.counts_per_rev")
-            .and_then(|r| r.listed.value.parse::<f64>().ok())
+            .find(|r| r.listed.path == ParamId::EncCountsPerRev.path())
+            .and_then(|r| r.listed.number)
             .filter(|c| c.is_finite() && *c > 0.0)
             .map_or(
                 gms_core::device::default_settings().rad_per_count() as f64,
