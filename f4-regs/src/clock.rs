@@ -49,7 +49,7 @@ pub fn css_ack(rcc: pac::rcc::Rcc) -> bool {
 /// revision A, keeps the prefetch off: gms-core's `hw::f4_prefetch_allowed`). The caches are
 /// empty after reset, so no ICRST/DCRST is needed first. Returns whether the prefetch is on.
 pub fn flash_accelerator(flash: pac::flash::Flash, idcode: u32, dev_id: u32) -> bool {
-    let prefetch = (idcode & 0xFFF) == dev_id && gms_core::hw::f4_prefetch_allowed(idcode);
+    let prefetch = (idcode & 0xFFF) == dev_id && gms_core::boards::hw::f4_prefetch_allowed(idcode);
     flash.acr().modify(|w| {
         w.set_prften(prefetch);
         w.set_icen(true);

@@ -476,7 +476,7 @@ const STACK_MIN: u32 = 16 * 1024;
 /// it, or `None` if the statics leave no room.
 pub fn stack_guard() -> Option<(u32, u32)> {
     let (end, start) = stack_region();
-    let size = gms_core::hw::STACK_GUARD_BYTES;
+    let size = gms_core::boards::hw::STACK_GUARD_BYTES;
     let (base, left) = f4_regs::mpu::guard_region(end, start, size, STACK_MIN)?;
     // SAFETY: the core's own MPU and SCB; nothing uses the guard's memory (the stack is far
     // above it, the statics below).
@@ -487,7 +487,7 @@ pub fn stack_guard() -> Option<(u32, u32)> {
 /// The stack's usable region, above the guard (or all of it without one): (bottom, top).
 pub fn stack_usable() -> (*const u32, *const u32) {
     let (end, start) = stack_region();
-    let size = gms_core::hw::STACK_GUARD_BYTES;
+    let size = gms_core::boards::hw::STACK_GUARD_BYTES;
     let bottom = f4_regs::mpu::guard_region(end, start, size, STACK_MIN)
         .map(|(base, _)| base + size)
         .unwrap_or(end);

@@ -97,11 +97,11 @@ async fn main(spawner: Spawner) {
     // Parameters: the stored set, or the defaults (and a fault if a stored set was unusable);
     // never a mix. The decision is gms-core's.
     // The store keeps the position map too, in a static buffer (8 KiB: out of the stack).
-    static STORE_MAP: ConstStaticCell<[u8; gms_core::store::MAP_BUFFER_LEN]> =
-        ConstStaticCell::new([0; gms_core::store::MAP_BUFFER_LEN]);
+    static STORE_MAP: ConstStaticCell<[u8; gms_core::device::store::MAP_BUFFER_LEN]> =
+        ConstStaticCell::new([0; gms_core::device::store::MAP_BUFFER_LEN]);
     let mut store = storage::new(rest.flash).with_map_buffer(STORE_MAP.take());
     let defaults = device::default_settings();
-    let mut log = |line: gms_core::drive::ReportLine| warn!("{}", line);
+    let mut log = |line: gms_core::device::ReportLine| warn!("{}", line);
     let start = match device::startup(store.load(), &defaults, &board::BOARD, &mut log) {
         Ok(s) => s,
         Err(e) => {
@@ -157,19 +157,19 @@ async fn main(spawner: Spawner) {
         ConstStaticCell::new([0.0; board::CAPTURE_VALUES as usize]);
     let capture = CAPTURE.take();
     // The position map's table, likewise (4 KiB).
-    static MAP: ConstStaticCell<[f32; gms_core::posmap::MAP_VALUES]> =
-        ConstStaticCell::new([0.0; gms_core::posmap::MAP_VALUES]);
+    static MAP: ConstStaticCell<[f32; gms_core::control::posmap::MAP_VALUES]> =
+        ConstStaticCell::new([0.0; gms_core::control::posmap::MAP_VALUES]);
     let table = MAP.take();
     // The stored map for these settings, or none; a map of another period or bin count is
     // left out with the reason (the decision is gms-core's).
-    match gms_core::posmap::restore(&mut store, &start.settings.map, table) {
+    match gms_core::device::restore_map(&mut store, &start.settings.map, table) {
         Ok(true) => info!("position map loaded from the store"),
         Ok(false) => {}
         Err(why) => warn!("{}", why),
     }
     // The table motion's buffer (reference, two corrections, two period errors: 20 KiB).
-    static TABLE: ConstStaticCell<[f32; gms_core::table::TABLE_VALUES]> =
-        ConstStaticCell::new([0.0; gms_core::table::TABLE_VALUES]);
+    static TABLE: ConstStaticCell<[f32; gms_core::control::table::TABLE_VALUES]> =
+        ConstStaticCell::new([0.0; gms_core::control::table::TABLE_VALUES]);
     let (telemetry_tx, telemetry_rx) = control::telemetry();
     let spare = install_loop(
         hw,
@@ -190,7 +190,7 @@ async fn main(spawner: Spawner) {
         Some((base, left)) => info!(
             "stack guard at {=u32:#x}, {} B; {} B of stack above it",
             base,
-            gms_core::hw::STACK_GUARD_BYTES,
+            gms_core::boards::hw::STACK_GUARD_BYTES,
             left
         ),
         None => warn!("no room for the stack guard: running without it"),
@@ -260,8 +260,8 @@ fn install_loop(
     hw: board::ControlHw,
     parts: LoopParts,
     telemetry: control::TelemetryTx,
-    map: &'static mut [f32; gms_core::posmap::MAP_VALUES],
-    table: &'static mut [f32; gms_core::table::TABLE_VALUES],
+    map: &'static mut [f32; gms_core::control::posmap::MAP_VALUES],
+    table: &'static mut [f32; gms_core::control::table::TABLE_VALUES],
 ) -> device::CtrlBuf {
     // The two controllers' storage: the loop runs one, the protocol side builds the next
     // parameter set in the other (`device::Staged`), and the loop swaps them by reference.

@@ -25,7 +25,7 @@ use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::flash::{Blocking, Error, Flash, MAX_ERASE_SIZE, WRITE_SIZE};
 use embassy_stm32::pac;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use gms_core::store::{FlashStore, SECTOR_SIZE, WORD_SIZE};
+use gms_core::device::store::{FlashStore, SECTOR_SIZE, WORD_SIZE};
 
 use crate::board::MEMORY;
 

@@ -193,7 +193,7 @@ pub fn rad_per_count(b: &mut impl Bench) -> Result<f64, Error> {
 }
 
 /// The velocity mode's ramp [rad/s²] (the device's `velocity` ramps at `MOVE_AMAX`).
-pub(crate) const VELOCITY_ACC: f64 = gms_core::reference::MOVE_AMAX as f64;
+pub(crate) const VELOCITY_ACC: f64 = gms_core::control::reference::MOVE_AMAX as f64;
 
 /// What the experiments need to know of the device, read with `get` (SI).
 #[derive(Debug, Clone, Copy)]
@@ -311,12 +311,14 @@ pub fn guarded<B: Bench, T>(
 pub fn velocity(vel: f64, sweep: Option<(f64, f64, f64, f64)>) -> Command<'static> {
     Command::Velocity {
         vel: vel as f32,
-        sweep: sweep.map(|(amp, f0, f1, seconds)| gms_core::reference::Sweep {
-            amp: amp as f32,
-            f0: f0 as f32,
-            f1: f1 as f32,
-            seconds: seconds as f32,
-        }),
+        sweep: sweep.map(
+            |(amp, f0, f1, seconds)| gms_core::control::reference::Sweep {
+                amp: amp as f32,
+                f0: f0 as f32,
+                f1: f1 as f32,
+                seconds: seconds as f32,
+            },
+        ),
     }
 }
 

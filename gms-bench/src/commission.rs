@@ -55,7 +55,7 @@ pub struct Commissioned {
     /// A notch set for a resonance above the crossover that held the loop under the floor
     /// (its slot, 0 or 1, and the notch), found by [`crate::frf::suggest_notch`] from a
     /// sliding sweep of the open loop.
-    pub notch: Option<(usize, gms_core::shaping::Notch)>,
+    pub notch: Option<(usize, gms_core::control::shaping::Notch)>,
 }
 
 /// The two notches' settings.

@@ -121,7 +121,7 @@ pub fn inductance_from_step(
     let ratio = (p.cur_rate_hz / p.pos_rate_hz).round().max(1.0) as usize;
     let h = 1.0 / p.cur_rate_hz as f64;
     let sse = |l: f64| -> Option<f64> {
-        let mut ctrl = gms_core::controller::Controller::<6>::try_new(*p).ok()?;
+        let mut ctrl = gms_core::control::controller::Controller::<6>::try_new(*p).ok()?;
         ctrl.hold_current(amps as f32);
         let (mut i, mut v_prev) = (0.0f64, 0.0f64);
         let mut sse = 0.0;
@@ -248,7 +248,7 @@ mod tests {
             let amps = 0.2;
             let ratio = (p.cur_rate_hz / p.pos_rate_hz).round() as usize;
             let h = 1.0 / p.cur_rate_hz as f64;
-            let mut ctrl = gms_core::controller::Controller::<6>::try_new(p).unwrap();
+            let mut ctrl = gms_core::control::controller::Controller::<6>::try_new(p).unwrap();
             ctrl.hold_current(amps as f32);
             let (mut i, mut v_prev) = (0.0f64, 0.0f64);
             let mut response = Vec::new();

@@ -13,7 +13,7 @@
 //!   `u = −L · cmd`), dimensionless, the loop-shaping filters included;
 //! - `closed`: `pos / in` (the sine at the position reference).
 
-use gms_core::frf::{FrfState, Injection};
+use gms_core::control::frf::{FrfState, Injection};
 use gms_core::protocol::ParamId;
 use gms_core::protocol::{self, Command, FrfCmd};
 use gms_ident::Error;
@@ -565,7 +565,7 @@ pub struct Suggestion {
     /// Which notch it goes in: 0 for `filt.notch1`, 1 for `filt.notch2` (the first one off).
     pub slot: usize,
     /// The notch.
-    pub notch: gms_core::shaping::Notch,
+    pub notch: gms_core::control::shaping::Notch,
     /// The resonance: its frequency \[Hz\] and the loop gain's level there \[dB\].
     pub resonance: (f64, f64),
     /// The margins measured.
@@ -612,10 +612,10 @@ fn score(m: &Margins) -> f64 {
 /// filters now (the first notch that is off takes it), `pos_hz` its position rate \[Hz\].
 pub fn suggest_notch(
     points: &[Point],
-    shaping: &gms_core::shaping::ShapingParams,
+    shaping: &gms_core::control::shaping::ShapingParams,
     pos_hz: f64,
 ) -> Result<Suggestion, String> {
-    use gms_core::shaping::{Notch, Shaping, ShapingParams};
+    use gms_core::control::shaping::{Notch, Shaping, ShapingParams};
     let good: Vec<&Point> = points
         .iter()
         .filter(|p| p.coherence >= MIN_COHERENCE)

@@ -30,8 +30,8 @@
 use gms_ident::Error;
 use gms_ident::linear::PositionController;
 
+use gms_core::control::table::{Geometry, TableReport, TableState, Which};
 use gms_core::protocol::{self, Command, TableCmd};
-use gms_core::table::{Geometry, TableReport, TableState, Which};
 
 use crate::client::{Bench, check_faults, guarded, status};
 use crate::ilc::{Iteration, Learner, LearningFilter, QFilter, Stop};
@@ -223,7 +223,7 @@ impl Table {
 }
 
 /// The most points the device's table holds.
-pub const POINTS: u32 = gms_core::table::TABLE_POINTS as u32;
+pub const POINTS: u32 = gms_core::control::table::TABLE_POINTS as u32;
 
 /// The table for `path` at the position rate `rate` \[Hz\] with an encoder of `rpc`
 /// \[rad/count\], a sine starting at `here` \[counts\]: as many points as the device holds at the
@@ -355,7 +355,7 @@ fn write_values(b: &mut impl Bench, which: Which, values: &[f64]) -> Result<(), 
             // f32's shortest decimal: the device reads back the same value.
             let word = format!("{}", *v as f32);
             let sep = usize::from(!text.is_empty());
-            if n == gms_core::table::TABLE_WRITE_VALUES
+            if n == gms_core::control::table::TABLE_WRITE_VALUES
                 || head + text.len() + sep + word.len() > max_line
             {
                 break;
@@ -613,7 +613,7 @@ pub fn learn(
         // Played until stopped (a host that reads, learns and uploads slower than a period
         // costs periods, not the run); a lost link ends it at its period's end.
         b.send(Command::Table(TableCmd::Run(
-            gms_core::table::TABLE_MAX_PERIODS,
+            gms_core::control::table::TABLE_MAX_PERIODS,
         )))?;
         out.started = table_status(b)?.started;
         // The first period starts from rest: the first pass is the next one held, in the
@@ -699,7 +699,8 @@ pub fn friction_stiffness(s: &gms_core::protocol::Settings, t: &Table) -> Vec<f6
         let k = i / steps;
         let s = (i % steps) as f32 / steps as f32;
         let p = |j: usize| t.values[j % n] as f32;
-        let (x, _, _) = gms_core::table::catmull_rom([p(k + n - 1), p(k), p(k + 1), p(k + 2)], s);
+        let (x, _, _) =
+            gms_core::control::table::catmull_rom([p(k + n - 1), p(k), p(k + 1), p(k + 2)], s);
         f64::from(x) * rpc
     };
     let mut out = vec![0.0; n];

@@ -279,7 +279,7 @@ pub fn csv(m: &PosMap) -> String {
 /// viscous term of its GMS model (`gms.*`, what `list` shows: the actuator's), as the
 /// controller's static map computes them.
 pub fn model_sliding_friction(s: &gms_core::protocol::Settings, speed: f64) -> f64 {
-    gms_core::static_map::StaticMap::try_new(s.ff.actuator.static_params())
+    gms_core::friction::static_map::StaticMap::try_new(s.ff.actuator.static_params())
         .map_or(0.0, |m| m.force_at(speed.abs() as f32) as f64)
 }
 
@@ -288,10 +288,10 @@ pub fn model_sliding_friction(s: &gms_core::protocol::Settings, speed: f64) -> f
 /// as it was unless `enable`. Returns the bins written.
 pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Error> {
     let n = map.offset.len();
-    if !(8..=gms_core::posmap::MAP_BINS_MAX).contains(&n) || map.scale.len() != n {
+    if !(8..=gms_core::control::posmap::MAP_BINS_MAX).contains(&n) || map.scale.len() != n {
         return Err(Error::Params(format!(
             "a map of {n} bins: the device holds 8 to {}",
-            gms_core::posmap::MAP_BINS_MAX
+            gms_core::control::posmap::MAP_BINS_MAX
         )));
     }
     b.set(ParamId::MapEnable, 0.0)?;

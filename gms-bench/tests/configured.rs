@@ -2,7 +2,7 @@
 //! encoder resolution and sense scale are the paper's rig's, which no user's axis is.
 
 use gms_bench::{Bench, commission};
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use gms_core::device::{DriveKind, StatusReply};
 use gms_core::drive::Faults;
 use gms_ident::Error;

@@ -4,7 +4,8 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use gms_core::{FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets};
+use gms_core::friction::presets;
+use gms_core::{FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams};
 
 const DT: f32 = 1e-4; // 10 kHz
 

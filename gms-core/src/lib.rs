@@ -11,7 +11,8 @@
 //! for a rotational one, s for time.
 //!
 //! ```
-//! use gms_core::{FrictionModel, Gms, presets};
+//! use gms_core::{FrictionModel, Gms};
+//! use gms_core::friction::presets;
 //! let mut m = Gms::try_new(presets::table1()).unwrap();
 //! // 50 urad at 1 mrad/s: pre-sliding, far below breakaway (220 uN·m).
 //! let f = m.advance(50e-6, 0.05);
@@ -21,37 +22,33 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-pub mod adaptive;
+// The layers, from the bottom: each module uses only those above it in this list (checked by
+// `tests/layers.rs`).
+//
+// - base: `math`, `numtext`, `crc`, `settings` (the parameters' one table);
+// - `friction`: the friction models;
+// - `control`: the controller and what it runs (references, shaping, the position map, the
+//   table motion, the frequency-response lock-in, the chunk a read is copied in);
+// - `drive`: the motor driver's pure logic (encoder, sense, faults, bridge, deadman, stats);
+// - `protocol`: the bench protocol (requests, replies, the parameter table's access);
+// - `device`: the device core (the control loop and the protocol side, the stored record);
+// - `boards`: the boards the firmware runs on (clock trees, memory maps, power stages);
+// - `selftest`: a fixed workload over everything, for the host/target equivalence.
 pub mod boards;
-pub mod controller;
+pub mod control;
+pub mod crc;
 pub mod device;
 pub mod drive;
-pub mod error;
-pub mod frf;
-pub mod gms;
-pub mod hw;
-pub mod lugre;
+pub mod friction;
 pub mod math;
-pub mod model;
 pub mod numtext;
-pub mod posmap;
-pub mod presets;
 pub mod protocol;
-pub mod reference;
 pub mod selftest;
-#[cfg(feature = "serde")]
-mod serde_array;
 pub mod settings;
-pub mod shaping;
-pub mod static_map;
-#[cfg(feature = "store")]
-pub mod store;
-pub mod stribeck;
-pub mod table;
 
-pub use error::{Field, ParamError, Side};
-pub use gms::{Block, Gms, GmsParams, UNUSED_BLOCK};
-pub use lugre::{LuGre, LugreParams};
-pub use model::FrictionModel;
-pub use static_map::{StaticMap, StaticParams};
-pub use stribeck::{Stribeck, StribeckParams};
+pub use friction::error::{Field, ParamError, Side};
+pub use friction::gms::{Block, Gms, GmsParams, UNUSED_BLOCK};
+pub use friction::lugre::{LuGre, LugreParams};
+pub use friction::model::FrictionModel;
+pub use friction::static_map::{StaticMap, StaticParams};
+pub use friction::stribeck::{Stribeck, StribeckParams};

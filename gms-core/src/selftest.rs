@@ -6,13 +6,13 @@
 //! and runs the controller against a toy plant; every output's bit pattern goes into an
 //! FNV-1a hash.
 
-use crate::controller::{Controller, ControllerParams, FfMode};
-use crate::gms::Gms;
-use crate::lugre::{LuGre, LugreParams};
-use crate::model::FrictionModel;
-use crate::presets;
-use crate::reference::RefSample;
-use crate::static_map::{StaticMap, StaticParams};
+use crate::control::controller::{Controller, ControllerParams, FfMode};
+use crate::control::reference::RefSample;
+use crate::friction::gms::Gms;
+use crate::friction::lugre::{LuGre, LugreParams};
+use crate::friction::model::FrictionModel;
+use crate::friction::presets;
+use crate::friction::static_map::{StaticMap, StaticParams};
 
 /// FNV-1a over 32-bit words.
 #[derive(Debug, Clone, Copy)]

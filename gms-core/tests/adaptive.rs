@@ -1,7 +1,7 @@
 //! The adaptation of the feedforward level: convergence against the analytic rate, the
 //! gates (dead zone, rest, saturation) and the bounds under adversarial inputs.
 
-use gms_core::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
+use gms_core::control::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use proptest::prelude::*;
 
 fn params() -> AdaptiveParams {

@@ -504,26 +504,26 @@ impl gms_core::device::LoopLink for InlineLink {
 }
 
 /// A store in memory.
-struct MemStore(Option<[u8; gms_core::drive::RECORD_LEN]>);
+struct MemStore(Option<[u8; gms_core::device::RECORD_LEN]>);
 
 impl gms_core::device::ParamStore for MemStore {
     fn save(
         &mut self,
-        rec: &[u8; gms_core::drive::RECORD_LEN],
+        rec: &[u8; gms_core::device::RECORD_LEN],
     ) -> Result<(), gms_core::device::StoreError> {
         self.0 = Some(*rec);
         Ok(())
     }
     fn load(
         &mut self,
-    ) -> Result<Option<[u8; gms_core::drive::RECORD_LEN]>, gms_core::device::StoreError> {
+    ) -> Result<Option<[u8; gms_core::device::RECORD_LEN]>, gms_core::device::StoreError> {
         Ok(self.0)
     }
 }
 
 /// A board's device from its store as `startup` decides, as the firmware builds it.
 fn board_device(
-    stored: Option<[u8; gms_core::drive::RECORD_LEN]>,
+    stored: Option<[u8; gms_core::device::RECORD_LEN]>,
 ) -> gms_core::device::Front<InlineLink, MemStore> {
     use gms_core::device::{Front, ParamStore as _, startup};
     let b = board();

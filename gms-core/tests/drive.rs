@@ -1,10 +1,13 @@
 //! The motor driver's pure logic (count extension, current scaling, faults, step statistics,
 //! bridge PWM, the flash record), against independent expectations.
 
+use gms_core::crc::crc32;
+use gms_core::device::{
+    self as record, RECORD_LEN, RecordError, ReportLine, decode_settings, encode_settings,
+};
 use gms_core::drive::{
-    self, CountExtender, CurrentSense, Faults, Limits, Measured, OffsetCalibration, RECORD_LEN,
-    RecordError, ReportLine, StepStats, bridge_compare, decode_settings, encode_settings,
-    pwm_timing, wrapping_delta,
+    self, CountExtender, CurrentSense, Faults, Limits, Measured, OffsetCalibration, StepStats,
+    bridge_compare, pwm_timing, wrapping_delta,
 };
 use gms_core::protocol::{self, Access, PARAMS};
 use gms_core::selftest;
@@ -79,14 +82,14 @@ fn wrapping_delta_examples() {
 
 /// Re-signs a record whose body was edited, so that the check behind the CRC is reached.
 fn resign(rec: &mut [u8; RECORD_LEN]) {
-    let crc = drive::crc32(&rec[..RECORD_LEN - 4]);
+    let crc = crc32(&rec[..RECORD_LEN - 4]);
     rec[RECORD_LEN - 4..].copy_from_slice(&crc.to_le_bytes());
 }
 
 #[test]
 fn crc32_is_zlibs() {
     // The standard check value of CRC-32/ISO-HDLC.
-    assert_eq!(drive::crc32(b"123456789"), 0xCBF4_3926);
+    assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
 }
 
 #[test]
@@ -108,14 +111,14 @@ fn bad_records_name_why() {
     // A version-1 record (no ids) of another table.
     let mut l = [0u8; RECORD_LEN];
     l[0] = 1;
-    l[1..5].copy_from_slice(&(drive::layout_id() ^ 1).to_le_bytes());
-    let crc = drive::crc32(&l[..266 - 4]);
+    l[1..5].copy_from_slice(&(record::layout_id() ^ 1).to_le_bytes());
+    let crc = crc32(&l[..266 - 4]);
     l[266 - 4..266].copy_from_slice(&crc.to_le_bytes());
     assert_eq!(decode_settings(&l, &base), Err(RecordError::Layout));
     // The entries: the first is rate.pos_hz's. A value that makes the set invalid (cur_hz no
     // longer a multiple): refused whole. Out of range: clamped and named. Not a number:
     // dropped and named. No such mode (the mode's entry): dropped, the default kept.
-    let pos_hz = drive::param_id("rate.pos_hz");
+    let pos_hz = record::param_id("rate.pos_hz");
     assert_eq!(u32::from_le_bytes(good[2..6].try_into().unwrap()), pos_hz);
     let with = |at: usize, v: f32| {
         let mut r = good;
@@ -140,7 +143,7 @@ fn bad_records_name_why() {
         (0..good[1] as usize)
             .map(|i| 2 + 8 * i)
             .find(|&a| {
-                u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == drive::param_id(path)
+                u32::from_le_bytes(good[a..a + 4].try_into().unwrap()) == record::param_id(path)
             })
             .unwrap()
     };
@@ -162,7 +165,7 @@ fn the_table_fits_a_record() {
         .iter()
         .filter(|p| matches!(p.access, Access::Number { .. }))
         .count();
-    assert!(numbers <= drive::MAX_NUMBERS, "{numbers} parameters");
+    assert!(numbers <= record::MAX_NUMBERS, "{numbers} parameters");
 }
 
 #[test]

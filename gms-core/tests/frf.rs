@@ -1,7 +1,7 @@
-//! The device's frequency-response measurement (`gms_core::frf`): the sine it injects and the
+//! The device's frequency-response measurement (`gms_core::control::frf`): the sine it injects and the
 //! whole-period demodulation, against analytic responses.
 
-use gms_core::frf::{CHANNELS, FrfError, LockIn, Sine};
+use gms_core::control::frf::{CHANNELS, FrfError, LockIn, Sine};
 
 /// The measured ratio of channel 1 to channel 0 for a first-order low-pass
 /// `y[k] = a y[k-1] + (1 - a) u[k]` driven by the sine, after `settle` samples, over `groups`
@@ -117,7 +117,7 @@ fn the_frequency_fits_the_rate_and_bad_requests_are_refused() {
 
 #[test]
 fn a_compensated_f32_sum_keeps_what_an_f64_one_keeps() {
-    use gms_core::frf::Sum2;
+    use gms_core::control::frf::Sum2;
     // 10^6 additions of 0.1 (as f32) and of a value 1e8 times smaller: a plain f32 sum
     // drifts by 0.35 % (50,177 for 50,000), the pair stays within 1e-9 of the f64 sum of the
     // same f32 values.
@@ -138,7 +138,7 @@ fn a_compensated_f32_sum_keeps_what_an_f64_one_keeps() {
 
 #[test]
 fn a_report_copied_a_part_at_a_time_is_the_report() {
-    use gms_core::frf::{FrfReport, FrfState, Injection};
+    use gms_core::control::frf::{FrfReport, FrfState, Injection};
     // A report with every field distinct from the default, every channel its own sums (a
     // part copied into the wrong place, or one left out, shows).
     let mut lock = LockIn::new();

@@ -550,7 +550,7 @@ proptest! {
 /// The used blocks come first; a set uses at least one.
 #[test]
 fn unused_blocks_only_at_the_end() {
-    let mut p = gms_core::presets::table1();
+    let mut p = gms_core::friction::presets::table1();
     assert_eq!(p.blocks_used(), 6);
     let four = p.with_blocks_used(4);
     assert_eq!(four.blocks_used(), 4);
@@ -565,7 +565,7 @@ fn unused_blocks_only_at_the_end() {
         "blocks[4] follows an unused block (k = alpha = 0): the used blocks come first"
     );
     // Half a block (k = 0, alpha > 0) is not unused.
-    let mut q = gms_core::presets::table1();
+    let mut q = gms_core::friction::presets::table1();
     q.blocks[5].k = 0.0;
     assert_eq!(q.validate(), Err(gms_core::ParamError::KNotPositive(5)));
     // None used.

@@ -1,6 +1,6 @@
-//! The clock-tree and memory-map arithmetic of `gms_core::hw` against hand-worked figures.
+//! The clock-tree and memory-map arithmetic of `gms_core::boards::hw` against hand-worked figures.
 
-use gms_core::hw::{F4Clocks, F405_LIMITS, F446_LIMITS, MemoryMap};
+use gms_core::boards::hw::{F4Clocks, F405_LIMITS, F446_LIMITS, MemoryMap};
 
 /// 8 MHz HSE, M 4, N 168, P 2, Q 7; AHB 1, APB1 4, APB2 2.
 const CLK: F4Clocks = F4Clocks {

@@ -3,12 +3,12 @@
 //! axis with a friction level the feedforward does not know it lowers the error after a
 //! reversal, while a constant load is still learned as a constant.
 
-use gms_core::controller::Controller;
+use gms_core::control::controller::Controller;
+use gms_core::control::reference::{RefSample, SUB_PER_COUNT};
 use gms_core::device::default_settings;
-use gms_core::gms::Gms;
-use gms_core::model::FrictionModel;
+use gms_core::friction::gms::Gms;
+use gms_core::friction::model::FrictionModel;
 use gms_core::protocol::Settings;
-use gms_core::reference::{RefSample, SUB_PER_COUNT};
 use proptest::prelude::*;
 
 /// The reference at `x` \[rad\], `v` [rad/s], `a` [rad/s²] for a controller of `rpc`

@@ -1,7 +1,7 @@
 //! Accuracy of gms-core's own transcendentals against f64, over the ranges the models meet.
 
+use gms_core::friction::stribeck::{Stribeck, StribeckParams};
 use gms_core::math;
-use gms_core::stribeck::{Stribeck, StribeckParams};
 
 /// Relative error of `got` against the exact `want`.
 fn rel(got: f32, want: f64) -> f64 {

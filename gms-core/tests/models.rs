@@ -1,8 +1,9 @@
 //! Validation, presets, the direction asymmetry, and the LuGre and static models.
 
+use gms_core::friction::presets;
 use gms_core::{
     Block, Field, FrictionModel, Gms, GmsParams, LuGre, LugreParams, ParamError, Side, StaticMap,
-    StaticParams, StribeckParams, presets,
+    StaticParams, StribeckParams,
 };
 
 const ST: StribeckParams = StribeckParams {

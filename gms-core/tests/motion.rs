@@ -2,7 +2,7 @@
 //! ended; a new move planned from the reference of a move under way continues it without a
 //! jump; `hold_at` and `stop` as the device core uses them.
 
-use gms_core::reference::{
+use gms_core::control::reference::{
     MOVE_AMAX, MOVE_JMAX, MOVE_VMAX, Motion, RefSample, Reference, SUB_PER_COUNT, Segment,
 };
 
@@ -178,7 +178,7 @@ fn stop_holds_where_the_reference_was_and_hold_at_moves_it() {
 
 #[test]
 fn a_velocity_profile_ramps_holds_and_sweeps() {
-    use gms_core::reference::{RefSample, SUB_PER_COUNT, Sweep, VelocityProfile};
+    use gms_core::control::reference::{RefSample, SUB_PER_COUNT, Sweep, VelocityProfile};
     let rpc = 3.8e-6f32;
     let dt = 1e-4f32;
     // From rest at count 1000 to 0.5 rad/s at 50 rad/s²: 10 ms of ramp.

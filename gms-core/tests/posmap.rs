@@ -2,8 +2,8 @@
 //! own line between bins; the phase kept by increments agrees with a division at every step,
 //! across wraps, jumps and either direction.
 
-use gms_core::posmap::{MAP_VALUES, MapCursor, MapParams};
-use gms_core::reference::SUB_PER_COUNT;
+use gms_core::control::posmap::{MAP_VALUES, MapCursor, MapParams};
+use gms_core::control::reference::SUB_PER_COUNT;
 
 #[test]
 fn the_cursor_interpolates_the_table_at_the_reference() {

@@ -3,7 +3,7 @@
 
 use core::fmt::Write;
 
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use gms_core::device::{CaptureState, StatusReply};
 use gms_core::protocol::{self, Access, Device, Line, LineReader, PARAMS, Settings};
 use gms_core::selftest;
@@ -97,7 +97,7 @@ impl Device for Mock {
     fn velocity(
         &mut self,
         vel: f32,
-        sweep: Option<gms_core::reference::Sweep>,
+        sweep: Option<gms_core::control::reference::Sweep>,
     ) -> Result<(), &'static str> {
         self.experiments.push(format!("velocity {vel} {sweep:?}"));
         Ok(())
@@ -532,8 +532,8 @@ fn block_count_is_staged_and_applied_with_the_blocks() {
     assert_eq!(ask(&mut d, "get gms.a6"), "ok 0\n");
     assert_eq!(d.s.ff.actuator.blocks_used(), 4);
     // The record keeps the count: encoded and decoded, the same set.
-    let rec = gms_core::drive::encode_settings(&d.s);
-    let back = gms_core::drive::decode_settings(&rec, &selftest::controller_params());
+    let rec = gms_core::device::encode_settings(&d.s);
+    let back = gms_core::device::decode_settings(&rec, &selftest::controller_params());
     assert_eq!(back.map(|l| l.settings), Ok(d.s));
     // A used block after an unused one is refused; growing back needs the new blocks.
     assert!(ask(&mut d, "set gms.k6 0.001").starts_with("err 7 "));
@@ -573,10 +573,10 @@ proptest! {
     fn a_written_command_parses_back_the_same(
         (which, path, value, x, pos, n, count, flag) in any_command()
     ) {
-        use gms_core::frf::Injection;
+        use gms_core::control::frf::Injection;
         use gms_core::protocol::{CaptureCmd, Command, FrfCmd, MapCmd, TableCmd, parse};
-        use gms_core::table::{Geometry, Which};
-        use gms_core::reference::Sweep;
+        use gms_core::control::table::{Geometry, Which};
+        use gms_core::control::reference::Sweep;
         // A value word must not be one of the keywords that change a command's meaning.
         prop_assume!(!matches!(value.as_str(), "off" | "read" | "next" | "current"));
         let sweep = Sweep { amp: pos, f0: pos, f1: x.abs().max(1e-3), seconds: pos };

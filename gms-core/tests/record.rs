@@ -4,13 +4,13 @@
 //! and names what it dropped; the position map is kept beside it in the store. A record of
 //! the firmware before records kept ids (version 1) loads too.
 
-use gms_core::device::{ParamStore, default_settings};
-use gms_core::drive::{
-    self, LoadReport, RECORD_LEN, ReportLine, decode_settings, decode_settings_with,
+use gms_core::device::store::{FlashStore, MAP_BUFFER_LEN, STORE_RANGE};
+use gms_core::device::{
+    self as record, LoadReport, RECORD_LEN, ReportLine, decode_settings, decode_settings_with,
     encode_settings_with, param_id,
 };
+use gms_core::device::{ParamStore, default_settings};
 use gms_core::protocol::{Access, PARAMS, Param, Settings};
-use gms_core::store::{FlashStore, MAP_BUFFER_LEN, STORE_RANGE};
 
 /// The parameter this test's "old firmware" had and the new one does not: it stands for a
 /// setting since removed (it reads and writes a field both have, under a path only the old
@@ -79,7 +79,7 @@ fn commissioned() -> Settings {
     s.shaping.notch[1].f_hz = 900.0;
     s.shaping.notch[1].q = 2.0;
     s.shaping.notch[1].depth_db = 6.0;
-    s.ff.mode = gms_core::controller::FfMode::GmsAdaptive;
+    s.ff.mode = gms_core::control::controller::FfMode::GmsAdaptive;
     s.validate().expect("the commissioned set is valid");
     s
 }
@@ -145,7 +145,7 @@ fn a_record_of_another_table_keeps_every_common_setting() {
 #[test]
 fn a_record_of_this_table_loads_clean_and_exact() {
     let saved = commissioned();
-    let rec = drive::encode_settings(&saved);
+    let rec = record::encode_settings(&saved);
     let loaded = decode_settings(&rec, &default_settings()).unwrap();
     assert_eq!(loaded.settings, saved);
     assert!(loaded.report.is_clean(), "{:?}", loaded.report);
@@ -155,12 +155,12 @@ fn a_record_of_this_table_loads_clean_and_exact() {
 /// table, mode, one f32 per number in table order, 64 slots, CRC-32).
 fn v1_record(s: &Settings) -> Vec<u8> {
     let mut out = vec![1u8];
-    out.extend(drive::layout_id().to_le_bytes());
+    out.extend(record::layout_id().to_le_bytes());
     out.push(match s.ff.mode {
-        gms_core::controller::FfMode::None => 0,
-        gms_core::controller::FfMode::Static => 1,
-        gms_core::controller::FfMode::Gms => 2,
-        gms_core::controller::FfMode::GmsAdaptive => 3,
+        gms_core::control::controller::FfMode::None => 0,
+        gms_core::control::controller::FfMode::Static => 1,
+        gms_core::control::controller::FfMode::Gms => 2,
+        gms_core::control::controller::FfMode::GmsAdaptive => 3,
     });
     let mut values = vec![0u8; 4 * 64];
     let numbers = PARAMS.iter().filter_map(|p| match p.access {
@@ -171,7 +171,7 @@ fn v1_record(s: &Settings) -> Vec<u8> {
         slot.copy_from_slice(&v.to_le_bytes());
     }
     out.extend(values);
-    let crc = drive::crc32(&out);
+    let crc = gms_core::crc::crc32(&out);
     out.extend(crc.to_le_bytes());
     out
 }
@@ -190,7 +190,7 @@ fn a_version_1_record_of_this_table_still_loads() {
     // Under another table its values cannot be told apart: refused, with the reason.
     assert_eq!(
         decode_settings_with(&rec, &default_settings(), &old_table()),
-        Err(drive::RecordError::Layout)
+        Err(record::RecordError::Layout)
     );
 }
 
@@ -215,8 +215,8 @@ impl embedded_storage_async::nor_flash::ReadNorFlash for RamFlash {
 }
 
 impl embedded_storage_async::nor_flash::NorFlash for RamFlash {
-    const WRITE_SIZE: usize = gms_core::store::WORD_SIZE;
-    const ERASE_SIZE: usize = gms_core::store::SECTOR_SIZE;
+    const WRITE_SIZE: usize = gms_core::device::store::WORD_SIZE;
+    const ERASE_SIZE: usize = gms_core::device::store::SECTOR_SIZE;
     async fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         let (a, b) = (
             (from - STORE_RANGE.start) as usize,
@@ -273,9 +273,9 @@ fn an_update_keeps_the_settings_and_the_map_in_the_store() {
 fn bad_entries_are_dropped_or_refused() {
     let saved = commissioned();
     let defaults = default_settings();
-    let mut rec = drive::encode_settings(&saved);
+    let mut rec = record::encode_settings(&saved);
     let resign = |rec: &mut [u8; RECORD_LEN]| {
-        let crc = drive::crc32(&rec[..RECORD_LEN - 4]);
+        let crc = gms_core::crc::crc32(&rec[..RECORD_LEN - 4]);
         rec[RECORD_LEN - 4..].copy_from_slice(&crc.to_le_bytes());
     };
     // The entry of pos.kp holds NaN: dropped, pos.kp at its default, the rest kept.
@@ -291,11 +291,11 @@ fn bad_entries_are_dropped_or_refused() {
     assert_eq!(l.settings.pid.ki, saved.pid.ki);
     assert_eq!(lines(&l.report), vec![ReportLine::Dropped(kp)]);
     // A count past the room: the record is refused whole.
-    let mut big = drive::encode_settings(&saved);
+    let mut big = record::encode_settings(&saved);
     big[1] = 200;
     resign(&mut big);
     assert_eq!(
         decode_settings(&big, &defaults),
-        Err(drive::RecordError::Invalid)
+        Err(record::RecordError::Invalid)
     );
 }

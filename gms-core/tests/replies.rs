@@ -1,13 +1,13 @@
 //! The replies that carry data: whatever the device writes, a host reads back the same (one
 //! format, one parser per reply), and a reply that lacks a key is refused naming it.
 
+use gms_core::control::frf::{FrfState, Injection};
+use gms_core::control::table::{Geometry, PeriodError, TableReport, TableState};
 use gms_core::device::CaptureState;
-use gms_core::frf::{FrfState, Injection};
 use gms_core::protocol::{
     self, CaptureStatus, FrfMeasure, FrfStatus, ListRange, ListRow, ListValue, ReplyError,
     TableStatus,
 };
-use gms_core::table::{Geometry, PeriodError, TableReport, TableState};
 use proptest::prelude::*;
 
 /// Any f32 but NaN (which is never equal to itself; NaN is checked on its own below).

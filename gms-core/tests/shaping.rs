@@ -1,8 +1,8 @@
-//! The loop-shaping filters (`gms_core::shaping`): each stage does what its settings say, and
+//! The loop-shaping filters (`gms_core::control::shaping`): each stage does what its settings say, and
 //! the filter that runs has the response that `Shaping::response` computes.
 
-use gms_core::frf::{LockIn, Sine};
-use gms_core::shaping::{Notch, Shaping, ShapingError, ShapingParams};
+use gms_core::control::frf::{LockIn, Sine};
+use gms_core::control::shaping::{Notch, Shaping, ShapingError, ShapingParams};
 
 const RATE: f32 = 20_000.0;
 

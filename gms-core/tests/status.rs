@@ -1,6 +1,6 @@
 //! The `status` reply: what the device writes, a host reads back (one format, one parser).
 
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use gms_core::device::{DriveKind, StatusError, StatusReply};
 use gms_core::drive::Faults;
 use proptest::prelude::*;

@@ -1,4 +1,4 @@
-//! Power-cut safety of the parameter store (`gms_core::store::FlashStore`): a `save` is cut at
+//! Power-cut safety of the parameter store (`gms_core::device::store::FlashStore`): a `save` is cut at
 //! every write and erase it makes, before the operation, part-way through it (bytes of a word
 //! half-programmed, part of a sector erased) and at its last byte; after the cut the flash is
 //! powered again and the device restarts on it. The restart must find the record that was
@@ -18,10 +18,11 @@ use std::rc::Rc;
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
+use gms_core::device::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 use gms_core::device::{ParamStore, default_settings, startup};
-use gms_core::drive::{Faults, RECORD_LEN, ReportLine, encode_settings, encode_settings_with};
+use gms_core::device::{RECORD_LEN, ReportLine, encode_settings, encode_settings_with};
+use gms_core::drive::Faults;
 use gms_core::protocol::{PARAMS, Param, Settings};
-use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
 const IMAGE_LEN: usize = (STORE_RANGE.end - STORE_RANGE.start) as usize;
 
@@ -386,13 +387,13 @@ fn a_cut_first_save_after_an_update_leaves_the_old_firmwares_record_or_the_new()
 
 /// A store that keeps a position map too (its buffer leaked: one per store, a test's).
 fn map_store(flash: CutFlash) -> FlashStore<CutFlash> {
-    use gms_core::store::MAP_BUFFER_LEN;
+    use gms_core::device::store::MAP_BUFFER_LEN;
     FlashStore::new(flash).with_map_buffer(Box::leak(vec![0u8; MAP_BUFFER_LEN].into_boxed_slice()))
 }
 
 /// A distinct, valid map record number `i`: 512 bins over a revolution.
 fn map_record(i: u32) -> Vec<u8> {
-    use gms_core::posmap::{MAP_RECORD_LEN, MAP_VALUES, encode_map};
+    use gms_core::control::posmap::{MAP_RECORD_LEN, MAP_VALUES, encode_map};
     let values: Vec<f32> = (0..MAP_VALUES)
         .map(|k| {
             if k % 2 == 0 {
@@ -428,7 +429,8 @@ fn save_map(
 /// settings' geometry, and refuses a map of another bin count with its reason.
 #[test]
 fn a_cut_map_save_leaves_the_old_or_the_new_map_and_the_record() {
-    use gms_core::posmap::{MAP_VALUES, MapParams, restore};
+    use gms_core::control::posmap::{MAP_VALUES, MapParams};
+    use gms_core::device::restore_map as restore;
     // A store with a record and map 1.
     let flash = CutFlash::new(vec![0xFF; IMAGE_LEN], None);
     let mut store = map_store(flash.clone());

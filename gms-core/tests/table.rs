@@ -1,12 +1,12 @@
-//! The table motion (`gms_core::table`): the reference between its points, the error's bins
+//! The table motion (`gms_core::control::table`): the reference between its points, the error's bins
 //! and figures, the correction's swap at a period's start, the run's end, and the checks of a
 //! table as it is written — each against an independent expectation.
 
-use gms_core::device::Chunk;
-use gms_core::table::{
+use gms_core::control::table::{
     Geometry, Player, Recorded, TABLE_POINTS, TABLE_VALUES, TableError, TableRequest, TableState,
     Upload, Which,
 };
+use gms_core::device::Chunk;
 
 const RATE: f32 = 10_000.0;
 const RPC: f32 = 3.8e-6;

@@ -8,7 +8,7 @@
 //! filter at 0.45 of the position rate): cur.kp 10.85, cur.ki 1.98e4, pos.kp 0.49, pos.ki
 //! 700, pos.kd 2.45e-4, pos.d_filter_hz 9000.
 
-use gms_core::controller::{ControllerParams, FfMode};
+use gms_core::control::controller::{ControllerParams, FfMode};
 use gms_core::settings::ParamId;
 
 /// The current loop's gain margin against its own delay \[-\]: its loop gain through the

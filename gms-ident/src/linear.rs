@@ -18,14 +18,14 @@
 //! `ratio` current periods of one position period, this is a discrete state-space system from
 //! the current command (held over the position period) to the position and current sampled at
 //! the position steps: the plant `P(z)` a device's lock-in measures. The position controller
-//! `C(z)` is the PID of `gms_core::controller` written as a transfer function (integral
+//! `C(z)` is the PID of `gms_core::control::controller` written as a transfer function (integral
 //! including this step's error, derivative on the measured position's difference through the
 //! first-order filter), times the loop-shaping filters' response; the loop gain is `C P`.
 
 use nalgebra::{Complex, DMatrix, DVector};
 
+use gms_core::control::shaping::Shaping;
 use gms_core::protocol::Settings;
-use gms_core::shaping::Shaping;
 
 /// The plant's constants for a linear model (SI, everything at the motor).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,7 +82,7 @@ pub struct LinearAxis {
 }
 
 /// The device's position controller as a transfer function: the PID of
-/// `gms_core::controller` (integral including this step's error, derivative on the measured
+/// `gms_core::control::controller` (integral including this step's error, derivative on the measured
 /// position's difference through the first-order filter) times the loop-shaping filters.
 pub struct PositionController {
     s: Settings,
@@ -92,7 +92,7 @@ pub struct PositionController {
 impl PositionController {
     /// The controller of the settings `s`.
     pub fn new(s: &Settings) -> Result<PositionController, String> {
-        let shaping = if s.shaping == gms_core::shaping::ShapingParams::OFF {
+        let shaping = if s.shaping == gms_core::control::shaping::ShapingParams::OFF {
             None
         } else {
             Some(

@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use gms_core::reference::Segment;
+use gms_core::control::reference::Segment;
 use serde::Serialize;
 
 /// One row of the trace, at the position-loop rate.

@@ -1,6 +1,6 @@
 //! The identification fits recover known parameters from exact and noisy synthetic data.
 
-use gms_core::presets;
+use gms_core::friction::presets;
 use gms_ident::identify::{fit_stribeck, fit_virgin};
 
 /// Deterministic noise in [-1, 1).

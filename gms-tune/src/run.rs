@@ -158,7 +158,7 @@ pub fn step_figures(
     seconds: f64,
     rad_per_count: f64,
 ) -> (Vec<gms_ident::trace::TraceRow>, gms_ident::trace::Metrics) {
-    use gms_core::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
+    use gms_core::control::reference::{MOVE_AMAX, MOVE_JMAX, MOVE_VMAX};
     let trace: Vec<gms_ident::trace::TraceRow> = rows
         .iter()
         .map(|r| gms_ident::trace::TraceRow {
@@ -177,7 +177,7 @@ pub fn step_figures(
             segment: 0,
         })
         .collect();
-    let seg = gms_core::reference::Segment::Move {
+    let seg = gms_core::control::reference::Segment::Move {
         distance: distance as f32,
         vmax: MOVE_VMAX,
         amax: MOVE_AMAX,

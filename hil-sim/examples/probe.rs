@@ -1,4 +1,4 @@
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use hil_sim::scenario::Scenario;
 fn main() {
     let sc = Scenario::default();

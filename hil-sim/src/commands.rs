@@ -6,7 +6,7 @@ use std::path::Path;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use hil_sim::commands;
 use hil_sim::friction_cmd;
 use hil_sim::scenario::{DEFAULT_SCENARIO, Scenario};
@@ -234,7 +234,8 @@ fn compare_and_write(
     for s in &segs {
         if matches!(
             s,
-            gms_core::reference::Segment::Step { .. } | gms_core::reference::Segment::Move { .. }
+            gms_core::control::reference::Segment::Step { .. }
+                | gms_core::control::reference::Segment::Move { .. }
         ) {
             zoom = t;
             break;

@@ -9,9 +9,9 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use gms_core::GmsParams;
-use gms_core::controller::{ControllerParams, FfMode};
+use gms_core::control::controller::{ControllerParams, FfMode};
+use gms_core::control::reference::Segment;
 use gms_core::protocol;
-use gms_core::reference::Segment;
 use serde::{Deserialize, Serialize};
 
 use gms_ident::paramfile::{FileError, FrictionSpec, parse_toml, read_text};
@@ -820,8 +820,8 @@ pub fn device_counts_per_rev(rad_per_count: f64) -> f32 {
 
 /// The scenario key of a controller error (the protocol path under `[controller]`, or the
 /// plant's key a value came from).
-fn controller_key(e: gms_core::controller::ControllerError) -> String {
-    use gms_core::controller::ControllerError as E;
+fn controller_key(e: gms_core::control::controller::ControllerError) -> String {
+    use gms_core::control::controller::ControllerError as E;
     match e {
         E::Invalid("ff.ratio") => "plant.lead / plant.gear_ratio out of range".into(),
         E::Invalid("enc.counts_per_rev") => {

@@ -1,8 +1,8 @@
 //! One closed-loop run: gms-core's controller (the firmware's code) against the plant.
 
 use crate::Error;
-use gms_core::controller::{Controller, FfMode, PositionOutput};
-use gms_core::reference::{RefSample, Reference, SUB_PER_COUNT, Segment};
+use gms_core::control::controller::{Controller, FfMode, PositionOutput};
+use gms_core::control::reference::{RefSample, Reference, SUB_PER_COUNT, Segment};
 use gms_ident::trace::{Metrics, TraceRow, metrics};
 
 use crate::plant::{Energy, Plant};

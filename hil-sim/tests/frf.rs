@@ -358,18 +358,24 @@ fn disable_and_a_lost_link_end_a_measurement() {
     dev.console("enable").unwrap();
     dev.console("frf current 100 0.003 1000 2").unwrap();
     dev.wait(0.1).unwrap();
-    assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Measuring);
+    assert_eq!(
+        state(&mut dev).state,
+        gms_core::control::frf::FrfState::Measuring
+    );
     dev.console("disable").unwrap();
     dev.wait(0.01).unwrap();
     let r = state(&mut dev);
-    assert_eq!(r.state, gms_core::frf::FrfState::Stopped);
+    assert_eq!(r.state, gms_core::control::frf::FrfState::Stopped);
     assert!(r.groups > 0 && r.phasors[0].norm() > 0.0029, "{r:?}");
     dev.console("enable").unwrap();
     dev.console("frf current 100 0.003 1000 2").unwrap();
     dev.wait(0.1).unwrap();
     dev.disconnect();
     dev.wait(0.01).unwrap();
-    assert_eq!(state(&mut dev).state, gms_core::frf::FrfState::Stopped);
+    assert_eq!(
+        state(&mut dev).state,
+        gms_core::control::frf::FrfState::Stopped
+    );
     let st = gms_bench::status(&mut dev).unwrap();
     assert!(st.enabled, "the position loop goes on holding");
     dev.console("current 0").unwrap();

@@ -4,10 +4,10 @@
 //! current-sense codes period by period, along a move, the two give the same duty in every
 //! PWM period, bit for bit: the runs' figures are the device core's control.
 
+use gms_core::control::reference::{Motion, SUB_PER_COUNT};
 use gms_core::device::{
     self, Board, ControlLoop, Inputs, MoveRequest, Requests, calibrate_sense, default_settings,
 };
-use gms_core::reference::{Motion, SUB_PER_COUNT};
 use hil_sim::sim::Schedule;
 
 #[test]

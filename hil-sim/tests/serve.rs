@@ -100,10 +100,10 @@ fn a_corrupt_record_means_defaults_and_a_fault() {
         // A record whose checksum fails, written with the board's store code.
         let mut s = default_settings();
         s.pid.kp = 0.4;
-        let mut rec = gms_core::drive::encode_settings(&s);
+        let mut rec = gms_core::device::encode_settings(&s);
         rec[10] ^= 0x40;
         let flash = hil_sim::device::HostFlash::open(&store).unwrap();
-        let mut st = gms_core::store::FlashStore::new(flash);
+        let mut st = gms_core::device::store::FlashStore::new(flash);
         st.save(&rec).unwrap();
     }
     let srv = common::serve(&["--tcp", "127.0.0.1:0"], &store);

@@ -2,7 +2,7 @@
 //! two-mass formulas, the position-dependent torque (`[plant.ripple]`), and the energy balance
 //! with both.
 
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use hil_sim::plant::Plant;
 use hil_sim::scenario::{Ripple, Scenario};
 use hil_sim::sim;

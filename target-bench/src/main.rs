@@ -19,12 +19,11 @@ use core::hint::black_box;
 use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m_rt::entry;
 use cortex_m_semihosting::{debug, hio};
-use gms_core::controller::{Controller, FfMode};
+use gms_core::control::controller::{Controller, FfMode};
+use gms_core::control::reference::{Motion, RefSample};
 use gms_core::device::{self, Board, ControlLoop, Inputs, Mailbox, MoveRequest, Requests};
-use gms_core::reference::{Motion, RefSample};
-use gms_core::{
-    FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
-};
+use gms_core::friction::presets;
+use gms_core::{FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, selftest};
 
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
@@ -116,14 +115,14 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
     };
     let mut settings = device::default_settings();
     if shaped {
-        settings.shaping = gms_core::shaping::ShapingParams {
+        settings.shaping = gms_core::control::shaping::ShapingParams {
             notch: [
-                gms_core::shaping::Notch {
+                gms_core::control::shaping::Notch {
                     f_hz: 700.0,
                     q: 2.0,
                     depth_db: 20.0,
                 },
-                gms_core::shaping::Notch {
+                gms_core::control::shaping::Notch {
                     f_hz: 1500.0,
                     q: 4.0,
                     depth_db: 10.0,
@@ -156,21 +155,24 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the benchmark's references to the buffer, one per call, never alive together.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
-    static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
+    static mut MAP: [f32; gms_core::control::posmap::MAP_VALUES] =
+        [0.0; gms_core::control::posmap::MAP_VALUES];
     // SAFETY: the benchmark's references to the table, one per call, never alive together.
     let map = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
-    gms_core::posmap::clear(map);
-    static mut TABLE: [f32; gms_core::table::TABLE_VALUES] = [0.0; gms_core::table::TABLE_VALUES];
+    gms_core::control::posmap::clear(map);
+    static mut TABLE: [f32; gms_core::control::table::TABLE_VALUES] =
+        [0.0; gms_core::control::table::TABLE_VALUES];
     // SAFETY: the benchmark's references to the table, one per call, never alive together.
     let tb = unsafe { &mut *core::ptr::addr_of_mut!(TABLE) };
     // The sine x = A (1 − cos), 0.05 rad, and a correction of 20 µN·m's sign of its speed,
     // written where `Set` and `Use` find them (the reference, the first correction buffer).
     let points = 100usize;
     for k in 0..points {
-        let (s, c) =
-            gms_core::reference::sin_cos(core::f32::consts::TAU * k as f32 / points as f32);
+        let (s, c) = gms_core::control::reference::sin_cos(
+            core::f32::consts::TAU * k as f32 / points as f32,
+        );
         tb[k] = 0.05 / rpc * (1.0 - c);
-        tb[gms_core::table::TABLE_POINTS + k] = if s >= 0.0 { 20e-6 } else { -20e-6 };
+        tb[gms_core::control::table::TABLE_POINTS + k] = if s >= 0.0 { 20e-6 } else { -20e-6 };
     }
     static mut CTRL: Option<device::Ctrl> = None;
     // SAFETY: the benchmark's references to the storage, one per call, never alive together.
@@ -203,8 +205,8 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
         writeln!(out, "{name}: no move planned").ok();
         return;
     };
-    let frf = gms_core::frf::FrfSpec::new(
-        gms_core::frf::Injection::Current,
+    let frf = gms_core::control::frf::FrfSpec::new(
+        gms_core::control::frf::Injection::Current,
         123.4,
         0.005,
         1_000_000,
@@ -215,7 +217,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
     .filter(|_| shaped);
     let ratio = lp.ratio();
     if table {
-        use gms_core::table::{Geometry, TableRequest};
+        use gms_core::control::table::{Geometry, TableRequest};
         let g = Geometry {
             points: points as u32,
             steps: 10,
@@ -290,8 +292,8 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
             }
         },
     );
-    let measuring = !shaped || mb.frf.state == gms_core::frf::FrfState::Measuring;
-    let playing = mb.table.state == gms_core::table::TableState::Playing
+    let measuring = !shaped || mb.frf.state == gms_core::control::frf::FrfState::Measuring;
+    let playing = mb.table.state == gms_core::control::table::TableState::Playing
         && mb.table.generation == 1
         && mb.table.done.is_some();
     let running = if table { playing } else { lp.status().moving };

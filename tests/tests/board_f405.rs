@@ -26,7 +26,7 @@ fn the_description_holds_together() {
 
 #[test]
 fn the_simulator_store_image_is_this_board_s() {
-    assert_eq!(desc::MEMORY.store, gms_core::store::STORE_RANGE);
+    assert_eq!(desc::MEMORY.store, gms_core::device::store::STORE_RANGE);
 }
 
 #[test]

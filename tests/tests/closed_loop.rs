@@ -1,6 +1,6 @@
 //! The whole axis in closed loop: gms-core's controller against hil-sim's plant.
 
-use gms_core::controller::FfMode;
+use gms_core::control::controller::FfMode;
 use hil_sim::scenario::Scenario;
 use hil_sim::sim;
 

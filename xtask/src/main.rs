@@ -148,7 +148,7 @@ fn check_elf(args: &[String]) -> Result<(), String> {
     let mut bad = Vec::new();
     // No single step of the stack pointer may jump the stack guard (gms-core's
     // `hw::STACK_GUARD_BYTES`, `f4_regs::mpu`).
-    let guard = gms_core::hw::STACK_GUARD_BYTES as u64;
+    let guard = gms_core::boards::hw::STACK_GUARD_BYTES as u64;
     if let Some((f, largest)) = funcs
         .iter()
         .map(|(n, f)| (n, f.largest_sub))
@@ -247,7 +247,7 @@ fn stack_bound(
         return Err("no _stack_end/_stack_start symbols (cortex-m-rt's)".into());
     };
     // Where the firmware puts its guard (`board::stack_guard`), by the same function.
-    let guard = gms_core::hw::STACK_GUARD_BYTES;
+    let guard = gms_core::boards::hw::STACK_GUARD_BYTES;
     let Some((guard_base, room)) = f4_regs::mpu::guard_region(end as u32, start as u32, guard, 0)
     else {
         return Err(format!(

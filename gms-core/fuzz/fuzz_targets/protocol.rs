@@ -69,7 +69,7 @@ impl Device for Dev {
     fn velocity(
         &mut self,
         _: f32,
-        _: Option<gms_core::reference::Sweep>,
+        _: Option<gms_core::control::reference::Sweep>,
     ) -> Result<(), &'static str> {
         Ok(())
     }

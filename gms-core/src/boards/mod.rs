@@ -7,5 +7,6 @@
 //! that write the linker's memory map from `*/memory.rs` (kept free of dependencies for that).
 
 pub mod f405;
+pub mod hw;
 pub mod nucleo_f446;
 pub mod power_stage;

@@ -23,9 +23,9 @@
 //! 0.24 mA per code (the simulator's ±0.5 A, 12 bits), sampled 16 times per PWM period by the
 //! hardware, centred on the counter's bottom (`board.rs`).
 
+use crate::boards::hw::F4Clocks;
 use crate::device::{Board, SenseChain};
 use crate::drive::{BoardLimits, SenseTiming};
-use crate::hw::F4Clocks;
 
 /// GPIOC pins of the bridge inputs IN1, IN2 (TIM8_CH1, TIM8_CH2).
 pub const BRIDGE_PINS: [usize; 2] = [6, 7];

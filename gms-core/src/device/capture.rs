@@ -6,8 +6,8 @@
 
 /// Fields one capture records at most.
 pub const CAPTURE_FIELDS: usize = 4;
-/// Values one read chunk carries at most.
-pub const CHUNK_VALUES: usize = 128;
+use crate::control::chunk::{CHUNK_VALUES, Chunk};
+use crate::protocol::CaptureState;
 
 /// The fields a capture may record (the telemetry's, without the simulator's truth): time
 /// since the trigger \[s\], position and reference since the trigger \[rad\], error \[rad\],
@@ -90,65 +90,6 @@ pub struct CaptureSpec {
     /// Start at the next experiment request (`current`, `velocity`, `move`, `hold`) instead
     /// of at once.
     pub on_next: bool,
-}
-
-/// Where a capture is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum CaptureState {
-    /// Nothing asked.
-    #[default]
-    Idle,
-    /// Waiting for its trigger.
-    Armed,
-    /// Recording.
-    Recording,
-    /// Full: readable.
-    Done,
-}
-
-impl CaptureState {
-    /// The name in `capture`'s reply.
-    pub fn name(self) -> &'static str {
-        match self {
-            CaptureState::Idle => "idle",
-            CaptureState::Armed => "armed",
-            CaptureState::Recording => "recording",
-            CaptureState::Done => "done",
-        }
-    }
-}
-
-/// A chunk of recorded values, sample-major (`nfields` values per sample).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Chunk {
-    /// The first sample's index.
-    pub start: u32,
-    /// Samples in the chunk.
-    pub samples: u32,
-    /// Values per sample.
-    pub nfields: u8,
-    /// The values; the first `samples × nfields` used.
-    pub values: [f32; CHUNK_VALUES],
-}
-
-impl Chunk {
-    /// An empty chunk of rows from `start`, `nfields` values a row.
-    pub const fn new(start: u32, nfields: u8) -> Chunk {
-        Chunk {
-            start,
-            samples: 0,
-            nfields,
-            values: [0.0; CHUNK_VALUES],
-        }
-    }
-
-    /// The chunk started over in place as an empty one of rows from `start`, `nfields`
-    /// values a row (its values are left: only the first `samples × nfields` are read).
-    pub fn restart(&mut self, start: u32, nfields: u8) {
-        self.start = start;
-        self.nfields = nfields;
-        self.samples = 0;
-    }
 }
 
 impl Default for Chunk {
@@ -305,7 +246,10 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         // since the trigger are exact in f32 up to 2^24; the reference's sub-counts split
         // into whole counts and a fraction so that neither loses what the f32 result keeps.
         let rpc = v.rad_per_count;
-        let (bits, sub) = (crate::reference::SUB_BITS, crate::reference::SUB_PER_COUNT);
+        let (bits, sub) = (
+            crate::control::reference::SUB_BITS,
+            crate::control::reference::SUB_PER_COUNT,
+        );
         let n = self.spec.nfields as usize;
         let at = self.count as usize * n;
         let (fields, t0, pos0) = (self.spec.fields, self.t0, self.pos0);

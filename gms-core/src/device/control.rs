@@ -1,11 +1,11 @@
 //! The loop half of the device core: one call per PWM period.
 
+use crate::control::reference::{Motion, RefSample, SUB_PER_COUNT};
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
-use crate::reference::{Motion, RefSample, SUB_PER_COUNT};
 
-use crate::frf::{CHANNELS, Frf, FrfReport, Injection};
-use crate::posmap::MapCursor;
-use crate::table::{Player, Recorded, TableReport};
+use crate::control::frf::{CHANNELS, Frf, FrfReport, Injection};
+use crate::control::posmap::MapCursor;
+use crate::control::table::{Player, Recorded, TableReport};
 
 use super::{
     Applied, Board, Capture, CaptureRequest, Chunk, Ctrl, CtrlBuf, Drive, FrfRequest, Handover,
@@ -201,7 +201,7 @@ pub struct ControlLoop {
     map_table: Option<MapTable>,
     /// Where the reference is in the map, while the map acts.
     map_cursor: Option<MapCursor>,
-    /// The table motion's buffer ([`crate::table::TABLE_VALUES`] values), if the shell gave
+    /// The table motion's buffer ([`crate::control::table::TABLE_VALUES`] values), if the shell gave
     /// one.
     table_buf: Option<TableBuf>,
     /// The table motion's player.
@@ -216,11 +216,11 @@ pub struct ControlLoop {
     done: Option<RequestsBuf>,
 }
 
-/// The buffer of the table motion ([`crate::table::TABLE_VALUES`] values; the shell's: a
+/// The buffer of the table motion ([`crate::control::table::TABLE_VALUES`] values; the shell's: a
 /// static on the board).
 pub type TableBuf = &'static mut [f32];
 
-/// The buffer of a position map's table ([`crate::posmap::MAP_VALUES`] values; the shell's: a
+/// The buffer of a position map's table ([`crate::control::posmap::MAP_VALUES`] values; the shell's: a
 /// static on the board).
 pub type MapTable = &'static mut [f32];
 
@@ -284,7 +284,7 @@ impl ControlLoop {
         }
     }
 
-    /// The loop with a table motion's buffer (`buf`: [`crate::table::TABLE_VALUES`] values).
+    /// The loop with a table motion's buffer (`buf`: [`crate::control::table::TABLE_VALUES`] values).
     /// Without one the table's requests are refused by the protocol side and do nothing here.
     pub fn with_table(mut self, buf: TableBuf) -> Self {
         self.attach_table(buf);
@@ -317,8 +317,8 @@ impl ControlLoop {
         self.fresh = true;
     }
 
-    /// The loop with a position map's table (`table`: [`crate::posmap::MAP_VALUES`] values,
-    /// as the start-up left it: [`crate::posmap::restore`], or [`crate::posmap::clear`]ed).
+    /// The loop with a position map's table (`table`: [`crate::control::posmap::MAP_VALUES`] values,
+    /// as the start-up left it: [`crate::device::restore_map`], or [`crate::control::posmap::clear`]ed).
     /// Without one the map settings have no effect and the map's requests read and write
     /// nothing.
     pub fn with_map(mut self, table: MapTable) -> Self {
@@ -542,7 +542,7 @@ impl ControlLoop {
             }
             Some(MapRequest::Clear) => {
                 if let Some(t) = self.map_table.as_deref_mut() {
-                    crate::posmap::clear(t);
+                    crate::control::posmap::clear(t);
                 }
             }
             None => {}
@@ -909,8 +909,8 @@ impl ControlLoop {
     /// Acts on a table request: a read into `chunk` (the requests' storage); a run only with
     /// the position loop running and the reference at the table's start (within a count).
     #[inline(never)]
-    fn take_table(&mut self, req: &crate::table::TableRequest, chunk: &mut Chunk) {
-        use crate::table::TableRequest;
+    fn take_table(&mut self, req: &crate::control::table::TableRequest, chunk: &mut Chunk) {
+        use crate::control::table::TableRequest;
         let Some(t) = self.table_buf.as_deref_mut() else {
             return;
         };

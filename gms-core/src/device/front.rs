@@ -3,20 +3,21 @@
 
 use core::fmt::{self, Write};
 
-use crate::drive::{self, Faults, RECORD_LEN};
+use super::RECORD_LEN;
+use crate::control::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
+use crate::drive::{self, Faults};
 use crate::protocol::{self, Device, Settings};
-use crate::reference::{MOVE_AMAX, Motion, SUB_PER_COUNT, Sweep, VelocityProfile};
 
 use super::{
     Applied, Board, CaptureRequest, CaptureSpec, CaptureState, Chunk, Ctrl, CtrlBuf, Drive, FIELDS,
     FrfRequest, MAP_WRITE_BINS, MAX_STREAM_HZ, Mailbox, MapRequest, MoveRequest, Requests,
     RequestsBuf, Sample, Staged, Status, StatusReply, VelocityRequest, capture_fields,
 };
-use crate::frf::{Channel, FrfSpec, Injection};
-use crate::protocol::TableCmd;
-use crate::table::{
+use crate::control::frf::{Channel, FrfSpec, Injection};
+use crate::control::table::{
     TABLE_WRITE_VALUES, TableError, TableReport, TableRequest, TableState, Upload, Which,
 };
+use crate::protocol::TableCmd;
 
 /// The longest frequency-response measurement \[s\] (settling and summing).
 pub const FRF_MAX_S: f32 = 600.0;
@@ -109,7 +110,7 @@ pub struct Startup {
 /// runnable; the defaults without a fault if nothing was ever saved. `Err` only if the
 /// defaults themselves cannot run on `board`. A record of another firmware's parameter table
 /// loads what this one knows; `log` gets a line for each setting it clamped, dropped or left
-/// at its default ([`drive::LoadReport`]).
+/// at its default ([`super::LoadReport`]).
 // Not inlined: the stored record, the decoded set and the loaded report stay in this frame, out
 // of the start-up task's poll frame (a task's frame must step the stack by less than the
 // board's guard: `cargo xtask check-elf`).
@@ -118,7 +119,7 @@ pub fn startup(
     stored: Result<Option<[u8; RECORD_LEN]>, StoreError>,
     defaults: &Settings,
     board: &Board,
-    log: &mut dyn FnMut(drive::ReportLine),
+    log: &mut dyn FnMut(super::ReportLine),
 ) -> Result<Startup, &'static str> {
     let fallback = |faults: Faults, note: &'static str| -> Result<Startup, &'static str> {
         Ok(Startup {
@@ -135,7 +136,7 @@ pub fn startup(
             Faults::INVALID_PARAMS,
             "parameter store unreadable: running the defaults",
         ),
-        Ok(Some(rec)) => match drive::decode_settings(&rec, defaults) {
+        Ok(Some(rec)) => match super::decode_settings(&rec, defaults) {
             Err(_) => fallback(
                 Faults::INVALID_PARAMS,
                 "stored parameters invalid: running the defaults",
@@ -170,6 +171,30 @@ pub fn startup(
     }
 }
 
+/// The start-up's position map: cleared (no effect), then the stored map if there is one for
+/// the settings' geometry. Returns what happened, for the log: `Ok(true)` loaded, `Ok(false)`
+/// none stored, `Err` why a stored one was not used (the table stays clear). The firmware's
+/// and the virtual device's start-up both call it.
+pub fn restore_map<S: ParamStore + ?Sized>(
+    store: &mut S,
+    p: &crate::control::posmap::MapParams,
+    table: &mut [f32],
+) -> Result<bool, &'static str> {
+    crate::control::posmap::clear(table);
+    let len = match store.load_map() {
+        Ok(Some(len)) => len,
+        Ok(None) => return Ok(false),
+        Err(_) => return Err("stored map unreadable"),
+    };
+    let Some(buf) = store.map_buffer() else {
+        return Ok(false);
+    };
+    let rec = buf.get(..len).ok_or("stored map: wrong length")?;
+    crate::control::posmap::decode_map(rec, p, table)
+        .map_err(crate::control::posmap::MapRecordError::reason)?;
+    Ok(true)
+}
+
 /// The protocol side of a device: implements [`Device`] over a [`LoopLink`] to the loop and a
 /// [`ParamStore`].
 pub struct Front<L: LoopLink, S: ParamStore> {
@@ -192,7 +217,7 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     /// The requests' storage and the spare controller's, while not with the loop.
     bufs: Bufs,
     /// The last frequency-response report read whole ([`read_frf`]).
-    frf: crate::frf::FrfReport,
+    frf: crate::control::frf::FrfReport,
 }
 
 /// The protocol side's share of the storage the two halves hand each other: the requests'
@@ -279,7 +304,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             defaults_configured: false,
             has_table: false,
             upload: Upload::default(),
-            frf: crate::frf::FrfReport::default(),
+            frf: crate::control::frf::FrfReport::default(),
         }
     }
 
@@ -402,11 +427,11 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
                 return Ok(());
             }
             for (k, v) in c.values.iter().enumerate().take(2 * c.samples as usize) {
-                crate::posmap::map_record_put(buf, 2 * at as usize + k, *v);
+                crate::control::posmap::map_record_put(buf, 2 * at as usize + k, *v);
             }
             at += c.samples;
         }
-        let len = crate::posmap::map_record_finish(period, bins, buf);
+        let len = crate::control::posmap::map_record_finish(period, bins, buf);
         store
             .save_map(len)
             .map_err(|_| "store write failed (the map)")
@@ -429,15 +454,15 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             return Ok(());
         };
         let rec = buf.get(..len).ok_or("stored map: wrong length")?;
-        crate::posmap::decode_map(rec, &p, &mut [])
-            .map_err(crate::posmap::MapRecordError::reason)?;
+        crate::control::posmap::decode_map(rec, &p, &mut [])
+            .map_err(crate::control::posmap::MapRecordError::reason)?;
         let bins = p.bins as usize;
         let mut start = 0;
         while start < bins {
             let n = (bins - start).min(MAP_WRITE_BINS);
             let mut values = [0.0f32; 2 * MAP_WRITE_BINS];
             for (k, v) in values.iter_mut().enumerate().take(2 * n) {
-                *v = crate::posmap::map_record_value(rec, 2 * start + k);
+                *v = crate::control::posmap::map_record_value(rec, 2 * start + k);
             }
             post_on(link, bufs, |r| {
                 r.map = Some(MapRequest::Write {
@@ -515,7 +540,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         if self.status_now().enabled {
             return Err("disable before save");
         }
-        let rec = drive::encode_settings(&self.settings);
+        let rec = super::encode_settings(&self.settings);
         let r = self.store.save(&rec);
         // The position map beside it (a store that keeps one, a loop that has one).
         let m = if r.is_ok() { self.save_map() } else { Ok(()) };
@@ -536,7 +561,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             Ok(None) => return Err("nothing saved"),
             Err(_) => return Err("store read failed"),
         };
-        let s = drive::decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
+        let s = super::decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
         self.apply(s.settings)?;
         self.load_map()
     }
@@ -812,7 +837,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             }
             Injection::Position => {
                 let w = core::f32::consts::TAU * f_hz;
-                if amp * w > crate::reference::VELOCITY_MAX {
+                if amp * w > crate::control::reference::VELOCITY_MAX {
                     return Err("AMP × 2π F_HZ beyond the speed limit (20 rad/s)");
                 }
                 let rpc = self.settings.rad_per_count();
@@ -844,7 +869,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             ) else {
                 return Err("a bin is OFFSET,SCALE (N·m, -)");
             };
-            if !crate::posmap::valid_bin(o, s) {
+            if !crate::control::posmap::valid_bin(o, s) {
                 return Err("a bin's offset beyond 10 N·m or scale outside 0 … 2");
             }
             match values.get_mut(2 * n..2 * n + 2) {
@@ -962,7 +987,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
                         &g,
                         self.settings.pos_rate_hz,
                         self.settings.rad_per_count(),
-                        crate::reference::VELOCITY_MAX,
+                        crate::control::reference::VELOCITY_MAX,
                         (limits.pos_min, limits.pos_max),
                     )
                     .map_err(reason)?;
@@ -1030,7 +1055,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
                     out,
                 )?;
                 if which == Which::Err && self.table_report().done != t.done {
-                    return Err(crate::table::READ_RACED);
+                    return Err(crate::control::table::READ_RACED);
                 }
                 Ok(())
             }
@@ -1090,11 +1115,11 @@ const FRF_READS: usize = 4;
 /// and the last. `None` after [`FRF_READS`] reads that each saw a new report (the loop
 /// publishes one per group of whole periods of the sine, many steps apart; the caller keeps
 /// its last whole read).
-fn read_frf<L: LoopLink>(link: &mut L) -> Option<crate::frf::FrfReport> {
-    let mut f = crate::frf::FrfReport::default();
+fn read_frf<L: LoopLink>(link: &mut L) -> Option<crate::control::frf::FrfReport> {
+    let mut f = crate::control::frf::FrfReport::default();
     for _ in 0..FRF_READS {
         let seq = link.with_mailbox(|m| m.frf_seq);
-        for part in 0..crate::frf::FrfReport::PARTS {
+        for part in 0..crate::control::frf::FrfReport::PARTS {
             link.with_mailbox(|m| f.copy_part(&m.frf, part));
         }
         if link.with_mailbox(|m| m.frf_seq) == seq {

@@ -20,24 +20,27 @@
 mod capture;
 mod control;
 mod front;
-mod status;
+mod record;
+#[cfg(feature = "store")]
+pub mod store;
 
 pub use capture::{
-    CAPTURE_FIELDS, CAPTURE_NAMES, CHUNK_VALUES, Capture, CaptureSpec, CaptureState, Chunk,
-    StepValues, capture_field, capture_fields,
+    CAPTURE_FIELDS, CAPTURE_NAMES, Capture, CaptureSpec, StepValues, capture_field, capture_fields,
 };
 
+pub use crate::protocol::{CaptureState, DriveKind, StatusError, StatusReply, StatusValue};
 pub use control::{
     ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, TableBuf, ZERO_SAMPLES,
     calibrate_sense,
 };
-pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, startup};
-pub use status::{DriveKind, StatusError, StatusReply, StatusValue};
+pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, restore_map, startup};
+pub use record::*;
 
-use crate::controller::Controller;
+pub use crate::control::chunk::{CHUNK_VALUES, Chunk};
+use crate::control::controller::Controller;
+use crate::control::reference::{MovePlan, RefSample, VelocityProfile};
 use crate::drive::{BoardLimits, Faults, Limits, StepStats};
 use crate::protocol::Settings;
-use crate::reference::{MovePlan, RefSample, VelocityProfile};
 
 /// The controller type a device runs (6 GMS blocks, as the protocol's settings).
 pub type Ctrl = Controller<6>;
@@ -167,7 +170,7 @@ pub const MAP_WRITE_BINS: usize = 8;
 #[derive(Debug, Clone, Copy)]
 pub enum FrfRequest {
     /// Start one (a measurement under way is stopped; ignored unless the position loop runs).
-    Start(crate::frf::FrfSpec),
+    Start(crate::control::frf::FrfSpec),
     /// Stop the one under way (what was summed stands).
     Stop,
 }
@@ -183,9 +186,9 @@ pub struct Handover<'a> {
     pub returned: Option<RequestsBuf>,
     /// The frequency-response measurement's report (at the end of each group of periods, and
     /// when it stops).
-    pub frf: Option<&'a crate::frf::FrfReport>,
+    pub frf: Option<&'a crate::control::frf::FrfReport>,
     /// The table motion's report (after a request, at each period's end, when a run ends).
-    pub table: Option<&'a crate::table::TableReport>,
+    pub table: Option<&'a crate::control::table::TableReport>,
 }
 
 /// What the protocol side asks of the capture.
@@ -270,7 +273,7 @@ pub struct Requests {
     /// Write, read or clear the position map's table.
     pub map: Option<MapRequest>,
     /// The table motion.
-    pub table: Option<crate::table::TableRequest>,
+    pub table: Option<crate::control::table::TableRequest>,
     /// Telemetry every N position steps (0: off).
     pub stream_every: Option<u32>,
     /// Reset the step statistics.
@@ -435,12 +438,12 @@ pub struct Mailbox {
     /// The position step at which the loop last took requests.
     pub taken_at: u64,
     /// The frequency-response measurement's last report.
-    pub frf: crate::frf::FrfReport,
+    pub frf: crate::control::frf::FrfReport,
     /// Reports published into [`Mailbox::frf`] (wrapping): a reader that copies it in parts
-    /// ([`crate::frf::FrfReport::copy_part`]) compares it before and after.
+    /// ([`crate::control::frf::FrfReport::copy_part`]) compares it before and after.
     pub frf_seq: u32,
     /// The table motion's last report.
-    pub table: crate::table::TableReport,
+    pub table: crate::control::table::TableReport,
 }
 
 impl Mailbox {
@@ -474,17 +477,17 @@ impl Mailbox {
                 capture_origin: 0,
             },
             taken_at: 0,
-            frf: crate::frf::FrfReport {
-                state: crate::frf::FrfState::Idle,
+            frf: crate::control::frf::FrfReport {
+                state: crate::control::frf::FrfState::Idle,
                 injection: None,
                 freq_hz: 0.0,
                 amp: 0.0,
-                lock: crate::frf::LockIn::new(),
+                lock: crate::control::frf::LockIn::new(),
                 groups: 0,
             },
             frf_seq: 0,
-            table: crate::table::TableReport {
-                state: crate::table::TableState::Empty,
+            table: crate::control::table::TableReport {
+                state: crate::control::table::TableState::Empty,
                 geometry: None,
                 period: 0,
                 periods: 0,
@@ -570,7 +573,7 @@ impl Mailbox {
 /// RMS error was 0.486 counts at 0.94 against 0.501 at 1.0, 0.497 at 0.97, 0.493 at 0.9 and
 /// 0.509 at 0.85. A board with another motor or other gains is tuned on the bench.
 pub fn default_settings() -> Settings {
-    use crate::controller::{
+    use crate::control::controller::{
         ControllerParams, CurrentParams, FeedforwardParams, FfMode, MotorModel, PidParams,
     };
     ControllerParams {
@@ -587,10 +590,10 @@ pub fn default_settings() -> Settings {
             kd: 2.45e-4,
             d_filter_hz: 9000.0,
             i_limit: 1e-3,
-            ki_fric: crate::controller::DEFAULT_KI_FRIC,
+            ki_fric: crate::control::controller::DEFAULT_KI_FRIC,
         },
-        shaping: crate::shaping::ShapingParams::OFF,
-        map: crate::posmap::MapParams::DEFAULT,
+        shaping: crate::control::shaping::ShapingParams::OFF,
+        map: crate::control::posmap::MapParams::DEFAULT,
         current: CurrentParams {
             kp: 10.85,
             ki: 1.98e4,
@@ -615,11 +618,11 @@ pub fn default_settings() -> Settings {
         ff: FeedforwardParams {
             mode: FfMode::Gms,
             gain: 0.94,
-            actuator: crate::presets::table1(),
-            guideway: Some(crate::presets::guideway()),
+            actuator: crate::friction::presets::table1(),
+            guideway: Some(crate::friction::presets::guideway()),
             ratio: 18.1e-6,
             static_band: 0.05,
-            adapt: crate::adaptive::AdaptiveParams::default(),
+            adapt: crate::control::adaptive::AdaptiveParams::default(),
         },
     }
 }

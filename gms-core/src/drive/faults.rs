@@ -3,7 +3,7 @@
 use core::fmt::{self, Write};
 
 use super::{abs, libm_ceil};
-use crate::protocol::Settings;
+use crate::control::controller::Settings;
 
 /// The latched fault word: one bit per cause. Any bit set keeps the bridge off until a
 /// `clear` command.

@@ -13,15 +13,11 @@
 //!   the timer setting for a PWM rate, switching off from any context).
 //! - `deadman`: [`Deadman`], [`Stall`] (the check above the control interrupt that switches
 //!   the bridge off when the step stops running or the sense chain fails).
-//! - `record`: [`encode_settings`], [`decode_settings`] (the parameter record kept in flash:
-//!   each setting under a stable id of its path, a version and a checksum; a record of
-//!   another parameter table loads what this one knows, with a [`LoadReport`]).
 
 mod bridge;
 mod deadman;
 mod encoder;
 mod faults;
-mod record;
 mod sense;
 mod stats;
 
@@ -29,7 +25,6 @@ pub use bridge::*;
 pub use deadman::*;
 pub use encoder::*;
 pub use faults::*;
-pub use record::*;
 pub use sense::*;
 pub use stats::*;
 

@@ -40,7 +40,7 @@ pub enum FrfCmd {
     /// pass, then demodulate `PERIODS` periods (both rounded up to whole groups).
     Start {
         /// Where the sine goes.
-        injection: crate::frf::Injection,
+        injection: crate::control::frf::Injection,
         /// Frequency \[Hz\].
         f_hz: f32,
         /// Amplitude \[A or rad\].
@@ -63,7 +63,7 @@ pub enum MapCmd<'a> {
         count: u32,
     },
     /// `map write START OFFSET,SCALE …`: bins from START (at most
-    /// [`crate::device::MAP_WRITE_BINS`] a line).
+    /// `MAP_WRITE_BINS` a line: the device's mailbox).
     Write {
         /// First bin.
         start: u32,
@@ -81,10 +81,10 @@ pub enum TableCmd<'a> {
     Status,
     /// `table ref START V …` or `table corr START V …`: points from START of the reference
     /// \[counts from the origin\] or of the correction being written \[N·m\] (at most
-    /// [`crate::table::TABLE_WRITE_VALUES`] a line), in order from 0.
+    /// [`crate::control::table::TABLE_WRITE_VALUES`] a line), in order from 0.
     Write {
         /// Which table (`Ref` or `Corr`).
-        which: crate::table::Which,
+        which: crate::control::table::Which,
         /// First point.
         start: u32,
         /// The values, as text (separated by spaces).
@@ -92,7 +92,7 @@ pub enum TableCmd<'a> {
     },
     /// `table set POINTS STEPS ORIGIN`: the reference written is checked whole and played
     /// with this geometry (STEPS position steps between points, ORIGIN \[counts\]).
-    Set(crate::table::Geometry),
+    Set(crate::control::table::Geometry),
     /// `table use`: the correction written is played from the next period's start.
     Use,
     /// `table corr off`: no correction from the next period's start.
@@ -105,7 +105,7 @@ pub enum TableCmd<'a> {
     /// value a line.
     Read {
         /// Which table.
-        which: crate::table::Which,
+        which: crate::control::table::Which,
         /// First point.
         start: u32,
         /// Points.
@@ -244,7 +244,7 @@ pub enum Command<'a> {
         /// Mean speed [rad/s].
         vel: f32,
         /// The sweep, if given.
-        sweep: Option<crate::reference::Sweep>,
+        sweep: Option<crate::control::reference::Sweep>,
     },
     /// `hold`: back to position control.
     Hold,
@@ -375,7 +375,7 @@ impl core::fmt::Display for Command<'_> {
             Command::Map(MapCmd::Write { start, pairs }) => write!(f, "map write {start} {pairs}"),
             Command::Map(MapCmd::Clear) => f.write_str("map clear"),
             Command::Table(t) => {
-                use crate::table::Which;
+                use crate::control::table::Which;
                 let name = |w: Which| match w {
                     Which::Ref => "ref",
                     Which::Corr => "corr",
@@ -551,7 +551,7 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
                     let f0 = num(arg())?;
                     let f1 = num(arg())?;
                     let seconds = num(arg())?;
-                    Some(crate::reference::Sweep {
+                    Some(crate::control::reference::Sweep {
                         amp,
                         f0,
                         f1,
@@ -588,7 +588,7 @@ pub fn parse(line: &str) -> Result<Command<'_>, ParseError> {
             }
         }
         "table" => {
-            use crate::table::Which;
+            use crate::control::table::Which;
             let usage = "usage: table | table ref|corr START V ... | table corr off | \
 table set POINTS STEPS ORIGIN | table use | table run PERIODS | table stop | \
 table read ref|corr|err START COUNT | table next | table clear";
@@ -617,7 +617,7 @@ table read ref|corr|err START COUNT | table next | table clear";
                     let points = int(arg())?;
                     let steps = int(arg())?;
                     let origin = arg().and_then(parse_i64).ok_or(bad(usage))?;
-                    Command::Table(TableCmd::Set(crate::table::Geometry {
+                    Command::Table(TableCmd::Set(crate::control::table::Geometry {
                         points,
                         steps,
                         origin,
@@ -626,7 +626,7 @@ table read ref|corr|err START COUNT | table next | table clear";
                 Some("use") => Command::Table(TableCmd::Use),
                 Some("run") => {
                     let n = int(arg())?;
-                    if n == 0 || n > crate::table::TABLE_MAX_PERIODS {
+                    if n == 0 || n > crate::control::table::TABLE_MAX_PERIODS {
                         return Err(bad("PERIODS from 1 to 1000000"));
                     }
                     Command::Table(TableCmd::Run(n))
@@ -656,7 +656,8 @@ table read ref|corr|err START COUNT | table next | table clear";
                 None => Command::Frf(FrfCmd::Status),
                 Some("off") => Command::Frf(FrfCmd::Off),
                 Some(w) => {
-                    let injection = crate::frf::Injection::from_name(w).ok_or(bad(usage))?;
+                    let injection =
+                        crate::control::frf::Injection::from_name(w).ok_or(bad(usage))?;
                     let f_hz = arg().and_then(parse_f32).ok_or(bad(usage))?;
                     let amp = arg().and_then(parse_f32).ok_or(bad(usage))?;
                     let periods = arg().and_then(parse_u32).ok_or(bad(usage))?;

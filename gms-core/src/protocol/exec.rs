@@ -29,7 +29,7 @@ pub trait Device {
     /// Switches the bridge off.
     fn disable(&mut self) -> Result<(), &'static str>;
     /// The device's state (`status`).
-    fn status(&mut self) -> crate::device::StatusReply;
+    fn status(&mut self) -> StatusReply;
     /// Clears latched faults.
     fn clear(&mut self) -> Result<(), &'static str>;
     /// Moves to `pos` \[rad\] at up to `vel` [rad/s].
@@ -40,7 +40,7 @@ pub trait Device {
     fn velocity(
         &mut self,
         vel: f32,
-        sweep: Option<crate::reference::Sweep>,
+        sweep: Option<crate::control::reference::Sweep>,
     ) -> Result<(), &'static str>;
     /// Back to position control: from a speed, stopping as the acceleration limit allows;
     /// from current mode, holding where the axis is.
@@ -74,7 +74,7 @@ pub trait Device {
     /// injected at `injection`, `settle` periods let pass, `periods` summed.
     fn frf_start(
         &mut self,
-        injection: crate::frf::Injection,
+        injection: crate::control::frf::Injection,
         f_hz: f32,
         amp: f32,
         periods: u32,
@@ -90,7 +90,7 @@ pub trait Device {
     /// The frequency-response measurement's state and result (`frf`).
     fn frf_status(&mut self) -> FrfStatus {
         FrfStatus {
-            state: crate::frf::FrfState::Idle,
+            state: crate::control::frf::FrfState::Idle,
             measure: None,
         }
     }

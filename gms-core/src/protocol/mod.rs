@@ -34,7 +34,7 @@
 
 use core::fmt::{self, Write};
 
-use crate::controller::{ControllerParams, FfMode};
+use crate::control::controller::FfMode;
 use crate::numtext::Num;
 
 mod command;
@@ -43,6 +43,7 @@ mod params;
 mod reader;
 mod replies;
 mod reply;
+mod status;
 
 pub use command::*;
 pub use exec::*;
@@ -50,6 +51,7 @@ pub use params::*;
 pub use reader::*;
 pub use replies::*;
 pub use reply::*;
+pub use status::*;
 
 /// The friction modes as `list` prints their range.
 pub const MODE_NAMES: &str = "none, static, gms, gms-adaptive";

@@ -5,8 +5,7 @@
 use super::*;
 pub use crate::settings::ParamId;
 
-/// The controller settings the protocol edits (the firmware's whole parameter set).
-pub type Settings = ControllerParams<6>;
+pub use crate::control::controller::Settings;
 
 /// How a parameter is read and written.
 #[derive(Clone, Copy)]

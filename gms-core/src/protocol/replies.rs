@@ -19,10 +19,9 @@
 
 use core::fmt::{self, Write};
 
-use crate::device::CaptureState;
-use crate::frf::{FrfState, Injection};
+use crate::control::frf::{FrfState, Injection};
+use crate::control::table::{Geometry, PeriodError, TableReport, TableState};
 use crate::numtext::{Int, Num};
-use crate::table::{Geometry, PeriodError, TableReport, TableState};
 
 /// Why a reply could not be read: the key that is missing or whose value does not parse.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -132,7 +131,31 @@ impl<'a> Words<'a> {
     }
 }
 
+/// Where a capture is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CaptureState {
+    /// Nothing asked.
+    #[default]
+    Idle,
+    /// Waiting for its trigger.
+    Armed,
+    /// Recording.
+    Recording,
+    /// Full: readable.
+    Done,
+}
+
 impl CaptureState {
+    /// The name in `capture`'s reply.
+    pub fn name(self) -> &'static str {
+        match self {
+            CaptureState::Idle => "idle",
+            CaptureState::Armed => "armed",
+            CaptureState::Recording => "recording",
+            CaptureState::Done => "done",
+        }
+    }
+
     /// Every state, in the order a capture goes through them.
     pub const ALL: [CaptureState; 4] = [
         CaptureState::Idle,

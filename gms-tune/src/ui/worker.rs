@@ -138,7 +138,7 @@ pub enum Outcome {
         /// The notch proposed, or why none.
         suggestion: Option<Result<gms_bench::frf::Suggestion, String>>,
         /// The device's filters when it was measured.
-        shaping: gms_core::shaping::ShapingParams,
+        shaping: gms_core::control::shaping::ShapingParams,
     },
 }
 

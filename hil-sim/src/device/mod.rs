@@ -23,13 +23,13 @@ use std::time::{Duration, Instant};
 use embedded_storage_async::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
+use gms_core::device::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 use gms_core::device::{
     self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, Sample, SenseChain,
     Status,
 };
 use gms_core::drive::BoardLimits;
 use gms_core::protocol::{self, LineReader, Settings};
-use gms_core::store::{FlashStore, SECTOR_SIZE, STORE_RANGE, WORD_SIZE};
 
 use crate::plant::Plant;
 use crate::scenario::Scenario;
@@ -219,16 +219,16 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let defaults = sc.controller_params()?;
     let board = board(sc);
     let mut store = FlashStore::new(flash).with_map_buffer(Box::leak(
-        vec![0u8; gms_core::store::MAP_BUFFER_LEN].into_boxed_slice(),
+        vec![0u8; gms_core::device::store::MAP_BUFFER_LEN].into_boxed_slice(),
     ));
     // The device's log of a record from another firmware, as the board's defmt log.
-    let mut log = |line: gms_core::drive::ReportLine| eprintln!("device: {line}");
+    let mut log = |line: gms_core::device::ReportLine| eprintln!("device: {line}");
     let start = device::startup(store.load(), &defaults, &board, &mut log)
         .map_err(|e| format!("the scenario's controller: {e}"))?;
     // The position map's table: the stored map for these settings, or none (a stored map of
     // another geometry is left out, as on the board).
-    let table = Box::leak(vec![0.0; gms_core::posmap::MAP_VALUES].into_boxed_slice());
-    let _ = gms_core::posmap::restore(&mut store, &start.settings.map, table);
+    let table = Box::leak(vec![0.0; gms_core::control::posmap::MAP_VALUES].into_boxed_slice());
+    let _ = gms_core::device::restore_map(&mut store, &start.settings.map, table);
     let adc = Adc::new(sc);
     let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
     let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
@@ -261,7 +261,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
             )
             .with_map(table)
             .with_table(Box::leak(
-                vec![0.0; gms_core::table::TABLE_VALUES].into_boxed_slice(),
+                vec![0.0; gms_core::control::table::TABLE_VALUES].into_boxed_slice(),
             )),
             plant,
             adc,

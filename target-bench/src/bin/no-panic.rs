@@ -18,16 +18,15 @@ use core::fmt::{self, Write};
 use core::hint::black_box;
 
 use cortex_m_rt::entry;
-use gms_core::controller::Controller;
+use gms_core::control::controller::Controller;
+use gms_core::control::reference::{Reference, Segment};
 use gms_core::device::{
     self, Board, ControlLoop, Front, Inputs, LoopLink, Mailbox, ParamStore, StoreError,
 };
 use gms_core::drive;
+use gms_core::friction::presets;
 use gms_core::protocol::{self, LineReader};
-use gms_core::reference::{Reference, Segment};
-use gms_core::{
-    FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, presets, selftest,
-};
+use gms_core::{FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, selftest};
 use panic_never as _;
 
 /// The device core's link on this check: the mailbox here, and waiting on the loop runs
@@ -66,14 +65,14 @@ impl LoopLink for CheckLink {
 }
 
 /// A store in RAM (one record).
-struct RamStore(Option<[u8; drive::RECORD_LEN]>);
+struct RamStore(Option<[u8; gms_core::device::RECORD_LEN]>);
 
 impl ParamStore for RamStore {
-    fn save(&mut self, rec: &[u8; drive::RECORD_LEN]) -> Result<(), StoreError> {
+    fn save(&mut self, rec: &[u8; gms_core::device::RECORD_LEN]) -> Result<(), StoreError> {
         self.0 = Some(*black_box(rec));
         Ok(())
     }
-    fn load(&mut self) -> Result<Option<[u8; drive::RECORD_LEN]>, StoreError> {
+    fn load(&mut self) -> Result<Option<[u8; gms_core::device::RECORD_LEN]>, StoreError> {
         Ok(black_box(self.0))
     }
 }
@@ -157,10 +156,11 @@ fn main() -> ! {
     static mut CAPTURE: [f32; 256] = [0.0; 256];
     // SAFETY: the check's only reference to the buffer, taken once.
     let capture = unsafe { &mut *core::ptr::addr_of_mut!(CAPTURE) };
-    static mut MAP: [f32; gms_core::posmap::MAP_VALUES] = [0.0; gms_core::posmap::MAP_VALUES];
+    static mut MAP: [f32; gms_core::control::posmap::MAP_VALUES] =
+        [0.0; gms_core::control::posmap::MAP_VALUES];
     // SAFETY: the check's only reference to the table, taken once.
     let map_table = unsafe { &mut *core::ptr::addr_of_mut!(MAP) };
-    gms_core::posmap::clear(map_table);
+    gms_core::control::posmap::clear(map_table);
     // The controllers' storage (the loop's running one, the front's spare) and the
     // requests', as the firmware's statics.
     static mut CTRL: [Option<device::Ctrl>; 2] = [None, None];

@@ -80,7 +80,7 @@ fn main() -> ! {
         core::ptr::addr_of!(_stack_end) as usize as u32,
         core::ptr::addr_of!(_stack_start) as usize as u32,
     );
-    let size = gms_core::hw::STACK_GUARD_BYTES;
+    let size = gms_core::boards::hw::STACK_GUARD_BYTES;
     let Some((base, left)) = mpu::guard_region(end, start, size, 16 * 1024) else {
         hprintln!(
             "no room for the guard between {:#010x} and {:#010x}",

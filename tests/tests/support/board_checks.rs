@@ -1,10 +1,10 @@
 //! The checks every board description passes (gms-core's `boards`), shared by the `board_*`
 //! test targets, one per board.
 
+use gms_core::boards::hw::{F4Clocks, F4Limits, MemoryMap};
+use gms_core::device::store::SECTOR_SIZE;
 use gms_core::device::{Board, default_settings, prepare};
 use gms_core::drive::{self, SenseTiming};
-use gms_core::hw::{F4Clocks, F4Limits, MemoryMap};
-use gms_core::store::SECTOR_SIZE;
 
 /// One board's description, as its files give it.
 pub struct Desc {

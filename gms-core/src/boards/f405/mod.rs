@@ -2,9 +2,9 @@
 //! Olimex STM32-H405) carrying the power stage (`power_stage.rs`). Plain numbers, checked on
 //! the host.
 
+use crate::boards::hw::{F4Clocks, F4Limits, F405_LIMITS, MemoryMap};
 use crate::device::Board;
 use crate::drive::SenseTiming;
-use crate::hw::{F4Clocks, F4Limits, F405_LIMITS, MemoryMap};
 
 use super::power_stage;
 

@@ -2,9 +2,9 @@
 //! PC0, PA0/PA1 are on its morpho headers, PA11/PA12 to a USB breakout), flashed through its
 //! on-board ST-LINK. Plain numbers, checked on the host.
 
+use crate::boards::hw::{F4Clocks, F4Limits, F446_LIMITS, MemoryMap};
 use crate::device::Board;
 use crate::drive::SenseTiming;
-use crate::hw::{F4Clocks, F4Limits, F446_LIMITS, MemoryMap};
 
 use super::power_stage;
 

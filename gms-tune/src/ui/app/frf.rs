@@ -167,11 +167,12 @@ impl App {
                         .find(|r| r.listed.path == ParamId::RatePosHz.path())
                         .and_then(|r| r.listed.number)
                         .unwrap_or(10_000.0);
-                    let p = gms_core::shaping::ShapingParams {
-                        notch: [s.notch, gms_core::shaping::Notch::OFF],
+                    let p = gms_core::control::shaping::ShapingParams {
+                        notch: [s.notch, gms_core::control::shaping::Notch::OFF],
                         lp_hz: 0.0,
                     };
-                    if let Ok(sh) = gms_core::shaping::Shaping::try_new(&p, pos_hz as f32) {
+                    if let Ok(sh) = gms_core::control::shaping::Shaping::try_new(&p, pos_hz as f32)
+                    {
                         predicted = sweep
                             .points
                             .iter()

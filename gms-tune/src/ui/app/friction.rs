@@ -14,7 +14,7 @@ impl App {
         )
         .ok()
         .and_then(|pf| pf.friction.gms_params::<6>().ok())
-        .and_then(|p| gms_core::gms::Gms::try_new(p).ok());
+        .and_then(|p| gms_core::friction::gms::Gms::try_new(p).ok());
         ui.label(format!(
             "The last {:.1} s of telemetry: the friction estimate (k_M·i − J·a_ref) against the \
              position (pre-sliding hysteresis) and the velocity (Stribeck curve), with the \

@@ -8,7 +8,7 @@ use std::time::Duration;
 use egui::{Color32, RichText};
 use egui_plot::{Legend, Line, Plot, PlotPoints, Points};
 use gms_core::device::StatusReply;
-use gms_core::model::FrictionModel;
+use gms_core::friction::model::FrictionModel;
 use gms_core::protocol::{Command, ParamId};
 
 mod experiments;

@@ -3,10 +3,10 @@
 //! `dz/dt = v - sigma0 |v| z / g(v)`, `F = sigma0 z + sigma1 dz/dt + sigma v`, with
 //! `g(v) = |s(v)|` the Stribeck magnitude (the original uses delta = 2).
 
-use crate::error::{Field, ParamError, finite};
+use crate::friction::error::{Field, ParamError, finite};
+use crate::friction::model::{FrictionModel, Step, step_velocity};
+use crate::friction::stribeck::{Stribeck, StribeckParams};
 use crate::math;
-use crate::model::{FrictionModel, Step, step_velocity};
-use crate::stribeck::{Stribeck, StribeckParams};
 
 /// Parameters of the LuGre model.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,8 +1,8 @@
 //! The static friction map `F = s(v) + sigma v` (Stribeck + Coulomb + viscous), no state.
 
-use crate::error::{Field, ParamError, finite};
-use crate::model::{FrictionModel, Step, step_velocity};
-use crate::stribeck::{Stribeck, StribeckParams};
+use crate::friction::error::{Field, ParamError, finite};
+use crate::friction::model::{FrictionModel, Step, step_velocity};
+use crate::friction::stribeck::{Stribeck, StribeckParams};
 
 /// Parameters of the static map.
 #[derive(Debug, Clone, Copy, PartialEq)]

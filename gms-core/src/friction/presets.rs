@@ -4,8 +4,8 @@
 //!   docs/design.md#reading-table-1 (torque motor-side in N·m, angle in rad).
 //! - [`guideway`]: the linear guideways of the paper's Fig. 2 (force in N, displacement in m).
 
-use crate::gms::{Block, GmsParams};
-use crate::stribeck::StribeckParams;
+use crate::friction::gms::{Block, GmsParams};
+use crate::friction::stribeck::StribeckParams;
 
 /// The paper's Table 1 in SI, rotational units (N·m, rad, s), motor side.
 ///

@@ -1,6 +1,6 @@
 //! Loop-shaping filters on the position loop's current command: two notches and a low-pass,
 //! each off at 0 Hz (settings `filt.notch1.*`, `filt.notch2.*`, `filt.lp.f_hz`; run by the
-//! controller once per position step, see [`crate::controller`]). A notch is the Audio EQ
+//! controller once per position step, see [`crate::control::controller`]). A notch is the Audio EQ
 //! Cookbook's peaking filter cut by `depth_db` at `f_hz` with quality `q` (a finite depth: a
 //! resonance is attenuated, not removed, so the loop's phase is disturbed only near it); the
 //! low-pass a second-order Butterworth. Each stage runs as the `biquad` crate's direct form 2
@@ -121,7 +121,7 @@ enum Kind {
 /// the F405's flash 4 KB.
 fn cookbook(kind: Kind, f0: f32, q: f32, fs: f32) -> Coefficients<f32> {
     let w0 = core::f32::consts::TAU * f0 / fs;
-    let (sin, cos) = crate::reference::sin_cos(w0);
+    let (sin, cos) = crate::control::reference::sin_cos(w0);
     let alpha = sin / (2.0 * q);
     let (b0, b1, b2, a0, a1, a2) = match kind {
         Kind::Peaking(db) => {

@@ -29,7 +29,7 @@
 //!   correction with `table use` / `table corr off`). However slow the link, the host reads
 //!   one whole period, the first of its correction, and never a mix of two.
 
-use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::control::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 
 /// The most points a table holds.
 pub const TABLE_POINTS: usize = 1024;
@@ -319,7 +319,7 @@ impl Player {
         &mut self,
         req: &TableRequest,
         t: &mut [f32],
-        chunk: Option<&mut crate::device::Chunk>,
+        chunk: Option<&mut crate::control::chunk::Chunk>,
     ) {
         match *req {
             TableRequest::Write {
@@ -414,7 +414,7 @@ impl Player {
                 };
                 let Some(base) = base else { return };
                 let n = (max as usize)
-                    .min(crate::device::CHUNK_VALUES)
+                    .min(crate::control::chunk::CHUNK_VALUES)
                     .min(points.saturating_sub(start as usize));
                 if let Some(src) = t.get(base + start as usize..) {
                     for (d, v) in chunk.values.iter_mut().zip(src.iter().take(n)) {

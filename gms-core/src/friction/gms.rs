@@ -1,9 +1,9 @@
 //! The Generalized Maxwell-Slip model (paper eqs 1-6, docs/design.md#the-gms-model).
 
-use crate::error::{Field, ParamError, finite};
+use crate::friction::error::{Field, ParamError, finite};
+use crate::friction::model::{FrictionModel, Step, step_velocity};
+use crate::friction::stribeck::{Stribeck, StribeckParams};
 use crate::math;
-use crate::model::{FrictionModel, Step, step_velocity};
-use crate::stribeck::{Stribeck, StribeckParams};
 
 /// One elementary Maxwell-slip block. A block with `k = 0` and `alpha = 0` is *unused*: it
 /// holds no force (a parameter set of `N` blocks may describe fewer; the used ones come
@@ -44,15 +44,15 @@ pub struct GmsParams<const N: usize> {
     /// Attraction parameter `C` of the slip dynamics [N/s or N·m/s], `> 0`.
     pub c: f32,
     /// The blocks.
-    #[cfg_attr(feature = "serde", serde(with = "crate::serde_array"))]
+    #[cfg_attr(feature = "serde", serde(with = "crate::friction::serde_array"))]
     pub blocks: [Block; N],
 }
 
 impl<const N: usize> GmsParams<N> {
     /// The static map of the same sliding friction: the Stribeck curve (and its negative side)
     /// and the viscous term, `s(v) + σ v` (what the GMS model tends to at a steady speed).
-    pub fn static_params(&self) -> crate::static_map::StaticParams {
-        crate::static_map::StaticParams {
+    pub fn static_params(&self) -> crate::friction::static_map::StaticParams {
+        crate::friction::static_map::StaticParams {
             stribeck: self.stribeck,
             negative: self.negative,
             sigma: self.sigma,

@@ -8,10 +8,10 @@
 
 use core::fmt::{self, Write};
 
-use crate::controller::FfMode;
+use super::Words;
+use crate::control::controller::FfMode;
 use crate::drive::Faults;
 use crate::numtext::Num;
-use crate::protocol::Words;
 
 /// What the loop drives while the bridge is on, as `status` names it (`drive=`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]

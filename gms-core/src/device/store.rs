@@ -1,5 +1,5 @@
 //! The parameter store on NOR flash, one format for the board and the virtual device: one
-//! record ([`crate::drive::encode_settings`]: version, each setting under its id, CRC-32) under one
+//! record ([`crate::device::encode_settings`]: version, each setting under its id, CRC-32) under one
 //! key of a `sequential-storage` map over two or more flash sectors ([`STORE_RANGE`] on the
 //! F405 board and in the simulator's store image; each board says where). The firmware runs it on the
 //! STM32F405's internal flash; `hil-sim serve --store FILE` on a file holding the image of the
@@ -18,8 +18,8 @@ use embedded_storage_async::nor_flash::NorFlash;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
+use crate::device::RECORD_LEN;
 use crate::device::{ParamStore, StoreError};
-use crate::drive::RECORD_LEN;
 
 /// The store's flash range, as offsets from the start of the F405's flash: its last two
 /// 128 KiB sectors (10 and 11, RM0090 table 5), which `memory.x` leaves out of FLASH.
@@ -38,7 +38,7 @@ const KEY_MAP: u8 = 2;
 
 /// The bytes a map buffer needs ([`FlashStore::with_map_buffer`]): the record, and a scratch
 /// area for the storage layer (the record, its key and alignment).
-pub const MAP_BUFFER_LEN: usize = 2 * (crate::posmap::MAP_RECORD_LEN + 32);
+pub const MAP_BUFFER_LEN: usize = 2 * (crate::control::posmap::MAP_RECORD_LEN + 32);
 
 /// The buffer holds one record plus sequential-storage's key and alignment.
 const BUF: usize = RECORD_LEN + 32;

@@ -5,15 +5,19 @@
 //! 10 kHz) and the current loop at `cur_rate_hz` (default 20 kHz, an integer multiple).
 //! Torques are motor-side [N·m], angles those of the encoder \[rad\], currents \[A\], volts \[V\].
 
-use crate::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
-use crate::error::ParamError;
-use crate::gms::{Gms, GmsParams};
+use crate::control::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
+use crate::control::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::control::shaping::{Shaping, ShapingParams};
+use crate::friction::error::ParamError;
+use crate::friction::gms::{Gms, GmsParams};
+use crate::friction::model::FrictionModel;
+use crate::friction::static_map::StaticMap;
 use crate::math::{self, clamp, i64_to_f32};
-use crate::model::FrictionModel;
-use crate::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::settings::ParamId;
-use crate::shaping::{Shaping, ShapingParams};
-use crate::static_map::StaticMap;
+
+/// The settings a device runs and the protocol edits (the firmware's whole parameter set: a
+/// controller of 6 GMS blocks).
+pub type Settings = ControllerParams<6>;
 
 /// The least stiffness of a GMS block in use on the device [N·m/rad] (0 marks an unused one).
 pub const MIN_BLOCK_K: f32 = 1e-12;
@@ -45,7 +49,7 @@ pub enum FfMode {
     #[default]
     Gms,
     /// The GMS model scaled by an on-line estimate of the friction level
-    /// ([`crate::adaptive`]).
+    /// ([`crate::control::adaptive`]).
     #[cfg_attr(feature = "serde", serde(rename = "gms-adaptive"))]
     GmsAdaptive,
 }
@@ -174,7 +178,7 @@ pub struct ControllerParams<const N: usize> {
     pub counts_per_rev: f32,
     /// Current-sense transimpedance \[V/A\]: volts at the ADC per ampere of motor current (the
     /// shunt's resistance times the amplifier's gain), `> 0`; the amps per ADC code derive from
-    /// it and the board's ADC ([`crate::device::SenseChain::amps_per_code`]).
+    /// it and the board's ADC (the device's sense chain: `SenseChain::amps_per_code`).
     pub sense_v_per_a: f32,
     /// Position PID.
     pub pid: PidParams,
@@ -202,8 +206,8 @@ pub struct ControllerParams<const N: usize> {
     pub sense_dir: f32,
     /// Friction feedforward.
     pub ff: FeedforwardParams<N>,
-    /// The position map's settings (its table is the control loop's, [`crate::posmap`]).
-    pub map: crate::posmap::MapParams,
+    /// The position map's settings (its table is the control loop's, [`crate::control::posmap`]).
+    pub map: crate::control::posmap::MapParams,
 }
 
 /// Why a controller parameter set was rejected.

@@ -112,7 +112,7 @@ impl Sine {
         }
         // The step's sine and cosine in f32 (the crate's own, as the reference generator's:
         // no f64 trigonometry in the firmware for this).
-        let (sin, cos) = crate::reference::sin_cos(
+        let (sin, cos) = crate::control::reference::sin_cos(
             (core::f64::consts::TAU * best.0 as f64 / best.1 as f64) as f32,
         );
         Ok(Sine {

@@ -9,7 +9,7 @@
 //! reference's fixed point (1/65536 count) by addition of each step's increment, so a step
 //! has no 64-bit division; the bin and the fraction come from one f32 multiplication.
 
-use crate::reference::SUB_PER_COUNT;
+use crate::control::reference::SUB_PER_COUNT;
 
 /// The most bins a map has.
 pub const MAP_BINS_MAX: usize = 512;
@@ -198,7 +198,7 @@ pub fn map_record_finish(period: f32, bins: u32, out: &mut [u8]) -> usize {
         map_record_put(out, k, 0.0);
     }
     let body = MAP_RECORD_LEN - 4;
-    let crc = crate::drive::crc32(out.get(..body).unwrap_or(&[]));
+    let crc = crate::crc::crc32(out.get(..body).unwrap_or(&[]));
     for (slot, b) in out.iter_mut().skip(body).zip(crc.to_le_bytes()) {
         *slot = b;
     }
@@ -247,7 +247,7 @@ pub fn decode_map(rec: &[u8], p: &MapParams, out: &mut [f32]) -> Result<(), MapR
     let (body, tail) = rec.split_at(MAP_RECORD_LEN - 4);
     let mut crc = [0u8; 4];
     crc.copy_from_slice(tail);
-    if crate::drive::crc32(body) != u32::from_le_bytes(crc) {
+    if crate::crc::crc32(body) != u32::from_le_bytes(crc) {
         return Err(MapRecordError::Checksum);
     }
     let byte = |i: usize| body.get(i).copied().unwrap_or(0);
@@ -269,26 +269,4 @@ pub fn decode_map(rec: &[u8], p: &MapParams, out: &mut [f32]) -> Result<(), MapR
         *o = value(k);
     }
     Ok(())
-}
-
-/// The start-up's table: cleared (no effect), then the stored map if there is one for the
-/// settings' geometry. Returns what happened, for the log: `Ok(true)` loaded, `Ok(false)`
-/// none stored, `Err` why a stored one was not used (the table stays clear).
-pub fn restore<S: crate::device::ParamStore + ?Sized>(
-    store: &mut S,
-    p: &MapParams,
-    table: &mut [f32],
-) -> Result<bool, &'static str> {
-    clear(table);
-    let len = match store.load_map() {
-        Ok(Some(len)) => len,
-        Ok(None) => return Ok(false),
-        Err(_) => return Err("stored map unreadable"),
-    };
-    let Some(buf) = store.map_buffer() else {
-        return Ok(false);
-    };
-    let rec = buf.get(..len).ok_or("stored map: wrong length")?;
-    decode_map(rec, p, table).map_err(MapRecordError::reason)?;
-    Ok(true)
 }

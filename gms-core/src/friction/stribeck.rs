@@ -1,7 +1,7 @@
 //! The Stribeck curve `s(v) = sgn(v) [Fc + (Fs - Fc) exp(-(|v|/Vs)^delta)]` (paper eq. 1 with
 //! the shape factor delta of its Table 1), optionally with separate parameters for v < 0.
 
-use crate::error::{Field, ParamError, Side, finite};
+use crate::friction::error::{Field, ParamError, Side, finite};
 use crate::math;
 
 /// Parameters of one branch of the Stribeck curve.

@@ -16,7 +16,8 @@
 
 use core::fmt;
 
-use crate::controller::FfMode;
+use crate::control::controller::FfMode;
+use crate::crc::crc32;
 use crate::protocol::{Access, PARAMS, Param, Settings};
 
 /// Version of the stored parameter record written now.
@@ -182,19 +183,6 @@ pub struct Loaded {
     pub settings: Settings,
     /// What was clamped, dropped or missing.
     pub report: LoadReport,
-}
-
-/// CRC-32 (IEEE 802.3, reflected, as zlib's) of `data`.
-pub fn crc32(data: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in data {
-        crc ^= b as u32;
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
-        }
-    }
-    !crc
 }
 
 /// The stable id of a parameter's path in a record: FNV-1a (32 bits) of its bytes.
