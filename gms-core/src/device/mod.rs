@@ -21,6 +21,7 @@ mod capture;
 mod control;
 mod front;
 mod record;
+mod startup;
 #[cfg(feature = "store")]
 pub mod store;
 
@@ -33,8 +34,9 @@ pub use control::{
     ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, TableBuf, ZERO_SAMPLES,
     calibrate_sense,
 };
-pub use front::{Front, LoopLink, ParamStore, Startup, StoreError, prepare, restore_map, startup};
+pub use front::{Front, LoopLink};
 pub use record::*;
+pub use startup::{ParamStore, Startup, StoreError, prepare, restore_map, startup};
 
 pub use crate::control::chunk::{CHUNK_VALUES, Chunk};
 use crate::control::controller::Controller;

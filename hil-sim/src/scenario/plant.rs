@@ -1,0 +1,217 @@
+//! A scenario's plant: the axis's friction and its variations (compliance, cogging and
+//! screw ripple, glitches, drift), as the file writes them.
+
+use super::*;
+
+/// The plant: motor, transmission, sensors, friction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plant {
+    /// H-bridge supply \[V\].
+    pub supply_v: f64,
+    /// Winding resistance \[ohm\].
+    pub resistance: f64,
+    /// Winding inductance \[H\].
+    pub inductance: f64,
+    /// Torque constant [N·m/A].
+    pub k_m: f64,
+    /// Back-EMF constant [V·s/rad].
+    pub k_e: f64,
+    /// Inertia reflected to the motor [kg·m^2].
+    pub inertia: f64,
+    /// Gearhead reduction [-].
+    pub gear_ratio: f64,
+    /// Lead-screw lead [m/rev].
+    pub lead: f64,
+    /// Encoder resolution [rad/count].
+    pub rad_per_count: f64,
+    /// ADC resolution \[bits\].
+    pub adc_bits: u32,
+    /// ADC full scale, ± \[A\].
+    pub adc_range: f64,
+    /// Current-sense noise, standard deviation \[A\].
+    pub adc_noise: f64,
+    /// PWM duty resolution \[steps\].
+    pub pwm_steps: u32,
+    /// Plant steps per current-loop period.
+    pub substeps: u32,
+    /// Friction variability, ± fraction of nominal.
+    pub variability: f64,
+    /// Seed of the friction draw and the noise.
+    pub seed: u64,
+    /// Seed of the noise alone, drawn after the friction (0: the noise goes on from `seed`'s
+    /// stream): the same plant with another realisation of its noise.
+    pub noise_seed: u64,
+    /// Actuator friction (motor side, N·m, rad).
+    pub actuator: FrictionSpec,
+    /// Guideway friction (slide, N, m).
+    pub guideway: FrictionSpec,
+    /// How the friction drifts during the run.
+    pub drift: Drift,
+    /// An injected encoder fault (none by default).
+    pub encoder_glitch: Glitch,
+    /// The encoder wired the other way round: it counts down when the motor turns forward
+    /// (a wiring fault for the bench tools to detect).
+    pub encoder_reversed: bool,
+    /// The current sense wired the other way round: it reads the current negated (a wiring
+    /// fault for the bench tools to detect).
+    pub sense_reversed: bool,
+    /// The screw/nut's axial compliance: a two-mass stage (rigid by default).
+    pub compliance: Compliance,
+    /// Position-dependent torque: cogging and the screw's once-per-revolution friction.
+    pub ripple: Ripple,
+}
+
+/// The stage's structural mode: the rotor side (motor, gearhead, screw) and the slide joined
+/// by the screw/nut's axial stiffness and damping. `inertia` stays the whole axis's inertia
+/// at the motor; of it, the slide's share is `slide_mass` × (slide travel per motor radian)².
+/// The encoder stays on the motor, the guideway friction acts on the slide.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Compliance {
+    /// The anti-resonance seen from the motor's encoder \[Hz\]: the slide's natural frequency
+    /// against the axial stiffness with the rotor held, `(1/2π) √(K / J_l)`; 0: rigid.
+    pub f_hz: f64,
+    /// Its damping ratio \[-\], in [0, 1).
+    pub zeta: f64,
+    /// The slide's mass (carriage and load) \[kg\], `> 0`.
+    pub slide_mass: f64,
+}
+
+/// One harmonic of the cogging torque.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Harmonic {
+    /// Its order: `order × per_rev` cycles per motor revolution \[-\], `>= 1`.
+    pub order: u32,
+    /// Its amplitude \[N·m\].
+    pub amplitude: f64,
+    /// Its phase \[rad\].
+    #[serde(default)]
+    pub phase: f64,
+}
+
+/// Position-dependent torque on the rotor: a conservative cogging torque periodic in the motor
+/// angle, `amplitude sin(per_rev θ + phase) + Σ a_h sin(order_h per_rev θ + phase_h)` (the
+/// torque the motor must supply to turn, positive against positive motion on the rising
+/// half), and a once-per-screw-revolution modulation of the actuator friction,
+/// `1 + screw_friction sin(θ / gear_ratio + screw_phase)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ripple {
+    /// The cogging's fundamental amplitude \[N·m\]; 0: none.
+    pub amplitude: f64,
+    /// Cogging cycles per motor revolution \[-\], `>= 1`.
+    pub per_rev: u32,
+    /// Phase of the fundamental \[rad\].
+    pub phase: f64,
+    /// Further harmonics.
+    pub harmonics: Vec<Harmonic>,
+    /// The actuator friction's modulation once per screw revolution, ± fraction \[-\], in
+    /// (-0.9, 0.9).
+    pub screw_friction: f64,
+    /// Its phase \[rad\].
+    pub screw_phase: f64,
+}
+
+impl Ripple {
+    /// The cogging torque at motor angle `theta` \[N·m\] and its potential energy relative
+    /// to angle 0 \[J\] (the torque's integral from 0 to `theta`).
+    pub fn cogging(&self, theta: f64) -> (f64, f64) {
+        let n = self.per_rev as f64;
+        let mut torque = 0.0;
+        let mut energy = 0.0;
+        let terms = core::iter::once((1.0, self.amplitude, self.phase)).chain(
+            self.harmonics
+                .iter()
+                .map(|h| (h.order as f64, h.amplitude, h.phase)),
+        );
+        for (order, a, ph) in terms {
+            if a == 0.0 {
+                continue;
+            }
+            let w = order * n;
+            torque += a * (w * theta + ph).sin();
+            energy += a / w * (ph.cos() - (w * theta + ph).cos());
+        }
+        (torque, energy)
+    }
+
+    /// The factor on the actuator friction at motor angle `theta` \[-\], for a gearhead of
+    /// `gear_ratio` (the screw turns once per `gear_ratio` motor revolutions).
+    pub fn screw_factor(&self, theta: f64, gear_ratio: f64) -> f64 {
+        1.0 + self.screw_friction * (theta / gear_ratio + self.screw_phase).sin()
+    }
+}
+
+/// Fault injection for testing what the device does about a bad encoder signal (a burst of
+/// noise counted as edges, a loose connector): from `at` on, the encoder reads `counts` away
+/// from the true angle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Glitch {
+    /// When the reading jumps [s of simulated time from the start], `>= 0`.
+    pub at: f64,
+    /// By how much \[counts\]; 0: no glitch.
+    pub counts: i64,
+}
+
+/// How the plant's friction drifts during a run: a factor on both sources' friction torque
+/// (equivalently fs, fc, sigma, every k and c scaled together).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DriftKind {
+    /// Stationary: factor 1.
+    None,
+    /// Slow drift: the factor moves linearly from 1 to 1 + amount over `time` seconds, then
+    /// stays.
+    Ramp,
+    /// Steps: 1 until `time`, then 1 + amount, 1 - amount, 1 + amount, … every `time` s.
+    Steps,
+    /// Along the stroke: 1 + amount sin(2 pi angle / period) (angle of the motor, rad).
+    Position,
+}
+
+/// The friction drift of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Drift {
+    /// Which drift.
+    pub kind: DriftKind,
+    /// Its size, a fraction [-], in (-0.9, 0.9); negative drifts the other way.
+    pub amount: f64,
+    /// Ramp duration or step interval \[s\], `> 0`.
+    pub time: f64,
+    /// Spatial period of the position-dependent drift [rad of motor angle], `> 0`.
+    pub period: f64,
+}
+
+impl Drift {
+    /// The friction factor at time `t` \[s\] and motor angle `theta` \[rad\].
+    pub fn factor(&self, t: f64, theta: f64) -> f64 {
+        match self.kind {
+            DriftKind::None => 1.0,
+            DriftKind::Ramp => 1.0 + self.amount * (t / self.time).clamp(0.0, 1.0),
+            DriftKind::Steps => {
+                let n = (t / self.time).floor();
+                if n < 1.0 {
+                    1.0
+                } else if n % 2.0 == 1.0 {
+                    1.0 + self.amount
+                } else {
+                    1.0 - self.amount
+                }
+            }
+            DriftKind::Position => {
+                1.0 + self.amount * (2.0 * std::f64::consts::PI * theta / self.period).sin()
+            }
+        }
+    }
+}
+
+impl Plant {
+    /// Slide travel per motor radian [m/rad].
+    pub fn ratio(&self) -> f64 {
+        self.lead / (2.0 * std::f64::consts::PI * self.gear_ratio)
+    }
+}
