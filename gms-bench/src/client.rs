@@ -3,27 +3,31 @@
 //! simulated plant (`hil-sim`'s `LocalDevice`) — and the primitives every workflow uses:
 //! parameters, `status`, the capture, moves, the bridge off on failure.
 
+use crate::Error;
 use gms_core::protocol::ParamId;
-use gms_ident::Error;
 use gms_ident::units::si;
+pub use gms_link::DeviceLink;
 
 use gms_core::device::{CaptureState, StatusReply};
 use gms_core::protocol::CaptureStatus;
 use gms_core::protocol::{CaptureCmd, Command, ErrorCode};
 
-/// A device speaking the bench protocol.
-pub trait Bench {
-    /// Sends a typed request (`gms_core::protocol::Command`: its line is the one the device's
-    /// parser reads back as the same command); returns the lines before its `ok` and the
-    /// text after `ok`, or the device's `err` as [`Error::Refused`].
-    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error>;
-    /// Lets at least `seconds` of device time pass; fails when the run must stop (the link
-    /// is lost, the user interrupted it).
-    fn wait(&mut self, seconds: f64) -> Result<(), Error>;
-    /// Sends a request that ends a run safely (the bridge off, the settings put back): unlike
-    /// [`Bench::send`] it goes out even after the run was stopped. By default the same.
+/// A device speaking the bench protocol ([`DeviceLink`]), with the workflows' conveniences:
+/// every link is one (a blanket implementation).
+pub trait Bench: DeviceLink {
+    /// [`DeviceLink::request`], its failure a bench [`Error`].
+    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
+        self.request(c).map_err(Error::from)
+    }
+
+    /// [`DeviceLink::pass`], its failure a bench [`Error`].
+    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
+        self.pass(seconds).map_err(Error::from)
+    }
+
+    /// [`DeviceLink::request_to_end`], its failure a bench [`Error`].
     fn send_to_end(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
-        self.send(c)
+        self.request_to_end(c).map_err(Error::from)
     }
 
     /// `set PATH VALUE` with a number (sent in f64's shortest decimal; the device rounds it
@@ -81,6 +85,8 @@ pub trait Bench {
         .map(drop)
     }
 }
+
+impl<T: DeviceLink + ?Sized> Bench for T {}
 
 /// The capture's state ([`CaptureStatus::parse`]: the device core's own format).
 pub fn capture_status(b: &mut impl Bench) -> Result<CaptureStatus, Error> {

@@ -1,10 +1,10 @@
 //! Commissioning: the motor's R, k_e, J, L, the current sense's and the encoder's directions,
 //! the breakaway, then the current and position loops' gains chosen from them.
 
+use crate::Error;
 use gms_core::drive::Faults;
 use gms_core::protocol::Command;
 use gms_core::protocol::ParamId;
-use gms_ident::Error;
 use gms_ident::units::{num4, si};
 
 use crate::client::{

@@ -2,6 +2,7 @@
 //! erase, the frictional-lag run, their plans sized for the device's encoder, and their data
 //! as CSV.
 
+use crate::Error;
 use crate::client::{
     Bench, DeviceInfo, VELOCITY_ACC, capture_now, capture_rows, capture_wait, check_faults,
     guarded, move_to, narrow_limits, position, primitive, timed_run,
@@ -12,7 +13,6 @@ use crate::settings::restoring;
 use gms_core::drive::Faults;
 use gms_core::protocol::Command;
 use gms_core::protocol::ParamId;
-use gms_ident::Error;
 
 /// The sliding experiment's settings.
 #[derive(Debug, Clone)]

@@ -1,13 +1,13 @@
 //! The whole bench identification (the experiments, then the fits of `gms-ident` on their
 //! data) and loading a parameter file into a device.
 
+use crate::Error;
 use crate::client::{Bench, DeviceInfo, move_to, narrow_limits, position};
 use crate::experiments::{
     LAG_MIN_SWING_COUNTS, LagPlan, Plans, lag, lag_csv, presliding, presliding_csv, sliding,
     sliding_csv,
 };
 use crate::settings::restoring;
-use gms_ident::Error;
 
 /// What a bench identification gathered.
 #[derive(Debug, Clone, Default)]

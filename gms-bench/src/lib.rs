@@ -31,6 +31,7 @@
 
 pub mod client;
 pub mod commission;
+mod error;
 pub mod estimate;
 pub mod experiments;
 pub mod frf;
@@ -44,6 +45,8 @@ pub mod tune_ff;
 
 pub use client::*;
 pub use commission::*;
+pub use error::*;
 pub use experiments::*;
+pub use gms_link::{DeviceLink, Refusal};
 pub use identify::*;
 pub use tune_ff::*;

@@ -3,9 +3,9 @@
 //! anything is sent), the file of a set of settings ([`file_of`]), and both on a device
 //! ([`load`], [`dump`]). What the device cannot hold is refused with the reason, whole.
 
+use crate::Error;
 use gms_core::numtext::Num;
 use gms_core::protocol::{self, Access, PARAMS, Settings};
-use gms_ident::Error;
 use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
 
 use crate::client::Bench;

@@ -7,9 +7,9 @@
 //! is friction, expressed as a **scale** of the device's model's sliding friction at that
 //! speed. A map measured one way only cannot tell the two apart.
 
+use crate::Error;
 use gms_core::protocol::ParamId;
 use gms_core::protocol::{Command, MapCmd};
-use gms_ident::Error;
 use nalgebra::{DMatrix, DVector};
 
 use crate::client::{Bench, capture_rows, capture_status, check_faults, get_param, guarded};

@@ -4,8 +4,8 @@
 //! device), and a snapshot that puts them back around a run ([`restoring`]), like a vendor's
 //! configuration snapshot around a calibration.
 
+use crate::Error;
 use gms_core::protocol::{self, Access, Command, ErrorCode, PARAMS, Settings};
-use gms_ident::Error;
 
 use crate::client::Bench;
 

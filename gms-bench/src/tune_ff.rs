@@ -1,13 +1,13 @@
 //! Tuning the feedforward's gain on the bench: the paper's sine test repeated over a sweep of
 //! gains, the optimum and how sure it is.
 
+use crate::Error;
 use crate::client::velocity;
 use crate::client::{
     Bench, DeviceInfo, capture_rows, capture_wait, check_faults, get_param, guarded, primitive,
     rad_per_count,
 };
 use gms_core::protocol::ParamId;
-use gms_ident::Error;
 
 use crate::settings::restoring;
 

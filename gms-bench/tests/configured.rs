@@ -1,11 +1,10 @@
 //! Commissioning refuses a device that runs on its built-in defaults (`configured=0`): its
 //! encoder resolution and sense scale are the paper's rig's, which no user's axis is.
 
-use gms_bench::{Bench, commission};
+use gms_bench::commission;
 use gms_core::control::controller::FfMode;
 use gms_core::device::{DriveKind, StatusReply};
 use gms_core::drive::Faults;
-use gms_ident::Error;
 
 /// A device that answers `status` with `configured` as given and records every request.
 struct Fake {
@@ -13,8 +12,11 @@ struct Fake {
     asked: Vec<String>,
 }
 
-impl Bench for Fake {
-    fn send(&mut self, c: gms_core::protocol::Command<'_>) -> Result<(Vec<String>, String), Error> {
+impl gms_link::DeviceLink for Fake {
+    fn request(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
         let line = c.to_string();
         self.asked.push(line.clone());
         match line.as_str() {
@@ -46,10 +48,10 @@ impl Bench for Fake {
                 }
                 Ok((vec![], text))
             }
-            _ => Err(Error::Device(format!("err 9 not in this test: {line}"))),
+            _ => Err(gms_link::Error::Reply(format!("not in this test: {line}"))),
         }
     }
-    fn wait(&mut self, _seconds: f64) -> Result<(), Error> {
+    fn pass(&mut self, _seconds: f64) -> Result<(), gms_link::Error> {
         Ok(())
     }
 }

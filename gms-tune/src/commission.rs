@@ -4,8 +4,8 @@
 use gms_core::protocol::Command;
 use std::path::Path;
 
+use gms_bench::Error;
 use gms_bench::load_params;
-use gms_ident::Error;
 use gms_tune::Link;
 
 use crate::Fail;

@@ -37,7 +37,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
             "--suggest and --apply need --loop open (the margins are the open loop's)".into(),
         ));
     }
-    let dev = |e: gms_ident::Error| Fail::Device(e.to_string());
+    let dev = |e: gms_bench::Error| Fail::Device(e.to_string());
     let i_max = gms_bench::get_param(link, ParamId::LimIMax).map_err(dev)?;
     let rpc = gms_bench::rad_per_count(link).map_err(dev)?;
     let pos_hz = gms_bench::get_param(link, ParamId::RatePosHz).map_err(dev)?;
@@ -93,7 +93,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     bar.bar.finish_and_clear();
     let sweep = match r {
         Ok(s) => s,
-        Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(gms_bench::Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {
             return Err(Fail::Device(format!(
                 "{e}; the bridge is off, the settings as they were"

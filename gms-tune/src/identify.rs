@@ -7,8 +7,8 @@ use gms_core::protocol::Command;
 use std::path::PathBuf;
 use std::time::Instant;
 
+use gms_bench::Error;
 use gms_bench::{self, LagPlan, Ranges, check_faults};
-use gms_ident::Error;
 use gms_tune::Link;
 
 use crate::Fail;

@@ -8,10 +8,10 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+use gms_bench::Error;
 use gms_bench::{
     Commissioned, DeviceInfo, Gathered, Plans, Ranges, TuneFf, TuneFfPlan, identify_on,
 };
-use gms_ident::Error;
 use gms_ident::identify::Identified;
 use gms_ident::paramfile::ParamFile;
 

@@ -52,7 +52,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     bar.bar.finish_and_clear();
     let l = match r {
         Ok(l) => l,
-        Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(gms_bench::Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {
             // Refused before anything moved, or stopped with the bridge off: the device says.
             let on = gms_bench::status(link).is_ok_and(|s| s.enabled);

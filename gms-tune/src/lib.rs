@@ -40,12 +40,12 @@ pub enum LinkError {
     Timeout(Duration),
     /// The device refused the request (`err CODE REASON`, read by
     /// [`gms_core::protocol::Reply`]).
-    Device(gms_ident::Refusal),
+    Device(gms_link::Refusal),
     /// The device answered, but not as the protocol reads (an `err` without a known code,
     /// a `status` that does not parse): the link is up, the reply is wrong.
     Reply(String),
-    /// A bench step on the link failed (its own message: [`gms_ident::Error`]).
-    Bench(gms_ident::Error),
+    /// A bench step on the link failed (its own message: [`gms_bench::Error`]).
+    Bench(gms_bench::Error),
     /// The connection failed or closed.
     Io(String),
 }
@@ -63,14 +63,27 @@ impl std::fmt::Display for LinkError {
 }
 
 impl LinkError {
-    /// As a bench error: the device's `err` reply typed ([`gms_ident::Error::Refused`]), a
-    /// timeout or a failed link as [`gms_ident::Error::Link`].
-    pub fn into_bench(self) -> gms_ident::Error {
+    /// As a bench error: the device's `err` reply typed ([`gms_bench::Error::Refused`]), a
+    /// timeout or a failed link as [`gms_bench::Error::Link`].
+    pub fn into_bench(self) -> gms_bench::Error {
         match self {
-            LinkError::Device(r) => gms_ident::Error::Refused(r),
+            LinkError::Device(r) => gms_bench::Error::Refused(r),
             LinkError::Bench(e) => e,
-            LinkError::Reply(_) => gms_ident::Error::Device(self.to_string()),
-            LinkError::Timeout(_) | LinkError::Io(_) => gms_ident::Error::Link(self.to_string()),
+            LinkError::Reply(_) => gms_bench::Error::Device(self.to_string()),
+            LinkError::Timeout(_) | LinkError::Io(_) => gms_bench::Error::Link(self.to_string()),
+        }
+    }
+
+    /// As a link's failure ([`gms_link::Error`]): the device's `err` reply typed, an
+    /// unreadable reply, or the link lost (a timeout, a failed connection, a bench step's
+    /// failure with its message).
+    pub fn into_link(self) -> gms_link::Error {
+        match self {
+            LinkError::Device(r) => gms_link::Error::Refused(r),
+            LinkError::Reply(_) => gms_link::Error::Reply(self.to_string()),
+            LinkError::Bench(_) | LinkError::Timeout(_) | LinkError::Io(_) => {
+                gms_link::Error::Lost(self.to_string())
+            }
         }
     }
 }
@@ -207,7 +220,7 @@ impl Link {
                 Ok(None) => body.push(l),
                 Ok(Some(Reply::Ok(text))) => return Ok((body, text.to_string())),
                 Ok(Some(Reply::Err(code, reason))) => {
-                    return Err(LinkError::Device(gms_ident::Refusal {
+                    return Err(LinkError::Device(gms_link::Refusal {
                         code,
                         reason: reason.to_string(),
                     }));
@@ -348,13 +361,13 @@ impl Link {
 /// The link as an abstract bench, for the experiments of `gms_bench` (captures read
 /// back with `gms_bench::capture_rows`, the sliding experiment, …). Waiting is in
 /// device time ([`Link::wait_device`]).
-impl gms_bench::Bench for Link {
-    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), gms_ident::Error> {
-        Link::ask(self, c).map_err(LinkError::into_bench)
+impl gms_link::DeviceLink for Link {
+    fn request(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), gms_link::Error> {
+        Link::ask(self, c).map_err(LinkError::into_link)
     }
 
-    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
-        self.wait_device(seconds).map_err(LinkError::into_bench)
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
+        self.wait_device(seconds).map_err(LinkError::into_link)
     }
 }
 

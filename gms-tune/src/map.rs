@@ -50,7 +50,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     bar.bar.finish_and_clear();
     let (data, map) = match r {
         Ok(v) => v,
-        Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(gms_bench::Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {
             return Err(Fail::Device(format!(
                 "{e}; the bridge is off, the settings as they were"

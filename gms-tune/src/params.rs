@@ -101,7 +101,7 @@ impl std::fmt::Display for LoadError {
 pub fn load(link: &mut Link, file: &Path) -> Result<usize, LoadError> {
     let pf = ParamFile::load(file).map_err(|e| LoadError::File(e.to_string()))?;
     gms_bench::load_params(link, &pf).map_err(|e| match e {
-        gms_ident::Error::Params(m) => LoadError::File(format!("{}: {m}", file.display())),
+        gms_bench::Error::Params(m) => LoadError::File(format!("{}: {m}", file.display())),
         e => LoadError::Device(e.to_string()),
     })
 }

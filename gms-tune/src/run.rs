@@ -7,10 +7,9 @@ use gms_core::protocol::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use gms_bench::Bench;
+use gms_bench::DeviceLink;
 use gms_bench::frf::{MIN_COHERENCE, Suggestion, Sweep};
 use gms_core::device::{StatusReply, StatusValue};
-use gms_ident::Error;
 
 use crate::Link;
 
@@ -47,9 +46,9 @@ impl<'a, 'h> RunBench<'a, 'h> {
         }
     }
 
-    fn stopped(&self) -> Result<(), Error> {
+    fn stopped(&self) -> Result<(), gms_link::Error> {
         if self.stop.load(Ordering::SeqCst) {
-            Err(Error::Link(self.why.into()))
+            Err(gms_link::Error::Lost(self.why.into()))
         } else {
             Ok(())
         }
@@ -61,20 +60,20 @@ impl<'a, 'h> RunBench<'a, 'h> {
     }
 }
 
-impl Bench for RunBench<'_, '_> {
-    fn send(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
+impl DeviceLink for RunBench<'_, '_> {
+    fn request(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), gms_link::Error> {
         self.stopped()?;
-        Bench::send(&mut *self.link, c)
+        DeviceLink::request(&mut *self.link, c)
     }
 
-    fn send_to_end(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), Error> {
-        Bench::send(&mut *self.link, c)
+    fn request_to_end(&mut self, c: Command<'_>) -> Result<(Vec<String>, String), gms_link::Error> {
+        DeviceLink::request(&mut *self.link, c)
     }
 
     /// Waits in device time, the progress told as it passes and the stop flag looked at
     /// between looks at the device's clock (a Stop ends a long wait within 50 ms, whatever
     /// the device's pace).
-    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
         self.stopped()?;
         let (stop, hooks) = (&self.stop, &mut *self.hooks);
         self.link
@@ -82,7 +81,7 @@ impl Bench for RunBench<'_, '_> {
                 hooks.waited(passed);
                 !stop.load(Ordering::SeqCst)
             })
-            .map_err(crate::LinkError::into_bench)?;
+            .map_err(crate::LinkError::into_link)?;
         self.stopped()
     }
 }
@@ -116,7 +115,7 @@ pub fn write_identified(
     id: &gms_ident::identify::Identified,
     report: &std::path::Path,
     out: Option<&std::path::Path>,
-) -> Result<(gms_ident::paramfile::ParamFile, String), gms_ident::Error> {
+) -> Result<(gms_ident::paramfile::ParamFile, String), gms_bench::Error> {
     gms_ident::identify::write_report(id, report)?;
     let (file, text) = identified_file(id, report);
     if let Some(out) = out {
@@ -315,7 +314,7 @@ fn status_text(v: StatusValue) -> String {
         StatusValue::Number(x) if x.fract() == 0.0 && x.abs() < 1e15 => format!("{x}"),
         StatusValue::Number(x) => gms_ident::units::num4(x),
         StatusValue::Text(t) => t.to_string(),
-        StatusValue::Faults(f) => gms_ident::fault_names(f),
+        StatusValue::Faults(f) => gms_bench::fault_names(f),
     }
 }
 

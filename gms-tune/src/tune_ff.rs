@@ -69,7 +69,7 @@ pub fn run(link: &mut Link, a: &Args) -> Result<(), Fail> {
     bar.bar.finish_and_clear();
     let t = match r {
         Ok(t) => t,
-        Err(gms_ident::Error::Io(m)) => return Err(Fail::Usage(m)),
+        Err(gms_bench::Error::Io(m)) => return Err(Fail::Usage(m)),
         Err(e) => {
             return Err(Fail::Device(format!(
                 "{e}; the bridge is off, ff.gain as it was"

@@ -77,7 +77,7 @@ pub struct Scatter {
 fn scatter(dev: &mut LocalDevice, t: &Table) -> Result<Scatter, Error> {
     use gms_bench::Bench;
     let per = u64::from(t.points) * u64::from(t.steps);
-    let run = |e: gms_ident::Error| Error::Run(format!("scatter: {e}"));
+    let run = |e: gms_bench::Error| Error::Run(format!("scatter: {e}"));
     dev.record_truth();
     let periods = SCATTER_PERIODS + 1;
     dev.send(gms_core::protocol::Command::Table(

@@ -356,7 +356,8 @@ fn main() -> ExitCode {
             rig,
             ranges,
         } => (|| {
-            use hil_sim::experiment::{Kind, Setup, run, run_on_device};
+            use hil_sim::bench::run_on_device;
+            use hil_sim::experiment::{Kind, Setup, run};
             if !(0.0..0.9).contains(&variability) {
                 return Err("--variability must be in [0, 0.9)".to_string());
             }

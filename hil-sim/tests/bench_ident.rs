@@ -441,21 +441,22 @@ struct Tracking<'a> {
     hi: f64,
 }
 
-impl gms_bench::Bench for Tracking<'_> {
-    fn send(
+impl gms_link::DeviceLink for Tracking<'_> {
+    fn request(
         &mut self,
         c: gms_core::protocol::Command<'_>,
-    ) -> Result<(Vec<String>, String), gms_ident::Error> {
-        self.dev.send(c)
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
+        self.dev.request(c)
     }
-    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
         // In slices, so that a run's far end is seen.
         let mut left = seconds;
         while left > 0.0 {
             let s = left.min(0.01);
-            self.dev.wait(s)?;
+            self.dev.pass(s)?;
             left -= s;
-            let x = gms_bench::position(&mut *self.dev)?;
+            let x = gms_bench::position(&mut *self.dev)
+                .map_err(|e| gms_link::Error::Lost(e.to_string()))?;
             self.lo = self.lo.min(x);
             self.hi = self.hi.max(x);
         }
@@ -504,18 +505,18 @@ struct Stalling {
     on: &'static str,
 }
 
-impl gms_bench::Bench for Stalling {
-    fn send(
+impl gms_link::DeviceLink for Stalling {
+    fn request(
         &mut self,
         c: gms_core::protocol::Command<'_>,
-    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
         if c.to_string() == self.on {
-            self.dev.wait(self.stall)?;
+            self.dev.pass(self.stall)?;
         }
-        self.dev.send(c)
+        self.dev.request(c)
     }
-    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
-        self.dev.wait(seconds)
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
+        self.dev.pass(seconds)
     }
 }
 

@@ -187,17 +187,17 @@ struct SlowLink<'a> {
     delay: f64,
 }
 
-impl gms_bench::Bench for SlowLink<'_> {
-    fn send(
+impl gms_link::DeviceLink for SlowLink<'_> {
+    fn request(
         &mut self,
         c: gms_core::protocol::Command<'_>,
-    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
         self.dev.run(self.delay);
-        self.dev.send(c)
+        self.dev.request(c)
     }
 
-    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
-        self.dev.wait(seconds)
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
+        self.dev.pass(seconds)
     }
 }
 

@@ -2,10 +2,10 @@
 //! device in-process: read whole, written as one staged set (all or nothing), and put back
 //! around a run whatever ends it.
 
+use gms_bench::Error;
 use gms_bench::settings::{self, Snapshot, changes, restoring};
 use gms_bench::{Bench, get_param};
 use gms_core::protocol::ParamId;
-use gms_ident::Error;
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
@@ -98,22 +98,25 @@ struct Stopping<'a> {
     left: usize,
 }
 
-impl Bench for Stopping<'_> {
-    fn send(&mut self, c: gms_core::protocol::Command<'_>) -> Result<(Vec<String>, String), Error> {
-        if self.left == 0 {
-            return Err(Error::Link("interrupted".into()));
-        }
-        self.left -= 1;
-        self.dev.send(c)
-    }
-    fn wait(&mut self, seconds: f64) -> Result<(), Error> {
-        self.dev.wait(seconds)
-    }
-    fn send_to_end(
+impl gms_link::DeviceLink for Stopping<'_> {
+    fn request(
         &mut self,
         c: gms_core::protocol::Command<'_>,
-    ) -> Result<(Vec<String>, String), Error> {
-        self.dev.send(c)
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
+        if self.left == 0 {
+            return Err(gms_link::Error::Lost("interrupted".into()));
+        }
+        self.left -= 1;
+        self.dev.request(c)
+    }
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
+        self.dev.pass(seconds)
+    }
+    fn request_to_end(
+        &mut self,
+        c: gms_core::protocol::Command<'_>,
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
+        self.dev.request(c)
     }
 }
 

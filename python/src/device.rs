@@ -97,7 +97,7 @@ impl Device {
                 gms_core::device::StatusValue::Number(x) => d.set_item(k, x)?,
                 gms_core::device::StatusValue::Text(t) => d.set_item(k, t)?,
                 gms_core::device::StatusValue::Faults(f) => {
-                    d.set_item(k, gms_ident::fault_names(f))?
+                    d.set_item(k, gms_bench::fault_names(f))?
                 }
             }
         }
@@ -461,7 +461,7 @@ impl Device {
         f: impl FnOnce(
             &mut gms_tune::Link,
             &mut gms_tune::jobs::Control<'_>,
-        ) -> Result<T, gms_ident::Error>,
+        ) -> Result<T, gms_bench::Error>,
     ) -> PyResult<T> {
         let mut quiet = Quiet;
         let mut ctl = gms_tune::jobs::Control {

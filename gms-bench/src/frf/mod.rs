@@ -21,10 +21,10 @@ pub use files::*;
 
 pub use notch::*;
 
+use crate::Error;
 use gms_core::control::frf::{FrfState, Injection};
 use gms_core::protocol::ParamId;
 use gms_core::protocol::{self, Command, FrfCmd};
-use gms_ident::Error;
 use num_complex::Complex64;
 
 pub use gms_ident::margins::{Extremum, Margins, db, extrema, margins, refinement};

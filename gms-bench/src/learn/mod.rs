@@ -35,7 +35,7 @@ pub use device::*;
 
 pub use path::*;
 
-use gms_ident::Error;
+use crate::Error;
 use gms_ident::linear::PositionController;
 
 use gms_core::control::table::{Geometry, TableReport, TableState, Which};

@@ -1,5 +1,5 @@
 //! The position controller and what it runs on the device's loop: the references and moves
-//! ([`reference`]), the loop-shaping filters ([`shaping`]), the adaptive feedforward level
+//! ([`mod@reference`]), the loop-shaping filters ([`shaping`]), the adaptive feedforward level
 //! ([`adaptive`]), the position map ([`posmap`]), the learning's table motion ([`table`]),
 //! the frequency-response lock-in ([`frf`]) and the chunk a long read is copied in
 //! ([`chunk`]).

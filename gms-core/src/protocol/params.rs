@@ -55,7 +55,7 @@ macro_rules! params {
        |$s:ident| $field:expr;)*) => {
         /// Every parameter, in `list` order (indexed by [`ParamId`]): its path and field, its
         /// unit and range from [`crate::settings::SPECS`]; the whole set must also pass
-        /// [`ControllerParams::validate`].
+        /// [`crate::control::controller::ControllerParams::validate`].
         pub const PARAMS: &[Param] = &[$(
             Param {
                 path: $path,

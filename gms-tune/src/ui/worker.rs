@@ -571,7 +571,7 @@ fn replied(
 fn gone(e: &LinkError) -> bool {
     matches!(
         e,
-        LinkError::Io(_) | LinkError::Timeout(_) | LinkError::Bench(gms_ident::Error::Link(_))
+        LinkError::Io(_) | LinkError::Timeout(_) | LinkError::Bench(gms_bench::Error::Link(_))
     )
 }
 

@@ -123,7 +123,7 @@ impl Bufs {
 }
 
 impl<L: LoopLink, S: ParamStore> Front<L, S> {
-    /// The protocol side of a device running `settings` (what [`startup`] chose), with
+    /// The protocol side of a device running `settings` (what [`super::startup()`] chose), with
     /// `defaults` for `defaults` and `load`; `req` is the storage of the requests it posts,
     /// `spare` that of the controllers it builds (the loop runs its own, given to
     /// [`super::ControlLoop::new`]).
@@ -165,7 +165,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         self
     }
 
-    /// Whether the running settings were configured for the axis (`running`: [`Startup`]'s
+    /// Whether the running settings were configured for the axis (`running`: [`super::Startup`]'s
     /// `configured` on a board) and whether the `defaults` are (`defaults`: true on a simulator,
     /// whose defaults come from its plant; false on a board, whose defaults are the paper's
     /// rig). Any `set`, `commit` or `load` configures it; `defaults` sets it to `defaults`.

@@ -470,7 +470,7 @@ impl App {
                 ui.label(format!("drive {}", st.drive.name()));
                 ui.label(format!("pos {:.6} rad", st.pos));
                 ui.label(format!("error {} counts", st.error_counts));
-                names = gms_ident::fault_names(st.faults);
+                names = gms_bench::fault_names(st.faults);
             }
             if names == "none" {
                 ui.label("faults: none");

@@ -2,6 +2,7 @@
 //! the bench workflows run without a link.
 
 use super::*;
+use gms_link::DeviceLink;
 
 /// The virtual device in-process and in simulated time: the same core, plant and store as
 /// [`serve`], with the protocol's waits driving the simulation instead of a real-time thread
@@ -80,10 +81,10 @@ impl LocalDevice {
     }
 
     /// The console passthrough, typed: one raw request line (a test's, a console's: host
-    /// code sends [`gms_core::protocol::Command`]s through [`gms_bench::Bench::send`]); the
+    /// code sends [`gms_core::protocol::Command`]s through [`DeviceLink::request`]); the
     /// lines before its `ok` and the text after it, or the device's `err` as
-    /// [`gms_ident::Error::Refused`].
-    pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), gms_ident::Error> {
+    /// [`gms_link::Error::Refused`].
+    pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), gms_link::Error> {
         use gms_core::protocol::Reply;
         let reply = self.ask(line);
         let mut lines: Vec<String> = reply.lines().map(String::from).collect();
@@ -91,12 +92,12 @@ impl LocalDevice {
         match Reply::parse(&last) {
             Ok(Some(Reply::Ok(text))) => Ok((lines, text.to_string())),
             Ok(Some(Reply::Err(code, reason))) => {
-                Err(gms_ident::Error::Refused(gms_ident::Refusal {
+                Err(gms_link::Error::Refused(gms_link::Refusal {
                     code,
                     reason: reason.to_string(),
                 }))
             }
-            Ok(None) | Err(_) => Err(gms_ident::Error::Device(format!(
+            Ok(None) | Err(_) => Err(gms_link::Error::Reply(format!(
                 "the reply did not end with `ok` or `err`: {last:?}"
             ))),
         }
@@ -162,17 +163,17 @@ impl LocalDevice {
     }
 }
 
-/// The device as an abstract bench (`gms_bench`): experiments run on it in simulated
-/// time, through the same protocol as on a board.
-impl gms_bench::Bench for LocalDevice {
-    fn send(
+/// The device as a link to a device (`gms_link`): the bench's workflows run on it in
+/// simulated time, through the same protocol as on a board.
+impl DeviceLink for LocalDevice {
+    fn request(
         &mut self,
         c: gms_core::protocol::Command<'_>,
-    ) -> Result<(Vec<String>, String), gms_ident::Error> {
+    ) -> Result<(Vec<String>, String), gms_link::Error> {
         self.console(&c.to_string())
     }
 
-    fn wait(&mut self, seconds: f64) -> Result<(), gms_ident::Error> {
+    fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
         if seconds.is_finite() && seconds > 0.0 {
             self.run(seconds);
         }
