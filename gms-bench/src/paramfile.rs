@@ -5,6 +5,7 @@
 
 use crate::Error;
 use gms_core::numtext::Num;
+use gms_core::protocol::ParamId;
 use gms_core::protocol::{self, Access, PARAMS, Settings};
 use gms_ident::paramfile::{BlockSpec, FrictionSpec, ModelKind, ParamFile};
 
@@ -42,7 +43,7 @@ pub fn sets_of(pf: &ParamFile) -> Result<Vec<(String, String)>, Error> {
         .map_err(|e| e.to_string())
         .and_then(|p| p.validate().map_err(|e| e.to_string()))
         .map_err(|e| Error::Params(format!("[friction] {e}")))?;
-    let mut sets: Vec<(String, String)> = vec![("gms.blocks".into(), format!("{n}"))];
+    let mut sets: Vec<(String, String)> = vec![(ParamId::GmsBlocks.path().into(), format!("{n}"))];
     for (k, v) in [
         ("fs", f.fs),
         ("fc", f.fc),

@@ -298,8 +298,11 @@ pub fn write(b: &mut impl Bench, map: &PosMap, enable: bool) -> Result<usize, Er
     crate::settings::apply(
         b,
         &[
-            ("map.bins".to_string(), format!("{n}")),
-            ("map.period".to_string(), format!("{}", map.period)),
+            (ParamId::MapBins.path().to_string(), format!("{n}")),
+            (
+                ParamId::MapPeriod.path().to_string(),
+                format!("{}", map.period),
+            ),
         ],
         false,
     )?;

@@ -10,7 +10,20 @@
 
 use core::fmt;
 
-use gms_core::protocol::{Command, ErrorCode};
+use gms_core::protocol::{Command, ErrorCode, Reply};
+
+/// One line of a reply, read as every host reads it ([`Reply::parse`]): `Ok(None)` a line of
+/// its body, `Ok(Some(text))` its `ok` end with the text after `ok`, [`Error::Refused`] its
+/// `err` end, [`Error::Reply`] an `err` line whose code the protocol does not have (still the
+/// reply's end).
+pub fn reply_line(line: &str) -> Result<Option<&str>, Error> {
+    match Reply::parse(line) {
+        Ok(None) => Ok(None),
+        Ok(Some(Reply::Ok(text))) => Ok(Some(text)),
+        Ok(Some(Reply::Err(code, reason))) => Err(Error::Refused(Refusal::new(code, reason))),
+        Err(e) => Err(Error::Reply(format!("{e}: {line}"))),
+    }
+}
 
 /// A device's `err CODE REASON` reply.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -22,14 +35,19 @@ pub struct Refusal {
 }
 
 impl Refusal {
+    /// The refusal `err CODE REASON`.
+    pub fn new(code: ErrorCode, reason: &str) -> Refusal {
+        Refusal {
+            code,
+            reason: reason.to_string(),
+        }
+    }
+
     /// Reads an `err CODE REASON` line ([`gms_core::protocol::Reply`]); `None` when the line
     /// is not one.
     pub fn parse(line: &str) -> Option<Refusal> {
-        match gms_core::protocol::Reply::parse(line.trim()) {
-            Ok(Some(gms_core::protocol::Reply::Err(code, reason))) => Some(Refusal {
-                code,
-                reason: reason.to_string(),
-            }),
+        match Reply::parse(line.trim()) {
+            Ok(Some(Reply::Err(code, reason))) => Some(Refusal::new(code, reason)),
             _ => None,
         }
     }

@@ -183,7 +183,7 @@ impl Link {
     /// it comes, before the next request's.
     pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), LinkError> {
         self.send(line)?;
-        let base = if line.split_whitespace().next() == Some("save") {
+        let base = if gms_core::protocol::parse(line) == Ok(Command::Save) {
             self.timeout.max(Duration::from_millis(
                 gms_core::protocol::SAVE_REPLY_MS as u64,
             ))
@@ -216,16 +216,11 @@ impl Link {
                 }
                 continue;
             }
-            match reply {
+            match gms_link::reply_line(&l) {
                 Ok(None) => body.push(l),
-                Ok(Some(Reply::Ok(text))) => return Ok((body, text.to_string())),
-                Ok(Some(Reply::Err(code, reason))) => {
-                    return Err(LinkError::Device(gms_link::Refusal {
-                        code,
-                        reason: reason.to_string(),
-                    }));
-                }
-                Err(e) => return Err(LinkError::Reply(format!("{e}: {l}"))),
+                Ok(Some(text)) => return Ok((body, text.to_string())),
+                Err(gms_link::Error::Refused(r)) => return Err(LinkError::Device(r)),
+                Err(e) => return Err(LinkError::Reply(e.to_string())),
             }
         }
     }

@@ -85,19 +85,12 @@ impl LocalDevice {
     /// lines before its `ok` and the text after it, or the device's `err` as
     /// [`gms_link::Error::Refused`].
     pub fn console(&mut self, line: &str) -> Result<(Vec<String>, String), gms_link::Error> {
-        use gms_core::protocol::Reply;
         let reply = self.ask(line);
         let mut lines: Vec<String> = reply.lines().map(String::from).collect();
         let last = lines.pop().unwrap_or_default();
-        match Reply::parse(&last) {
-            Ok(Some(Reply::Ok(text))) => Ok((lines, text.to_string())),
-            Ok(Some(Reply::Err(code, reason))) => {
-                Err(gms_link::Error::Refused(gms_link::Refusal {
-                    code,
-                    reason: reason.to_string(),
-                }))
-            }
-            Ok(None) | Err(_) => Err(gms_link::Error::Reply(format!(
+        match gms_link::reply_line(&last)? {
+            Some(text) => Ok((lines, text.to_string())),
+            None => Err(gms_link::Error::Reply(format!(
                 "the reply did not end with `ok` or `err`: {last:?}"
             ))),
         }

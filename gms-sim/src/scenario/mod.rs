@@ -531,13 +531,16 @@ pub fn device_counts_per_rev(rad_per_count: f64) -> f32 {
 /// plant's key a value came from).
 fn controller_key(e: gms_core::control::controller::ControllerError) -> String {
     use gms_core::control::controller::ControllerError as E;
+    use gms_core::protocol::ParamId;
     match e {
         E::Invalid("ff.ratio") => "plant.lead / plant.gear_ratio out of range".into(),
-        E::Invalid("enc.counts_per_rev") => {
+        E::Invalid(p) if p == ParamId::EncCountsPerRev.path() => {
             "plant.rad_per_count (plant.counts_per_rev) is out of range".into()
         }
-        E::Invalid("sense.v_per_a") => "plant.adc_range is out of range".into(),
-        E::Invalid(name) if name.starts_with("motor.") || name == "lim.v_supply" => {
+        E::Invalid(p) if p == ParamId::SenseVPerA.path() => {
+            "plant.adc_range is out of range".into()
+        }
+        E::Invalid(name) if name.starts_with("motor.") || name == ParamId::LimVSupply.path() => {
             format!("controller.{name} (from [plant] unless set) is out of range")
         }
         E::Invalid(name) => format!("controller.{name} is out of range"),

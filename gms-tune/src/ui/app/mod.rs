@@ -520,7 +520,7 @@ fn ff_plot(ui: &mut egui::Ui, pts: Vec<[f64; 2]>, chosen: Option<f64>) {
     let h = (ui.available_height() - 10.0).max(100.0);
     Plot::new("ff")
         .height(h)
-        .x_axis_label("ff.gain")
+        .x_axis_label(ParamId::FfGain.path())
         .y_axis_label("sine test RMS error [counts]")
         .show(ui, |p| {
             p.line(Line::new("RMS error", PlotPoints::from(pts)));
