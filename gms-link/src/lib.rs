@@ -88,13 +88,6 @@ impl fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
-impl Error {
-    /// True when the device refused the request with `code`.
-    pub fn refused_with(&self, code: ErrorCode) -> bool {
-        matches!(self, Error::Refused(r) if r.is(code))
-    }
-}
-
 /// A link to a device speaking the bench protocol: what a board's port, the virtual device's
 /// socket and the in-process device core each implement. The workflows' conveniences (`set`,
 /// `enable`, `capture`, …) are `gms_bench::Bench`'s, on top of it.

@@ -63,17 +63,6 @@ impl std::fmt::Display for LinkError {
 }
 
 impl LinkError {
-    /// As a bench error: the device's `err` reply typed ([`gms_bench::Error::Refused`]), a
-    /// timeout or a failed link as [`gms_bench::Error::Link`].
-    pub fn into_bench(self) -> gms_bench::Error {
-        match self {
-            LinkError::Device(r) => gms_bench::Error::Refused(r),
-            LinkError::Bench(e) => e,
-            LinkError::Reply(_) => gms_bench::Error::Device(self.to_string()),
-            LinkError::Timeout(_) | LinkError::Io(_) => gms_bench::Error::Link(self.to_string()),
-        }
-    }
-
     /// As a link's failure ([`gms_link::Error`]): the device's `err` reply typed, an
     /// unreadable reply, or the link lost (a timeout, a failed connection, a bench step's
     /// failure with its message).
