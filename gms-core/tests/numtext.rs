@@ -191,7 +191,7 @@ proptest! {
 }
 
 /// About a million f32 spread over the whole range (every 4099th bit pattern); slow in a
-/// debug build: `cargo test --release -p gms-core --test numtext -- --ignored`.
+/// debug build: `cargo test --release -p gms-core --test all -- numtext:: --ignored`.
 #[test]
 #[ignore]
 fn sweep_round_trips() {

@@ -1,6 +1,6 @@
 //! `docs/protocol.md`'s parameter table is written from `protocol::PARAMS` and the default
 //! set: this test fails when they differ, and rewrites the table with
-//! `GMS_WRITE_DOCS=1 cargo test -p gms-core --test protocol_doc`.
+//! `GMS_WRITE_DOCS=1 cargo test -p gms-core --test all -- protocol_doc::`.
 
 use gms_core::device::default_settings;
 use gms_core::numtext::Num;
@@ -48,7 +48,7 @@ fn the_protocol_reference_lists_every_parameter() {
         }
         panic!(
             "docs/protocol.md's parameter table differs from protocol::PARAMS: rewrite it with \
-             GMS_WRITE_DOCS=1 cargo test -p gms-core --test protocol_doc"
+             GMS_WRITE_DOCS=1 cargo test -p gms-core --test all -- protocol_doc::"
         );
     }
     // Every path appears once.

@@ -9,7 +9,7 @@ use gms_core::protocol::ParamId;
 use std::path::Path;
 use std::process::Command;
 
-mod support;
+use crate::support;
 use support::*;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).

@@ -6,7 +6,7 @@
 
 use std::process::{Command, Stdio};
 
-mod support;
+use crate::support;
 use support::*;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).

@@ -4,7 +4,7 @@
 //! One test at a time (each starts a virtual device, most of them faster than real time);
 //! the devices are this binary itself (`serve_child`, `hil_sim::harness`).
 
-mod support;
+use crate::support;
 use support::*;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).

@@ -8,7 +8,7 @@ use std::io::Write as _;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
-mod support;
+use crate::support;
 use support::*;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).

@@ -3,7 +3,7 @@
 //! identified with the same fits as the simulated experiments: the bench sees the plant's
 //! hidden friction.
 
-mod common;
+use crate::common;
 use common::{QUIET, identification_errors};
 use gms_bench::{SlidingPlan, sliding};
 use gms_ident::identify::fit_stribeck;

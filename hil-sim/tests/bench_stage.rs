@@ -3,7 +3,7 @@
 //! device as 4 blocks, and a compliant stage (`[plant.compliance]` 700 Hz, zeta 0.03). The
 //! device starts from its defaults (Table 1): the tool is told nothing of the truth.
 
-mod common;
+use crate::common;
 use common::{QUIET, identification_errors};
 use gms_bench::{DeviceInfo, Plans, Ranges, get_param, identify_on, load_params, sine_test};
 use gms_core::protocol::ParamId;

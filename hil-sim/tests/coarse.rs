@@ -4,7 +4,7 @@
 //! `sense.v_per_a`); commissioning and identification run on it in its own units, the motor
 //! and the friction hidden from the device.
 
-mod common;
+use crate::common;
 use common::identification_errors;
 use gms_bench::{DeviceInfo, Plans, Ranges, commission, get_param, identify_on};
 use gms_core::protocol::ParamId;

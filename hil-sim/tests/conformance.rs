@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use hil_sim::device::LocalDevice;
 use hil_sim::scenario::Scenario;
 
-mod common;
+use crate::common;
+use crate::suite;
 use common::Server;
-mod suite;
 use suite::{Dut, TcpLink, error_after, field, keys};
 
 struct Local {

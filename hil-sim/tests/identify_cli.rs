@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-mod common;
+use crate::common;
 
 /// Runs `hil-sim ARGS…` in `cwd`; returns (exit code, stderr).
 fn hil(args: &[&str], cwd: &Path) -> (i32, String) {

@@ -4,7 +4,7 @@ use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
-mod common;
+use crate::common;
 use common::Server;
 
 /// A raw TCP client of the device.

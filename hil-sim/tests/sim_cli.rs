@@ -1,6 +1,6 @@
 //! `hil-sim run`, `compare` and their contracts, as a user runs them.
 
-mod common;
+use crate::common;
 use common::hil;
 
 /// A short scenario so that the tests run fast.

@@ -6,7 +6,7 @@ use std::io::{BufRead, BufReader, Write};
 use std::net::TcpStream;
 use std::time::Duration;
 
-mod common;
+use crate::common;
 use common::hil;
 use hil_sim::scenario::Scenario;
 

@@ -1,7 +1,7 @@
 //! Tuning on the device (`gms_bench`, what `gms-tune tune-ff` runs), in-process on the
 //! device core and the simulated plant.
 
-mod common;
+use crate::common;
 use common::QUIET;
 use gms_bench::{Bench, TuneFfPlan, get_param, tune_ff};
 use gms_core::protocol::ParamId;

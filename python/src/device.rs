@@ -1,7 +1,7 @@
 //! The bench client: a device over a serial port or TCP, and the bench workflows on it.
 
-use gms_core::protocol::ParamId;
 use super::*;
+use gms_core::protocol::ParamId;
 
 /// Two numpy arrays of f64 (the position map's offset and scale).
 type ArrayPair<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);

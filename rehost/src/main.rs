@@ -26,7 +26,7 @@ struct Cli {
 enum Cmd {
     /// Runs the image from reset for a while and prints its log and figures.
     Boot {
-        /// The firmware ELF (`cargo fw-f446` builds target/thumbv7em-none-eabihf/release/firmware).
+        /// The firmware ELF (`cargo fw-f446` builds target/thumbv7em-none-eabihf/firmware/firmware).
         elf: std::path::PathBuf,
         /// The board it was built for: nucleo-f446 or f405.
         #[arg(long, default_value = "nucleo-f446")]

@@ -17,11 +17,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
-mod support;
+use crate::support;
 use support::Served;
 
-#[path = "../../hil-sim/tests/suite/mod.rs"]
-mod suite;
+use crate::suite;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
 #[test]

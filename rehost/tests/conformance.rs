@@ -20,11 +20,10 @@
 
 use std::time::Duration;
 
-#[path = "../../hil-sim/tests/suite/mod.rs"]
-mod suite;
+use crate::suite;
 use suite::{Dut, TcpLink, field};
 
-mod support;
+use crate::support;
 use support::Served;
 
 /// Wall time for one reply at most: the emulator at a tenth of a board's speed or less (a

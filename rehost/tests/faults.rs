@@ -7,7 +7,7 @@
 
 use rehost::{Board, Machine, Options};
 
-mod support;
+use crate::support;
 
 /// The control interrupt (DMA2 stream 0, IRQ 56).
 const CONTROL: u32 = 16 + 56;

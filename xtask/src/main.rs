@@ -375,7 +375,8 @@ fn flash(args: &[String]) -> Result<u8, String> {
             "build",
             "-p",
             "firmware",
-            "--release",
+            "--profile",
+            "firmware",
             "--target",
             "thumbv7em-none-eabihf",
             "--no-default-features",
@@ -395,7 +396,7 @@ fn flash(args: &[String]) -> Result<u8, String> {
     let target_dir = std::env::var("CARGO_TARGET_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|_| root.join("target"));
-    let elf = target_dir.join("thumbv7em-none-eabihf/release/firmware");
+    let elf = target_dir.join("thumbv7em-none-eabihf/firmware/firmware");
     let status = Command::new("probe-rs")
         .args(["run", "--chip", chip])
         .arg(&elf)
@@ -471,7 +472,8 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
             "-q",
             "-p",
             "target-bench",
-            "--release",
+            "--profile",
+            "firmware",
             "--target",
             "thumbv7em-none-eabihf",
         ])
@@ -484,9 +486,9 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
     let target_dir = std::env::var("CARGO_TARGET_DIR")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(|_| root.join("target"));
-    let elf = target_dir.join("thumbv7em-none-eabihf/release/target-bench");
+    let elf = target_dir.join("thumbv7em-none-eabihf/firmware/target-bench");
     // The stack guard first: its own binary, a recursion that must fault into it.
-    let guard = target_dir.join("thumbv7em-none-eabihf/release/stack-guard");
+    let guard = target_dir.join("thumbv7em-none-eabihf/firmware/stack-guard");
     let (ok, text) = qemu(&guard, false)?;
     let hit = text.lines().find(|l| l.starts_with("stack guard hit:"));
     match (ok, hit) {

@@ -13,7 +13,7 @@ pub fn elf() -> String {
     let path = std::env::var("REHOST_ELF").unwrap_or_else(|_| {
         panic!(
             "REHOST_ELF is not set: name the Nucleo image (`cargo fw-f446`, then \
-             REHOST_ELF=target/thumbv7em-none-eabihf/release/firmware)"
+             REHOST_ELF=target/thumbv7em-none-eabihf/firmware/firmware)"
         )
     });
     let p = std::path::Path::new(&path);

@@ -8,9 +8,10 @@
 //! protocol front with every command, move planning, start-up, and the control loop's step
 //! with its request handling and bumpless hand-over) on inputs the optimiser cannot see,
 //! with `panic-never` as its panic handler: that handler refers to a symbol that does not
-//! exist, so the release build links only if no panic (bounds check, overflow, unwrap, …)
-//! is reachable from this code. `cargo build -p target-bench --bin no-panic --release
-//! --target thumbv7em-none-eabihf` is the check; it runs in CI.
+//! exist, so the build (the `firmware` profile: fat LTO, one codegen unit) links only if no
+//! panic (bounds check, overflow, unwrap, …) is reachable from this code. `cargo build -p
+//! target-bench --bin no-panic --profile firmware --target thumbv7em-none-eabihf` is the
+//! check; it runs in CI.
 #![no_std]
 #![no_main]
 
