@@ -1,9 +1,7 @@
 //! The f405 board's description (gms-core's `boards::f405`, the one the firmware links) checked
 //! (`support/board_checks.rs`).
-#![allow(dead_code)]
 
-#[path = "support/board_checks.rs"]
-mod checks;
+use crate::checks;
 use gms_core::boards::f405 as desc;
 use gms_core::boards::f405::memory;
 use gms_core::boards::power_stage;

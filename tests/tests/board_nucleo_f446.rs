@@ -1,9 +1,7 @@
 //! The nucleo_f446 board's description (gms-core's `boards::nucleo_f446`, the one the firmware links) checked
 //! (`support/board_checks.rs`).
-#![allow(dead_code)]
 
-#[path = "support/board_checks.rs"]
-mod checks;
+use crate::checks;
 use gms_core::boards::nucleo_f446 as desc;
 use gms_core::boards::nucleo_f446::memory;
 use gms_core::boards::power_stage;
