@@ -12,13 +12,6 @@ use std::process::Command;
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 #[test]
 fn set_save_restart_dump_and_load() {
     let _one = support::one_at_a_time();

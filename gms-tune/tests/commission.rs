@@ -9,13 +9,6 @@ use std::process::{Command, Stdio};
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// `commission --apply` on a virtual device 10× faster than real time whose motor the device
 /// does not know (R 7.5 Ω, k 8 mN·m/A) and whose encoder and sense are both wired the other
 /// way: found, written, applied; a blocked axis: exit 1, nothing changed.

@@ -7,13 +7,6 @@
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// `gms-tune frf --loop open --suggest --apply` on the virtual device (20× real time): a line
 /// per point, frf.csv with its header, margins.toml with its four keys, bode.svg; the notch
 /// proposed is set; the bridge is off after it.

@@ -11,13 +11,6 @@ use std::process::{Child, Command, Stdio};
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// A device that answers everything but the bench primitives (an older firmware): records
 /// the requests it saw.
 fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {

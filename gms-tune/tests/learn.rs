@@ -6,13 +6,6 @@
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// `gms-tune learn` on the default virtual device: a line per iteration, the files, the
 /// correction left playing with `--apply` (none without); bad arguments and a path beyond the
 /// soft limits refused with a clear line, the latter before anything moves (the axis holding

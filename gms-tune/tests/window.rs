@@ -7,13 +7,6 @@
 use crate::support;
 use support::*;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other tests"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// Against `hil-sim serve`: the window lists every parameter path with its unit; the
 /// telemetry's values change over time; Enable and Disable switch the bridge; a set typed in
 /// the window changes the device (read back with `get` once the window is closed); a refused

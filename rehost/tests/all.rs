@@ -7,3 +7,11 @@ mod faults;
 #[path = "../../hil-sim/tests/suite/mod.rs"]
 mod suite;
 mod support;
+
+/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`
+/// runs it again with the filter `serve_child --exact`: this test's name at the crate root).
+#[test]
+#[ignore = "the virtual device of the bench test"]
+fn serve_child() {
+    hil_sim::harness::serve_child();
+}

@@ -22,13 +22,6 @@ use support::Served;
 
 use crate::suite;
 
-/// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`).
-#[test]
-#[ignore = "the virtual device of the other test"]
-fn serve_child() {
-    hil_sim::harness::serve_child();
-}
-
 /// The plant: a motor the devices are not told, Table 1's friction exactly (no draw), the
 /// guideway negligible; the virtual device told the image's defaults (its motor, its
 /// inertia, no guideway model).
