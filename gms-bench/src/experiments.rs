@@ -428,11 +428,19 @@ pub(crate) fn staircase(
             )));
         }
         if dx.abs() > plan.window || s.creep.abs() > plan.creep {
-            return match b.hold() {
-                Ok(_) => Ok(()),
-                // Broken away, it ran on to the guard before the hold came (a host slow
-                // against the device's clock: seen in CI against `--speed 20`): the same end
-                // as the guard's during a step, the bridge off.
+            // Held where the axis is, then given the time to stop: a hold that lands just
+            // inside the guard with the axis still running (a host slow against the device's
+            // clock) brakes it past the guard, which latches after the hold was accepted
+            // (seen in CI on the image on emulated silicon: the next experiment refused).
+            let held = b
+                .hold()
+                .and_then(|()| b.wait(HOLD_SETTLE))
+                .and_then(|()| check_faults(b));
+            return match held {
+                Ok(()) => Ok(()),
+                // Broken away, it ran on to the guard before the hold came, or braked past
+                // it after (a host slow against the device's clock: seen in CI against
+                // `--speed 20`): the same end as the guard's during a step, the bridge off.
                 Err(_) if only_position_limit(b) => b.clear(),
                 Err(e) => Err(e),
             };
@@ -448,6 +456,11 @@ pub(crate) fn staircase(
         dev.fs
     )))
 }
+
+/// The time a hold after breakaway is given to stop the axis before the staircase checks
+/// that the guard was not reached \\[s\\]: the measuring loop brakes the axis in a few
+/// milliseconds.
+pub(crate) const HOLD_SETTLE: f64 = 0.1;
 
 /// The ratio of one erase swing to the one before \\[-\\]: each block is left within
 /// ±(1 − r)/(1 + r) of its slip deflection of zero (±2.6 % at 0.95).

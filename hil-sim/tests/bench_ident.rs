@@ -503,6 +503,10 @@ struct Stalling {
     stall: f64,
     /// The request that stalls.
     on: &'static str,
+    /// The device time every request costs \[s\]: a link's round trip.
+    latency: f64,
+    /// Whether a `hold` was accepted.
+    held: bool,
 }
 
 impl gms_link::DeviceLink for Stalling {
@@ -513,7 +517,13 @@ impl gms_link::DeviceLink for Stalling {
         if c.to_string() == self.on {
             self.dev.pass(self.stall)?;
         }
-        self.dev.request(c)
+        if self.latency > 0.0 {
+            self.dev.pass(self.latency)?;
+        }
+        let hold = c.to_string() == "hold";
+        let r = self.dev.request(c);
+        self.held |= hold && r.is_ok();
+        r
     }
     fn pass(&mut self, seconds: f64) -> Result<(), gms_link::Error> {
         self.dev.pass(seconds)
@@ -541,6 +551,8 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
             dev: LocalDevice::new(&sc).unwrap(),
             stall: 0.2,
             on: "status",
+            latency: 0.0,
+            held: false,
         };
         let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
         plan.guard = guard;
@@ -588,6 +600,8 @@ fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
         dev: LocalDevice::new(&sc).unwrap(),
         stall: 2.0,
         on: "hold",
+        latency: 0.0,
+        held: false,
     };
     // The identification's own staircase (the erase first, the measuring loop, its guard).
     let info = gms_bench::DeviceInfo::read(&mut b).unwrap();
@@ -604,4 +618,55 @@ fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
     assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());
     assert!(x > 0.5 && x < 0.6, "x {x}");
     assert!(st.contains("faults=0") && st.contains("enabled=0"), "{st}");
+}
+
+/// A hold that lands just inside the guard with the axis still running: the position loop
+/// brakes it past the guard after the hold was accepted (seen in CI on the image on emulated
+/// silicon, where the next experiment was then refused). The host's stall is bisected to the
+/// edge between a hold that stops the axis inside the guard and one that comes after the
+/// guard stopped it; on both sides, and at the edge, the staircase ends cleanly: no fault
+/// left latched once the axis has come to rest.
+#[test]
+fn a_hold_at_the_guards_edge_leaves_no_fault() {
+    use gms_bench::{Bench, PreslidingPlan, position, presliding};
+    let sc = Scenario::parse(&runaway_plant(), "test").unwrap();
+    let run = |stall: f64| {
+        let mut b = Stalling {
+            dev: LocalDevice::new(&sc).unwrap(),
+            stall,
+            on: "hold",
+            latency: 2e-3,
+            held: false,
+        };
+        let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
+        plan.erase = false;
+        let mut pre = Vec::new();
+        let r = presliding(&mut b, &plan, &mut pre);
+        // The axis at rest, wherever it stopped.
+        b.wait(0.5).unwrap();
+        let x = position(&mut b).unwrap();
+        let (_, st) = b.dev.console("status").unwrap();
+        assert!(
+            r.is_ok() && st.contains("faults=0"),
+            "stall {stall:.4} s: {r:?}, stopped at {x:.4} rad; {st}"
+        );
+        (x, b.held)
+    };
+    // Stalls of 0 and 2 s: the axis stops inside the guard (0.5 rad), and at it.
+    let (mut lo, mut hi) = (0.0, 2.0);
+    assert!(run(lo).0 < 0.5 && run(hi).0 > 0.5);
+    // The case CI met: a hold accepted, the axis stopped beyond the guard.
+    let mut braked_past = false;
+    for _ in 0..22 {
+        let mid = 0.5 * (lo + hi);
+        let (x, held) = run(mid);
+        braked_past |= held && x > 0.5;
+        if x < 0.5 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    assert!(braked_past, "no hold braked the axis past the guard");
+    eprintln!("the edge: a stall of {lo:.4}-{hi:.4} s");
 }
