@@ -17,10 +17,18 @@ ROOT = Path(__file__).resolve().parents[2]
 TABLE1 = ROOT / "examples" / "table1.toml"
 
 
+def hil_sim_cmd():
+    """The `hil-sim` command: `$HIL_SIM` when set (a built binary: CI passes the test build's,
+    which `cargo run -p hil-sim` would build again with the features of that package alone),
+    else through cargo from the repository's root."""
+    exe = os.environ.get("HIL_SIM")
+    return [exe] if exe else ["cargo", "run", "-q", "-p", "hil-sim", "--"]
+
+
 def hil_sim(*args, **kw):
-    """`hil-sim ARGS` through cargo from the repository's root."""
+    """`hil-sim ARGS`."""
     return subprocess.run(
-        ["cargo", "run", "-q", "-p", "hil-sim", "--", *map(str, args)],
+        [*hil_sim_cmd(), *map(str, args)],
         cwd=ROOT,
         check=True,
         capture_output=True,
@@ -128,7 +136,7 @@ def test_run_is_hil_sim_run(tmp_path):
 def serve(*args):
     """`hil-sim serve --tcp 127.0.0.1:0 ARGS`: the process and its address."""
     p = subprocess.Popen(
-        ["cargo", "run", "-q", "-p", "hil-sim", "--", "serve", "--tcp", "127.0.0.1:0", *map(str, args)],
+        [*hil_sim_cmd(), "serve", "--tcp", "127.0.0.1:0", *map(str, args)],
         cwd=ROOT,
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
