@@ -375,6 +375,44 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
         .unwrap_or(0);
     let (mean, _) = stats(&all.iter().map(|&(_, n)| n).collect::<Vec<_>>());
     let c = m.chip();
+    // The same runs in cycles (their entry and return included), against the period at the
+    // default 40 kHz.
+    let cyc: Vec<u64> = m
+        .handled
+        .iter()
+        .filter(|h| h.exc == CONTROL)
+        .map(|h| h.cycles)
+        .collect();
+    let (cmean, cmax) = stats(&cyc);
+    let period = HZ / 40_000;
+    let model = match c.model {
+        rehost::TimeModel::Cpi(cpi) => format!("{cpi} cycles per instruction"),
+        rehost::TimeModel::Cycles => "the Cortex-M4's costs and the flash's wait states".into(),
+    };
+    println!(
+        "the control interrupt in cycles ({model}): {cmean:.0} mean, {cmax} at most: {:.0} % \
+         and {:.0} % of the {period}-cycle period at 40 kHz; thread mode {:.0} % of the time \
+         awake",
+        100.0 * cmean / period as f64,
+        100.0 * cmax as f64 / period as f64,
+        100.0 * c.thread_cycles as f64 / c.cycles.max(1) as f64,
+    );
+    if c.model == rehost::TimeModel::Cycles {
+        let (sp, a) = (c.timing.spent, c.timing.art.stats);
+        println!(
+            "where the cycles went: instructions {:.1} M, taken branches {:.1} M, the flash's \
+             wait states {:.1} M (instruction lines {} hits, {} misses; data lines {} hits, {} \
+             misses), exception entry and return {:.1} M",
+            sp.instructions as f64 / 1e6,
+            sp.branches as f64 / 1e6,
+            sp.flash as f64 / 1e6,
+            a.i_hits,
+            a.i_misses,
+            a.d_hits,
+            a.d_misses,
+            sp.exceptions as f64 / 1e6
+        );
+    }
     println!(
         "{:.3} s of device time, {:.1} M instructions, {} resets; the control interrupt {} \
          times: {mean:.0} instructions mean, {steady} at most outside requests (budget \

@@ -16,8 +16,9 @@
 //! workspace depends on it.
 
 pub mod core_regs;
+pub mod cycles;
 pub mod machine;
 pub mod periph;
 pub mod rtt;
 
-pub use machine::{Board, Machine, Options};
+pub use machine::{Board, Machine, Options, TimeModel};

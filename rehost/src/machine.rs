@@ -9,9 +9,11 @@
 //! engine runs handlers as thread-mode code; their `bx lr` to EXC_RETURN fetches from
 //! 0xFFFFFFxx, which is not mapped: that stop is the exception return (B1.5.8), done here.
 //!
-//! Time is the core's cycles at 168 MHz: each instruction counts `cpi` cycles (the flash's
-//! wait states and the pipeline make the M4 take 1.3-2.1 per instruction from flash at 5 wait
-//! states with the accelerator on); WFI sleeps to the next event.
+//! Time is the core's cycles at 168 MHz, by one of two models ([`TimeModel`]): a fixed number
+//! of cycles per instruction (1.5, the default until the image fits its budget in cycles), or
+//! the Cortex-M4's costs ([`crate::cycles`]: each instruction's class, taken branches, the
+//! flash's wait states behind the ART accelerator, exception entry and return with lazy FP
+//! stacking). WFI sleeps to the next event.
 
 use std::collections::HashMap;
 
@@ -21,6 +23,7 @@ use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot, uc_erro
 use unicorn_engine::{RegisterARM as R, Unicorn};
 
 use crate::core_regs::{CoreRegs, exc};
+use crate::cycles::{self, Timing};
 use crate::periph::{Periphs, base, tim, usart};
 use crate::rtt;
 
@@ -61,11 +64,34 @@ impl Board {
     }
 }
 
+/// How the emulated time advances.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TimeModel {
+    /// This many cycles per instruction \[cycles\]; exception entry 12 (29 with the FP frame),
+    /// return 10.
+    Cpi(f64),
+    /// The Cortex-M4's costs and the flash behind the accelerator ([`crate::cycles`]).
+    Cycles,
+}
+
+impl TimeModel {
+    /// `cpi` (1.5 cycles per instruction) or `cycles` (the M4's costs).
+    pub fn parse(s: &str) -> Result<TimeModel, String> {
+        match s {
+            "cpi" => Ok(TimeModel::Cpi(1.5)),
+            "cycles" => Ok(TimeModel::Cycles),
+            _ => Err(format!(
+                "--timing {s}: `cpi` (1.5 cycles per instruction) or `cycles` (the M4's costs)"
+            )),
+        }
+    }
+}
+
 /// How to run.
 #[derive(Debug, Clone)]
 pub struct Options {
-    /// Cycles per instruction \[cycles\] (the time model; 1.5 by default).
-    pub cpi: f64,
+    /// The time model (1.5 cycles per instruction by default).
+    pub timing: TimeModel,
     /// The plant's scenario (hil-sim's defaults when `None`).
     pub scenario: Option<Scenario>,
     /// Print log lines as they come.
@@ -75,7 +101,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Options {
-            cpi: 1.5,
+            timing: TimeModel::Cpi(1.5),
             scenario: None,
             echo_log: false,
         }
@@ -97,6 +123,8 @@ pub struct Handled {
     pub exc: u32,
     /// Instructions it executed itself (not counting those it was preempted by).
     pub instructions: u64,
+    /// Its own cycles, its entry and return included \[cycles\].
+    pub cycles: u64,
     /// When it was entered \[cycles\].
     pub at: u64,
 }
@@ -114,6 +142,7 @@ pub enum Stop {
 struct Active {
     exc: u32,
     instructions: u64,
+    cycles: u64,
     at: u64,
 }
 
@@ -186,11 +215,16 @@ pub struct Chip {
     /// Instructions executed.
     pub instructions: u64,
     cycle_frac: f64,
-    cpi: f64,
+    /// The time model.
+    pub model: TimeModel,
+    /// The M4's costs and the accelerator (with [`TimeModel::Cycles`]).
+    pub timing: Timing,
+    /// FLASH_ACR as the accelerator was last configured from.
+    acr_seen: u32,
     /// Stop the engine at or after this time \[cycles\].
     next_stop: u64,
-    /// Instruction counts of the blocks seen (by address and size).
-    block_len: HashMap<(u64, u32), u32>,
+    /// The blocks seen, decoded and costed (by address and size).
+    blocks: HashMap<(u64, u32), std::sync::Arc<cycles::Block>>,
     /// The run stopped at a WFE or WFI: the core sleeps there unless the event register is
     /// set (WFE) or an interrupt wakes it.
     pub slept: bool,
@@ -203,6 +237,8 @@ pub struct Chip {
     active: Vec<Active>,
     /// Instructions in thread mode.
     pub thread_instructions: u64,
+    /// Cycles in thread mode, sleep excluded \[cycles\].
+    pub thread_cycles: u64,
     /// The lowest SP seen, and where (the exceptions active then).
     pub sp_min: u32,
     /// The exceptions active at the lowest SP.
@@ -254,15 +290,55 @@ impl Chip {
         self.cycles
     }
 
+    /// `b`, at `addr`, about to run: its instructions and cycles counted.
+    fn run_block(&mut self, addr: u32, b: &cycles::Block) {
+        let cycles = match self.model {
+            TimeModel::Cpi(cpi) => self.cpi_cycles(b.instructions, cpi),
+            TimeModel::Cycles => {
+                let acr = self.p.flash.acr();
+                if acr != self.acr_seen {
+                    self.timing.art.configure(acr);
+                    self.acr_seen = acr;
+                }
+                self.timing.block(addr, b) as u64
+            }
+        };
+        self.count(b.instructions, cycles);
+    }
+
+    /// `n` one-cycle instructions run outside a block (a WFE or WFI completing).
     fn add_instructions(&mut self, n: u32) {
-        self.instructions += n as u64;
-        let c = n as f64 * self.cpi + self.cycle_frac;
+        let cycles = match self.model {
+            TimeModel::Cpi(cpi) => self.cpi_cycles(n, cpi),
+            TimeModel::Cycles => n as u64,
+        };
+        self.count(n, cycles);
+    }
+
+    /// `n` instructions at `cpi` cycles each, the fraction carried \[cycles\].
+    fn cpi_cycles(&mut self, n: u32, cpi: f64) -> u64 {
+        let c = n as f64 * cpi + self.cycle_frac;
         let whole = c.floor();
         self.cycle_frac = c - whole;
-        self.cycles += whole as u64;
+        whole as u64
+    }
+
+    /// `n` instructions and their `cycles` counted to what runs now.
+    fn count(&mut self, n: u32, cycles: u64) {
+        self.instructions += n as u64;
         match self.active.last_mut() {
             Some(a) => a.instructions += n as u64,
             None => self.thread_instructions += n as u64,
+        }
+        self.add_cycles(cycles);
+    }
+
+    /// `n` cycles spent by what runs now (an exception, or thread mode).
+    fn add_cycles(&mut self, n: u64) {
+        self.cycles += n;
+        match self.active.last_mut() {
+            Some(a) => a.cycles += n,
+            None => self.thread_cycles += n,
         }
     }
 
@@ -370,13 +446,16 @@ impl Machine {
             cycles: 0,
             instructions: 0,
             cycle_frac: 0.0,
-            cpi: opts.cpi,
+            model: opts.timing,
+            timing: Timing::new(0),
+            acr_seen: 0,
             next_stop: u64::MAX,
-            block_len: HashMap::new(),
+            blocks: HashMap::new(),
             enc_counts: plant.encoder(),
             enc_offset: 0,
             active: Vec::new(),
             thread_instructions: 0,
+            thread_cycles: 0,
             sp_min: u32::MAX,
             sp_min_context: Vec::new(),
             guard: None,
@@ -513,19 +592,26 @@ impl Machine {
         // Every block: its instructions counted (when it runs: a stop requested here ends the
         // run before the block), the stack's depth, PRIMASK's hold, the guard.
         uc.add_block_hook(1, 0, |uc: &mut Unicorn<'_, Chip>, addr: u64, size: u32| {
-            let n = match uc.get_data().block_len.get(&(addr, size)) {
-                Some(&n) => n,
+            let b = match uc.get_data().blocks.get(&(addr, size)) {
+                Some(b) => b.clone(),
                 None => {
                     let mut code = vec![0u8; size as usize];
-                    let n = if uc.mem_read(addr, &mut code).is_ok() {
-                        thumb_instructions(&code)
+                    let b = if uc.mem_read(addr, &mut code).is_ok() {
+                        cycles::block(addr as u32, &code)
                     } else {
-                        1
+                        cycles::Block {
+                            bytes: size,
+                            instructions: 1,
+                            cycles: 1,
+                            ..Default::default()
+                        }
                     };
-                    uc.get_data_mut().block_len.insert((addr, size), n);
-                    n
+                    let b = std::sync::Arc::new(b);
+                    uc.get_data_mut().blocks.insert((addr, size), b.clone());
+                    b
                 }
             };
+            let n = b.instructions;
             let sp = uc.reg_read(R::SP).unwrap_or(0) as u32;
             let primask = uc.reg_read(R::PRIMASK).unwrap_or(0) & 1 != 0;
             let basepri = uc.reg_read(R::BASEPRI).unwrap_or(0) as u32 & 0xFF;
@@ -571,7 +657,7 @@ impl Machine {
             if stop {
                 let _ = uc.emu_stop();
             } else {
-                c.add_instructions(n);
+                c.run_block(addr as u32, &b);
                 let here = c.active.last().map(|a| a.exc);
                 if c.profile.is_some() {
                     if c.profile_exc.is_none() {
@@ -712,6 +798,8 @@ impl Machine {
         self.uc.reg_write(R::PC, (pc & !1) as u64).map_err(err)?;
         let c = self.uc.get_data_mut();
         c.active.clear();
+        c.timing.reset();
+        c.acr_seen = 0;
         c.guard = None;
         c.primask = Hold::default();
         // The watch is armed once the image's loop runs (its interrupt at its priority); a
@@ -883,19 +971,30 @@ impl Machine {
         c.active.push(Active {
             exc: n,
             instructions: 0,
+            cycles: 0,
             at,
         });
         c.core.vect_active = n;
         c.event = true;
-        // Exception entry: 12 cycles (PM0214 §2.3.7), 29 with the FP frame... counted as
-        // instructions' time.
-        c.cycles += if fpca { 29 } else { 12 };
+        // Exception entry: 12 cycles (PM0214 §2.3.7); the FP frame stacked at entry (29), or
+        // lazily at the handler's first FP instruction with the M4's costs.
+        let entry = match c.model {
+            TimeModel::Cpi(_) => {
+                if fpca {
+                    29
+                } else {
+                    12
+                }
+            }
+            TimeModel::Cycles => c.timing.enter(fpca) as u64,
+        };
+        c.add_cycles(entry);
         Ok(())
     }
 
     /// Returns from the active exception with `exc_return` (B1.5.8).
     fn exception_return(&mut self, exc_return: u32) -> Result<(), String> {
-        let Some(done) = self.uc.get_data_mut().active.pop() else {
+        let Some(mut done) = self.uc.get_data_mut().active.pop() else {
             return Err(format!(
                 "exception return ({exc_return:#010x}) with no exception active"
             ));
@@ -932,7 +1031,12 @@ impl Machine {
         let c = self.uc.get_data_mut();
         c.core.vect_active = c.active.last().map_or(0, |a| a.exc);
         c.event = true;
-        c.cycles += 10;
+        let ret = match c.model {
+            TimeModel::Cpi(_) => 10,
+            TimeModel::Cycles => c.timing.exit() as u64,
+        };
+        c.cycles += ret;
+        done.cycles += ret;
         if c.profile_exc == Some(done.exc) {
             let blocks = std::mem::take(&mut c.run_blocks);
             if done.instructions > c.profile_over
@@ -946,6 +1050,7 @@ impl Machine {
         self.handled.push(Handled {
             exc: done.exc,
             instructions: done.instructions,
+            cycles: done.cycles,
             at: done.at,
         });
         Ok(())

@@ -10,7 +10,7 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use rehost::{Board, Machine, Options};
+use rehost::{Board, Machine, Options, TimeModel};
 
 mod check;
 mod serve;
@@ -34,9 +34,13 @@ enum Cmd {
         /// Device time to run \[s\].
         #[arg(long, default_value_t = 0.5)]
         seconds: f64,
-        /// Cycles per instruction (the time model).
+        /// Cycles per instruction (with `--timing cpi`).
         #[arg(long, default_value_t = 1.5)]
         cpi: f64,
+        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
+        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
+        #[arg(long, default_value = "cpi")]
+        timing: String,
     },
     /// Runs the image with its USART2 bridged to a TCP port: `gms-tune --tcp HOST:PORT` talks
     /// to the shipped firmware (one client at a time; the log on stderr).
@@ -58,6 +62,10 @@ enum Cmd {
         /// stored survives a restart, as on a board); none: erased at each start.
         #[arg(long, value_name = "FILE")]
         flash: Option<std::path::PathBuf>,
+        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
+        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
+        #[arg(long, default_value = "cpi")]
+        timing: String,
     },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
     /// while moving, save, a power cycle, the setting back; the figures printed, the
@@ -73,6 +81,10 @@ enum Cmd {
         /// Print where the `status` request's instructions go (by function).
         #[arg(long)]
         profile: bool,
+        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
+        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
+        #[arg(long, default_value = "cpi")]
+        timing: String,
     },
 }
 
@@ -95,7 +107,9 @@ fn run(cli: Cli) -> Result<(), String> {
             speed,
             scenario,
             flash,
+            timing,
         } => {
+            let timing = TimeModel::parse(&timing)?;
             let (image, _) = load(&elf, "nucleo-f446")?;
             if !(speed > 0.0 && speed.is_finite()) {
                 return Err(format!("--speed {speed}: must be above 0"));
@@ -117,7 +131,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 Options {
                     echo_log: true,
                     scenario,
-                    ..Options::default()
+                    timing,
                 },
             )?;
             serve::run(m, &listen, speed, flash.as_deref())
@@ -126,9 +140,18 @@ fn run(cli: Cli) -> Result<(), String> {
             elf,
             board,
             profile,
+            timing,
         } => {
+            let timing = TimeModel::parse(&timing)?;
             let (image, board) = load(&elf, &board)?;
-            let mut m = Machine::new(&image, board, Options::default())?;
+            let mut m = Machine::new(
+                &image,
+                board,
+                Options {
+                    timing,
+                    ..Options::default()
+                },
+            )?;
             let r = check::run(&mut m, profile);
             if r.is_err() {
                 eprintln!("the image's log:");
@@ -152,13 +175,18 @@ fn run(cli: Cli) -> Result<(), String> {
             board,
             seconds,
             cpi,
+            timing,
         } => {
+            let timing = match TimeModel::parse(&timing)? {
+                TimeModel::Cpi(_) => TimeModel::Cpi(cpi),
+                t => t,
+            };
             let (image, board) = load(&elf, &board)?;
             let mut m = Machine::new(
                 &image,
                 board,
                 Options {
-                    cpi,
+                    timing,
                     echo_log: true,
                     ..Options::default()
                 },

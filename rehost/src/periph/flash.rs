@@ -50,6 +50,11 @@ impl FlashIf {
         }
     }
 
+    /// FLASH_ACR: the wait states and the accelerator's switches (RM0090 §3.9.1).
+    pub fn acr(&self) -> u32 {
+        self.acr
+    }
+
     /// Whether a programming sequence is open (CR.PG set, unlocked).
     pub fn programming(&self) -> bool {
         self.cr & CR_PG != 0 && self.cr & CR_LOCK == 0
