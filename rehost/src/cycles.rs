@@ -330,6 +330,35 @@ pub struct Block {
     /// The addresses its PC-relative loads read (literal pools: LDR, LDRB/H, LDRSB/H and
     /// VLDR from `[pc, #imm]`), in order.
     pub literals: Vec<u32>,
+    /// Its last IT instruction's ITSTATE (firstcond:mask) and the instructions after it.
+    pub last_it: Option<(u8, u32)>,
+}
+
+/// ITSTATE after one instruction of an IT block (ARMv7-M ARM A7.3.3, `ITAdvance`).
+pub fn it_advance(it: u8) -> u8 {
+    if it & 0x7 == 0 {
+        0
+    } else {
+        (it & 0xE0) | ((it << 1) & 0x1F)
+    }
+}
+
+impl Block {
+    /// ITSTATE after the block ran, from `start` (the state it began in: 0 unless the engine
+    /// split an IT block there).
+    pub fn it_after(&self, start: u8) -> u8 {
+        let (mut it, n) = match self.last_it {
+            Some((v, n)) => (v, n),
+            None => (start, self.instructions),
+        };
+        for _ in 0..n {
+            if it == 0 {
+                break;
+            }
+            it = it_advance(it);
+        }
+        it
+    }
 }
 
 /// The address a PC-relative load at `at` reads, if the instruction is one (ARMv7-M ARM
@@ -402,6 +431,12 @@ pub fn block(addr: u32, code: &[u8]) -> Block {
         }
         if let Some(lit) = literal(at, hw1, hw2) {
             b.literals.push(lit);
+        }
+        // IT (A7.7.38): 0xBF, firstcond:mask with a mask (0xBFx0 are the hints).
+        if d.len == 2 && hw1 >> 8 == 0xBF && hw1 & 0xF != 0 {
+            b.last_it = Some(((hw1 & 0xFF) as u8, 0));
+        } else if let Some((_, n)) = b.last_it.as_mut() {
+            *n += 1;
         }
         b.instructions += 1;
         b.cycles += c;
@@ -902,6 +937,31 @@ mod tests {
         assert_eq!(literal(0x0800_0300, 0xED90, 0x0A00), None);
         let b = block(0x0800_0102, &code(&[&[0x02, 0x48], &[0x08, 0x68]]));
         assert_eq!(b.literals, vec![0x0800_010C]);
+    }
+
+    /// ITSTATE through a block: the `ittt lo` of memcpy and the instruction after its block.
+    #[test]
+    fn the_it_state_after_a_block() {
+        // ittt lo (0xBF3E); ldrlo; str.w lo; cmp lo: the block done, ITSTATE 0.
+        let body = code(&[
+            &[0x3e, 0xbf],
+            &[0x8d, 0x68],
+            &[0x43, 0xf8, 0x04, 0x5b],
+            &[0x63, 0x45],
+        ]);
+        let b = block(0x0802_9ff6, &body);
+        assert_eq!(b.last_it, Some((0x3E, 3)));
+        assert_eq!(b.it_after(0), 0);
+        // Split after its first instruction: two left (lo, then the mask shifted).
+        let b = block(0x0802_9ff6, &body[..4]);
+        assert_eq!(b.it_after(0), it_advance(0x3E));
+        assert_ne!(b.it_after(0), 0);
+        // The rest of the split block, from that state: done.
+        let rest = block(0x0802_9ffa, &body[4..]);
+        assert_eq!(rest.last_it, None);
+        assert_eq!(rest.it_after(it_advance(0x3E)), 0);
+        // nop (0xBF00) is a hint, not an IT.
+        assert_eq!(block(0, &[0x00, 0xbf]).last_it, None);
     }
 
     /// Short sequences whose cycles the TRM states.

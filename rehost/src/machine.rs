@@ -225,6 +225,13 @@ pub struct Chip {
     next_stop: u64,
     /// The blocks seen, decoded and costed (by address and size).
     blocks: HashMap<(u64, u32), std::sync::Arc<cycles::Block>>,
+    /// Where the last block run ended, and ITSTATE after it (A7.3.3).
+    prev_end: u64,
+    it_next: u8,
+    /// The run was stopped before a block, in this ITSTATE: the engine's own may be stale
+    /// (it keeps what it last stored, before the last load or store of an IT block:
+    /// unicorn-engine issue 2309), so it is written back before the run goes on.
+    it_fix: Option<u8>,
     /// The run stopped at a WFE or WFI: the core sleeps there unless the event register is
     /// set (WFE) or an interrupt wakes it.
     pub slept: bool,
@@ -451,6 +458,9 @@ impl Machine {
             acr_seen: 0,
             next_stop: u64::MAX,
             blocks: HashMap::new(),
+            prev_end: 0,
+            it_next: 0,
+            it_fix: None,
             enc_counts: plant.encoder(),
             enc_offset: 0,
             active: Vec::new(),
@@ -654,9 +664,15 @@ impl Machine {
                 c.guard_hit = Some(sp);
                 stop = true;
             }
+            // ITSTATE where this block begins: the one after the block before when it runs on
+            // from it (an IT block split by a page boundary), else none (a branch ends one).
+            let it = if addr == c.prev_end { c.it_next } else { 0 };
             if stop {
+                c.it_fix = Some(it);
                 let _ = uc.emu_stop();
             } else {
+                c.prev_end = addr + size as u64;
+                c.it_next = b.it_after(it);
                 c.run_block(addr as u32, &b);
                 let here = c.active.last().map(|a| a.exc);
                 if c.profile.is_some() {
@@ -799,6 +815,7 @@ impl Machine {
         let c = self.uc.get_data_mut();
         c.active.clear();
         c.timing.reset();
+        (c.prev_end, c.it_next, c.it_fix) = (0, 0, None);
         c.acr_seen = 0;
         c.guard = None;
         c.primask = Hold::default();
@@ -830,6 +847,21 @@ impl Machine {
 
     fn reg(&self, r: R) -> u32 {
         self.uc.reg_read(r).unwrap_or(0) as u32
+    }
+
+    /// The engine's ITSTATE (A7.3.3): its CPSR's IT bits (26:25, 15:10); its xPSR reads them
+    /// as zero, as MRS does.
+    fn it_state(&self) -> u8 {
+        let c = self.reg(R::CPSR);
+        (((c >> 25) & 3) | ((c >> 8) & 0xFC)) as u8
+    }
+
+    /// Sets the engine's ITSTATE, nothing else of its CPSR.
+    fn set_it_state(&mut self, it: u8) -> Result<(), String> {
+        let c = self.reg(R::CPSR);
+        let it = it as u32;
+        let c = (c & !(3 << 25) & !(0x3F << 10)) | ((it & 3) << 25) | ((it >> 2) << 10);
+        self.uc.reg_write(R::CPSR, c as u64).map_err(err)
     }
 
     /// The execution priority (B1.5.4): the most urgent of the active exceptions', BASEPRI
@@ -901,7 +933,10 @@ impl Machine {
         let frame: u32 = if fpca { 0x68 } else { 0x20 };
         let realign = (sp - frame) & 4 != 0;
         let new_sp = (sp - frame) & !7;
-        let xpsr = self.reg(R::XPSR);
+        // The xPSR stacked with its IT bits (B1.5.6): the engine reads them as zero there.
+        let it = self.it_state() as u32;
+        let xpsr =
+            (self.reg(R::XPSR) & !(3 << 25) & !(0x3F << 10)) | ((it & 3) << 25) | ((it >> 2) << 10);
         let regs = [
             self.reg(R::R0),
             self.reg(R::R1),
@@ -957,6 +992,7 @@ impl Machine {
         self.uc
             .reg_write(R::XPSR, ((xpsr & 0xF80F_0000) | (1 << 24)) as u64)
             .map_err(err)?;
+        self.set_it_state(0)?;
         if fpca {
             self.uc
                 .reg_write(R::CONTROL, (control & !4) as u64)
@@ -1027,7 +1063,12 @@ impl Machine {
         self.uc
             .reg_write(R::XPSR, ((xpsr & !0x1FF & !(1 << 9)) | (1 << 24)) as u64)
             .map_err(err)?;
+        // The IT bits back (the engine keeps them in its CPSR), and where the run goes on.
+        let it = (((xpsr >> 25) & 3) | ((xpsr >> 8) & 0xFC)) as u8;
+        self.set_it_state(it)?;
         self.uc.reg_write(R::PC, (pc & !1) as u64).map_err(err)?;
+        let c = self.uc.get_data_mut();
+        (c.prev_end, c.it_next) = ((pc & !1) as u64, it);
         let c = self.uc.get_data_mut();
         c.core.vect_active = c.active.last().map_or(0, |a| a.exc);
         c.event = true;
@@ -1119,6 +1160,9 @@ impl Machine {
         let pc = self.reg(R::PC);
         let r = self.uc.emu_start((pc | 1) as u64, 0, 0, 0);
         self.uc.get_data_mut().masked_pending = None;
+        if let Some(it) = self.uc.get_data_mut().it_fix.take() {
+            self.set_it_state(it).map_err(Stop::Lockup)?;
+        }
         let pc = self.reg(R::PC);
         match r {
             Ok(()) => {
