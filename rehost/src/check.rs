@@ -351,6 +351,33 @@ fn session(s: &mut Session<'_>, profile: bool) -> Result<u64, String> {
     Ok(status_cost)
 }
 
+/// The control interrupt's runs so far in cycles (their entry and return included), against
+/// the period at the default 40 kHz, with the time model and thread mode's share.
+pub fn control_cycles(m: &Machine) -> String {
+    let c = m.chip();
+    let cyc: Vec<u64> = m
+        .handled
+        .iter()
+        .filter(|h| h.exc == CONTROL)
+        .map(|h| h.cycles)
+        .collect();
+    let (cmean, cmax) = stats(&cyc);
+    let period = HZ / 40_000;
+    let model = match c.model {
+        rehost::TimeModel::Cpi(cpi) => format!("{cpi} cycles per instruction"),
+        rehost::TimeModel::Cycles => "the Cortex-M4's costs and the flash's wait states".into(),
+    };
+    format!(
+        "the control interrupt in cycles ({model}): {} runs, {cmean:.0} mean, {cmax} at most: \
+         {:.0} % and {:.0} % of the {period}-cycle period at 40 kHz; thread mode {:.0} % of the \
+         time awake",
+        cyc.len(),
+        100.0 * cmean / period as f64,
+        100.0 * cmax as f64 / period as f64,
+        100.0 * c.thread_cycles as f64 / c.cycles.max(1) as f64,
+    )
+}
+
 /// The run's figures, and the budgets they are held to.
 fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
     let m = &*s.m;
@@ -375,28 +402,7 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
         .unwrap_or(0);
     let (mean, _) = stats(&all.iter().map(|&(_, n)| n).collect::<Vec<_>>());
     let c = m.chip();
-    // The same runs in cycles (their entry and return included), against the period at the
-    // default 40 kHz.
-    let cyc: Vec<u64> = m
-        .handled
-        .iter()
-        .filter(|h| h.exc == CONTROL)
-        .map(|h| h.cycles)
-        .collect();
-    let (cmean, cmax) = stats(&cyc);
-    let period = HZ / 40_000;
-    let model = match c.model {
-        rehost::TimeModel::Cpi(cpi) => format!("{cpi} cycles per instruction"),
-        rehost::TimeModel::Cycles => "the Cortex-M4's costs and the flash's wait states".into(),
-    };
-    println!(
-        "the control interrupt in cycles ({model}): {cmean:.0} mean, {cmax} at most: {:.0} % \
-         and {:.0} % of the {period}-cycle period at 40 kHz; thread mode {:.0} % of the time \
-         awake",
-        100.0 * cmean / period as f64,
-        100.0 * cmax as f64 / period as f64,
-        100.0 * c.thread_cycles as f64 / c.cycles.max(1) as f64,
-    );
+    println!("{}", control_cycles(m));
     if c.model == rehost::TimeModel::Cycles {
         let (sp, a) = (c.timing.spent, c.timing.art.stats);
         println!(

@@ -167,6 +167,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     c.bad_flash_write,
                     c.p.flash.read(0x0C)
                 );
+                eprintln!("{}", check::control_cycles(&m));
             }
             r
         }
