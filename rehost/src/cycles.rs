@@ -1006,6 +1006,16 @@ mod tests {
         assert!(!b.ends_in_branch);
     }
 
+    /// A 32-bit instruction's length follows its first halfword (A5.1).
+    #[test]
+    fn thumb_instruction_lengths_follow_the_first_halfword() {
+        // movs r0, #1 (16-bit); bl (32-bit: 0xF000 0xF800); bx lr (16-bit).
+        let code = [0x01, 0x20, 0x00, 0xF0, 0x00, 0xF8, 0x70, 0x47];
+        assert_eq!(block(0, &code).instructions, 3);
+        // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
+        assert_eq!(block(0, &[0xD1, 0xF8, 0x00, 0x00]).instructions, 1);
+    }
+
     /// The lines a block spans, an instruction straddling two lines included.
     #[test]
     fn lines_follow_the_code() {

@@ -384,17 +384,15 @@ pub struct Machine {
     pub faults: Vec<String>,
 }
 
-/// Counts Thumb-2 instructions in `code` (a 32-bit one starts with 0b11101, 0b11110 or
-/// 0b11111 in its first halfword's top bits: ARMv7-M ARM A5.1).
-pub fn thumb_instructions(code: &[u8]) -> u32 {
-    let mut i = 0;
-    let mut n = 0;
-    while i + 1 < code.len() {
-        let hw = u16::from_le_bytes([code[i], code[i + 1]]);
-        i += if hw >> 11 >= 0b11101 { 4 } else { 2 };
-        n += 1;
-    }
-    n
+/// ITSTATE from a PSR's IT bits (IT[1:0] at 26:25, IT[7:2] at 15:10: ARMv7-M ARM B1.4.2).
+fn it_of(psr: u32) -> u8 {
+    (((psr >> 25) & 3) | ((psr >> 8) & 0xFC)) as u8
+}
+
+/// `psr` with its IT bits set to `it`.
+fn with_it(psr: u32, it: u8) -> u32 {
+    let it = it as u32;
+    (psr & !(3 << 25) & !(0x3F << 10)) | ((it & 3) << 25) | ((it >> 2) << 10)
 }
 
 fn err(e: uc_error) -> String {
@@ -849,18 +847,15 @@ impl Machine {
         self.uc.reg_read(r).unwrap_or(0) as u32
     }
 
-    /// The engine's ITSTATE (A7.3.3): its CPSR's IT bits (26:25, 15:10); its xPSR reads them
-    /// as zero, as MRS does.
+    /// The engine's ITSTATE (A7.3.3): its CPSR's IT bits; its xPSR reads them as zero, as
+    /// MRS does.
     fn it_state(&self) -> u8 {
-        let c = self.reg(R::CPSR);
-        (((c >> 25) & 3) | ((c >> 8) & 0xFC)) as u8
+        it_of(self.reg(R::CPSR))
     }
 
     /// Sets the engine's ITSTATE, nothing else of its CPSR.
     fn set_it_state(&mut self, it: u8) -> Result<(), String> {
-        let c = self.reg(R::CPSR);
-        let it = it as u32;
-        let c = (c & !(3 << 25) & !(0x3F << 10)) | ((it & 3) << 25) | ((it >> 2) << 10);
+        let c = with_it(self.reg(R::CPSR), it);
         self.uc.reg_write(R::CPSR, c as u64).map_err(err)
     }
 
@@ -934,9 +929,7 @@ impl Machine {
         let realign = (sp - frame) & 4 != 0;
         let new_sp = (sp - frame) & !7;
         // The xPSR stacked with its IT bits (B1.5.6): the engine reads them as zero there.
-        let it = self.it_state() as u32;
-        let xpsr =
-            (self.reg(R::XPSR) & !(3 << 25) & !(0x3F << 10)) | ((it & 3) << 25) | ((it >> 2) << 10);
+        let xpsr = with_it(self.reg(R::XPSR), self.it_state());
         let regs = [
             self.reg(R::R0),
             self.reg(R::R1),
@@ -1064,12 +1057,11 @@ impl Machine {
             .reg_write(R::XPSR, ((xpsr & !0x1FF & !(1 << 9)) | (1 << 24)) as u64)
             .map_err(err)?;
         // The IT bits back (the engine keeps them in its CPSR), and where the run goes on.
-        let it = (((xpsr >> 25) & 3) | ((xpsr >> 8) & 0xFC)) as u8;
+        let it = it_of(xpsr);
         self.set_it_state(it)?;
         self.uc.reg_write(R::PC, (pc & !1) as u64).map_err(err)?;
         let c = self.uc.get_data_mut();
         (c.prev_end, c.it_next) = ((pc & !1) as u64, it);
-        let c = self.uc.get_data_mut();
         c.core.vect_active = c.active.last().map_or(0, |a| a.exc);
         c.event = true;
         let ret = match c.model {
@@ -1908,19 +1900,5 @@ impl Machine {
             .filter(|h| h.exc == exc && h.at >= from)
             .map(|h| h.instructions)
             .collect()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn thumb_instruction_lengths_follow_the_first_halfword() {
-        // movs r0, #1 (16-bit); bl (32-bit: 0xF000 0xF800); bx lr (16-bit).
-        let code = [0x01, 0x20, 0x00, 0xF0, 0x00, 0xF8, 0x70, 0x47];
-        assert_eq!(thumb_instructions(&code), 3);
-        // ldr.w r0, [r1] = 0xF8D1 0x0000: one instruction of 4 bytes.
-        assert_eq!(thumb_instructions(&[0xD1, 0xF8, 0x00, 0x00]), 1);
     }
 }
