@@ -655,6 +655,21 @@ pub struct Spent {
     pub exceptions: u64,
 }
 
+impl Spent {
+    /// `o` added to these.
+    pub fn add(&mut self, o: &Spent) {
+        self.instructions += o.instructions;
+        self.branches += o.branches;
+        self.flash += o.flash;
+        self.exceptions += o.exceptions;
+    }
+
+    /// All of them \[cycles\].
+    pub fn total(&self) -> u64 {
+        self.instructions + self.branches + self.flash + self.exceptions
+    }
+}
+
 impl Timing {
     /// The timing with the accelerator as FLASH_ACR `acr` sets it.
     pub fn new(acr: u32) -> Timing {
@@ -670,6 +685,11 @@ impl Timing {
     /// when the block before ended in a branch and `addr` does not follow it, the flash's wait
     /// for its lines, and the lazy FP frame at a handler's first FP instruction.
     pub fn block(&mut self, addr: u32, b: &Block) -> u32 {
+        self.block_spent(addr, b).total() as u32
+    }
+
+    /// As [`Timing::block`], the cycles by what they went to.
+    pub fn block_spent(&mut self, addr: u32, b: &Block) -> Spent {
         let jumped = self.prev.is_none_or(|(end, _)| end != addr);
         let refill = match self.prev {
             Some((end, true)) if end != addr => REFILL,
@@ -689,11 +709,14 @@ impl Timing {
             f.stacked = true;
             fp = FP_FRAME;
         }
-        self.spent.instructions += b.cycles as u64;
-        self.spent.branches += refill as u64;
-        self.spent.flash += wait as u64;
-        self.spent.exceptions += fp as u64;
-        b.cycles + refill + wait + fp
+        let s = Spent {
+            instructions: b.cycles as u64,
+            branches: refill as u64,
+            flash: wait as u64,
+            exceptions: fp as u64,
+        };
+        self.spent.add(&s);
+        s
     }
 
     /// An exception entered from a context with FP state (`fp`: CONTROL.FPCA) or without

@@ -182,22 +182,22 @@ impl Inject {
 /// A condition's runs of blocks (a mask held): where the current one began.
 #[derive(Debug, Default, Clone, Copy)]
 struct Hold {
-    /// Since this many instructions, from this address; `None` when not held.
+    /// Since this time \[cycles\], from this address; `None` when not held.
     since: Option<(u64, u64)>,
 }
 
 impl Hold {
-    /// The condition at a block starting at `addr` after `instructions`: when a run ends
-    /// here, its length \[instructions\] and where it began.
-    fn update(&mut self, held: bool, instructions: u64, addr: u64) -> Option<(u64, u64)> {
+    /// The condition at a block starting at `addr` at time `now` \[cycles\]: when a run ends
+    /// here, its length \[cycles\] and where it began.
+    fn update(&mut self, held: bool, now: u64, addr: u64) -> Option<(u64, u64)> {
         match (held, self.since) {
             (true, None) => {
-                self.since = Some((instructions, addr));
+                self.since = Some((now, addr));
                 None
             }
             (false, Some((from, at))) => {
                 self.since = None;
-                Some((instructions - from, at))
+                Some((now - from, at))
             }
             _ => None,
         }
@@ -256,7 +256,7 @@ pub struct Chip {
     pub guard_hit: Option<u32>,
     /// PRIMASK's holds.
     primask: Hold,
-    /// The longest time PRIMASK was held \[instructions\].
+    /// The longest time PRIMASK was held \[cycles\].
     pub primask_max: u64,
     /// Where the longest hold began (the first block run with PRIMASK set).
     pub primask_max_at: u64,
@@ -265,7 +265,10 @@ pub struct Chip {
     pub watch: Option<u32>,
     /// The watched exception's holds.
     held: Hold,
-    /// The longest time \[instructions\] the watched exception was held off by PRIMASK or
+    /// The watched exception's own blocks' cycles by what they went to (under
+    /// [`TimeModel::Cycles`]; its entries and returns are in [`Handled::cycles`]).
+    pub watch_spent: cycles::Spent,
+    /// The longest time \[cycles\] the watched exception was held off by PRIMASK or
     /// BASEPRI in a context it would otherwise preempt (thread mode, or a handler below it):
     /// the delay a critical section adds to its start.
     pub held_max: u64,
@@ -282,14 +285,14 @@ pub struct Chip {
     /// that arrived in the instant before the DMA served it (RM0390 §25.6.1: a DR read
     /// clears RXNE), and is counted.
     pub dr_reads_under_dma: u64,
-    /// Instructions by block address, while profiling.
-    profile: Option<HashMap<u64, u64>>,
+    /// Instructions and cycles by block address, while profiling.
+    profile: Option<HashMap<u64, (u64, u64)>>,
     /// Profile only this exception's own instructions (all when `None`).
     profile_exc: Option<u32>,
-    /// With `profile_exc`: only its runs of more than this many instructions.
+    /// With `profile_exc`: only its runs of more than this many cycles.
     profile_over: u64,
-    /// The blocks of the profiled exception's run in progress.
-    run_blocks: Vec<(u64, u32)>,
+    /// The blocks of the profiled exception's run in progress: address, instructions, cycles.
+    run_blocks: Vec<(u64, u32, u64)>,
 }
 
 impl Chip {
@@ -297,8 +300,8 @@ impl Chip {
         self.cycles
     }
 
-    /// `b`, at `addr`, about to run: its instructions and cycles counted.
-    fn run_block(&mut self, addr: u32, b: &cycles::Block) {
+    /// `b`, at `addr`, about to run: its instructions and cycles counted; its cycles.
+    fn run_block(&mut self, addr: u32, b: &cycles::Block) -> u64 {
         let cycles = match self.model {
             TimeModel::Cpi(cpi) => self.cpi_cycles(b.instructions, cpi),
             TimeModel::Cycles => {
@@ -307,10 +310,15 @@ impl Chip {
                     self.timing.art.configure(acr);
                     self.acr_seen = acr;
                 }
-                self.timing.block(addr, b) as u64
+                let s = self.timing.block_spent(addr, b);
+                if self.watch.is_some() && self.active.last().map(|a| a.exc) == self.watch {
+                    self.watch_spent.add(&s);
+                }
+                s.total()
             }
         };
         self.count(b.instructions, cycles);
+        cycles
     }
 
     /// `n` one-cycle instructions run outside a block (a WFE or WFI completing).
@@ -474,6 +482,7 @@ impl Machine {
             watch: None,
             held: Hold::default(),
             held_max: 0,
+            watch_spent: cycles::Spent::default(),
             held_max_at: 0,
             masked_pending: None,
             bad_flash_write: None,
@@ -638,7 +647,7 @@ impl Machine {
                 let held = enabled
                     && p < c.active_priority()
                     && (primask || (basepri != 0 && basepri as i32 <= p));
-                if let Some((n, at)) = c.held.update(held, c.instructions, addr)
+                if let Some((n, at)) = c.held.update(held, c.cycles, addr)
                     && n > c.held_max
                 {
                     (c.held_max, c.held_max_at) = (n, at);
@@ -648,7 +657,7 @@ impl Machine {
                 c.sp_min = sp;
                 c.sp_min_context = c.active.iter().map(|a| a.exc).collect();
             }
-            if let Some((n, at)) = c.primask.update(primask, c.instructions, addr)
+            if let Some((n, at)) = c.primask.update(primask, c.cycles, addr)
                 && n > c.primask_max
             {
                 (c.primask_max, c.primask_max_at) = (n, at);
@@ -671,15 +680,16 @@ impl Machine {
             } else {
                 c.prev_end = addr + size as u64;
                 c.it_next = b.it_after(it);
-                c.run_block(addr as u32, &b);
+                let cycles = c.run_block(addr as u32, &b);
                 let here = c.active.last().map(|a| a.exc);
                 if c.profile.is_some() {
                     if c.profile_exc.is_none() {
                         if let Some(p) = c.profile.as_mut() {
-                            *p.entry(addr).or_insert(0) += n as u64;
+                            let e = p.entry(addr).or_insert((0, 0));
+                            (e.0, e.1) = (e.0 + n as u64, e.1 + cycles);
                         }
                     } else if c.profile_exc == here {
-                        c.run_blocks.push((addr, n));
+                        c.run_blocks.push((addr, n, cycles));
                     }
                 }
             }
@@ -1072,11 +1082,12 @@ impl Machine {
         done.cycles += ret;
         if c.profile_exc == Some(done.exc) {
             let blocks = std::mem::take(&mut c.run_blocks);
-            if done.instructions > c.profile_over
+            if done.cycles > c.profile_over
                 && let Some(p) = c.profile.as_mut()
             {
-                for (a, n) in blocks {
-                    *p.entry(a).or_insert(0) += n as u64;
+                for (a, n, cycles) in blocks {
+                    let e = p.entry(a).or_insert((0, 0));
+                    (e.0, e.1) = (e.0 + n as u64, e.1 + cycles);
                 }
             }
         }
@@ -1827,14 +1838,14 @@ impl Machine {
         Ok(())
     }
 
-    /// Starts counting instructions by function: everything the core runs, or exception
-    /// `exc`'s own.
+    /// Starts counting instructions and cycles by function: everything the core runs, or
+    /// exception `exc`'s own.
     pub fn start_profile(&mut self, exc: Option<u32>) {
         self.start_profile_over(exc, 0);
     }
 
     /// As [`Machine::start_profile`], only the runs of exception `exc` of more than `over`
-    /// instructions counted.
+    /// cycles (their entry and return included) counted.
     pub fn start_profile_over(&mut self, exc: Option<u32>, over: u64) {
         let c = self.chip_mut();
         c.profile = Some(HashMap::new());
@@ -1843,9 +1854,9 @@ impl Machine {
         c.run_blocks.clear();
     }
 
-    /// The instructions counted since [`Machine::start_profile`], by function (the image's
-    /// symbols), most first.
-    pub fn take_profile(&mut self) -> Vec<(String, u64)> {
+    /// The instructions and cycles (blocks' own, not entry and return) counted since
+    /// [`Machine::start_profile`], by function (the image's symbols), most cycles first.
+    pub fn take_profile(&mut self) -> Vec<(String, u64, u64)> {
         use object::{Object, ObjectSymbol, SymbolKind};
         let Some(blocks) = self.chip_mut().profile.take() else {
             return Vec::new();
@@ -1865,18 +1876,22 @@ impl Machine {
             })
             .collect();
         syms.sort();
-        let mut by: HashMap<String, u64> = HashMap::new();
-        for (addr, n) in blocks {
+        let mut by: HashMap<String, (u64, u64)> = HashMap::new();
+        for (addr, (n, cycles)) in blocks {
             let i = syms.partition_point(|s| s.0 <= addr);
             let name = i
                 .checked_sub(1)
                 .and_then(|i| syms.get(i))
                 .filter(|s| addr < s.0 + s.1)
-                .map_or_else(|| format!("{addr:#010x}"), |s| s.2.clone());
-            *by.entry(name).or_insert(0) += n;
+                .map_or_else(
+                    || format!("{addr:#010x}"),
+                    |s| format!("{:#}", rustc_demangle::demangle(&s.2)),
+                );
+            let e = by.entry(name).or_insert((0, 0));
+            (e.0, e.1) = (e.0 + n, e.1 + cycles);
         }
-        let mut v: Vec<(String, u64)> = by.into_iter().collect();
-        v.sort_by_key(|e| std::cmp::Reverse(e.1));
+        let mut v: Vec<(String, u64, u64)> = by.into_iter().map(|(f, (n, c))| (f, n, c)).collect();
+        v.sort_by_key(|e| std::cmp::Reverse(e.2));
         v
     }
 
@@ -1899,6 +1914,16 @@ impl Machine {
             .iter()
             .filter(|h| h.exc == exc && h.at >= from)
             .map(|h| h.instructions)
+            .collect()
+    }
+
+    /// Cycles (entry and return included) of every run of exception `exc` entered at or after
+    /// `from` \[cycles\].
+    pub fn cycles_of(&self, exc: u32, from: u64) -> Vec<u64> {
+        self.handled
+            .iter()
+            .filter(|h| h.exc == exc && h.at >= from)
+            .map(|h| h.cycles)
             .collect()
     }
 }

@@ -6,6 +6,7 @@
 //! Torques are motor-side [N·m], angles those of the encoder \[rad\], currents \[A\], volts \[V\].
 
 use crate::control::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
+use crate::control::posmap::MapGeometry;
 use crate::control::reference::{RefSample, SUB_PER_COUNT, SubCounts};
 use crate::control::shaping::{Shaping, ShapingParams};
 use crate::friction::error::ParamError;
@@ -386,6 +387,9 @@ pub struct Controller<const N: usize> {
     /// The encoder's resolution \[rad/count\] ([`ControllerParams::rad_per_count`], divided
     /// once here, not in every step).
     rpc: f32,
+    /// The position map's geometry for these settings (worked out where the controller is
+    /// built, outside the control interrupt).
+    map_geometry: MapGeometry,
     dt_pos: f32,
     dt_cur: f32,
     d_alpha: f32,
@@ -462,6 +466,7 @@ impl<const N: usize> Controller<N> {
             shaping,
             map_sample: (0.0, 1.0),
             rpc: p.rad_per_count(),
+            map_geometry: MapGeometry::new(&p.map, p.rad_per_count()),
             dt_pos,
             dt_cur: 1.0 / (p.ratio() as f32 * p.pos_rate_hz),
             d_alpha: 1.0 - math::exp(-2.0 * core::f32::consts::PI * p.pid.d_filter_hz * dt_pos),
@@ -567,6 +572,12 @@ impl<const N: usize> Controller<N> {
     /// was built: cheap in a control step, unlike [`ControllerParams::rad_per_count`]).
     pub fn rad_per_count(&self) -> f32 {
         self.rpc
+    }
+
+    /// The position map's geometry for this controller's settings (worked out when it was
+    /// built).
+    pub fn map_geometry(&self) -> &MapGeometry {
+        &self.map_geometry
     }
 
     /// True when `p` runs at other loop rates than this controller (a change that cannot be

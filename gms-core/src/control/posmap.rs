@@ -57,7 +57,38 @@ pub fn valid_bin(offset: f32, scale: f32) -> bool {
         && scale <= MAP_SCALE_RANGE.1
 }
 
-/// The map's geometry in the reference's fixed point, and where the reference is in it.
+/// The map's geometry in the reference's fixed point: worked out once for a parameter set, on
+/// the protocol side (it divides in double precision, soft on the M4F: about 1,700 cycles that
+/// a control step taking the set must not spend).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapGeometry {
+    /// The period [1/65536 count].
+    period: i64,
+    /// Bins.
+    bins: u32,
+    /// Bins per 1/65536 count.
+    per_sub: f32,
+    /// The origin [1/65536 count].
+    origin: i64,
+}
+
+impl MapGeometry {
+    /// The geometry of the map `m` for an encoder of `rad_per_count` \[rad\].
+    pub fn new(m: &MapParams, rad_per_count: f32) -> MapGeometry {
+        let sub = SUB_PER_COUNT as f64;
+        let period = ((m.period as f64 / rad_per_count as f64) * sub).max(1.0) as i64;
+        let bins = (m.bins as u32).clamp(1, MAP_BINS_MAX as u32);
+        let origin = (m.origin as f64 / rad_per_count as f64 * sub) as i64;
+        MapGeometry {
+            period,
+            bins,
+            per_sub: (bins as f64 / period as f64) as f32,
+            origin,
+        }
+    }
+}
+
+/// The map's geometry, and where the reference is in it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapCursor {
     /// The period [1/65536 count].
@@ -76,20 +107,22 @@ pub struct MapCursor {
 
 impl MapCursor {
     /// The cursor of the map `m` for an encoder of `rad_per_count` \[rad\], at the reference
-    /// `reference` [1/65536 count] (one 64-bit division: outside the steps).
+    /// `reference` [1/65536 count]: [`MapGeometry::new`], then [`MapCursor::at`].
     pub fn new(m: &MapParams, rad_per_count: f32, reference: i64) -> MapCursor {
-        let sub = SUB_PER_COUNT as f64;
-        let period = ((m.period as f64 / rad_per_count as f64) * sub).max(1.0) as i64;
-        let bins = (m.bins as u32).clamp(1, MAP_BINS_MAX as u32);
-        let origin = (m.origin as f64 / rad_per_count as f64 * sub) as i64;
+        MapCursor::at(&MapGeometry::new(m, rad_per_count), reference)
+    }
+
+    /// The cursor of the map of geometry `g` at the reference `reference` [1/65536 count]
+    /// (one 64-bit remainder: cheap enough for the step that takes a parameter set).
+    pub fn at(g: &MapGeometry, reference: i64) -> MapCursor {
         MapCursor {
-            period,
-            bins,
-            per_sub: (bins as f64 / period as f64) as f32,
-            origin,
+            period: g.period,
+            bins: g.bins,
+            per_sub: g.per_sub,
+            origin: g.origin,
             phase: reference
-                .saturating_sub(origin)
-                .checked_rem_euclid(period)
+                .saturating_sub(g.origin)
+                .checked_rem_euclid(g.period)
                 .unwrap_or(0),
             last: reference,
         }

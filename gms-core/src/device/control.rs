@@ -330,14 +330,14 @@ impl ControlLoop {
     /// loop already in its static).
     pub fn attach_map(&mut self, table: MapTable) {
         self.map_table = Some(table);
-        self.map_cursor = self.map_cursor_for(self.ctrl.params(), self.ctrl.rad_per_count());
+        self.map_cursor = self.map_cursor_for(self.ctrl);
     }
 
     /// The map's cursor for the settings `p` (an encoder of `rpc` rad/count) at the reference
     /// now (none while the map is off or there is no table).
-    fn map_cursor_for(&self, p: &crate::protocol::Settings, rpc: f32) -> Option<MapCursor> {
-        (p.map.enable != 0.0 && self.map_table.is_some())
-            .then(|| MapCursor::new(&p.map, rpc, self.r.pos))
+    fn map_cursor_for(&self, c: &Ctrl) -> Option<MapCursor> {
+        (c.params().map.enable != 0.0 && self.map_table.is_some())
+            .then(|| MapCursor::at(c.map_geometry(), self.r.pos))
     }
 
     /// The PWM timer setting (prescaler, period) of the running set.
@@ -463,7 +463,7 @@ impl ControlLoop {
             let next: &mut Ctrl = &mut *a.ctrl;
             // The new map's cursor, and its sample at the reference set before the hand-over,
             // so that switching the map on or off (or another table geometry) is bumpless.
-            let mut cursor = self.map_cursor_for(next.params(), next.rad_per_count());
+            let mut cursor = self.map_cursor_for(next);
             // A table's correction playing stays in the sample (bumpless too).
             if let (Some(c), Some(t)) = (&mut cursor, self.map_table.as_deref()) {
                 let (o, s) = c.sample(self.r.pos, t);
