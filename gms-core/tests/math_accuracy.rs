@@ -184,3 +184,39 @@ fn sqrt_within_two_ulp() {
     assert!(gms_core::math::sqrt(f32::NAN).is_nan());
     assert_eq!(gms_core::math::sqrt(f32::INFINITY), f32::INFINITY);
 }
+
+/// The comparisons' `min` and `max` (the M4F has no VMINNM) are `f32::min` and `f32::max`,
+/// bit for bit, on every pair of special values and on random bit patterns (NaNs included).
+#[test]
+fn min_and_max_are_the_standard_ones() {
+    let special = [
+        0.0f32,
+        -0.0,
+        1.0,
+        -1.0,
+        f32::MIN_POSITIVE,
+        f32::MAX,
+        f32::MIN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        1e-45,
+    ];
+    let same =
+        |a: f32, b: f32| a.to_bits() == b.to_bits() || (a == b) || (a.is_nan() && b.is_nan());
+    for &a in &special {
+        for &b in &special {
+            assert!(same(gms_core::math::min(a, b), a.min(b)), "min({a}, {b})");
+            assert!(same(gms_core::math::max(a, b), a.max(b)), "max({a}, {b})");
+        }
+    }
+    let mut x = 0x2545_f491_4f6c_dd1du64;
+    for _ in 0..100_000 {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        let (a, b) = (f32::from_bits(x as u32), f32::from_bits((x >> 32) as u32));
+        assert!(same(gms_core::math::min(a, b), a.min(b)), "min({a}, {b})");
+        assert!(same(gms_core::math::max(a, b), a.max(b)), "max({a}, {b})");
+    }
+}

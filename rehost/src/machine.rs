@@ -1904,8 +1904,11 @@ impl Machine {
         file.symbols()
             .filter(|s| s.kind() == SymbolKind::Text)
             .find(|s| (s.address() & !1) <= addr && addr < (s.address() & !1) + s.size())
-            .and_then(|s| s.name().ok().map(str::to_string))
-            .unwrap_or_else(|| format!("{addr:#010x}"))
+            .and_then(|s| s.name().ok())
+            .map_or_else(
+                || format!("{addr:#010x}"),
+                |n| format!("{:#}", rustc_demangle::demangle(n)),
+            )
     }
 
     /// Instructions of every run of exception `exc` entered at or after `from` \[cycles\].

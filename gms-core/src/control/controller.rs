@@ -407,6 +407,9 @@ pub struct Controller<const N: usize> {
     d_filt: f32,
     last_meas: Option<i64>,
     last_ref: Option<SubCounts>,
+    /// The friction model's output for the next position step's reference, worked out ahead
+    /// ([`Controller::feedforward_ahead`]) \[N·m\].
+    ff_ahead: Option<f32>,
     gms_act: Gms<N>,
     gms_guide: Option<Gms<N>>,
     map_act: StaticMap,
@@ -478,6 +481,7 @@ impl<const N: usize> Controller<N> {
             d_filt: 0.0,
             last_meas: None,
             last_ref: None,
+            ff_ahead: None,
             gms_act,
             gms_guide,
             map_act,
@@ -555,6 +559,7 @@ impl<const N: usize> Controller<N> {
         self.d_filt = 0.0;
         self.last_meas = None;
         self.last_ref = None;
+        self.ff_ahead = None;
         self.gms_act.reset();
         if let Some(g) = &mut self.gms_guide {
             g.reset();
@@ -618,6 +623,7 @@ impl<const N: usize> Controller<N> {
         }
         self.last_meas = old.last_meas;
         self.last_ref = old.last_ref;
+        self.ff_ahead = None;
         self.d_filt = old.d_filt;
         self.i_cmd = old.i_cmd;
         self.w_ref = old.w_ref;
@@ -735,18 +741,43 @@ impl<const N: usize> Controller<N> {
         }
     }
 
+    /// The friction feedforward for the next position step's reference `r`, worked out now:
+    /// the friction model advanced by the reference's increment (it depends on the reference
+    /// alone, not on the measurement). The control loop calls it in the current step before
+    /// the position step's when the current loop runs faster, so that the two steps share
+    /// the work; [`Controller::position_step`] with the same `r` then uses it (and works it out
+    /// itself when it was not).
+    pub fn feedforward_ahead(&mut self, r: &RefSample) {
+        let ff = self.friction_ff_at(r);
+        self.ff_ahead = Some(ff);
+    }
+
+    /// Forgets the feedforward worked out ahead (its position step does not run).
+    pub fn forget_ahead(&mut self) {
+        self.ff_ahead = None;
+    }
+
+    /// The friction model advanced to the reference `r` from the last one; its output \[N·m\].
+    fn friction_ff_at(&mut self, r: &RefSample) -> f32 {
+        // Reference increment for the GMS feedforward (exact in fixed point).
+        let dx_ref = match self.last_ref {
+            Some(prev) => i64_to_f32(r.pos.saturating_sub(prev)) * (self.rpc / SUB_PER_COUNT),
+            None => 0.0,
+        };
+        self.last_ref = Some(r.pos);
+        self.friction_ff(dx_ref, r.vel)
+    }
+
     /// One position-loop step: measured encoder count `meas` and the reference sample `r`.
     /// Returns the per-term breakdown; the current command is kept for the current loop.
     pub fn position_step(&mut self, meas: i64, r: &RefSample) -> PositionOutput {
         let rpc = self.rpc;
         let meas_sub = meas.saturating_mul(SUB_PER_COUNT as i64);
         let error = i64_to_f32(r.pos.saturating_sub(meas_sub)) * (rpc / SUB_PER_COUNT);
-        // Reference increment for the GMS feedforward (exact in fixed point).
-        let dx_ref = match self.last_ref {
-            Some(prev) => i64_to_f32(r.pos.saturating_sub(prev)) * (rpc / SUB_PER_COUNT),
-            None => 0.0,
+        let ff_model = match self.ff_ahead.take() {
+            Some(ff) => ff,
+            None => self.friction_ff_at(r),
         };
-        self.last_ref = Some(r.pos);
         // Derivative on the measurement, first-order filtered.
         let vel_meas = match self.last_meas {
             Some(prev) => i64_to_f32(meas.saturating_sub(prev)) * rpc / self.dt_pos,
@@ -759,7 +790,6 @@ impl<const N: usize> Controller<N> {
         let pid = self.p.pid;
         let p_term = pid.kp * error;
         let d_term = pid.kd * self.d_filt;
-        let ff_model = self.friction_ff(dx_ref, r.vel);
         let adaptive = self.p.ff.mode == FfMode::GmsAdaptive;
         let ff_scale = if adaptive { self.adapt.scale() } else { 1.0 };
         let (map_offset, map_scale) = self.map_sample;
@@ -777,9 +807,10 @@ impl<const N: usize> Controller<N> {
         let phi = self.phi_of(ff_model);
         let delta = pid.ki * error * self.dt_pos;
         let share = pid.ki_fric * phi;
-        let fric_new = (self.integ_fric + share * delta)
-            .max(-self.fric_floor)
-            .min(pid.i_limit);
+        let fric_new = math::min(
+            math::max(self.integ_fric + share * delta, -self.fric_floor),
+            pid.i_limit,
+        );
         let const_new = clamp(
             self.integ + delta - (fric_new - self.integ_fric) * phi,
             pid.i_limit,

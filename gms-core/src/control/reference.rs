@@ -434,7 +434,7 @@ impl VelocityProfile {
             && self.t_sweep < s.seconds
         {
             self.t_sweep += dt;
-            let t = self.t_sweep.min(s.seconds);
+            let t = math::min(self.t_sweep, s.seconds);
             let tau = core::f32::consts::TAU;
             let phase = tau * (s.f0 * t + (s.f1 - s.f0) * t * t / (2.0 * s.seconds));
             let f = s.f0 + (s.f1 - s.f0) * t / s.seconds;

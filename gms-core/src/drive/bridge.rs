@@ -35,7 +35,7 @@ pub fn bridge_compare(duty: f32, period: u32, enabled: bool) -> (u32, u32) {
         return (0, 0);
     }
     let d = if duty.is_finite() { duty } else { 0.0 };
-    let mag = abs(d).min(1.0);
+    let mag = crate::math::min(abs(d), 1.0);
     // The PWM side is high for (1 - |duty|) of the period, low (driving) for |duty|.
     let low = (mag * period as f32 + 0.5) as u32;
     // Above the period the output stays high for the whole period.
