@@ -38,6 +38,8 @@ struct Session<'m> {
     motions: Vec<(&'static str, usize, u64)>,
     /// The control interrupt's budget \[cycles\]: [`STEP_SHARE`] of the current period.
     budget: u64,
+    /// The current loop's rate \[Hz\].
+    cur_hz: u64,
     /// Print where the cycles of the runs near the budget went, by function.
     profile: bool,
 }
@@ -171,7 +173,7 @@ fn step_budget(cur_hz: u64) -> u64 {
 
 /// Runs the session; an error names the first thing that went wrong and every budget missed.
 /// The figures are printed either way.
-pub fn run(m: &mut Machine, profile: bool) -> Result<(), String> {
+pub fn run(m: &mut Machine, profile: bool, cur_hz: u64) -> Result<(), String> {
     m.run_until_logged("control loop running", 1.0)?;
     // From here the interrupt is the loop's, at its priority: a critical section below it
     // delays a step.
@@ -181,11 +183,14 @@ pub fn run(m: &mut Machine, profile: bool) -> Result<(), String> {
         m,
         windows: Vec::new(),
         motions: Vec::new(),
-        budget: step_budget(40_000),
+        budget: step_budget(cur_hz),
+        cur_hz,
         profile,
     };
     let r = if s.m.board() == Board::NucleoF446 {
         session(&mut s)
+    } else if cur_hz != 40_000 {
+        Err("--cur-hz: the F405's link is not modelled, it runs its defaults only".into())
     } else {
         // The F405's link (USB) is not modelled yet: the image boots and holds at rest.
         s.motion("at rest", |s| s.run_for(0.5)).map(|_| 0)
@@ -219,6 +224,16 @@ fn session(s: &mut Session<'_>) -> Result<u64, String> {
     }
     if !st.last().is_some_and(|l| l.contains("enabled=0")) {
         return Err(format!("status after boot: {st:?}"));
+    }
+    if s.cur_hz != 40_000 {
+        // Another current-loop rate, set with the bridge off (the timer changes), and the
+        // current loop's PI for it as commissioning sets it (the default plant's 10 Ω and
+        // 0.24 mH: the 40 kHz defaults have 4 dB of gain margin, which half the rate takes).
+        let (kp, ki) = gms_ident::gains::current_pi(10.0, 0.24e-3, s.cur_hz as f64);
+        s.ok(&format!("set rate.cur_hz {}", s.cur_hz), 0.5)?;
+        s.ok(&format!("set cur.kp {kp:.4}"), 0.5)?;
+        s.ok(&format!("set cur.ki {ki:.1}"), 0.5)?;
+        s.run_for(0.01)?;
     }
     s.ok("enable", 0.5)?;
     s.run_for(0.05)?;
@@ -384,8 +399,8 @@ fn session(s: &mut Session<'_>) -> Result<u64, String> {
 }
 
 /// The control interrupt's runs so far in cycles (their entry and return included), against
-/// the period at the default 40 kHz, with the time model and thread mode's share.
-pub fn control_cycles(m: &Machine) -> String {
+/// the period at a current loop of `cur_hz`, with the time model and thread mode's share.
+pub fn control_cycles(m: &Machine, cur_hz: u64) -> String {
     let c = m.chip();
     let cyc: Vec<u64> = m
         .handled
@@ -394,18 +409,19 @@ pub fn control_cycles(m: &Machine) -> String {
         .map(|h| h.cycles)
         .collect();
     let (cmean, cmax) = stats(&cyc);
-    let period = HZ / 40_000;
+    let period = HZ / cur_hz;
     let model = match c.model {
         rehost::TimeModel::Cpi(cpi) => format!("{cpi} cycles per instruction"),
         rehost::TimeModel::Cycles => "the Cortex-M4's costs and the flash's wait states".into(),
     };
     format!(
         "the control interrupt in cycles ({model}): {} runs, {cmean:.0} mean, {cmax} at most: \
-         {:.0} % and {:.0} % of the {period}-cycle period at 40 kHz; thread mode {:.0} % of the \
+         {:.0} % and {:.0} % of the {period}-cycle period at {} kHz; thread mode {:.0} % of the \
          time awake",
         cyc.len(),
         100.0 * cmean / period as f64,
         100.0 * cmax as f64 / period as f64,
+        cur_hz as f64 / 1000.0,
         100.0 * c.thread_cycles as f64 / c.cycles.max(1) as f64,
     )
 }
@@ -506,14 +522,15 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
         .max()
         .unwrap_or(0);
     let c = m.chip();
-    let period = HZ / 40_000;
+    let period = HZ / s.cur_hz;
     let budget = s.budget;
     let pct = |n: u64| 100.0 * n as f64 / period as f64;
-    println!("{}", control_cycles(m));
+    println!("{}", control_cycles(m, s.cur_hz));
     println!(
         "the control interrupt's budget: {budget} cycles, {:.0} % of the {period}-cycle period \
-         at 40 kHz and {} MHz",
+         at {} kHz and {} MHz",
         pct(budget),
+        s.cur_hz as f64 / 1000.0,
         HZ / 1_000_000
     );
     let mut over = Vec::new();

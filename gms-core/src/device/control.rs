@@ -228,6 +228,9 @@ type FrfIn = (f32, (f32, f32), Injection);
 /// advanced), worked out before the measurement side ([`ControlLoop::reference_side`]).
 #[derive(Debug, Clone, Copy)]
 struct Ahead {
+    /// The step's reference (the motion's or the table's), [`ControlLoop::r`] from the step on
+    /// (what the status, the telemetry and a capture show).
+    base: RefSample,
     /// The reference the position step runs on (a sine at the reference in it).
     r: RefSample,
     /// The frequency response's sample in that step.
@@ -777,6 +780,7 @@ impl ControlLoop {
                     Some(a) => a,
                     None => self.reference_side(),
                 };
+                self.r = a.base;
                 // The two figures the loop reports, not the whole output (a 40-byte copy
                 // through memmove, ~60 instructions on the M4F).
                 let o = self.ctrl.position_step(pos, &a.r);
@@ -902,15 +906,17 @@ impl ControlLoop {
         false
     }
 
-    /// The table's reference into `self.r` and its correction, while it plays (out of the
-    /// step's line: the step without a table pays for one test).
+    /// The table's reference and its correction, while it plays (out of the step's line: the
+    /// step without a table pays for one test).
     #[inline(never)]
-    fn table_sample(&mut self) -> Option<f32> {
+    fn table_sample(&mut self) -> Option<(RefSample, f32)> {
+        if !self.table.playing() {
+            return None;
+        }
         let t = self.table_buf.as_deref()?;
         let ts = self.table.sample(t);
-        self.r = ts.r;
         self.table_corr = ts.corr;
-        Some(ts.corr)
+        Some((ts.r, ts.corr))
     }
 
     /// After a position step while the table plays: its error recorded, the period's and the
@@ -979,16 +985,15 @@ impl ControlLoop {
     /// the reference (the position step then needs the measurement only).
     fn reference_side(&mut self) -> Ahead {
         // The table's correction goes where the map's offset goes (one sample a step for both).
-        let corr = if self.table.playing() {
-            self.table_sample()
-        } else {
-            self.r = self.motion.next(self.ctrl.dt_pos());
-            None
+        // `self.r` stays the running step's until the position step (the status is as of it).
+        let (base, corr) = match self.table_sample() {
+            Some((r, corr)) => (r, Some(corr)),
+            None => (self.motion.next(self.ctrl.dt_pos()), None),
         };
         let frf = self.frf_input();
         let r = match frf {
-            Some((v, ph, Injection::Position)) => self.frf_reference(v, ph),
-            _ => self.r,
+            Some((v, ph, Injection::Position)) => self.frf_reference(&base, v, ph),
+            _ => base,
         };
         if let (Some(c), Some(t)) = (&mut self.map_cursor, self.map_table.as_deref()) {
             let (offset, scale) = c.sample(r.pos, t);
@@ -997,7 +1002,7 @@ impl ControlLoop {
             self.ctrl.set_map_sample(u, 1.0);
         }
         self.ctrl.feedforward_ahead(&r);
-        Ahead { r, frf }
+        Ahead { base, r, frf }
     }
 
     /// The frequency-response measurement's sample now, if one runs: its injected value, its
@@ -1008,17 +1013,17 @@ impl ControlLoop {
         Some((v, ph, f.injection()))
     }
 
-    /// The reference with the measurement's sine `v` (phase `ph`) added: its position,
+    /// The reference `base` with the measurement's sine `v` (phase `ph`) added: its position,
     /// velocity and acceleration.
-    fn frf_reference(&self, v: f32, ph: (f32, f32)) -> RefSample {
+    fn frf_reference(&self, base: &RefSample, v: f32, ph: (f32, f32)) -> RefSample {
         let rpc = self.ctrl.rad_per_count();
         let (w, amp) = self.frf.as_ref().map_or((0.0, 0.0), |f| {
             (f.omega(self.ctrl.params().pos_rate_hz), f.amplitude())
         });
         RefSample {
-            pos: self.r.pos.saturating_add((v / rpc * SUB_PER_COUNT) as i64),
-            vel: self.r.vel + w * amp * ph.1,
-            acc: self.r.acc - w * w * v,
+            pos: base.pos.saturating_add((v / rpc * SUB_PER_COUNT) as i64),
+            vel: base.vel + w * amp * ph.1,
+            acc: base.acc - w * w * v,
         }
     }
 

@@ -59,7 +59,7 @@ pub fn applied_duty(duty: f32, period: u32) -> f32 {
     if !duty.is_finite() || period == 0 {
         return 0.0;
     }
-    let low = (abs(duty).min(1.0) * period as f32 + 0.5) as u32;
+    let low = (crate::math::min(abs(duty), 1.0) * period as f32 + 0.5) as u32;
     let mag = low.min(period) as f32 / period as f32;
     if duty >= 0.0 { mag } else { -mag }
 }
