@@ -355,8 +355,8 @@ impl ControlLoop {
         self.map_cursor = self.map_cursor_for(self.ctrl);
     }
 
-    /// The map's cursor for the settings `p` (an encoder of `rpc` rad/count) at the reference
-    /// now (none while the map is off or there is no table).
+    /// The map's cursor for the controller `c`'s settings (its geometry worked out when `c` was
+    /// built) at the reference now (none while the map is off or there is no table).
     fn map_cursor_for(&self, c: &Ctrl) -> Option<MapCursor> {
         (c.params().map.enable != 0.0 && self.map_table.is_some())
             .then(|| MapCursor::at(c.map_geometry(), self.r.pos))
