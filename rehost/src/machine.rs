@@ -1911,15 +1911,6 @@ impl Machine {
             )
     }
 
-    /// Instructions of every run of exception `exc` entered at or after `from` \[cycles\].
-    pub fn instructions_of(&self, exc: u32, from: u64) -> Vec<u64> {
-        self.handled
-            .iter()
-            .filter(|h| h.exc == exc && h.at >= from)
-            .map(|h| h.instructions)
-            .collect()
-    }
-
     /// Cycles (entry and return included) of every run of exception `exc` entered at or after
     /// `from` \[cycles\].
     pub fn cycles_of(&self, exc: u32, from: u64) -> Vec<u64> {
