@@ -92,6 +92,19 @@ pub fn set_bridge(tim: pac::timer::TimAdv, in1: u32, in2: u32) {
     tim.ccr(1).write(|w| w.set_ccr(clamp(in2)));
 }
 
+/// Where the PWM timer is in its period now, as gms-core's [`gms_core::drive::pwm_phase`]
+/// orders it: CNT and CR1.DIR (read-only in centre-aligned mode, RM0090 §17.4.1), two reads
+/// of the APB2 timer. The counter is read first: a bottom between the two reads (a count
+/// from the way down, the direction from the way up) reads as just after the bottom, so a
+/// step that ends there is taken as late, never the other way round (the bridge off when in
+/// doubt); a top between them reads a little later than it was, which no check here minds.
+#[inline(always)]
+pub fn phase(tim: pac::timer::TimAdv) -> u32 {
+    let cnt = tim.cnt().read().cnt();
+    let down = tim.cr1().read().dir() == pac::timer::vals::Dir::DOWN;
+    gms_core::drive::pwm_phase(cnt, down)
+}
+
 /// Sets the prescaler and the period (register values; preloaded, taking effect at the next
 /// update) and the sense trigger's lead for them (below the period), `arr` at most `max_arr`.
 pub fn set_timing(tim: pac::timer::TimAdv, psc: u32, arr: u32, max_arr: u32, lead: u32) {

@@ -197,6 +197,12 @@ impl ControlHw {
         pwm::set_bridge(pac::TIM8, in1, in2);
     }
 
+    /// Where the PWM timer is in its period now (gms-core's `drive::pwm_phase`).
+    #[inline(always)]
+    pub fn pwm_phase(&self) -> u32 {
+        pwm::phase(pac::TIM8)
+    }
+
     /// Sets the PWM timer's prescaler and period (register values; preloaded, so they take
     /// effect at the next update) and the sense trigger's lead for them.
     pub fn set_pwm_timing(&mut self, psc: u32, arr: u32) {

@@ -7,8 +7,10 @@
 //!
 //! Each call reads the encoder counter and the current-sense codes, calls the core, writes
 //! the bridge's compare values (and the timer, after a change of loop rates), queues a
-//! telemetry sample when one is due, and hands the step's own duration (DWT cycles) back to the
-//! core, which latches an overrun and switches the bridge off in the same call. The time since
+//! telemetry sample when one is due, and hands the step's own duration (DWT cycles) and whether
+//! its compare values went in after the PWM update they were for (the timer's counter read at
+//! the start and after the write) back to the core, which latches an overrun and switches the
+//! bridge off in the same call. The time since
 //! the previous step's start goes in with the inputs: a step more than 1.5 periods after the
 //! last means a period was missed (another interrupt or a critical section held the loop
 //! off), which the core counts and latches as an overrun while the bridge drives.
@@ -22,7 +24,7 @@
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
 use gms_core::device::{ControlLoop, Inputs, Mailbox, Sample};
-use gms_core::drive::{Faults, Stall};
+use gms_core::drive::{self, Faults, Stall};
 use static_cell::StaticCell;
 
 use embassy_stm32::{interrupt, pac};
@@ -150,6 +152,7 @@ impl Loop {
     /// One PWM period.
     fn step(&mut self) {
         let t0 = cortex_m::peripheral::DWT::cycle_count();
+        let phase0 = self.hw.pwm_phase();
         // Only this interrupt writes it: a load and a store, no read-modify-write needed.
         STEPS.store(
             STEPS.load(Ordering::Relaxed).wrapping_add(1),
@@ -185,12 +188,17 @@ impl Loop {
             self.hw.set_pwm_timing(psc, arr);
         }
         self.hw.set_bridge(out.compare.0, out.compare.1);
+        // The deadline: the compare values written before the update they are for (the
+        // counter's bottom, where the preloaded values take effect, RM0090 §17.3.9), not only
+        // a step within its length: a step that started late and ends past the update leaves
+        // the bridge a period on the old duty.
+        let late = drive::past_update(phase0, self.hw.pwm_phase());
         if let Some(s) = out.sample {
             // A full queue drops the sample: the loop never waits for the comms side.
             let _ = self.telemetry.enqueue(s);
         }
         let cycles = cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0);
-        if self.core.finish(cycles) {
+        if self.core.finish(cycles, late) {
             self.hw.set_bridge(0, 0);
         }
     }

@@ -38,6 +38,7 @@ impl gms_link::DeviceLink for Fake {
                     step_us_mean: 0.0,
                     sense_offset: 2048.0,
                     missed: 0,
+                    late: 0,
                     drive: DriveKind::Position,
                     configured: self.configured == Some(1),
                 }

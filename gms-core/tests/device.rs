@@ -60,7 +60,7 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
             since_last,
         };
         lp.step(inp, |_, _| req.take());
-        lp.finish(1000);
+        lp.finish(1000, false);
         if req.is_none() {
             break;
         }
@@ -91,6 +91,34 @@ fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
     // Two periods missed: counted, overrun latched, the bridge off at once.
     step(&mut lp, 3 * period, None);
     assert_eq!(lp.status().stats.missed(), 2);
+    assert!(lp.faults().contains(Faults::OVERRUN), "{:?}", lp.faults());
+    assert!(!lp.enabled());
+}
+
+/// A step that wrote its duty past the update it was for (the shell's timer reading): while
+/// disabled nothing; while driving counted as `late` (not as a missed period), overrun
+/// latched and the bridge off at once, even though its length was within budget.
+#[test]
+fn a_late_step_latches_overrun_while_driving() {
+    let period = period_cycles();
+    let mut lp = rest();
+    step(&mut lp, 0, None);
+    assert!(!lp.finish(1000, true));
+    assert_eq!((lp.status().stats.late(), lp.faults()), (0, Faults::NONE));
+    let enable = Requests {
+        enable: true,
+        ..Requests::default()
+    };
+    step(&mut lp, period, Some(enable));
+    for _ in 0..10 {
+        step(&mut lp, period, None);
+        assert!(!lp.finish(1000, false));
+    }
+    assert!(lp.enabled());
+    step(&mut lp, period, None);
+    assert!(lp.finish(1000, true), "the bridge off now");
+    let st = lp.status();
+    assert_eq!((st.stats.late(), st.stats.missed()), (1, 0));
     assert!(lp.faults().contains(Faults::OVERRUN), "{:?}", lp.faults());
     assert!(!lp.enabled());
 }
@@ -148,7 +176,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
             since_last: period,
         };
         let o = lp.step(inp, |_, _| req.take());
-        lp.finish(1000);
+        lp.finish(1000, false);
         outs.push(o);
     }
     let arr = lp.timing().1;
@@ -374,7 +402,7 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
                 },
             };
             lp.step(inp, |_, _| None);
-            lp.finish(1000);
+            lp.finish(1000, false);
         }
         assert_eq!(
             lp.faults().contains(Faults::ENCODER_JUMP),
@@ -401,11 +429,11 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
         while let Some(r) = req.take() {
             let mut once = Some(r);
             lp.step(inp, |_, _| once.take());
-            lp.finish(1000);
+            lp.finish(1000, false);
             req = once;
         }
         lp.step(inp, |_, _| None);
-        lp.finish(1000);
+        lp.finish(1000, false);
     };
     let enable = Requests {
         enable: true,
@@ -498,7 +526,7 @@ impl gms_core::device::LoopLink for InlineLink {
         };
         let mb = &mut self.mb;
         self.lp.step(inp, |st, c| mb.exchange(st, c));
-        self.lp.finish(1000);
+        self.lp.finish(1000, false);
         self.t_us += (1e6 / default_settings().cur_rate_hz) as u64;
     }
 }

@@ -684,3 +684,53 @@ fn missed_periods_between_steps() {
     assert_eq!(drive::missed_periods(p, 0), 0);
     assert_eq!(drive::missed_periods(u32::MAX, 1), u32::MAX - 1);
 }
+
+/// A centre-aligned counter at `t` timer counts after a bottom: its value and whether it
+/// counts down (at the top, `arr`, either way: the hardware's DIR there is not relied on).
+fn centre_aligned(t: u64, arr: u64, top_down: bool) -> (u16, bool) {
+    let p = t % (2 * arr);
+    if p < arr || (p == arr && !top_down) {
+        (p as u16, false)
+    } else {
+        ((2 * arr - p) as u16, true)
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2048))]
+
+    /// Two readings of a centre-aligned counter less than a period apart: the later one is
+    /// past the update exactly when a bottom (the update event, the counter at 0 counting up)
+    /// lies after the first and at or before the second, whatever the period and wherever
+    /// the readings fall, the top's direction read either way.
+    #[test]
+    fn a_duty_written_past_the_bottom_is_late(
+        arr in 2u64..=0xFFFF,
+        t1 in 0u64..1 << 40,
+        frac in 0.0f64..1.0,
+        top1 in any::<bool>(),
+        top2 in any::<bool>(),
+    ) {
+        let d = ((2 * arr) as f64 * frac) as u64;
+        let t2 = t1 + d;
+        // One instant read twice reads one direction.
+        let top2 = if d == 0 { top1 } else { top2 };
+        let (c1, d1) = centre_aligned(t1, arr, top1);
+        let (c2, d2) = centre_aligned(t2, arr, top2);
+        let bottom_between = t2 / (2 * arr) > t1 / (2 * arr);
+        prop_assert_eq!(
+            drive::past_update(drive::pwm_phase(c1, d1), drive::pwm_phase(c2, d2)),
+            bottom_between,
+            "arr {} t1 {} t2 {}", arr, t1, t2
+        );
+    }
+}
+
+#[test]
+fn a_late_step_is_counted_apart() {
+    let mut s = StepStats::new();
+    assert_eq!(s.late(), 0);
+    s.record_late();
+    s.record_late();
+    assert_eq!((s.late(), s.missed()), (2, 0));
+}

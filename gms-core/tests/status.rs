@@ -36,13 +36,14 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
             f(),
             f(),
             any::<u32>(),
+            any::<u32>(),
             prop::sample::select(DriveKind::ALL.to_vec()),
             any::<bool>(),
         ),
     )
         .prop_map(
             |((mode, enabled, faults, t, pos, error_counts, moving, current), rest)| {
-                let (ff, duty, worst, mean, offset, missed, drive, configured) = rest;
+                let (ff, duty, worst, mean, offset, missed, late, drive, configured) = rest;
                 StatusReply {
                     mode,
                     enabled,
@@ -58,6 +59,7 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
                     step_us_mean: mean,
                     sense_offset: offset,
                     missed,
+                    late,
                     drive,
                     configured,
                 }
@@ -94,13 +96,14 @@ fn a_reply_without_a_key_is_refused_naming_it_and_unknown_keys_are_ignored() {
         step_us_mean: 9.5,
         sense_offset: 2048.25,
         missed: 2,
+        late: 1,
         drive: DriveKind::Current,
         configured: true,
     };
     let text = written(&s);
     assert!(text.contains(" fault_names=over_current "), "{text}");
     let words: Vec<&str> = text.split_whitespace().collect();
-    assert_eq!(words.len(), 17, "{text}");
+    assert_eq!(words.len(), 18, "{text}");
     for (i, w) in words.iter().enumerate() {
         let key = w.split_once('=').unwrap().0;
         let without: Vec<&str> = words
@@ -155,7 +158,7 @@ proptest! {
                     // f32 values as f32; the position, the time and the integers as f64.
                     let as_f32 = v.parse::<f32>().unwrap() as f64;
                     let as_f64 = v.parse::<f64>().unwrap();
-                    let wide = matches!(key, "t" | "pos" | "missed" | "faults");
+                    let wide = matches!(key, "t" | "pos" | "missed" | "late" | "faults");
                     prop_assert_eq!(x, if wide { as_f64 } else { as_f32 }, "{}: {}", key, v);
                 }
                 StatusValue::Text(t) => prop_assert_eq!(t, *v),

@@ -299,6 +299,7 @@ fn status_meaning(key: &str) -> (&'static str, &'static str) {
         "step_us_mean" => ("mean control step", "µs"),
         "sense_offset" => ("current-sense zero", "ADC codes"),
         "missed" => ("control periods missed", ""),
+        "late" => ("control steps that wrote their duty late", ""),
         "drive" => ("what the loop drives", ""),
         "configured" => (
             "settings chosen for this axis (1) or built-in defaults (0)",

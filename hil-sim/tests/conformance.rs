@@ -148,6 +148,7 @@ fn status_keys_are_one_set() {
         "step_us_mean",
         "sense_offset",
         "missed",
+        "late",
         "drive",
         "configured",
     ];
@@ -158,6 +159,7 @@ fn status_keys_are_one_set() {
         // 0 A at code 2048 with 0.6 codes of noise).
         assert_eq!(field(&st, "faults"), 0.0, "{st}");
         assert_eq!(field(&st, "missed"), 0.0, "{st}");
+        assert_eq!(field(&st, "late"), 0.0, "{st}");
         let zero = field(&st, "sense_offset");
         assert!(zero != 2048.0 && (zero - 2048.0).abs() < 0.5, "{st}");
     });

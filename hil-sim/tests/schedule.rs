@@ -93,7 +93,7 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
             out.duty
         );
         compared += 1;
-        lp.finish(1000);
+        lp.finish(1000, false);
         // The axis: the reference's count less a lag and a wobble.
         if phase0 {
             let target = st.reference.pos / SUB_PER_COUNT as i64;

@@ -165,6 +165,9 @@ pub struct Inject {
     /// Code patched in by [`Machine::hang_handler`], put back at the next reset: (address,
     /// the original halfword).
     patches: Vec<(u64, [u8; 2])>,
+    /// [`Machine::start_late`]: the exception, how late each of its entries comes \[cycles\],
+    /// and the entries left to delay.
+    late_entry: Option<(u32, u64, u32)>,
 }
 
 impl Inject {
@@ -932,6 +935,15 @@ impl Machine {
 
     /// Enters exception `n` at the current instruction boundary (`ret` the return address).
     fn enter(&mut self, n: u32, ret: u32) -> Result<(), String> {
+        if let Some((e, late, left)) = self.chip().inject.late_entry
+            && e == n
+            && left > 0
+        {
+            // Held off (`start_late`): the time passes in the context it preempts.
+            let c = self.chip_mut();
+            c.add_cycles(late);
+            c.inject.late_entry = Some((e, late, left - 1));
+        }
         let control = self.reg(R::CONTROL);
         let fpca = control & 4 != 0;
         let sp = self.reg(R::SP);
@@ -1182,10 +1194,17 @@ impl Machine {
                     self.raise_lines();
                     if !event && !self.wakes() {
                         self.fire_events();
-                        let t = self.next_event().min(until);
-                        let c = self.uc.get_data_mut();
-                        if t > c.cycles {
-                            c.cycles = t;
+                        // An event due now (fired just above) may raise a line that wakes the
+                        // core: it sleeps to the next event only if none did (the sense's DMA
+                        // interrupt, due at the WFI, was taken a half period late at the
+                        // timer's next event: a step past its deadline).
+                        self.raise_lines();
+                        if !self.wakes() {
+                            let t = self.next_event().min(until);
+                            let c = self.uc.get_data_mut();
+                            if t > c.cycles {
+                                c.cycles = t;
+                            }
                         }
                     }
                 }
@@ -1582,6 +1601,13 @@ impl Machine {
         c.inject.patches.push((addr, orig));
         c.stop_soon();
         Ok(())
+    }
+
+    /// Exception `exc`'s next `runs` entries each come `cycles` late, as if something above
+    /// it had held it off that long (the time passes in the context it preempts): a control
+    /// step that starts late, for the deadline.
+    pub fn start_late(&mut self, exc: u32, cycles: u64, runs: u32) {
+        self.chip_mut().inject.late_entry = Some((exc, cycles, runs));
     }
 
     /// The encoder jumps by `counts` (a burst of noise counted as edges).

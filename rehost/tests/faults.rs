@@ -279,3 +279,46 @@ fn a_power_cut_at_every_flash_write_of_a_save_leaves_the_old_or_the_new() {
     );
     assert!(old > 0 && new > 0, "{old} old, {new} new");
 }
+
+/// A value of a `status` reply.
+fn value(st: &str, key: &str) -> f64 {
+    st.split_whitespace()
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {key} in {st}"))
+}
+
+/// The deadline, not only the length: control steps that start late (held off by something
+/// above them, here 1,800 cycles) while the axis moves, so that a long one ends past the PWM
+/// update its duty was for. Each is caught by the timer's counter read after the duty is
+/// written: `overrun` latched, the bridge off, counted as `late` — not as a missed period
+/// (the steps stay less than 1.5 periods apart) nor by length (each runs as long as ever).
+/// Started 300 cycles late, every step still writes in time: nothing latched.
+#[test]
+fn a_step_that_writes_its_duty_past_the_update_is_an_overrun() {
+    let mut m = driving();
+    assert!(ask(&mut m, "move 0.02").starts_with("ok"));
+    m.start_late(CONTROL, 300, 400);
+    m.run_for(0.012).unwrap();
+    let st = status(&mut m);
+    assert!(
+        st.contains("enabled=1") && st.contains("fault_names=none"),
+        "{st}"
+    );
+    assert_eq!(
+        (value(&st, "late"), value(&st, "missed")),
+        (0.0, 0.0),
+        "{st}"
+    );
+
+    let mut m = driving();
+    assert!(ask(&mut m, "move 0.02").starts_with("ok"));
+    m.start_late(CONTROL, 1800, 400);
+    m.run_for(0.012).unwrap();
+    assert!(!m.bridge_driving());
+    let st = off_with(&mut m, &["overrun"]);
+    assert!(value(&st, "late") >= 1.0, "{st}");
+    assert_eq!(value(&st, "missed"), 0.0, "{st}");
+    // Not by length: the longest step within the 18.75 µs budget of a 25 µs period.
+    assert!(value(&st, "step_us_worst") < 18.75, "{st}");
+}

@@ -7,6 +7,7 @@
 /// Fields one capture records at most.
 pub const CAPTURE_FIELDS: usize = 4;
 use crate::control::chunk::{CHUNK_VALUES, Chunk};
+use crate::math::i64_to_f32;
 use crate::protocol::CaptureState;
 
 /// The fields a capture may record (the telemetry's, without the simulator's truth): time
@@ -127,16 +128,6 @@ pub struct StepValues {
     pub current_period: f32,
     /// The bridge voltage's mean over those periods \[V\].
     pub volts_period: f32,
-}
-
-/// `x` as f32 through the FPU's conversion from i32 when it fits (a capture's differences
-/// since its trigger do), the soft 64-bit conversion (`__aeabi_l2f`, ~70 instructions on the
-/// M4F) only beyond.
-fn to_f32(x: i64) -> f32 {
-    match i32::try_from(x) {
-        Ok(v) => v as f32,
-        Err(_) => x as f32,
-    }
 }
 
 /// A capture in progress over a buffer of `B`.
@@ -260,12 +251,12 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let buf = self.buf.as_mut();
         for (k, &f) in fields.iter().take(n).enumerate() {
             let x = match f {
-                0 => to_f32(v.steps.saturating_sub(t0).min(i64::MAX as u64) as i64) * v.dt,
-                1 => to_f32(v.pos.saturating_sub(pos0)) * rpc,
+                0 => i64_to_f32(v.steps.saturating_sub(t0).min(i64::MAX as u64) as i64) * v.dt,
+                1 => i64_to_f32(v.pos.saturating_sub(pos0)) * rpc,
                 2 => {
                     let d = v.reference.saturating_sub(pos0.saturating_mul(1 << bits));
                     let (whole, frac) = (d >> bits, d & ((1 << bits) - 1));
-                    (to_f32(whole) + to_f32(frac) / sub) * rpc
+                    (i64_to_f32(whole) + i64_to_f32(frac) / sub) * rpc
                 }
                 3 => v.error,
                 4 => v.ff,

@@ -741,9 +741,9 @@ impl ControlLoop {
             if let Some(req) = req {
                 // Acted on in place, outside the shell's critical section; given back at the
                 // next exchange.
+                took = true;
                 timing = self.take(req);
                 self.done = Some(req);
-                took = true;
             }
         }
         if self.phase == 0 {
@@ -893,12 +893,19 @@ impl ControlLoop {
         }
     }
 
-    /// Records the duration of the step just run \[cycles\]; an overrun latches the fault and
-    /// switches the bridge off. Returns true when the bridge must be switched off now.
-    pub fn finish(&mut self, cycles: u32) -> bool {
+    /// Records the duration of the step just run \[cycles\] and whether it wrote the bridge's
+    /// compare values after the PWM update they were for (`late`: the timer's counter went
+    /// through the bottom during the step, [`drive::past_update`]; a virtual device's steps
+    /// are never late). An overrun by length or by deadline latches the fault and switches the
+    /// bridge off (a late step is also counted in the status's `late`). Returns true when the
+    /// bridge must be switched off now.
+    pub fn finish(&mut self, cycles: u32, late: bool) -> bool {
         self.stats.record(cycles);
         self.last_cycles = cycles;
-        if self.enabled && drive::overrun(cycles, self.limits.budget_cycles) {
+        if self.enabled && late {
+            self.stats.record_late();
+        }
+        if self.enabled && (late || drive::overrun(cycles, self.limits.budget_cycles)) {
             self.faults.latch(Faults::OVERRUN);
             self.switch_off();
             return true;

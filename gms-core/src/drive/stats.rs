@@ -16,7 +16,32 @@ pub fn missed_periods(since_last: u32, period: u32) -> u32 {
     periods.saturating_sub(1).min(u32::MAX as u64) as u32
 }
 
-/// Worst and mean duration of the control step \[cycles\], and the periods missed.
+/// Where a centre-aligned PWM timer is in its period, as an order \[-\]: counting up from the
+/// bottom `cnt` (0 up to the top), counting down back to it `0x2_0000 - cnt` (above every
+/// up-counting value, growing as the counter falls). Only the order matters: two readings of
+/// one period compare as the times they were taken, whatever the period (`ARR`) is, so a step
+/// that changes the timer's period needs nothing else. `cnt` is TIMx_CNT, `down` CR1.DIR
+/// (read-only in centre-aligned mode, RM0090 §17.4.1).
+pub const fn pwm_phase(cnt: u16, down: bool) -> u32 {
+    if down {
+        0x2_0000 - cnt as u32
+    } else {
+        cnt as u32
+    }
+}
+
+/// Whether a step that started at PWM phase `start` and had written the bridge's compare
+/// values at `end` (both [`pwm_phase`]) wrote them after the update event they were for: the
+/// counter went through the bottom (the update, where preloaded compare values take effect)
+/// in between, so the phase went back. The period ran on the old duty, and the new one acts a
+/// period late. Exact for a step shorter than a period (a longer one is an overrun by its
+/// length already).
+pub const fn past_update(start: u32, end: u32) -> bool {
+    end < start
+}
+
+/// Worst and mean duration of the control step \[cycles\], the periods missed and the steps
+/// that wrote their duty late.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StepStats {
     worst: u32,
@@ -24,6 +49,7 @@ pub struct StepStats {
     sum: u64,
     n: u64,
     missed: u32,
+    late: u32,
 }
 
 impl StepStats {
@@ -35,7 +61,18 @@ impl StepStats {
             sum: 0,
             n: 0,
             missed: 0,
+            late: 0,
         }
+    }
+
+    /// Records a step that wrote its duty after the update it was for ([`past_update`]).
+    pub fn record_late(&mut self) {
+        self.late = self.late.saturating_add(1);
+    }
+
+    /// Steps that wrote their duty after the update they were for, while the bridge drove.
+    pub fn late(&self) -> u32 {
+        self.late
     }
 
     /// Records `n` missed periods.

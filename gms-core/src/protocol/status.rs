@@ -76,6 +76,9 @@ pub struct StatusReply {
     pub sense_offset: f32,
     /// Control periods missed since start [-].
     pub missed: u32,
+    /// Control steps that wrote their duty after the PWM update they were for, since start
+    /// [-] (each latches `overrun`).
+    pub late: u32,
     /// What the loop drives.
     pub drive: DriveKind,
     /// False while the device runs on its built-in defaults (never configured for an axis:
@@ -105,14 +108,15 @@ impl StatusReply {
         self.faults.write_names(out)?;
         write!(
             out,
-            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} drive={} \
-             configured={}",
+            " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} late={} \
+             drive={} configured={}",
             Num(self.ff),
             Num(self.duty),
             Num(self.step_us_worst),
             Num(self.step_us_mean),
             Num(self.sense_offset),
             self.missed,
+            self.late,
             self.drive.name(),
             self.configured as u8,
         )
@@ -137,6 +141,7 @@ impl StatusReply {
             step_us_mean: w.number("step_us_mean")?,
             sense_offset: w.number("sense_offset")?,
             missed: w.number("missed")?,
+            late: w.number("late")?,
             drive: w.named("drive", DriveKind::from_name)?,
             configured: w.flag("configured")?,
         })
@@ -156,7 +161,7 @@ pub enum StatusValue {
 
 impl StatusReply {
     /// The reply's keys and values in the order the device writes them.
-    pub fn entries(&self) -> [(&'static str, StatusValue); 17] {
+    pub fn entries(&self) -> [(&'static str, StatusValue); 18] {
         use StatusValue::{Number as N, Text};
         let b = |x: bool| N(x as u8 as f64);
         [
@@ -175,6 +180,7 @@ impl StatusReply {
             ("step_us_mean", N(self.step_us_mean as f64)),
             ("sense_offset", N(self.sense_offset as f64)),
             ("missed", N(self.missed as f64)),
+            ("late", N(self.late as f64)),
             ("drive", Text(self.drive.name())),
             ("configured", b(self.configured)),
         ]

@@ -168,7 +168,8 @@ impl Sim {
             let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);
             let ns = t0.map_or(0, |t| t.elapsed().as_nanos().min(u32::MAX as u128) as u32);
-            self.core.finish(ns);
+            // The simulated bridge takes each period's duty in time: never late.
+            self.core.finish(ns, false);
             let duty = if self.core.enabled() { out.duty } else { 0.0 };
             if let Some(mut s) = out.sample {
                 s.friction_true = self.plant.friction as f32;

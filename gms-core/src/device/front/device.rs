@@ -126,6 +126,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             step_us_mean: drive::cycles_to_us(st.stats.mean(), clock),
             sense_offset: st.sense_offset,
             missed: st.stats.missed(),
+            late: st.stats.late(),
             drive: st.drive.kind(),
             configured: self.configured,
         }
