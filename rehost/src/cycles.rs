@@ -519,6 +519,10 @@ pub struct Art {
     pub icache: bool,
     /// The data cache (DCEN).
     pub dcache: bool,
+    /// Code taken as fetched from SRAM through the I-bus (SYSCFG's remap of SRAM1 at 0,
+    /// RM0090 §9.2.1), not from the flash: no wait states and no accelerator lines
+    /// (\[start, end) addresses; a what-if, `rehost check --what-if-sram`).
+    pub sram_code: Vec<(u32, u32)>,
     ilines: Lines,
     dlines: Lines,
     /// The last line fetched, and the cycles its instructions took.
@@ -535,6 +539,7 @@ impl Art {
             prefetch: false,
             icache: false,
             dcache: false,
+            sram_code: Vec::new(),
             ilines: Lines::new(64),
             dlines: Lines::new(8),
             last: None,
@@ -565,7 +570,11 @@ impl Art {
     /// line, with the prefetch on, what its fetch (wait states + 1) takes beyond the cycles
     /// the line before it ran; any other line the wait states.
     pub fn fetch(&mut self, addr: u32, b: &Block, jumped: bool) -> u32 {
-        if !in_flash(addr) || self.wait_states == 0 {
+        let in_sram = self
+            .sram_code
+            .iter()
+            .any(|&(from, to)| (from..to).contains(&addr));
+        if in_sram || !in_flash(addr) || self.wait_states == 0 {
             self.last = None;
             return 0;
         }
@@ -745,10 +754,12 @@ impl Timing {
 
     /// A reset: no exception active, the accelerator as FLASH_ACR's reset value sets it.
     pub fn reset(&mut self) {
+        let sram_code = std::mem::take(&mut self.art.sram_code);
         *self = Timing {
             spent: self.spent,
             ..Timing::new(0)
         };
+        self.art.sram_code = sram_code;
     }
 }
 
@@ -1088,6 +1099,25 @@ mod tests {
             0
         );
         assert_eq!(Art::new(0x700).fetch(0x0800_2000, &big, true), 0);
+    }
+
+    /// The what-if of code fetched from SRAM: the 80-line loop that misses on every pass
+    /// costs nothing inside the range given, and what it would have put in the cache stays
+    /// out of it (the 32-line loop after it still hits from its second pass).
+    #[test]
+    fn code_taken_as_fetched_from_sram_waits_for_nothing() {
+        let big = block(0x0800_2000, &[0x88, 0x18].repeat(80 * 8));
+        let body = block(0x0800_1000, &[0x88, 0x18].repeat(32 * 8));
+        let mut a = art();
+        a.sram_code = vec![(0x0800_2000, 0x0800_2000 + 80 * 16)];
+        a.fetch(0x0800_1000, &body, true);
+        for _ in 0..10 {
+            assert_eq!(a.fetch(0x0800_2000, &big, true), 0);
+            assert_eq!(a.fetch(0x0800_1000, &body, true), 0);
+        }
+        // Just past the range: the flash again.
+        let after = block(0x0800_2000 + 80 * 16, &[0x88, 0x18].repeat(8));
+        assert_eq!(a.fetch(0x0800_2000 + 80 * 16, &after, true), 5);
     }
 
     /// Branch-heavy code (blocks of `adds; b` on lines of their own, each jumping to the

@@ -1937,6 +1937,39 @@ impl Machine {
             )
     }
 
+    /// A what-if for the cycle model: the functions whose demangled names contain one of
+    /// `names` fetched as from SRAM through the I-bus (no flash wait states, the accelerator
+    /// untouched), as if the image had placed them there; the code itself stays where it is.
+    /// Returns each function taken (name, bytes). Error: a name that matches nothing.
+    pub fn fetch_as_sram(&mut self, names: &[String]) -> Result<Vec<(String, u32)>, String> {
+        use object::{Object, ObjectSymbol, SymbolKind};
+        let file = object::File::parse(&*self.image).map_err(|e| format!("the image: {e}"))?;
+        let mut taken = Vec::new();
+        let mut ranges = Vec::new();
+        for want in names {
+            let before = taken.len();
+            for s in file.symbols().filter(|s| s.kind() == SymbolKind::Text) {
+                let Ok(n) = s.name() else { continue };
+                let name = format!("{:#}", rustc_demangle::demangle(n));
+                let from = (s.address() & !1) as u32;
+                if name.contains(want.as_str())
+                    && s.size() > 0
+                    && !ranges.iter().any(|&(f, _)| f == from)
+                {
+                    ranges.push((from, from + s.size() as u32));
+                    taken.push((name, s.size() as u32));
+                }
+            }
+            if taken.len() == before {
+                return Err(format!(
+                    "--what-if-sram {want}: no function of the image matches"
+                ));
+            }
+        }
+        self.chip_mut().timing.art.sram_code = ranges;
+        Ok(taken)
+    }
+
     /// Cycles (entry and return included) of every run of exception `exc` entered at or after
     /// `from` \[cycles\].
     pub fn cycles_of(&self, exc: u32, from: u64) -> Vec<u64> {

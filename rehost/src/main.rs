@@ -91,6 +91,11 @@ enum Cmd {
         /// only (the F405's link is not modelled).
         #[arg(long, default_value_t = 40_000)]
         cur_hz: u64,
+        /// A what-if for `--timing cycles`: the functions whose names contain NAME (repeat
+        /// it) fetched as from SRAM remapped at 0 (the I-bus, no wait states), as if the image
+        /// had put them there; the image is not changed. Measures what moving them would gain.
+        #[arg(long, value_name = "NAME")]
+        what_if_sram: Vec<String>,
     },
 }
 
@@ -148,10 +153,14 @@ fn run(cli: Cli) -> Result<(), String> {
             profile,
             timing,
             cur_hz,
+            what_if_sram,
         } => {
             let timing = TimeModel::parse(&timing)?;
             if !(1_000..=100_000).contains(&cur_hz) {
                 return Err(format!("--cur-hz {cur_hz}: 1000 … 100000 Hz"));
+            }
+            if !what_if_sram.is_empty() && timing != TimeModel::Cycles {
+                return Err("--what-if-sram needs --timing cycles".into());
             }
             let (image, board) = load(&elf, &board)?;
             let mut m = Machine::new(
@@ -162,6 +171,17 @@ fn run(cli: Cli) -> Result<(), String> {
                     ..Options::default()
                 },
             )?;
+            if !what_if_sram.is_empty() {
+                let taken = m.fetch_as_sram(&what_if_sram)?;
+                let bytes: u32 = taken.iter().map(|t| t.1).sum();
+                println!(
+                    "what if: {} functions, {bytes} bytes of code, fetched from SRAM (the image unchanged):",
+                    taken.len()
+                );
+                for (name, n) in &taken {
+                    println!("  {n:6} B  {name}");
+                }
+            }
             let r = check::run(&mut m, profile, cur_hz);
             if r.is_err() {
                 eprintln!("the image's log:");
