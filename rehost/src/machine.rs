@@ -227,7 +227,7 @@ pub struct Chip {
     /// Stop the engine at or after this time \[cycles\].
     next_stop: u64,
     /// The blocks seen, decoded and costed (by address and size).
-    blocks: HashMap<(u64, u32), std::sync::Arc<cycles::Block>>,
+    blocks: rustc_hash::FxHashMap<(u64, u32), std::sync::Arc<cycles::Block>>,
     /// Where the last block run ended, and ITSTATE after it (A7.3.3).
     prev_end: u64,
     it_next: u8,
@@ -466,7 +466,7 @@ impl Machine {
             timing: Timing::new(0),
             acr_seen: 0,
             next_stop: u64::MAX,
-            blocks: HashMap::new(),
+            blocks: rustc_hash::FxHashMap::default(),
             prev_end: 0,
             it_next: 0,
             it_fix: None,
