@@ -553,12 +553,20 @@ impl gms_core::device::ParamStore for MemStore {
 fn board_device(
     stored: Option<[u8; gms_core::device::RECORD_LEN]>,
 ) -> gms_core::device::Front<InlineLink, MemStore> {
+    board_device_at(stored, 2048)
+}
+
+/// As [`board_device`], its current sense's zero calibrated at `zero` \[code\].
+fn board_device_at(
+    stored: Option<[u8; gms_core::device::RECORD_LEN]>,
+    zero: u32,
+) -> gms_core::device::Front<InlineLink, MemStore> {
     use gms_core::device::{Front, ParamStore as _, startup};
     let b = board();
     let mut store = MemStore(stored);
     let defaults = default_settings();
     let start = startup(store.load(), &defaults, &b, &mut |_| {}).unwrap();
-    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(codes(2048)));
+    let zero = calibrate_sense(&b, start.settings.sense_v_per_a, || Some(codes(zero)));
     let lp = ControlLoop::new(
         b,
         start.applied,
@@ -568,11 +576,12 @@ fn board_device(
         buffer(),
         ctrl_buf(),
     );
-    let link = InlineLink {
-        lp,
-        mb: gms_core::device::Mailbox::new(),
-        t_us: 0,
+    // The loop's status published from the start, as every shell does before the first step.
+    let mb = gms_core::device::Mailbox {
+        status: lp.status(),
+        ..gms_core::device::Mailbox::new()
     };
+    let link = InlineLink { lp, mb, t_us: 0 };
     Front::new(
         link,
         store,
@@ -640,4 +649,59 @@ fn the_device_s_status_reads_back_as_its_state() {
     let reply = ask(&mut dev, "status");
     let st = StatusReply::parse(reply.trim().strip_prefix("ok ").unwrap()).unwrap();
     assert!(st.configured);
+}
+
+/// The over-current trip within reach whatever the calibrated zero: for a zero anywhere in
+/// the calibration's window (2048 ± 150 codes) and any current limit, the trip's reading from
+/// the zero lies inside the INA240's linear range (0.2 V, 248 codes, inside each rail), so the
+/// ADC shows it before it clips; at 2048 the trip is 0.95 of the hand-computed reach, the
+/// nearer rail's room (4095 - 2048 - 0.2/3.3·4095 codes) × 3.3/4095/3.4 A = 0.4264 A.
+#[test]
+fn the_over_current_trip_is_within_the_senses_linear_range_from_any_zero() {
+    let b = board();
+    let margin = 0.2 / 3.3 * 4095.0;
+    let apc = 3.3 / 4095.0 / 3.4;
+    for zero in (1898..=2198).step_by(10) {
+        for i_max in [0.05f32, 0.2, 0.4, 0.6, 2.0] {
+            let mut s = default_settings();
+            s.i_max = i_max;
+            let a = prepare(&s, &b).unwrap();
+            let z = calibrate_sense(&b, 3.4, || Some(codes(zero)));
+            assert_eq!(z.faults, Faults::NONE, "{zero}");
+            let lp = ControlLoop::new(b, a, z.sense, z.faults, 0, buffer(), ctrl_buf());
+            let trip_codes = lp.limits().i_trip / apc;
+            let z = zero as f32;
+            assert!(
+                z + trip_codes <= 4095.0 - margin + 0.01 && z - trip_codes >= margin - 0.01,
+                "zero {zero}, i_max {i_max}: trip {} A ({trip_codes} codes)",
+                lp.limits().i_trip
+            );
+            assert!(lp.limits().i_trip <= 1.5 * i_max);
+        }
+    }
+    let reach = (4095.0 - 2048.0 - margin) * apc;
+    assert!((reach - 0.4264).abs() < 1e-4, "{reach}");
+    let lp = rest();
+    assert!(
+        (lp.limits().i_trip - 0.95 * reach).abs() < 1e-4,
+        "{:?}",
+        lp.limits()
+    );
+}
+
+/// A zero 150 codes off (the window's edge) leaves the sense 0.391 A each way: `enable` with
+/// the default 0.4 A limit is refused, saying why, and nothing drives; with `lim.i_max` below
+/// the reach it enables. At 2048 the default enables.
+#[test]
+fn enable_is_refused_when_the_sense_cannot_reach_the_current_limit() {
+    let mut dev = board_device_at(None, 2198);
+    assert_eq!(
+        ask(&mut dev, "enable").trim_end(),
+        "err 8 lim.i_max beyond what the current sense reaches from its zero"
+    );
+    assert!(ask(&mut dev, "status").contains(" enabled=0 "));
+    assert_eq!(ask(&mut dev, "set lim.i_max 0.38").trim_end(), "ok");
+    assert_eq!(ask(&mut dev, "enable").trim_end(), "ok");
+    let mut dev = board_device_at(None, 2048);
+    assert_eq!(ask(&mut dev, "enable").trim_end(), "ok");
 }

@@ -107,6 +107,7 @@ pub struct Plant {
     supply: f64,
     adc_lsb: f64,
     adc_max: f64,
+    sense_offset_codes: f64,
     pwm_steps: f64,
     noise: Normal<f64>,
     rng: ChaCha8Rng,
@@ -206,6 +207,7 @@ impl Plant {
             supply: spec.supply_v,
             adc_lsb: lsb,
             adc_max: spec.adc_range,
+            sense_offset_codes: spec.sense.offset_codes,
             pwm_steps: spec.pwm_steps as f64,
             noise: Normal::new(0.0, spec.adc_noise).map_err(|e| format!("plant.adc_noise: {e}"))?,
             rng,
@@ -308,6 +310,12 @@ impl Plant {
     /// board's average's: one of the n conversions averaged has √n times it).
     pub fn sense(&mut self, noise_scale: f64) -> f64 {
         self.sense_sign * self.i + noise_scale * self.noise.sample(&mut self.rng)
+    }
+
+    /// The current-sense chain's zero off the ADC's mid-scale \[codes\] (`[plant.sense]
+    /// offset_codes`): a board's ADC model adds it to every conversion.
+    pub fn sense_offset_codes(&self) -> f64 {
+        self.sense_offset_codes
     }
 
     /// The current-sense reading now \[A\]: noise, then quantisation and clipping.

@@ -131,6 +131,14 @@ fn both_on(toml: &str, check: impl Fn(&mut dyn Dut)) {
 }
 
 #[test]
+fn a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach() {
+    both_on(
+        suite::SENSE_ZERO_LOW,
+        suite::a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach,
+    );
+}
+
+#[test]
 fn status_keys_are_one_set() {
     let expect = [
         "mode",

@@ -44,9 +44,20 @@ struct Image {
 impl Image {
     /// The image from reset, served on a free port, its flash erased.
     fn start() -> Image {
+        Self::start_on(None)
+    }
+
+    /// As [`Image::start`], the plant the scenario `toml` (a scenario file's text) if any.
+    fn start_on(toml: Option<&str>) -> Image {
         let dir = tempfile::tempdir().unwrap();
         let flash = dir.path().join("flash.bin");
-        let served = Self::serve(&flash);
+        let mut args = vec!["--flash".to_string(), flash.display().to_string()];
+        if let Some(toml) = toml {
+            let file = dir.path().join("scenario.toml");
+            std::fs::write(&file, toml).unwrap();
+            args.extend(["--scenario".to_string(), file.display().to_string()]);
+        }
+        let served = Self::serve(&args);
         let link = TcpLink::connect(&served.addr);
         Image {
             served,
@@ -57,8 +68,9 @@ impl Image {
         }
     }
 
-    fn serve(flash: &std::path::Path) -> Served {
-        Served::start(&["--flash", &flash.display().to_string()], REPLY_WITHIN)
+    fn serve(args: &[String]) -> Served {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        Served::start(&args, REPLY_WITHIN)
     }
 
     /// Device time \[s\]: `status`'s `t=`, its telemetry kept for the next reply.
@@ -95,7 +107,7 @@ impl Dut for Image {
     fn restart(&mut self) {
         // The process ends (as the supply does); the flash file stays.
         self.served.stop();
-        self.served = Self::serve(&self.flash);
+        self.served = Self::serve(&["--flash".to_string(), self.flash.display().to_string()]);
         self.link = TcpLink::connect(&self.served.addr);
         self.telemetry.clear();
     }
@@ -126,6 +138,13 @@ fn a_second_move_mid_move_continues_the_reference() {
 #[test]
 fn a_following_error_latches_and_clear_works() {
     on_image(suite::a_following_error_latches_and_clear_works);
+}
+
+#[test]
+fn a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach() {
+    suite::a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach(&mut Image::start_on(Some(
+        suite::SENSE_ZERO_LOW,
+    )));
 }
 
 #[test]

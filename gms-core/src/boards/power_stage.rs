@@ -59,6 +59,11 @@ pub const SENSE_OFFSET_EXPECTED: f32 = 2048.0;
 /// How far the measured zero may lie from it \[code\] (INA240 offset, resistor tolerances).
 pub const SENSE_OFFSET_TOLERANCE: f32 = 150.0;
 
+/// How near its 3.3 V supply and ground the INA240's output stays linear \[V\]: about 0.2 V
+/// (the hardware review of its datasheet's output swing). With the zero at 1.65 V and 3.4 V/A
+/// that leaves ±0.43 A; a zero at the calibration window's edge (150 codes off), ±0.39 A.
+pub const SENSE_LINEAR_MARGIN_V: f32 = 0.2;
+
 /// How the current is sampled on a board clocked by `clocks`: 8 conversions of 15 cycles'
 /// sampling (0.71 us at 21 MHz: the INA240's output drives the pin directly) + 12, from a
 /// trigger latency of 2 ADC cycles (DS8626 t_latr, at most 3): 218 ADC cycles, a 10.4 us
@@ -119,6 +124,7 @@ pub const fn board(clocks: &F4Clocks) -> Board {
             full_scale: ADC_FULL_SCALE,
             zero_code: SENSE_OFFSET_EXPECTED,
             zero_tolerance: SENSE_OFFSET_TOLERANCE,
+            linear_margin_v: SENSE_LINEAR_MARGIN_V,
             window_s: timing.window_s(),
         },
         limits: limits(clocks),

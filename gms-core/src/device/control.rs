@@ -262,7 +262,7 @@ impl ControlLoop {
         let ratio = a.ctrl.params().ratio().max(1);
         let enc_dir = a.ctrl.params().enc_dir;
         *ctrl = a.ctrl;
-        ControlLoop {
+        let mut lp = ControlLoop {
             board,
             ratio,
             ctrl,
@@ -303,7 +303,9 @@ impl ControlLoop {
             fresh: false,
             done: None,
             ahead: None,
-        }
+        };
+        lp.limits = lp.reachable(lp.limits);
+        lp
     }
 
     /// The loop with a table motion's buffer (`buf`: [`crate::control::table::TABLE_VALUES`] values).
@@ -530,7 +532,7 @@ impl ControlLoop {
             // control interrupt); the old one goes back to the protocol side in its place.
             core::mem::swap(&mut self.ctrl, &mut a.ctrl);
             a.taken = true;
-            self.limits = a.limits;
+            self.limits = self.reachable(a.limits);
             self.map_cursor = cursor;
         }
         match req.map {
@@ -891,6 +893,27 @@ impl ControlLoop {
             timing,
             sample,
         }
+    }
+
+    /// `l` with its over-current trip within what the current sense measures from the zero
+    /// start-up calibration found (at most 0.95 of [`SenseChain::reach`](super::SenseChain)
+    /// from it, with the running `sense.v_per_a`): the trip is met before the amplifier leaves
+    /// its linear range or the ADC clips, wherever within its window the zero came out.
+    fn reachable(&self, mut l: Limits) -> Limits {
+        let reach = self
+            .board
+            .sense
+            .reach(self.sense.offset, self.ctrl.params().sense_v_per_a);
+        let cap = 0.95 * reach;
+        if l.i_trip > cap || l.i_trip.is_nan() {
+            l.i_trip = cap;
+        }
+        l
+    }
+
+    /// The safety limits the loop checks (its over-current trip within the sense's reach).
+    pub fn limits(&self) -> Limits {
+        self.limits
     }
 
     /// Records the duration of the step just run \[cycles\] and whether it wrote the bridge's

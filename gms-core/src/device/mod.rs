@@ -86,6 +86,11 @@ pub struct SenseChain {
     /// How far the measured zero may lie from `zero_code` \[code\] (amplifier offset, resistor
     /// tolerances).
     pub zero_tolerance: f32,
+    /// How near each rail of the ADC's input range the amplifier's output stays linear \[V\]
+    /// (an INA240 on a 3.3 V supply: within about 0.2 V of its supply, per the hardware
+    /// review of its datasheet; 0 for an ideal sense). Past it the reading no longer grows
+    /// with the current, so a trip set there would never be reached.
+    pub linear_margin_v: f32,
     /// From the sampling trigger to the last conversion's end \[s\] ([`crate::drive::SenseTiming`];
     /// 0 for an instantaneous sense): the window is centred on the PWM period's turning point
     /// and the control step starts at its end, so it must leave the step its budget:
@@ -108,13 +113,23 @@ impl SenseChain {
     }
 
     /// The largest current the chain shows in either direction around its nominal zero
-    /// \[A\], with an amplifier of `v_per_a` \[V/A\].
+    /// \[A\], with an amplifier of `v_per_a` \[V/A\] ([`SenseChain::reach`] from `zero_code`).
     pub fn range(&self, v_per_a: f32) -> f32 {
-        let room = self
-            .zero_code
-            .min(self.full_scale - self.zero_code)
-            .max(0.0);
-        room * self.amps_per_code(v_per_a)
+        self.reach(self.zero_code, v_per_a)
+    }
+
+    /// The largest current \[A\] the chain measures in both directions from a zero at
+    /// `zero` \[code\] (the one start-up calibration found), with an amplifier of `v_per_a`
+    /// \[V/A\]: the room from the zero to the nearer end of the amplifier's linear range
+    /// ([`SenseChain::linear_margin_v`] inside each rail), 0 if there is none.
+    pub fn reach(&self, zero: f32, v_per_a: f32) -> f32 {
+        let margin = self.linear_margin_v / self.vref * self.full_scale;
+        let room = (zero - margin).min(self.full_scale - margin - zero);
+        if room > 0.0 {
+            room * self.amps_per_code(v_per_a)
+        } else {
+            0.0
+        }
     }
 }
 

@@ -58,6 +58,8 @@ pub fn board(sc: &Scenario) -> Board {
             vref: SIM_ADC_VREF,
             full_scale: (2.0 * adc.mid) as f32,
             zero_code: adc.mid as f32,
+            // The plant's ADC is linear to its ends (its range is the scenario's).
+            linear_margin_v: 0.0,
             window_s: 0.0,
             ..real.sense
         },
@@ -80,6 +82,8 @@ struct Adc {
     lsb: f64,
     mid: f64,
     top: f64,
+    /// The chain's zero off mid-scale (`[plant.sense] offset_codes`) \[codes\].
+    offset: f64,
 }
 
 impl Adc {
@@ -89,12 +93,14 @@ impl Adc {
             lsb: 2.0 * sc.plant.adc_range / full,
             mid: full / 2.0,
             top: full - 1.0,
+            offset: sc.plant.sense.offset_codes,
         }
     }
 
-    /// The code of a current the plant's ADC measured \[A\].
-    fn code(&self, amps: f32) -> u32 {
-        (amps as f64 / self.lsb + self.mid)
+    /// The code of the sense chain's output \[A\] (the plant's `sense`, noise included):
+    /// quantised around the chain's zero, clipped at the ADC's ends.
+    fn code(&self, amps: f64) -> u32 {
+        ((amps / self.lsb).round() + self.mid + self.offset)
             .round()
             .clamp(0.0, self.top) as u32
     }
@@ -160,7 +166,7 @@ impl Sim {
         for _ in 0..n {
             let inp = Inputs {
                 encoder: self.plant.encoder() as u32,
-                current_codes: self.adc.code(self.plant.adc()),
+                current_codes: self.adc.code(self.plant.sense(1.0)),
                 // Simulated time: the steps are exactly one period apart (in the board's
                 // step clock, ns), so none is ever missed.
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
@@ -233,7 +239,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
     let adc = Adc::new(sc);
     let mut plant = Plant::new(&sc.plant, sc.plant.seed)?;
     let zero = device::calibrate_sense(&board, start.settings.sense_v_per_a, || {
-        Some(adc.code(plant.adc()))
+        Some(adc.code(plant.sense(1.0)))
     });
     let mut faults = start.faults;
     faults.latch(zero.faults);

@@ -201,6 +201,9 @@ impl Scenario {
                 ));
             }
         }
+        if !(p.sense.offset_codes.is_finite() && p.sense.offset_codes.abs() <= 1000.0) {
+            return Err("plant.sense.offset_codes must be a finite number within ±1000".into());
+        }
         let r = &p.ripple;
         if !(r.amplitude.is_finite() && r.phase.is_finite()) {
             return Err("plant.ripple.amplitude and phase must be finite numbers".into());

@@ -60,6 +60,18 @@ pub struct Plant {
     pub compliance: Compliance,
     /// Position-dependent torque: cogging and the screw's once-per-revolution friction.
     pub ripple: Ripple,
+    /// The current-sense chain as built: where its zero lies.
+    pub sense: SenseSpec,
+}
+
+/// The current-sense chain's departures from its nominal design (`[plant.sense]`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SenseSpec {
+    /// The amplifier's zero off the ADC's mid-scale \[ADC codes\] (its offset and the
+    /// reference divider's tolerance): the device's start-up calibration finds it, and a
+    /// board refuses one more than its window (150 codes on the F4 boards) away.
+    pub offset_codes: f64,
 }
 
 /// The stage's structural mode: the rotor side (motor, gearhead, screw) and the slide joined

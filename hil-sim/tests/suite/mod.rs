@@ -213,6 +213,32 @@ pub fn an_over_current_latches(d: &mut dyn Dut) {
     assert_eq!(field(&st, "enabled"), 0.0);
 }
 
+/// The scenario that puts the current sense's zero 130 codes below mid-scale
+/// (`[plant.sense] offset_codes`), for [`a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach`].
+pub const SENSE_ZERO_LOW: &str = "[plant.sense]\noffset_codes = -130.0\n";
+
+/// On a plant whose current-sense zero lies 130 codes below mid-scale ([`SENSE_ZERO_LOW`]):
+/// start-up finds it (inside its window, no fault); with `lim.i_max` 0.48 A `enable` is
+/// refused, as the sense no longer reaches it from there (the image's INA240, linear to 0.2 V
+/// inside its rails: 0.396 A; the simulator's ADC, ±0.5 A about mid-scale: 0.468 A), and
+/// nothing drives; with a limit it reaches the device enables, and a current loop far too
+/// stiff still trips `over_current`.
+pub fn a_sense_zero_off_mid_scale_refuses_a_limit_it_cannot_reach(d: &mut dyn Dut) {
+    let st = d.ask("status");
+    assert!((field(&st, "sense_offset") - 1918.0).abs() < 1.0, "{st}");
+    assert_eq!(field(&st, "faults"), 0.0, "{st}");
+    assert_eq!(d.ask("set lim.i_max 0.48"), "ok");
+    assert_eq!(
+        d.ask("enable"),
+        "err 8 lim.i_max beyond what the current sense reaches from its zero"
+    );
+    assert_eq!(field(&d.ask("status"), "enabled"), 0.0);
+    assert_eq!(d.ask("set lim.i_max 0.3"), "ok");
+    assert_eq!(d.ask("enable"), "ok");
+    assert_eq!(d.ask("disable"), "ok");
+    an_over_current_latches(d);
+}
+
 pub fn a_refused_set_changes_nothing(d: &mut dyn Dut) {
     assert!(d.ask("set gms.fs 1e-6").starts_with("err 7 "));
     assert_eq!(d.ask("get gms.fs"), "ok 0.00022");

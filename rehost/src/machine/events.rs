@@ -168,7 +168,8 @@ impl Machine {
         // conversion has sqrt(length) times it; quantised once, here.
         let n = self.chip().p.adc.length() as f64;
         let amps = self.plant.sense(n.sqrt());
-        let code = (2048.0 + amps * 3.4 * 4095.0 / 3.3)
+        let zero = 2048.0 + self.plant.sense_offset_codes();
+        let code = (zero + amps * 3.4 * 4095.0 / 3.3)
             .round()
             .clamp(0.0, 4095.0) as u32;
         let code = self.chip().inject.sense_code.unwrap_or(code);

@@ -182,6 +182,23 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         self.link.with_mailbox(|m| m.status)
     }
 
+    /// Refuses to drive when the current sense cannot see the current the loop may command:
+    /// from the zero start-up calibration found, the amplifier's linear range reaches less
+    /// than `lim.i_max` (the loop's over-current trip, at most 0.95 of that reach, would
+    /// then sit below currents the loop commands, or be out of reach).
+    fn sense_reaches_i_max(&mut self) -> Result<(), &'static str> {
+        let zero = self.status_now().sense_offset;
+        let v_per_a = self.settings.sense_v_per_a;
+        let reach = self.board.sense.reach(zero, v_per_a);
+        // Within a code (the ADC's resolution, and the calibrated zero's noise): a sense whose
+        // range is the current limit itself (the simulator's) reaches it.
+        let code = self.board.sense.amps_per_code(v_per_a);
+        if reach + code < self.settings.i_max {
+            return Err("lim.i_max beyond what the current sense reaches from its zero");
+        }
+        Ok(())
+    }
+
     /// The link (for the shell's own use of the mailbox).
     pub fn link_mut(&mut self) -> &mut L {
         &mut self.link
