@@ -128,6 +128,18 @@ pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
         w.set_eocie(false);
         w.set_ovrie(true);
     });
+    // The analog watchdog on the channel (RM0090 §13.3.7, §13.13.2 ADC_CR1, §13.13.7-8
+    // HTR/LTR): a conversion above 4094 or below 1, at an end of the ADC's range, sets SR.AWD,
+    // which the control step reads ([`clipped`]); no interrupt (a clipped channel would raise
+    // one per conversion).
+    adc.htr().write(|w| w.set_ht(AWD_HIGH));
+    adc.ltr().write(|w| w.set_lt(AWD_LOW));
+    adc.cr1().modify(|w| {
+        w.set_awdch(layout.channel);
+        w.set_awdsgl(pac::adc::vals::Awdsgl::SINGLE_CHANNEL);
+        w.set_awden(true);
+        w.set_awdie(false);
+    });
     if layout.channel >= 10 {
         adc.smpr1()
             .modify(|w| w.set_smp((layout.channel - 10) as usize, SampleTime::CYCLES15));
@@ -161,6 +173,27 @@ pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
         w.set_exten(Exten::RISING_EDGE);
         w.set_adon(true);
     });
+}
+
+/// The analog watchdog's high threshold \[code\]: a conversion of 4095 is above it.
+pub const AWD_HIGH: u16 = 4094;
+/// The analog watchdog's low threshold \[code\]: a conversion of 0 is below it.
+pub const AWD_LOW: u16 = 1;
+
+/// ADC_SR written to clear AWD alone: rc_w0 flags in bits 0-5 (AWD, EOC, JEOC, JSTRT,
+/// STRT, OVR), 1 leaves a flag, 0 clears it; reserved bits 0 (RM0090 §13.13.1). Not a
+/// read-modify-write, which would clear a flag set between the read and the write.
+pub const SR_CLEAR_AWD: u32 = 0x3E;
+
+/// True when a conversion since the last call read at an end of the ADC's range (SR.AWD,
+/// [`init`]'s watchdog); the flag cleared.
+#[inline(always)]
+pub fn clipped(adc: pac::adc::Adc) -> bool {
+    let hit = adc.sr().read().awd();
+    if hit {
+        adc.sr().write(|w| w.0 = SR_CLEAR_AWD);
+    }
+    hit
 }
 
 /// Clears the stream's flags (LIFCR, RM0090 §10.5.3).

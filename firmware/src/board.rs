@@ -197,6 +197,13 @@ impl ControlHw {
         pwm::set_bridge(pac::TIM8, in1, in2);
     }
 
+    /// True when one of the current sense's conversions since the last call read 0 or 4095
+    /// (the ADC's analog watchdog, `f4_regs::sense::clipped`).
+    #[inline(always)]
+    pub fn sense_clipped(&self) -> bool {
+        sense::clipped(pac::ADC1)
+    }
+
     /// Where the PWM timer is in its period now (gms-core's `drive::pwm_phase`).
     #[inline(always)]
     pub fn pwm_phase(&self) -> u32 {

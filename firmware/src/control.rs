@@ -171,6 +171,9 @@ impl Loop {
             t0.wrapping_sub(self.last_start)
         };
         self.last_start = t0.max(1);
+        if self.hw.sense_clipped() {
+            self.core.sense_clipped();
+        }
         let inp = Inputs {
             encoder: self.hw.encoder_raw(),
             current_codes: self.hw.current_codes(),

@@ -705,3 +705,27 @@ fn enable_is_refused_when_the_sense_cannot_reach_the_current_limit() {
     let mut dev = board_device_at(None, 2048);
     assert_eq!(ask(&mut dev, "enable").trim_end(), "ok");
 }
+
+/// A conversion at an end of the ADC's range (the shell's analog watchdog): while disabled
+/// nothing; while driving `over_current` latched and the bridge off before the step.
+#[test]
+fn a_clipped_conversion_latches_over_current_while_driving() {
+    let period = period_cycles();
+    let mut lp = rest();
+    step(&mut lp, 0, None);
+    lp.sense_clipped();
+    assert_eq!(lp.faults(), Faults::NONE);
+    let enable = Requests {
+        enable: true,
+        ..Requests::default()
+    };
+    step(&mut lp, period, Some(enable));
+    assert!(lp.enabled());
+    lp.sense_clipped();
+    assert!(!lp.enabled());
+    assert!(
+        lp.faults().contains(Faults::OVER_CURRENT),
+        "{:?}",
+        lp.faults()
+    );
+}

@@ -322,3 +322,29 @@ fn a_step_that_writes_its_duty_past_the_update_is_an_overrun() {
     // Not by length: the longest step within the 18.75 µs budget of a 25 µs period.
     assert!(value(&st, "step_us_worst") < 18.75, "{st}");
 }
+
+/// One conversion of one period at an end of the ADC's range (a spike the average of eight
+/// hides: 2048 + 2047/8 codes is 0.06 A, far below the trip) while the bridge drives: the
+/// ADC's analog watchdog sees it, the step latches `over_current` and switches the bridge off.
+/// One conversion one code inside either end: nothing.
+#[test]
+fn one_conversion_at_an_end_of_the_adcs_range_latches_over_current() {
+    for inside in [4094, 1] {
+        let mut m = driving();
+        m.chip_mut().inject.sense_code_once = Some(inside);
+        m.run_for(0.002).unwrap();
+        assert!(m.chip().inject.sense_code_once.is_none());
+        let st = status(&mut m);
+        assert!(
+            st.contains("enabled=1") && st.contains("fault_names=none"),
+            "{inside}: {st}"
+        );
+    }
+    for end in [4095, 0] {
+        let mut m = driving();
+        m.chip_mut().inject.sense_code_once = Some(end);
+        m.run_for(0.002).unwrap();
+        assert!(!m.bridge_driving(), "{end}");
+        off_with(&mut m, &["over_current"]);
+    }
+}

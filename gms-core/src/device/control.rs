@@ -911,6 +911,17 @@ impl ControlLoop {
         l
     }
 
+    /// A current-sense conversion read at an end of the ADC's range (0 or full scale: the
+    /// board's analog watchdog, the simulator's ADC): the current is past what the sense
+    /// measures, so while driving `over_current` is latched and the bridge switched off (the
+    /// step that follows drives nothing). Call before the period's [`ControlLoop::step`].
+    pub fn sense_clipped(&mut self) {
+        if self.enabled {
+            self.faults.latch(Faults::OVER_CURRENT);
+            self.switch_off();
+        }
+    }
+
     /// The safety limits the loop checks (its over-current trip within the sense's reach).
     pub fn limits(&self) -> Limits {
         self.limits

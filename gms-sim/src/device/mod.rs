@@ -164,9 +164,14 @@ impl Sim {
         let (theta, count) = (self.plant.theta, self.plant.encoder());
         let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
         for _ in 0..n {
+            let code = self.adc.code(self.plant.sense(1.0));
+            if code == 0 || code as f64 >= self.adc.top {
+                // At an end of the ADC's range, as the board's analog watchdog sees it.
+                self.core.sense_clipped();
+            }
             let inp = Inputs {
                 encoder: self.plant.encoder() as u32,
-                current_codes: self.adc.code(self.plant.sense(1.0)),
+                current_codes: code,
                 // Simulated time: the steps are exactly one period apart (in the board's
                 // step clock, ns), so none is ever missed.
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,

@@ -173,6 +173,12 @@ impl Machine {
             .round()
             .clamp(0.0, 4095.0) as u32;
         let code = self.chip().inject.sense_code.unwrap_or(code);
+        let code = self
+            .chip_mut()
+            .inject
+            .sense_code_once
+            .take()
+            .unwrap_or(code);
         let c = self.chip_mut();
         if c.p.adc.take_conversion(t, code) {
             // DMA2 stream 0, channel 0 (ADC1): a halfword into memory.

@@ -164,6 +164,8 @@ pub struct Inject {
     /// Every ADC conversion reads this code (a dead sense chain: its amplifier unpowered
     /// reads 0, a broken ground full scale).
     pub sense_code: Option<u32>,
+    /// The next ADC conversion alone reads this code (a spike), then the plant again.
+    pub sense_code_once: Option<u32>,
     /// The encoder's counter no longer follows the axis (a broken encoder cable).
     pub encoder_frozen: bool,
     /// Flash writes so far (each program store and each sector erase).

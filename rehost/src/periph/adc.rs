@@ -4,8 +4,12 @@
 //! its conversion time ((SMPR + 12) ADC clocks each, the ADC clock APB2 / ADCPRE), and DMA
 //! requests (CR2.DMA). The machine takes the conversions as they finish
 //! ([`Adc::take_conversion`]) and hands each to DMA2 stream 0; a conversion whose data the
-//! DMA did not take sets OVR.
+//! DMA did not take sets OVR. The analog watchdog (RM0090 §13.3.7: CR1.AWDEN on the regular
+//! channels, AWDSGL with AWDCH for one channel, HTR and LTR) sets SR.AWD on a conversion above
+//! HTR or below LTR, and interrupts with CR1.AWDIE.
 
+/// SR.AWD.
+pub const SR_AWD: u32 = 1;
 /// SR.EOC.
 pub const SR_EOC: u32 = 1 << 1;
 /// SR.STRT.
@@ -22,6 +26,12 @@ pub const CR2_DDS: u32 = 1 << 9;
 const OVRIE: u32 = 1 << 26;
 /// CR1.EOCIE.
 const EOCIE: u32 = 1 << 5;
+/// CR1.AWDIE.
+const AWDIE: u32 = 1 << 6;
+/// CR1.AWDSGL.
+const AWDSGL: u32 = 1 << 9;
+/// CR1.AWDEN (the regular channels).
+const AWDEN: u32 = 1 << 23;
 /// The trigger latency \[ADC clocks\] (DS10693 t_latr: 2 typical, 3 at most).
 pub const LATENCY: u64 = 2;
 
@@ -47,6 +57,8 @@ const CR1: usize = 1;
 const CR2: usize = 2;
 const SMPR1: usize = 3;
 const SMPR2: usize = 4;
+const HTR: usize = 9;
+const LTR: usize = 10;
 const SQR1: usize = 11;
 const SQR3: usize = 13;
 const DR: usize = 19;
@@ -54,8 +66,11 @@ const DR: usize = 19;
 impl Adc {
     /// The ADC at reset on a core whose APB2 clock is 1/`apb2_div` of the core's.
     pub fn new(apb2_div: u64) -> Adc {
+        let mut regs = [0; 0x50 / 4];
+        // HTR resets to 0x0FFF (RM0090 §13.13.7).
+        regs[HTR] = 0x0FFF;
         Adc {
-            regs: [0; 0x50 / 4],
+            regs,
             ccr: 0,
             running: None,
             apb2_div,
@@ -137,6 +152,14 @@ impl Adc {
         }
         self.dr = code & 0xFFF;
         self.regs[SR] |= SR_EOC;
+        // The analog watchdog: the channel converted is the sequence's (the firmware's ranks
+        // all convert one channel: SQ1's).
+        let cr1 = self.regs[CR1];
+        let channel = self.regs[SQR3] & 0x1F;
+        let watched = cr1 & AWDEN != 0 && (cr1 & AWDSGL == 0 || cr1 & 0x1F == channel);
+        if watched && (self.dr > self.regs[HTR] & 0xFFF || self.dr < self.regs[LTR] & 0xFFF) {
+            self.regs[SR] |= SR_AWD;
+        }
         self.running = if left > 1 {
             Some((t + self.conversion_cycles(), left - 1))
         } else {
@@ -155,11 +178,13 @@ impl Adc {
         self.dr
     }
 
-    /// The interrupt line (ADC_IRQn): OVR with OVRIE, EOC with EOCIE.
+    /// The interrupt line (ADC_IRQn): OVR with OVRIE, EOC with EOCIE, AWD with AWDIE.
     pub fn irq(&self) -> bool {
         let sr = self.regs[SR];
         let cr1 = self.regs[CR1];
-        (sr & SR_OVR != 0 && cr1 & OVRIE != 0) || (sr & SR_EOC != 0 && cr1 & EOCIE != 0)
+        (sr & SR_OVR != 0 && cr1 & OVRIE != 0)
+            || (sr & SR_EOC != 0 && cr1 & EOCIE != 0)
+            || (sr & SR_AWD != 0 && cr1 & AWDIE != 0)
     }
 
     /// Reads the register at `off` (0x300.. the common ones).
@@ -219,6 +244,41 @@ mod tests {
             0,
         );
         a
+    }
+
+    /// The analog watchdog on the sequence's channel with HTR 4094 and LTR 1: a conversion
+    /// at either end of the range sets AWD (not one inside), which stays until written 0
+    /// (rc_w0: writing 1 to the other flags leaves them); off, or on another channel, never.
+    #[test]
+    fn the_analog_watchdog_flags_a_conversion_at_either_end() {
+        let run = |cr1: u32, codes: &[u32]| {
+            let mut a = sequence_of_16_on_tim8();
+            a.write(0x24, 4094, 0);
+            a.write(0x28, 1, 0);
+            a.write(0x04, cr1, 0);
+            a.trigger(0);
+            for &c in codes {
+                assert!(a.take_conversion(a.next_event().unwrap(), c));
+                a.dma_read();
+            }
+            a.read(0) & SR_AWD != 0
+        };
+        let on = AWDEN | AWDSGL | 10;
+        assert!(!run(on, &[1, 2048, 4094]));
+        assert!(run(on, &[2048, 4095, 2048]));
+        assert!(run(on, &[2048, 0]));
+        assert!(!run(0, &[0, 4095]));
+        assert!(!run(AWDEN | AWDSGL | 11, &[0, 4095]));
+        assert!(run(AWDEN | 11, &[0]));
+        let mut a = sequence_of_16_on_tim8();
+        a.write(0x28, 1, 0);
+        a.write(0x04, on | AWDIE, 0);
+        a.trigger(0);
+        a.take_conversion(a.next_event().unwrap(), 0);
+        assert!(a.irq());
+        a.write(0x00, 0x3E, 0);
+        assert_eq!(a.read(0) & SR_AWD, 0);
+        assert_ne!(a.read(0) & SR_EOC, 0);
     }
 
     #[test]
