@@ -1,7 +1,8 @@
 //! A board's faults, thrown at the shipped image on emulated silicon (`REHOST_ELF`, the
-//! Nucleo's): a dead current-sense chain, an encoder that stops counting or jumps, a control
-//! step that hangs (the deadman, then the watchdog), a power cut at every flash write of a
-//! `save`. Each asserts what the image does: the bridge, the faults latched, the log line,
+//! Nucleo's): a dead current-sense chain, one conversion at an end of the ADC's range, an
+//! encoder that stops counting or jumps, a control step that hangs (the deadman, then the
+//! watchdog), control steps that start late and write their duty past the update, a power cut
+//! at every flash write of a `save`. Each asserts what the image does: the bridge, the faults latched, the log line,
 //! what survives. (No HSE is `rehost check`'s; an over-current and a request cut by a lost
 //! link are the conformance suite's, `conformance.rs`.)
 

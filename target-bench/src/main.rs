@@ -281,7 +281,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                     },
                 );
                 black_box((o.compare, o.sample.map(|s| s.error)));
-                black_box(lp.finish(black_box(3000)));
+                black_box(lp.finish(black_box(3000), black_box(false)));
             }
         },
         |i| {
