@@ -44,11 +44,14 @@ pub fn device_view(d: &Desc) {
     assert_eq!(d.timing.adc_hz, d.clocks.adc_hz(), "{}", d.name);
     assert!(d.timing.adc_hz <= 36_000_000, "{}", d.name);
     // The device's default `sense.v_per_a` is the power stage as built: 68 mohm × 50 shows
-    // ±0.485 A around the 1.65 V zero (2047 codes of 0.237 mA).
+    // ±0.426 A around the 1.65 V zero within the INA240's linear range (2047 codes of
+    // 0.237 mA to the top rail, less the 0.2 V, 248 codes, the amplifier does not reach).
     let s = default_settings();
     assert_eq!(s.sense_v_per_a, d.sense_v_per_a, "{}", d.name);
     let range = b.sense.range(s.sense_v_per_a);
-    assert!((range - 0.4852).abs() < 1e-4, "{}: {range}", d.name);
+    let expect = (2047.0 - 0.2 / 3.3 * 4095.0) * (3.3 / 4095.0 / 3.4);
+    assert!((range - expect).abs() < 1e-4, "{}: {range}", d.name);
+    assert!((range - 0.4264).abs() < 1e-4, "{}: {range}", d.name);
     // The encoder filter for the board's timer clock passes the design rate.
     let (code, window) = drive::encoder_filter(d.clocks.tim_apb1_hz(), d.encoder_max_rate);
     assert!(code > 0 && window <= 0.5 / d.encoder_max_rate, "{}", d.name);
