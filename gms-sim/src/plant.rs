@@ -152,6 +152,9 @@ pub struct Plant {
     pending_duty: f64,
     /// Energy ledger.
     pub energy: Energy,
+    /// The last step's length \[s\] and its RL decay `exp(-R/L dt)`: the step length is
+    /// constant in a run, and the exponential was a tenth of a simulation's time.
+    decay_memo: (f64, f64),
 }
 
 /// Scales a friction table's parameters by independent uniform factors in [1-v, 1+v]
@@ -245,6 +248,7 @@ impl Plant {
             voltage: 0.0,
             pending_duty: 0.0,
             energy: Energy::default(),
+            decay_memo: (f64::NAN, 0.0),
         })
     }
 
@@ -341,7 +345,13 @@ impl Plant {
         let a = self.r / self.l;
         let i_ss = (self.voltage - self.k_e * self.omega) / self.r;
         let d0 = self.i - i_ss;
-        let e = (-a * dt).exp();
+        let e = if dt == self.decay_memo.0 {
+            self.decay_memo.1
+        } else {
+            let e = (-a * dt).exp();
+            self.decay_memo = (dt, e);
+            e
+        };
         let i_int = i_ss * dt + d0 * (1.0 - e) / a; // ∫ i dt
         let i2_int = i_ss * i_ss * dt
             + 2.0 * i_ss * d0 * (1.0 - e) / a

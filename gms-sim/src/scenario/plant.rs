@@ -152,6 +152,10 @@ impl Ripple {
     /// The factor on the actuator friction at motor angle `theta` \[-\], for a gearhead of
     /// `gear_ratio` (the screw turns once per `gear_ratio` motor revolutions).
     pub fn screw_factor(&self, theta: f64, gear_ratio: f64) -> f64 {
+        if self.screw_friction == 0.0 {
+            // No modulation (the default): the sine's cost spared, the same 1.
+            return 1.0;
+        }
         1.0 + self.screw_friction * (theta / gear_ratio + self.screw_phase).sin()
     }
 }
