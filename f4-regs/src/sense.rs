@@ -122,19 +122,17 @@ pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
     // regular channels"). An overrun (a conversion lost: the ADC stops its DMA requests until
     // OVR is cleared, §13.8.1) interrupts on the ADC vector.
     let adc = r.adc;
+    // The analog watchdog on the channel (RM0090 §13.3.7, §13.13.2 ADC_CR1, §13.13.7-8
+    // HTR/LTR): a conversion above 4094 or below 1, at an end of the ADC's range, sets SR.AWD,
+    // which the control step reads ([`clipped`]); no interrupt (a clipped channel would raise
+    // one per conversion). Its thresholds first, then CR1 in one read-modify-write.
+    adc.htr().write(|w| w.set_ht(AWD_HIGH));
+    adc.ltr().write(|w| w.set_lt(AWD_LOW));
     adc.cr1().modify(|w| {
         w.set_res(Res::BITS12);
         w.set_scan(true);
         w.set_eocie(false);
         w.set_ovrie(true);
-    });
-    // The analog watchdog on the channel (RM0090 §13.3.7, §13.13.2 ADC_CR1, §13.13.7-8
-    // HTR/LTR): a conversion above 4094 or below 1, at an end of the ADC's range, sets SR.AWD,
-    // which the control step reads ([`clipped`]); no interrupt (a clipped channel would raise
-    // one per conversion).
-    adc.htr().write(|w| w.set_ht(AWD_HIGH));
-    adc.ltr().write(|w| w.set_lt(AWD_LOW));
-    adc.cr1().modify(|w| {
         w.set_awdch(layout.channel);
         w.set_awdsgl(pac::adc::vals::Awdsgl::SINGLE_CHANNEL);
         w.set_awden(true);

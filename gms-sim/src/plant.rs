@@ -95,6 +95,20 @@ struct TwoMass {
     c: f64,
 }
 
+/// One drive pulse of the real bridge, in time from its period's start \[s\]: on from `on`
+/// to `off`, in the direction `sign`. An edge is fixed (its dead time added by the current's
+/// direction then) when the integration first reaches it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Pulse {
+    on: f64,
+    off: f64,
+    sign: f64,
+    on_fixed: bool,
+    off_fixed: bool,
+    /// False for a full-period pulse (|duty| = 1): its outputs never switch, no dead time.
+    edges: bool,
+}
+
 /// The plant's state and models.
 pub struct Plant {
     r: f64,
@@ -104,7 +118,23 @@ pub struct Plant {
     j: f64,
     ratio: f64,
     rad_per_count: f64,
+    /// The supply's open-circuit voltage \[V\] and source resistance \[ohm\].
     supply: f64,
+    r_source: f64,
+    /// The real bridge (`None`: the ideal one).
+    bridge: Option<crate::scenario::BridgeSpec>,
+    /// The PWM period now: its length \[s\], the time since it started \[s\], its duty
+    /// (quantised, \[-1, 1\]) and the drive pulses that fall in it (this period's and the
+    /// end of the last one's, delayed past its end).
+    period: f64,
+    phase: f64,
+    duty: f64,
+    pulses: [Option<Pulse>; 2],
+    /// Whether the bridge's outputs are on (off: no voltage, the current decays).
+    outputs_on: bool,
+    /// The sense amplifier's time constant \[s\] (0: none) and its output now \[A\].
+    sense_tau: f64,
+    sensed: f64,
     adc_lsb: f64,
     adc_max: f64,
     sense_offset_codes: f64,
@@ -155,6 +185,8 @@ pub struct Plant {
     /// The last step's length \[s\] and its RL decay `exp(-R/L dt)`: the step length is
     /// constant in a run, and the exponential was a tenth of a simulation's time.
     decay_memo: (f64, f64),
+    /// Likewise the sense amplifier's lag over a step, `exp(-dt / tau)`.
+    sense_memo: (f64, f64),
 }
 
 /// Scales a friction table's parameters by independent uniform factors in [1-v, 1+v]
@@ -207,7 +239,20 @@ impl Plant {
             j: spec.inertia,
             ratio: spec.ratio(),
             rad_per_count: spec.rad_per_count,
-            supply: spec.supply_v,
+            supply: spec.supply.volts,
+            r_source: spec.supply.r_source_ohm,
+            bridge: (!spec.bridge.ideal).then_some(spec.bridge),
+            period: 0.0,
+            phase: 0.0,
+            duty: 0.0,
+            pulses: [None; 2],
+            outputs_on: true,
+            sense_tau: if spec.sense.bandwidth_hz > 0.0 {
+                1.0 / (2.0 * std::f64::consts::PI * spec.sense.bandwidth_hz)
+            } else {
+                0.0
+            },
+            sensed: 0.0,
             adc_lsb: lsb,
             adc_max: spec.adc_range,
             sense_offset_codes: spec.sense.offset_codes,
@@ -249,6 +294,7 @@ impl Plant {
             pending_duty: 0.0,
             energy: Energy::default(),
             decay_memo: (f64::NAN, 0.0),
+            sense_memo: (f64::NAN, 0.0),
         })
     }
 
@@ -279,7 +325,7 @@ impl Plant {
         let (kg, sg) = stiff(&self.gw_spec);
         let r2 = self.ratio * self.ratio;
         SmallSignal {
-            r: self.r,
+            r: self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm),
             l: self.l,
             k_m: self.k_m,
             k_e: self.k_e,
@@ -313,7 +359,12 @@ impl Plant {
     /// noise's standard deviation times `noise_scale` (the scenario's `adc_noise` is the
     /// board's average's: one of the n conversions averaged has √n times it).
     pub fn sense(&mut self, noise_scale: f64) -> f64 {
-        self.sense_sign * self.i + noise_scale * self.noise.sample(&mut self.rng)
+        let i = if self.sense_tau > 0.0 {
+            self.sensed
+        } else {
+            self.i
+        };
+        self.sense_sign * i + noise_scale * self.noise.sample(&mut self.rng)
     }
 
     /// The current-sense chain's zero off the ADC's mid-scale \[codes\] (`[plant.sense]
@@ -332,18 +383,115 @@ impl Plant {
     /// Starts a current-loop period: the duty computed in the previous period is applied now
     /// (one period of delay), and `duty` waits for the next. Duty is quantised to the PWM's
     /// steps and limited to ±1.
-    pub fn set_duty(&mut self, duty: f32) {
+    pub fn set_duty(&mut self, duty: f32, period_s: f64) {
         let d = (duty as f64).clamp(-1.0, 1.0);
         let q = (d * self.pwm_steps).round() / self.pwm_steps;
-        self.voltage = self.pending_duty * self.supply;
+        self.start_period(self.pending_duty, period_s);
         self.pending_duty = q;
+    }
+
+    /// Starts a PWM period of `period_s` \[s\] at the timer counter's bottom, the bridge
+    /// driven at `duty` \[-1, 1\] (as the timer's compare values give it) until the next.
+    /// Centre-aligned: the drive pulse is centred on the counter's top, half a period on, so
+    /// that the brake is centred on the bottom, where the current is sensed. The real
+    /// bridge's outputs follow `delay_s` later: the end of the last period's pulse can fall
+    /// in this one.
+    pub fn start_period(&mut self, duty: f64, period_s: f64) {
+        let duty = if duty.is_finite() {
+            duty.clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        let elapsed = self.phase;
+        // The newest pulse still driving past the period's end (the delay) goes on into this
+        // one; it cannot reach further (the delay is shorter than a period).
+        let carried = self
+            .pulses
+            .iter()
+            .flatten()
+            .map(|p| Pulse {
+                on: p.on - elapsed,
+                off: p.off - elapsed,
+                ..*p
+            })
+            .rfind(|p| p.off > 0.0 || !p.off_fixed);
+        let new = match self.bridge {
+            Some(b) if duty != 0.0 && period_s > 0.0 => {
+                let half = 0.5 * duty.abs() * period_s;
+                let centre = 0.5 * period_s + b.delay_s;
+                Some(Pulse {
+                    on: centre - half,
+                    off: centre + half,
+                    sign: duty.signum(),
+                    on_fixed: false,
+                    off_fixed: false,
+                    edges: duty.abs() < 1.0,
+                })
+            }
+            _ => None,
+        };
+        self.pulses = [carried, new];
+        self.period = period_s;
+        self.phase = 0.0;
+        self.duty = duty;
+    }
+
+    /// The bridge's outputs on or off (the timer's outputs disabled, the pins taken from it):
+    /// off, the bridge applies no voltage.
+    pub fn set_outputs(&mut self, on: bool) {
+        self.outputs_on = on;
+    }
+
+    /// The fraction of the next `dt` \[s\] that the bridge drives, signed by the direction
+    /// \[-1, 1\]: the duty for the ideal bridge; the real one's pulses, each edge fixed when
+    /// reached with its dead time on the side the current's direction gives it.
+    fn drive_fraction(&mut self, dt: f64) -> f64 {
+        if !self.outputs_on {
+            return 0.0;
+        }
+        let Some(b) = self.bridge else {
+            return self.duty;
+        };
+        let (a, e) = (self.phase, self.phase + dt);
+        let i = self.i;
+        let mut sum = 0.0;
+        for p in self.pulses.iter_mut().flatten() {
+            // The current in the pulse's direction: during the dead time it flows on through
+            // the low side's diode (the brake's voltage) and the pulse starts late; against
+            // it, through the high side's (the drive's) and the pulse ends late.
+            let along = p.sign * i >= 0.0;
+            if !p.on_fixed && p.on <= e {
+                if p.edges && along {
+                    p.on += b.dead_time_s;
+                }
+                p.on_fixed = true;
+            }
+            if !p.off_fixed && p.off <= e {
+                if p.edges && !along {
+                    p.off += b.dead_time_s;
+                }
+                p.off_fixed = true;
+            }
+            let overlap = (p.off.min(e) - p.on.max(a)).max(0.0);
+            sum += p.sign * overlap;
+        }
+        (sum / dt).clamp(-1.0, 1.0)
     }
 
     /// Advances the plant by `dt` \[s\] at the applied voltage.
     pub fn step(&mut self, dt: f64) {
-        // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step.
-        let a = self.r / self.l;
-        let i_ss = (self.voltage - self.k_e * self.omega) / self.r;
+        // The bridge: the step's mean voltage from the fraction it drives, at the supply's
+        // voltage less its source resistance's drop under the current drawn (the step's
+        // start).
+        let drive = self.drive_fraction(dt);
+        let bus = self.supply - self.r_source * drive * self.i;
+        self.voltage = drive * bus;
+        self.phase += dt;
+        // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step;
+        // R the winding's and, for the real bridge, the switches' in the current's path.
+        let r = self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm);
+        let a = r / self.l;
+        let i_ss = (self.voltage - self.k_e * self.omega) / r;
         let d0 = self.i - i_ss;
         let e = if dt == self.decay_memo.0 {
             self.decay_memo.1
@@ -359,9 +507,19 @@ impl Plant {
         self.i = i_ss + d0 * e;
         let i_avg = i_int / dt;
         self.energy.input += self.voltage * i_int;
-        self.energy.copper += self.r * i2_int;
+        self.energy.copper += r * i2_int;
         self.energy.converted += self.k_e * self.omega * i_int;
         self.energy.magnetic = 0.5 * self.l * self.i * self.i;
+        if self.sense_tau > 0.0 {
+            let lag = if dt == self.sense_memo.0 {
+                self.sense_memo.1
+            } else {
+                let lag = (-dt / self.sense_tau).exp();
+                self.sense_memo = (dt, lag);
+                lag
+            };
+            self.sensed = self.i + (self.sensed - self.i) * lag;
+        }
         // Mechanics: semi-implicit Euler with the friction, cogging and coupling of the
         // current state.
         let torque = self.k_m * i_avg;

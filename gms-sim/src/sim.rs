@@ -125,7 +125,7 @@ fn run_with(sc: &Scenario, mode: FfMode, seed: u64, oracle: bool) -> Result<RunR
             if let Some(o) = pos_out {
                 out = o;
             }
-            plant.set_duty(duty);
+            plant.set_duty(duty, dt_plant * sc.plant.substeps as f64);
             for _ in 0..sc.plant.substeps {
                 plant.step(dt_plant);
             }

@@ -3,6 +3,7 @@
 
 mod bench_ident;
 mod bench_stage;
+mod bridge;
 mod coarse;
 mod common;
 mod conformance;

@@ -55,7 +55,7 @@ fn measured(sc: &Scenario, f: f64) -> f64 {
     let (mut tr, mut ti, mut vr, mut vi) = (0.0, 0.0, 0.0, 0.0);
     let mut t = 0.0f64;
     for k in 0..n_settle + n_meas {
-        p.set_duty((0.05 * (w * k as f64 * dt_cur).sin()) as f32);
+        p.set_duty((0.05 * (w * k as f64 * dt_cur).sin()) as f32, dt_cur);
         for _ in 0..sub {
             p.step(dt);
             t += dt;

@@ -743,9 +743,9 @@ impl ControlLoop {
             if let Some(req) = req {
                 // Acted on in place, outside the shell's critical section; given back at the
                 // next exchange.
-                took = true;
                 timing = self.take(req);
                 self.done = Some(req);
+                took = true;
             }
         }
         if self.phase == 0 {
@@ -896,7 +896,8 @@ impl ControlLoop {
     }
 
     /// `l` with its over-current trip within what the current sense measures from the zero
-    /// start-up calibration found (at most 0.95 of [`SenseChain::reach`](super::SenseChain)
+    /// start-up calibration found (at most [`TRIP_SHARE_OF_REACH`](crate::drive::TRIP_SHARE_OF_REACH)
+    /// of [`SenseChain::reach`](super::SenseChain)
     /// from it, with the running `sense.v_per_a`): the trip is met before the amplifier leaves
     /// its linear range or the ADC clips, wherever within its window the zero came out.
     fn reachable(&self, mut l: Limits) -> Limits {
@@ -904,10 +905,7 @@ impl ControlLoop {
             .board
             .sense
             .reach(self.sense.offset, self.ctrl.params().sense_v_per_a);
-        let cap = 0.95 * reach;
-        if l.i_trip > cap || l.i_trip.is_nan() {
-            l.i_trip = cap;
-        }
+        l.i_trip = crate::drive::trip_within(l.i_trip, reach);
         l
     }
 

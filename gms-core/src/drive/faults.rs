@@ -159,17 +159,27 @@ pub struct BoardLimits {
 /// radians may be only a few counts, which quantisation and an ordinary move's lag exceed.
 pub const MIN_ERROR_COUNTS: f32 = 64.0;
 
+/// The share of what the current sense reaches that the over-current trip may use [-]: the
+/// trip is met with 5 % of the sense's reach to spare (noise, the ripple about the mean).
+pub const TRIP_SHARE_OF_REACH: f32 = 0.95;
+
+/// `trip` \[A\] held to [`TRIP_SHARE_OF_REACH`] of the sense's `reach` \[A\] (a NaN trip
+/// gives the cap): the one rule for the trip at start-up and at every hand-over.
+pub fn trip_within(trip: f32, reach: f32) -> f32 {
+    let cap = TRIP_SHARE_OF_REACH * reach;
+    if trip < cap { trip } else { cap }
+}
+
 /// The limits the control step checks for the settings `s` on a board `b` whose current
 /// sense shows up to `sense_range` \[A\] with the settings' `sense.v_per_a` (the trip stays
 /// below 95 % of it; see `device::Board::limits`).
 pub fn limits_for(s: &Settings, b: &BoardLimits, sense_range: f32) -> Limits {
     let trip = b.trip_factor * s.i_max;
-    let cap = 0.95 * sense_range;
     let rpc = s.rad_per_count();
     let min_error = MIN_ERROR_COUNTS * rpc;
     let per_step = b.max_speed / rpc / s.pos_rate_hz;
     Limits {
-        i_trip: if trip < cap { trip } else { cap },
+        i_trip: trip_within(trip, sense_range),
         max_error: if b.max_error > min_error {
             b.max_error
         } else {

@@ -84,6 +84,8 @@ struct Adc {
     top: f64,
     /// The chain's zero off mid-scale (`[plant.sense] offset_codes`) \[codes\].
     offset: f64,
+    /// The lowest and highest codes the amplifier's output reaches (`[plant.sense] swing_v`).
+    limits: (f64, f64),
 }
 
 impl Adc {
@@ -94,15 +96,16 @@ impl Adc {
             mid: full / 2.0,
             top: full - 1.0,
             offset: sc.plant.sense.offset_codes,
+            limits: sc.plant.sense.code_limits(SIM_ADC_VREF as f64, full - 1.0),
         }
     }
 
     /// The code of the sense chain's output \[A\] (the plant's `sense`, noise included):
-    /// quantised around the chain's zero, clipped at the ADC's ends.
+    /// quantised around the chain's zero, held within the amplifier's swing.
     fn code(&self, amps: f64) -> u32 {
         ((amps / self.lsb).round() + self.mid + self.offset)
             .round()
-            .clamp(0.0, self.top) as u32
+            .clamp(self.limits.0.ceil(), self.limits.1.floor()) as u32
     }
 }
 
@@ -190,7 +193,7 @@ impl Sim {
                 }
                 q.push_back(s);
             }
-            self.plant.set_duty(duty);
+            self.plant.set_duty(duty, dt_plant * self.substeps as f64);
             for _ in 0..self.substeps {
                 self.plant.step(dt_plant);
             }

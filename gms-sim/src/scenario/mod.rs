@@ -122,7 +122,7 @@ impl Scenario {
     fn check_inner(&self) -> Result<(), String> {
         let p = &self.plant;
         let pos = [
-            ("plant.supply_v", p.supply_v),
+            ("plant.supply.volts", p.supply.volts),
             ("plant.resistance", p.resistance),
             ("plant.inductance", p.inductance),
             ("plant.k_m", p.k_m),
@@ -204,6 +204,27 @@ impl Scenario {
         if !(p.sense.offset_codes.is_finite() && p.sense.offset_codes.abs() <= 1000.0) {
             return Err("plant.sense.offset_codes must be a finite number within ±1000".into());
         }
+        let in_range = |x: f64, lo: f64, hi: f64| x.is_finite() && (lo..=hi).contains(&x);
+        if !in_range(p.sense.bandwidth_hz, 0.0, 1e9) {
+            return Err("plant.sense.bandwidth_hz must be a finite number >= 0 (0: none)".into());
+        }
+        if !(in_range(p.sense.swing_v, 0.0, 1.0) && p.sense.swing_v < 1.0) {
+            return Err("plant.sense.swing_v must be a finite number in [0, 1) V".into());
+        }
+        let b = &p.bridge;
+        for (key, v, hi) in [
+            ("plant.bridge.dead_time_s", b.dead_time_s, 5e-6),
+            ("plant.bridge.delay_s", b.delay_s, 5e-6),
+            ("plant.bridge.r_on_ohm", b.r_on_ohm, 10.0),
+            ("plant.supply.r_source_ohm", p.supply.r_source_ohm, 10.0),
+        ] {
+            if !in_range(v, 0.0, hi) {
+                return Err(format!("{key} must be a finite number in [0, {hi}]"));
+            }
+        }
+        if p.supply.volts > 60.0 {
+            return Err("plant.supply.volts must be at most 60 V".into());
+        }
         let r = &p.ripple;
         if !(r.amplitude.is_finite() && r.phase.is_finite()) {
             return Err("plant.ripple.amplitude and phase must be finite numbers".into());
@@ -284,7 +305,7 @@ impl Scenario {
         s.motor.k_m = p.k_m as f32;
         s.motor.r = p.resistance as f32;
         s.motor.k_e = p.k_e as f32;
-        s.v_supply = p.supply_v as f32;
+        s.v_supply = p.supply.volts as f32;
         s.ff.ratio = p.ratio() as f32;
         let mut guideway = true;
         let mut start = Start::Device;

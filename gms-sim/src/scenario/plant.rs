@@ -7,8 +7,6 @@ use super::*;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Plant {
-    /// H-bridge supply \[V\].
-    pub supply_v: f64,
     /// Winding resistance \[ohm\].
     pub resistance: f64,
     /// Winding inductance \[H\].
@@ -60,8 +58,46 @@ pub struct Plant {
     pub compliance: Compliance,
     /// Position-dependent torque: cogging and the screw's once-per-revolution friction.
     pub ripple: Ripple,
-    /// The current-sense chain as built: where its zero lies.
+    /// The current-sense chain as built: where its zero lies, its bandwidth and its swing.
     pub sense: SenseSpec,
+    /// The H-bridge as built: dead time, delay, on-resistance (or the ideal bridge).
+    pub bridge: BridgeSpec,
+    /// The motor supply: its voltage and its source resistance.
+    pub supply: SupplySpec,
+}
+
+/// The H-bridge (`[plant.bridge]`): a DRV8871-class driver taking IN1/IN2 in slow-decay
+/// sign-magnitude (drive, then brake with both low sides on), its outputs switching
+/// `delay_s` after the timer's edges with `dead_time_s` of both switches off at each edge.
+/// While both are off the current flows on through a body diode, so that the dead time
+/// belongs to the brake when the current flows in the driven direction and to the drive when
+/// it flows against it: the period's mean voltage is `(d − sign(i) t_dead / T) V`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BridgeSpec {
+    /// The ideal bridge: `duty × volts` over the whole period, no dead time, no delay, no
+    /// on-resistance (the plant before issue 55, kept for comparison).
+    pub ideal: bool,
+    /// Both switches of the switching half-bridge off at each of its edges \[s\], in
+    /// [0, 5e-6] (DRV8870/DRV8871 t_DEAD 220 ns typical).
+    pub dead_time_s: f64,
+    /// From the timer's edge to the output's \[s\], in [0, 5e-6] (t_PD 0.7 µs typical, 1 µs
+    /// at most).
+    pub delay_s: f64,
+    /// The on-resistance in the current's path, high side plus low side \[ohm\], in [0, 10]
+    /// (307 + 258 mΩ typical at 24 V, 1 A).
+    pub r_on_ohm: f64,
+}
+
+/// The motor supply (`[plant.supply]`): its voltage sags by `r_source_ohm` times the current
+/// the bridge draws from it (the supply's output resistance, its leads and connector).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupplySpec {
+    /// The open-circuit voltage \[V\], in (0, 60].
+    pub volts: f64,
+    /// The source resistance \[ohm\], in [0, 10].
+    pub r_source_ohm: f64,
 }
 
 /// The current-sense chain's departures from its nominal design (`[plant.sense]`).
@@ -72,6 +108,22 @@ pub struct SenseSpec {
     /// reference divider's tolerance): the device's start-up calibration finds it, and a
     /// board refuses one more than its window (150 codes on the F4 boards) away.
     pub offset_codes: f64,
+    /// The amplifier's bandwidth \[Hz\], a first-order lag on the current it reads; 0: none
+    /// (INA240: 400 kHz).
+    pub bandwidth_hz: f64,
+    /// How close to each rail of the ADC's 3.3 V span the amplifier's output can swing \[V\],
+    /// in [0, 1): readings beyond are held there, short of the ADC's end codes.
+    pub swing_v: f64,
+}
+
+impl SenseSpec {
+    /// The lowest and highest ADC codes the amplifier's output reaches, for an ADC of
+    /// `top` + 1 codes over `vref` \[V\] (`swing_v` short of each rail): a board's ADC model
+    /// holds its conversions within them.
+    pub fn code_limits(&self, vref: f64, top: f64) -> (f64, f64) {
+        let swing = (self.swing_v / vref * top).clamp(0.0, top / 2.0);
+        (swing, top - swing)
+    }
 }
 
 /// The stage's structural mode: the rotor side (motor, gearhead, screw) and the slide joined

@@ -100,6 +100,8 @@ impl Machine {
     pub(super) fn plant_period(&mut self, t: u64) {
         self.advance_plant(t);
         self.applied_duty = self.bridge_duty();
+        let period = self.chip().p.tim8.period_cycles() as f64 / HZ as f64;
+        self.plant.start_period(self.applied_duty, period);
     }
 
     /// The plant advanced from where it was to `t` \[cycles\] at the applied duty, in steps of
@@ -112,12 +114,8 @@ impl Machine {
         };
         self.plant_at = t;
         let dt = cycles as f64 / HZ as f64;
-        let duty = if self.bridge_on() {
-            self.applied_duty
-        } else {
-            0.0
-        };
-        self.plant.voltage = duty * self.supply;
+        let on = self.bridge_on();
+        self.plant.set_outputs(on);
         if dt < 0.01 {
             let n = (dt / 5e-6).ceil().max(1.0) as usize;
             for _ in 0..n {
@@ -169,9 +167,10 @@ impl Machine {
         let n = self.chip().p.adc.length() as f64;
         let amps = self.plant.sense(n.sqrt());
         let zero = 2048.0 + self.plant.sense_offset_codes();
+        let (lo, hi) = self.sense_limits;
         let code = (zero + amps * 3.4 * 4095.0 / 3.3)
             .round()
-            .clamp(0.0, 4095.0) as u32;
+            .clamp(lo.ceil(), hi.floor()) as u32;
         let code = self.chip().inject.sense_code.unwrap_or(code);
         let code = self
             .chip_mut()

@@ -392,7 +392,9 @@ pub struct Machine {
     echo_log: bool,
     /// The plant.
     pub plant: Plant,
-    supply: f64,
+    /// The lowest and highest codes the sense amplifier's output reaches on this ADC
+    /// (`[plant.sense] swing_v`).
+    sense_limits: (f64, f64),
     /// When the plant's state is \[cycles\].
     plant_at: u64,
     /// The bridge's duty since the last update event \[−1, 1\] (the compare values active then).
@@ -728,7 +730,7 @@ impl Machine {
             rtt_cb,
             log,
             echo_log: opts.echo_log,
-            supply: scenario.plant.supply_v,
+            sense_limits: scenario.plant.sense.code_limits(3.3, 4095.0),
             plant,
             plant_at: 0,
             applied_duty: 0.0,

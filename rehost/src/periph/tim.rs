@@ -109,6 +109,17 @@ impl Timer {
         self.arr
     }
 
+    /// The counter's period in core cycles: 2 × ARR ticks centre-aligned (up to ARR, down to
+    /// 0: RM0090 §17.3.2), ARR + 1 edge-aligned.
+    pub fn period_cycles(&self) -> u64 {
+        let counts = if self.centre() {
+            2 * self.arr as u64
+        } else {
+            self.arr as u64 + 1
+        };
+        counts * self.tick()
+    }
+
     /// The active compare value of channel `ch` (0-3).
     pub fn ccr(&self, ch: usize) -> u32 {
         self.ccr[ch]

@@ -1,0 +1,194 @@
+//! The plant's real bridge, supply and sense chain (`[plant.bridge]`, `[plant.supply]`,
+//! `[plant.sense]`) against what their physics gives by hand: the period's mean voltage with
+//! the dead time on the side the current's direction puts it, the pulse's delay, a pulse
+//! that runs past its period's end, the supply's sag, the amplifier's lag, and the energy
+//! balance with the switches' losses in it.
+
+use gms_core::control::controller::FfMode;
+use hil_sim::plant::Plant;
+use hil_sim::scenario::Scenario;
+use hil_sim::sim;
+
+/// 40 kHz, the default current loop's period \[s\].
+const T: f64 = 25e-6;
+
+/// The default scenario with the real bridge at the DRV8871's figures and a stiff supply.
+fn real() -> Scenario {
+    let mut sc = Scenario::default();
+    sc.plant.bridge.ideal = false;
+    sc.plant.bridge.dead_time_s = 220e-9;
+    sc.plant.bridge.delay_s = 0.7e-6;
+    sc.plant.supply.r_source_ohm = 0.0;
+    sc.check().unwrap();
+    sc
+}
+
+/// One period of `duty` in `n` steps with the current held at `amps` at each step's start
+/// (the bridge's voltage depends on the current's direction alone): the voltage's mean over
+/// the period \[V\] and its centroid in time \[s from the period's start\].
+fn period_with_current(p: &mut Plant, duty: f64, amps: f64, n: usize) -> (f64, f64) {
+    p.start_period(duty, T);
+    let dt = T / n as f64;
+    let (mut area, mut moment) = (0.0, 0.0);
+    for k in 0..n {
+        p.i = amps;
+        p.step(dt);
+        area += p.voltage * dt;
+        moment += p.voltage * dt * (k as f64 + 0.5) * dt;
+    }
+    (area / T, moment / area)
+}
+
+#[test]
+fn the_dead_time_takes_its_side_from_the_currents_direction() {
+    let sc = real();
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    let v = sc.plant.supply.volts;
+    let td = sc.plant.bridge.dead_time_s;
+    // Two periods each: the first one's pulse ends in the second (the delay), so that the
+    // second is the steady period.
+    for (duty, amps) in [(0.2, 0.1), (0.2, -0.1), (-0.2, -0.1), (-0.2, 0.1)] {
+        period_with_current(&mut p, duty, amps, 250);
+        let (mean, _) = period_with_current(&mut p, duty, amps, 250);
+        // Along the drive: the dead time is the brake's; against it, the drive's.
+        let along = duty * amps > 0.0;
+        let expect = duty * v - f64::signum(duty) * if along { td } else { -td } / T * v;
+        assert!(
+            (mean - expect).abs() < 1e-9,
+            "duty {duty}, current {amps}: {mean} V against {expect}"
+        );
+    }
+    // The step at a reversal: 2 t_dead / T × V, 0.211 V at 12 V and 40 kHz.
+    period_with_current(&mut p, 0.2, 0.1, 250);
+    let (pos, _) = period_with_current(&mut p, 0.2, 0.1, 250);
+    period_with_current(&mut p, 0.2, -0.1, 250);
+    let (neg, _) = period_with_current(&mut p, 0.2, -0.1, 250);
+    let step = neg - pos;
+    assert!((step - 2.0 * td / T * v).abs() < 1e-9, "{step}");
+    assert!((step - 0.2112).abs() < 1e-4, "{step}");
+
+    // The ideal bridge: duty × supply, whatever the current.
+    let mut sc = real();
+    sc.plant.bridge.ideal = true;
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    for amps in [0.1, -0.1] {
+        let (mean, _) = period_with_current(&mut p, 0.2, amps, 10);
+        assert!((mean - 0.2 * v).abs() < 1e-12, "{mean}");
+    }
+}
+
+#[test]
+fn the_pulse_is_centred_on_the_counters_top_after_the_delay() {
+    let sc = real();
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    let (td, delay) = (sc.plant.bridge.dead_time_s, sc.plant.bridge.delay_s);
+    period_with_current(&mut p, 0.3, 0.1, 500);
+    let (_, centroid) = period_with_current(&mut p, 0.3, 0.1, 500);
+    // The pulse runs from T/2 − w/2 + delay + t_dead to T/2 + w/2 + delay: its centre is
+    // T/2 + delay + t_dead / 2. The steps' centroid is within a step's half (25 ns).
+    let expect = T / 2.0 + delay + td / 2.0;
+    assert!(
+        (centroid - expect).abs() < 25e-9,
+        "{centroid} s against {expect} s"
+    );
+}
+
+#[test]
+fn a_pulse_delayed_past_its_periods_end_drives_the_next_one() {
+    let sc = real();
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    let (v, td, delay) = (
+        sc.plant.supply.volts,
+        sc.plant.bridge.dead_time_s,
+        sc.plant.bridge.delay_s,
+    );
+    // At 0.98 the pulse ends 0.25 µs before the period's end, 0.45 µs after it once delayed.
+    // Every period's mean is still its own pulse's (less the dead time).
+    period_with_current(&mut p, 0.98, 0.1, 250);
+    let (mean, _) = period_with_current(&mut p, 0.98, 0.1, 250);
+    let expect = (0.98 - td / T) * v;
+    assert!((mean - expect).abs() < 1e-9, "{mean} against {expect}");
+    // The period after a full pulse's last one, at duty 0: only the spill-over drives.
+    let (spill, _) = period_with_current(&mut p, 0.0, 0.1, 250);
+    let expect = (delay - 0.01 * T) / T * v;
+    assert!((spill - expect).abs() < 1e-9, "{spill} against {expect}");
+    // At full duty the outputs never switch: no dead time at all.
+    period_with_current(&mut p, 1.0, 0.1, 250);
+    let (full, _) = period_with_current(&mut p, 1.0, 0.1, 250);
+    assert!((full - v).abs() < 1e-9, "{full}");
+}
+
+#[test]
+fn the_supply_sags_under_the_current_it_delivers() {
+    let mut sc = Scenario::default();
+    sc.plant.bridge.ideal = true;
+    sc.plant.supply.r_source_ohm = 1.0;
+    sc.check().unwrap();
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    // Half the period driving 0.2 A: the supply delivers 0.1 A on average, 0.1 V lost.
+    let (mean, _) = period_with_current(&mut p, 0.5, 0.2, 10);
+    assert!((mean - 0.5 * (12.0 - 0.1)).abs() < 1e-12, "{mean}");
+    // Braking a current (driving against it) pushes it back into the supply: it rises.
+    let (mean, _) = period_with_current(&mut p, 0.5, -0.2, 10);
+    assert!((mean - 0.5 * (12.0 + 0.1)).abs() < 1e-12, "{mean}");
+}
+
+#[test]
+fn the_sense_amplifier_lags_by_its_bandwidth() {
+    // A held rotor (no back-EMF) and a voltage step: i = I (1 − e^(−t/τe)); through a first-
+    // order lag τs the reading is I (1 − (τe e^(−t/τe) − τs e^(−t/τs)) / (τe − τs)).
+    let mut sc = Scenario::default();
+    sc.plant.k_e = 0.0;
+    sc.plant.adc_noise = 0.0;
+    sc.plant.sense.bandwidth_hz = 20e3;
+    sc.plant.supply.r_source_ohm = 0.0;
+    sc.check().unwrap();
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    let r = sc.plant.resistance;
+    let tau_e = sc.plant.inductance / r;
+    let tau_s = 1.0 / (2.0 * std::f64::consts::PI * 20e3);
+    let big_i = 0.1 * sc.plant.supply.volts / r;
+    let dt = 5e-9;
+    p.start_period(0.1, 1.0);
+    let mut worst = 0.0f64;
+    for k in 1..=20_000 {
+        p.step(dt);
+        let t = k as f64 * dt;
+        let expect = big_i
+            * (1.0 - (tau_e * (-t / tau_e).exp() - tau_s * (-t / tau_s).exp()) / (tau_e - tau_s));
+        worst = worst.max((p.sense(0.0) - expect).abs());
+    }
+    // The lag is stepped on each step's end current: an error of order dt / τs of the
+    // current's change per step: at most (I / τe) dt / 2 = 12 µA, a twentieth of a code.
+    assert!(worst < 2e-5, "{worst} A");
+    // Unlimited (0 Hz): the reading is the current.
+    sc.plant.sense.bandwidth_hz = 0.0;
+    let mut p = Plant::new(&sc.plant, 1).unwrap();
+    p.start_period(0.1, 1.0);
+    p.step(1e-6);
+    assert_eq!(p.sense(0.0), p.i);
+}
+
+#[test]
+fn the_amplifiers_swing_keeps_the_adc_off_its_end_codes() {
+    let sc = Scenario::default();
+    // 0.05 V of a 3.3 V span: 62 codes short of each end.
+    let (lo, hi) = sc.plant.sense.code_limits(3.3, 4095.0);
+    assert!((lo - 0.05 / 3.3 * 4095.0).abs() < 1e-9 && (hi - (4095.0 - lo)).abs() < 1e-9);
+    assert!((62.0..63.0).contains(&lo), "{lo}");
+}
+
+/// The energy balance closes with the real bridge: its switches' loss is in the copper term,
+/// and the input is what the bridge puts into the winding (the supply's sag before it).
+#[test]
+fn energy_balance_closes_with_the_real_bridge() {
+    let mut sc = real();
+    sc.plant.supply.r_source_ohm = 0.5;
+    sc.check().unwrap();
+    for (mode, seed) in [(FfMode::Gms, 3), (FfMode::None, 4)] {
+        let e = sim::run(&sc, mode, seed).unwrap().energy;
+        let out = e.copper + e.magnetic + e.mechanical();
+        assert!(e.input > 0.0 && e.friction > 0.0, "{e:?}");
+        assert!((e.input - out).abs() < 0.01 * e.input, "{e:?}");
+    }
+}
