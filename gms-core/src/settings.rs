@@ -75,6 +75,7 @@ macro_rules! for_each_param {
             LimVSupply "lim.v_supply" "V" [0.1, 1e3] real checked |s| s.v_supply;
             LimPosMin "lim.pos_min" "rad" [-1e5, 1e5] real checked |s| s.pos_min;
             LimPosMax "lim.pos_max" "rad" [-1e5, 1e5] real checked |s| s.pos_max;
+            DriveDeadTime "drive.dead_time" "s" [0.0, 5e-6] real checked |s| s.dead_time;
             EncDir "enc.dir" "-" [-1.0, 1.0] real own |s| s.enc_dir;
             EncCountsPerRev "enc.counts_per_rev" "count/rev" [4.0, 1e10] real checked |s| s.counts_per_rev;
             SenseDir "sense.dir" "-" [-1.0, 1.0] real own |s| s.sense_dir;

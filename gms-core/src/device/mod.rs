@@ -627,6 +627,7 @@ pub fn default_settings() -> Settings {
         // the current loop tracked its command closely).
         i_max: 0.4,
         v_supply: 12.0,
+        dead_time: 0.0,
         // ±50 rad of the motor: ±0.9 mm of the slide through the gearhead and lead screw.
         pos_min: -50.0,
         pos_max: 50.0,
