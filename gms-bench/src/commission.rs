@@ -12,29 +12,34 @@ use crate::client::{
     check_faults, get_param, guarded, hold_current, means, narrow_limits, position, primitive,
     rad_per_count, scales_line, timed_run,
 };
-use crate::estimate::{inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope};
+use crate::estimate::{
+    inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope, resistance_and_step,
+};
 use crate::settings::restoring;
 
 /// What commissioning measured and decided.
 #[derive(Debug, Clone, Default)]
 pub struct Commissioned {
-    /// The current sense's residual offset at rest, bridge off \\[A\\] (after the start-up zero).
+    /// The current sense's residual offset at rest, bridge off \[A\] (after the start-up zero).
     pub sense_offset: f64,
-    /// Its noise at rest, one standard deviation per position step \\[A\\].
+    /// Its noise at rest, one standard deviation per position step \[A\].
     pub sense_noise: f64,
-    /// The current-sense polarity found (`sense.dir`) \\[-\\].
+    /// The current-sense polarity found (`sense.dir`) \[-\].
     pub sense_dir: f64,
-    /// The encoder direction found (`enc.dir`) \\[-\\].
+    /// The encoder direction found (`enc.dir`) \[-\].
     pub enc_dir: f64,
-    /// Winding resistance \\[ohm\\].
+    /// Winding resistance \[ohm\] (with the bridge's switches in the current's path).
     pub r: f64,
+    /// The bridge's dead time \[s\] (`drive.dead_time`), from the step of the voltage the
+    /// held currents need through zero current; 0 when there is none to see.
+    pub dead_time: f64,
     /// Back-EMF constant [V·s/rad] (= k_M in SI).
     pub k_e: f64,
     /// Reflected inertia [kg·m²].
     pub inertia: f64,
-    /// Winding inductance \\[H\\].
+    /// Winding inductance \[H\].
     pub inductance: f64,
-    /// The current of the pulse that first slid the axis \\[A\\] (an upper bound of the
+    /// The current of the pulse that first slid the axis \[A\] (an upper bound of the
     /// breakaway current within a quarter of it; × k_M: the breakaway torque).
     pub breakaway_a: f64,
     /// The device's friction model scaled to the measured breakaway, when the axis broke away
@@ -79,6 +84,7 @@ impl Commissioned {
             (ParamId::SenseDir, self.sense_dir),
             (ParamId::EncDir, self.enc_dir),
             (ParamId::MotorR, self.r),
+            (ParamId::DriveDeadTime, self.dead_time),
             (ParamId::MotorKE, self.k_e),
             (ParamId::MotorKM, self.k_e),
             (ParamId::FfInertia, self.inertia),
@@ -104,14 +110,18 @@ impl Commissioned {
 /// that broke the axis away.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Slide {
-    /// The signed slide \\[rad\\] (negative: the encoder counts against the motor).
+    /// The signed slide \[rad\] (negative: the encoder counts against the motor).
     pub moved: f64,
-    /// The current of the pulse that moved the axis \\[A\\] (the one before it held): an
+    /// The current of the pulse that moved the axis \[A\] (the one before it held): an
     /// upper bound of the breakaway current, within a quarter of it.
     pub amps: f64,
 }
 
-/// How far a pulse must move the axis to count as a slide \\[rad\\]: 2 mrad (beyond the
+/// The dead times commissioning sets \[s\]: none up to a bridge's 5 µs (the parameter's
+/// range, `drive.dead_time`).
+pub const DEAD_TIME_RANGE: (f64, f64) = (0.0, 5e-6);
+
+/// How far a pulse must move the axis to count as a slide \[rad\]: 2 mrad (beyond the
 /// pre-sliding range, which a stiff or blocked axis travels too) or eight counts of the
 /// encoder, whichever is more.
 pub fn slide_threshold(rad_per_count: f64) -> f64 {
@@ -228,7 +238,7 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
 /// runs [-] (`pos.ki_fric`; the device's own is put back after them).
 const KE_RUN_FRICTION_SHARE: f64 = 0.5;
 
-/// The length of each back-EMF run at constant speed \\[s\\] (0.1 s settling, 0.1 s averaged).
+/// The length of each back-EMF run at constant speed \[s\] (0.1 s settling, 0.1 s averaged).
 pub(crate) const KE_RUN: f64 = 0.2;
 
 pub use gms_ident::gains::CURRENT_BW_FRACTION;
@@ -341,26 +351,77 @@ pub(crate) fn commission_steps(
             si(moved, "rad")
         ));
     }
-    // 4. R at standstill: ±40 % of the expected breakaway, friction holds the axis.
-    let (ip, vp, _) = hold_current(b, 0.4 * i_fs, 0.2, dt)?;
-    let (in_, vn, _) = hold_current(b, -0.4 * i_fs, 0.2, dt)?;
+    // 4. R and the bridge's dead time at standstill, friction holding the axis: ±40 % and
+    //    ±80 % of the breakaway (the expected one, or three quarters of the pulse that slid
+    //    it, the last one below it having held). The bridge loses sign(i) t_dead / T × V of
+    //    every period's voltage; the status's volts are the duty's, the firmware's own
+    //    compensation (`drive.dead_time`) included, so they carry the whole loss whatever it
+    //    is set to: v = R i + c sign(i) over the four holds, t_dead = c T / V. (Two holds, as
+    //    before, read R + c / |i|: on the real bridge's default motor 18.7 Ω for 10.6.)
+    let base = i_fs.min(0.75 * sl.amps);
+    let mut holds = Vec::with_capacity(4);
+    for share in [0.4, -0.4, 0.8, -0.8] {
+        let (i, v, _) = hold_current(b, share * base, 0.2, dt)?;
+        holds.push((i, v));
+    }
     b.current(0.0)?;
-    if (ip - in_).abs() < 0.2 * i_fs {
+    let (ip, vp) = holds[0];
+    let (in_, vn) = holds[1];
+    if (ip - in_).abs() < 0.2 * base {
         return Err(Error::Device(format!(
             "commanded ±{:.3e} A, measured {ip:.3e} and {in_:.3e} A: no current flows (the motor \
              not connected?)",
-            0.4 * i_fs
+            0.4 * base
         )));
     }
-    c.r = (vp - vn) / (ip - in_);
+    let (r, step) = resistance_and_step(&holds).ok_or_else(|| {
+        Error::Device(format!(
+            "the held currents do not fit a resistance: {holds:?} (A, V)"
+        ))
+    })?;
+    c.r = r;
+    let v_supply = get_param(b, ParamId::LimVSupply)?;
+    let rate = get_param(b, ParamId::RateCurHz)?;
+    let dead = step / v_supply / rate;
+    let (lo, hi) = DEAD_TIME_RANGE;
+    c.dead_time = dead.clamp(lo, hi);
     c.lines.push(format!(
-        "winding resistance: {} ({} at {}, {} at {})",
+        "winding resistance: {} ({} at {}, {} at {}; {} at {}, {} at {})",
         si(c.r, "Ω"),
         si(vp, "V"),
         si(ip, "A"),
         si(vn, "V"),
-        si(in_, "A")
+        si(in_, "A"),
+        si(holds[2].1, "V"),
+        si(holds[2].0, "A"),
+        si(holds[3].1, "V"),
+        si(holds[3].0, "A")
     ));
+    c.lines.push(if dead > hi {
+        format!(
+            "bridge dead time: {} from a step of {} at zero current, more than a bridge's \
+             {}: taken as {} (the sense's zero or the motor, not the bridge?)",
+            si(dead, "s"),
+            si(2.0 * step, "V"),
+            si(hi, "s"),
+            si(c.dead_time, "s")
+        )
+    } else if dead > lo {
+        format!(
+            "bridge dead time: {} (the voltage steps by {} through zero current at {} and {}): \
+             drive.dead_time",
+            si(dead, "s"),
+            si(2.0 * step, "V"),
+            si(v_supply, "V"),
+            si(rate, "Hz")
+        )
+    } else {
+        format!(
+            "bridge dead time: none seen (the voltage steps by {} through zero current): \
+             drive.dead_time 0",
+            si(2.0 * step, "V")
+        )
+    });
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
     //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
     //    use a softer position loop (kp / 4, ki / 8, kd / 2, the derivative's filter at a
@@ -924,21 +985,21 @@ pub(crate) fn inertia(
 /// How `inertia` pulses the axis for an encoder.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InertiaPlan {
-    /// The pulse's current in breakaway currents \\[-\\].
+    /// The pulse's current in breakaway currents \[-\].
     pub breakaways: f64,
-    /// The pulse's length \\[s\\].
+    /// The pulse's length \[s\].
     pub pulse: f64,
-    /// The record from the pulse's start \\[s\\] (the pulse and the coast).
+    /// The record from the pulse's start \[s\] (the pulse and the coast).
     pub record: f64,
-    /// The local parabolas' half width \\[samples\\].
+    /// The local parabolas' half width \[samples\].
     pub half_window: usize,
-    /// How far from the pulse's ends a parabola's centre keeps \\[s\\] (its half width on a
+    /// How far from the pulse's ends a parabola's centre keeps \[s\] (its half width on a
     /// coarse encoder, so that none straddles the switch; 0 on a fine one).
     pub edge: f64,
 }
 
 impl InertiaPlan {
-    /// The plan for an encoder of `rad_per_count` \\[rad\\] sampled every `dt` \\[s\\]: on the
+    /// The plan for an encoder of `rad_per_count` \[rad\] sampled every `dt` \[s\]: on the
     /// paper's (3.8 µrad) or any finer than 20 µrad, 3 × the breakaway for 2 ms, recorded 30
     /// ms, 7-sample parabolas; on a coarser one, 1.5 × for 20 ms (about 50 counts of a 3 mrad
     /// count on a motor that its breakaway accelerates at 1500 rad/s²), recorded 60 ms,

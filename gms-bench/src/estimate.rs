@@ -63,6 +63,37 @@ pub fn ls_slope(x: &[f64], y: &[f64], min_sxx: f64) -> Option<f64> {
     Some(sxy / sxx.max(min_sxx))
 }
 
+/// The winding's resistance \[ohm\] and the bridge's voltage step \[V\] from currents held
+/// at standstill, `points` of (current \[A\], voltage \[V\]): the least-squares fit of
+/// `v = R i + c sign(i)` (the bridge loses `c = t_dead / T × V_supply` of each period's
+/// voltage in the current's direction, so that the voltage needed steps by `2 c` through
+/// zero). `None` unless both directions are held at two magnitudes at least (the two
+/// unknowns apart).
+pub fn resistance_and_step(points: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let (mut sii, mut sia, mut svi, mut svs) = (0.0, 0.0, 0.0, 0.0);
+    let n = points.len() as f64;
+    for &(i, v) in points {
+        let s = if i > 0.0 {
+            1.0
+        } else if i < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        sii += i * i;
+        sia += i.abs();
+        svi += v * i;
+        svs += v * s;
+    }
+    // Normal equations: [Σi² Σ|i|; Σ|i| n] [R; c] = [Σ v i; Σ v sign(i)].
+    let det = sii * n - sia * sia;
+    let both = points.iter().any(|p| p.0 > 0.0) && points.iter().any(|p| p.0 < 0.0);
+    if !(both && det.is_finite() && det > 1e-12 * sii * n) {
+        return None;
+    }
+    Some(((svi * n - sia * svs) / det, (sii * svs - sia * svi) / det))
+}
+
 /// The reflected inertia \[kg·m²\] from one current pulse of `pulse` \[s\] that starts at
 /// t = 0 and the coast after it: `samples` are `(t [s], speed [rad/s], acceleration [rad/s²],
 /// current [A])` along the motion's direction. Friction is the same during the pulse and the
@@ -165,6 +196,26 @@ pub fn inductance_from_step(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Exact points of `v = R i + c sign(i)` give R and c back; one direction alone, or one
+    /// magnitude both ways (R and c not apart), gives none.
+    #[test]
+    fn resistance_and_the_bridges_step() {
+        let (r, c) = (10.565, 0.1056);
+        let v = |i: f64| r * i + c * i.signum();
+        let pts: Vec<(f64, f64)> = [0.013, -0.013, 0.026, -0.026, 0.02]
+            .iter()
+            .map(|&i| (i, v(i)))
+            .collect();
+        let (rr, cc) = resistance_and_step(&pts).unwrap();
+        assert!((rr - r).abs() < 1e-9 && (cc - c).abs() < 1e-9, "{rr} {cc}");
+        // The old two-point estimate, (v+ − v−) / (i+ − i−), reads R + c / |i|: 18.7 Ω here.
+        let two = (v(0.013) - v(-0.013)) / 0.026;
+        assert!((two - (r + c / 0.013)).abs() < 1e-9);
+        assert!(resistance_and_step(&pts[..1]).is_none());
+        assert!(resistance_and_step(&[(0.01, 0.2), (0.02, 0.3)]).is_none());
+        assert!(resistance_and_step(&pts[..2]).is_none());
+    }
 
     /// A line's slope exactly; with noise, the slope of the least-squares line (checked
     /// against the normal equations solved independently); no points, none.
