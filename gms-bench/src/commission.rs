@@ -357,7 +357,7 @@ pub(crate) fn commission_steps(
     //    every period's voltage; the status's volts are the duty's, the firmware's own
     //    compensation (`drive.dead_time`) included, so they carry the whole loss whatever it
     //    is set to: v = R i + c sign(i) over the four holds, t_dead = c T / V. (Two holds, as
-    //    before, read R + c / |i|: on the real bridge's default motor 18.7 Ω for 10.6.)
+    //    before, read R + c / |i|: 24.6 Ω for 10.6 at the default motor's 7.5 mA holds.)
     let base = i_fs.min(0.75 * sl.amps);
     let mut holds = Vec::with_capacity(4);
     for share in [0.4, -0.4, 0.8, -0.8] {
