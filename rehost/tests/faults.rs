@@ -12,8 +12,8 @@ use crate::support;
 
 /// The control interrupt (DMA2 stream 0, IRQ 56).
 const CONTROL: u32 = 16 + 56;
-/// One PWM period \[s\] (20 kHz).
-const PERIOD: f64 = 50e-6;
+/// One PWM period \[s\] (40 kHz, the default `rate.cur_hz`).
+const PERIOD: f64 = 25e-6;
 
 /// The image from reset, `before` applied before its first instruction; booted to its loop
 /// (or to `until`, a log line).

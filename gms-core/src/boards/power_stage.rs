@@ -4,7 +4,7 @@
 //!
 //! | signal | MCU pin | peripheral | goes to |
 //! |---|---|---|---|
-//! | H-bridge IN1 | PC6 | TIM8_CH1 (20 kHz PWM, center-aligned) | DRV8871 IN1 |
+//! | H-bridge IN1 | PC6 | TIM8_CH1 (40 kHz PWM, `rate.cur_hz`, center-aligned) | DRV8871 IN1 |
 //! | H-bridge IN2 | PC7 | TIM8_CH2 | DRV8871 IN2 |
 //! | motor current | PC0 | ADC1_IN10 | INA240A2 OUT (68 mohm shunt in series with the motor, REF at 1.65 V) |
 //! | encoder A | PA0 | TIM2_CH1 (32-bit encoder mode) | encoder A (5 V encoders through a 74LVC14 or a divider) |
