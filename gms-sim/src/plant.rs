@@ -95,6 +95,15 @@ struct TwoMass {
     c: f64,
 }
 
+/// `f(dt)`, kept in `memo` with its `dt` \[s\]: a run's steps have one length and `f` (an
+/// exponential decay over a step) depends on nothing else, so that it is computed once.
+fn per_step(memo: &mut (f64, f64), dt: f64, f: impl FnOnce(f64) -> f64) -> f64 {
+    if dt != memo.0 {
+        *memo = (dt, f(dt));
+    }
+    memo.1
+}
+
 /// One drive pulse of the real bridge, in time from its period's start \[s\]: on from `on`
 /// to `off`, in the direction `sign`. An edge is fixed (its dead time added by the current's
 /// direction then) when the integration first reaches it.
@@ -123,10 +132,9 @@ pub struct Plant {
     r_source: f64,
     /// The real bridge (`None`: the ideal one).
     bridge: Option<crate::scenario::BridgeSpec>,
-    /// The PWM period now: its length \[s\], the time since it started \[s\], its duty
-    /// (quantised, \[-1, 1\]) and the drive pulses that fall in it (this period's and the
-    /// end of the last one's, delayed past its end).
-    period: f64,
+    /// The PWM period now: the time since it started \[s\], its duty (quantised, \[-1, 1\])
+    /// and the drive pulses that fall in it (this period's and the end of the last one's,
+    /// delayed past its end).
     phase: f64,
     duty: f64,
     pulses: [Option<Pulse>; 2],
@@ -242,7 +250,6 @@ impl Plant {
             supply: spec.supply.volts,
             r_source: spec.supply.r_source_ohm,
             bridge: (!spec.bridge.ideal).then_some(spec.bridge),
-            period: 0.0,
             phase: 0.0,
             duty: 0.0,
             pulses: [None; 2],
@@ -325,7 +332,7 @@ impl Plant {
         let (kg, sg) = stiff(&self.gw_spec);
         let r2 = self.ratio * self.ratio;
         SmallSignal {
-            r: self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm),
+            r: self.r_path(),
             l: self.l,
             k_m: self.k_m,
             k_e: self.k_e,
@@ -431,7 +438,6 @@ impl Plant {
             _ => None,
         };
         self.pulses = [carried, new];
-        self.period = period_s;
         self.phase = 0.0;
         self.duty = duty;
     }
@@ -478,6 +484,12 @@ impl Plant {
         (sum / dt).clamp(-1.0, 1.0)
     }
 
+    /// The resistance in the current's path \[ohm\]: the winding's and, for the real bridge,
+    /// its switches'.
+    fn r_path(&self) -> f64 {
+        self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm)
+    }
+
     /// Advances the plant by `dt` \[s\] at the applied voltage.
     pub fn step(&mut self, dt: f64) {
         // The bridge: the step's mean voltage from the fraction it drives, at the supply's
@@ -489,17 +501,11 @@ impl Plant {
         self.phase += dt;
         // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step;
         // R the winding's and, for the real bridge, the switches' in the current's path.
-        let r = self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm);
+        let r = self.r_path();
         let a = r / self.l;
         let i_ss = (self.voltage - self.k_e * self.omega) / r;
         let d0 = self.i - i_ss;
-        let e = if dt == self.decay_memo.0 {
-            self.decay_memo.1
-        } else {
-            let e = (-a * dt).exp();
-            self.decay_memo = (dt, e);
-            e
-        };
+        let e = per_step(&mut self.decay_memo, dt, |dt| (-a * dt).exp());
         let i_int = i_ss * dt + d0 * (1.0 - e) / a; // ∫ i dt
         let i2_int = i_ss * i_ss * dt
             + 2.0 * i_ss * d0 * (1.0 - e) / a
@@ -511,13 +517,8 @@ impl Plant {
         self.energy.converted += self.k_e * self.omega * i_int;
         self.energy.magnetic = 0.5 * self.l * self.i * self.i;
         if self.sense_tau > 0.0 {
-            let lag = if dt == self.sense_memo.0 {
-                self.sense_memo.1
-            } else {
-                let lag = (-dt / self.sense_tau).exp();
-                self.sense_memo = (dt, lag);
-                lag
-            };
+            let tau = self.sense_tau;
+            let lag = per_step(&mut self.sense_memo, dt, |dt| (-dt / tau).exp());
             self.sensed = self.i + (self.sensed - self.i) * lag;
         }
         // Mechanics: semi-implicit Euler with the friction, cogging and coupling of the

@@ -185,12 +185,7 @@ fn energy_balance_closes_with_the_real_bridge() {
     let mut sc = real();
     sc.plant.supply.r_source_ohm = 0.5;
     sc.check().unwrap();
-    for (mode, seed) in [(FfMode::Gms, 3), (FfMode::None, 4)] {
-        let e = sim::run(&sc, mode, seed).unwrap().energy;
-        let out = e.copper + e.magnetic + e.mechanical();
-        assert!(e.input > 0.0 && e.friction > 0.0, "{e:?}");
-        assert!((e.input - out).abs() < 0.01 * e.input, "{e:?}");
-    }
+    crate::common::energy_balance_closes(&sc);
 }
 
 /// The median over `seeds` friction draws of the GMS-compensated run's (rms, reversal) error

@@ -2,10 +2,8 @@
 //! two-mass formulas, the position-dependent torque (`[plant.ripple]`), and the energy balance
 //! with both.
 
-use gms_core::control::controller::FfMode;
 use hil_sim::plant::Plant;
 use hil_sim::scenario::{Ripple, Scenario};
-use hil_sim::sim;
 
 /// The default plant with the stage's mode at `f_hz`, damping `zeta`, and a slide heavy enough
 /// (`j_l` of the 6e-8 kg·m^2 at the motor) for the mode to show at the encoder; no friction.
@@ -197,11 +195,7 @@ fn energy_balance_closes_on_a_compliant_stage_with_ripple() {
     sc.plant.ripple.amplitude = 30e-6;
     sc.plant.ripple.screw_friction = 0.1;
     sc.check().unwrap();
-    for (mode, seed) in [(FfMode::Gms, 3), (FfMode::None, 4)] {
-        let e = sim::run(&sc, mode, seed).unwrap().energy;
-        let out = e.copper + e.magnetic + e.mechanical();
-        assert!(e.input > 0.0 && e.friction > 0.0, "{e:?}");
-        assert!((e.input - out).abs() < 0.01 * e.input, "{e:?}");
+    for e in crate::common::energy_balance_closes(&sc) {
         assert!(
             (e.converted - e.mechanical()).abs() < 0.01 * e.converted,
             "{e:?}"

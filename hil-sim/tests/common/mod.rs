@@ -8,6 +8,24 @@ use std::process::Command;
 
 pub use hil_sim::harness::{QUIET, Server, run};
 
+/// Runs `sc` in the simulator with the GMS feedforward (seed 3) and without (seed 4) and
+/// checks each run's energy ledger closes: electrical input = copper + magnetic + the
+/// mechanical terms within 1 %, with input and friction work both positive. Returns the two
+/// ledgers for the caller's own checks.
+pub fn energy_balance_closes(sc: &hil_sim::scenario::Scenario) -> Vec<hil_sim::plant::Energy> {
+    use gms_core::control::controller::FfMode;
+    [(FfMode::Gms, 3), (FfMode::None, 4)]
+        .into_iter()
+        .map(|(mode, seed)| {
+            let e = hil_sim::sim::run(sc, mode, seed).unwrap().energy;
+            let out = e.copper + e.magnetic + e.mechanical();
+            assert!(e.input > 0.0 && e.friction > 0.0, "{e:?}");
+            assert!((e.input - out).abs() < 0.01 * e.input, "{e:?}");
+            e
+        })
+        .collect()
+}
+
 /// The errors of an identified friction `found` against the truth: the relative errors of
 /// Fs, Fc, Vs, delta, sigma and C, and the virgin curves' RMS difference (uniform in x over
 /// the pre-sliding range `g` measured) as a fraction of the true Fs.
