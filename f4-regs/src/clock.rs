@@ -79,6 +79,65 @@ pub fn erase_at_x32(flash: pac::flash::Flash) {
         .modify(|w| w.set_psize(pac::flash::vals::Psize::PSIZE32));
 }
 
+/// FLASH_OPTKEYR's key sequence, which unlocks FLASH_OPTCR (RM0090 §3.7.2).
+pub const OPTION_KEYS: [u32; 2] = [0x0819_2A3B, 0x4C5D_6E7F];
+
+/// What [`brown_out_reset`] found and did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BrownOut {
+    /// The option bytes already held the level.
+    Set,
+    /// They did not; programmed now.
+    Programmed,
+    /// They did not and could not be programmed (the flash stayed busy past the bound, the
+    /// option register stayed locked, or it read back otherwise).
+    Failed,
+}
+
+/// Puts the brown-out reset at `level` (FLASH_OPTCR.BOR_LEV, gms-core's
+/// `hw::BOR_LEV_2V7`) in the option bytes, if they do not hold it already, by RM0090 §3.7.2
+/// "Modifying user option bytes": no flash operation going on (SR.BSY), OPTCR unlocked by
+/// its keys, the value written with only BOR_LEV changed (the whole register is programmed:
+/// read protection, write protection and the watchdog's options as read), OPTSTRT, BSY
+/// waited for, OPTCR locked again. Each wait is bounded by `limit` cycles of `now` (the DWT
+/// cycle counter). RM0390 §3.7.2 is the same on the F446.
+pub fn brown_out_reset(
+    flash: pac::flash::Flash,
+    level: u8,
+    now: impl Fn() -> u32,
+    limit: u32,
+) -> BrownOut {
+    if flash.optcr().read().bor_lev() == level {
+        return BrownOut::Set;
+    }
+    let idle = || {
+        let t0 = now();
+        while flash.sr().read().bsy() {
+            if now().wrapping_sub(t0) > limit {
+                return false;
+            }
+        }
+        true
+    };
+    if !idle() {
+        return BrownOut::Failed;
+    }
+    if flash.optcr().read().optlock() {
+        for key in OPTION_KEYS {
+            flash.optkeyr().write_value(key);
+        }
+    }
+    flash.optcr().modify(|w| w.set_bor_lev(level));
+    flash.optcr().modify(|w| w.set_optstrt(true));
+    let done = idle();
+    flash.optcr().modify(|w| w.set_optlock(true));
+    if done && flash.optcr().read().bor_lev() == level {
+        BrownOut::Programmed
+    } else {
+        BrownOut::Failed
+    }
+}
+
 /// Flushes the flash data cache: DCEN off, a DCRST pulse, DCEN as it was (RM0090 §3.5.2: the
 /// cache is reset only while disabled).
 pub fn flush_data_cache(flash: pac::flash::Flash) {

@@ -22,6 +22,24 @@ pub fn idle_low(tim: pac::timer::TimAdv) {
     });
 }
 
+/// The break input on, for the clock security system alone: a failed HSE clears MOE in
+/// hardware, the outputs at their idle level (low, [`idle_low`]) in the same clock, before the
+/// NMI's first instruction (RM0090 §7.2.7: the clock failure event goes to TIM1's and TIM8's
+/// break inputs; §17.3.12 "Using the break function": BKE enables the break, which clears MOE
+/// asynchronously; §17.4.18 TIMx_BDTR). BKP is active high: the break pin (TIM8_BKIN) is not
+/// given to the timer (no pin in its alternate function), so the pin's side of the input is
+/// inactive low, and only the clock failure can break. AOE stays 0: MOE stays cleared until
+/// software sets it, and nothing does (a break is terminal, as the NMI's trip). BIE stays 0:
+/// the NMI is the handler.
+pub fn break_on_clock_failure(tim: pac::timer::TimAdv) {
+    tim.bdtr().modify(|w| {
+        w.set_bkp(0, pac::timer::vals::Bkp::ACTIVE_HIGH);
+        w.set_aoe(false);
+    });
+    // A separate write: BKE takes one APB clock to act (TIMx_BDTR's note), after the polarity.
+    tim.bdtr().modify(|w| w.set_bke(0, true));
+}
+
 /// The sense trigger: channel 4 (no pin) in PWM mode 1, preloaded, so OC4REF is high while
 /// the counter is below CCR4 and rises on the way down `lead` counts before the bottom;
 /// OC4REF as TRGO (CR2.MMS = 111, RM0090 §17.4.2), the ADC's trigger, once per period.

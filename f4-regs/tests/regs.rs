@@ -226,6 +226,22 @@ fn the_bridge_goes_off_on_its_registers() {
 }
 
 #[test]
+fn the_break_input_is_on_for_the_clock_failure_alone() {
+    let tim = block(pac::timer::TimAdv::from_ptr);
+    // As embassy leaves it: MOE set, OSSI set by `idle_low`.
+    tim.bdtr().modify(|w| w.set_moe(true));
+    pwm::idle_low(tim);
+    pwm::break_on_clock_failure(tim);
+    let bdtr = word(tim.as_ptr(), 0x44);
+    // BKE (bit 12), BKP (bit 13, active high), AOE (bit 14) clear, MOE (bit 15) and OSSI
+    // (bit 10) kept.
+    assert_eq!(bdtr & (1 << 12), 1 << 12, "BKE");
+    assert_eq!(bdtr & (1 << 13), 1 << 13, "BKP active high");
+    assert_eq!(bdtr & (1 << 14), 0, "AOE clear: MOE stays off after a break");
+    assert_eq!(bdtr & ((1 << 15) | (1 << 10)), (1 << 15) | (1 << 10));
+}
+
+#[test]
 fn the_deadman_tick_clears_its_flag_and_stops_after_a_trip() {
     let tim = block(pac::timer::TimAdv::from_ptr);
     pwm::deadman_arm(tim);
@@ -420,6 +436,44 @@ fn the_flash_accelerator_and_erase_set_up() {
         0,
         "no key written to an unlocked CR"
     );
+}
+
+#[test]
+fn the_brown_out_reset_is_programmed_with_only_its_field_changed() {
+    use f4_regs::clock::BrownOut;
+    let flash = block(pac::flash::Flash::from_ptr);
+    // The factory option bytes (RM0090 §3.9.10's reset value): BOR off, RDP level 0 (0xAA),
+    // no write protection, locked.
+    set_word(flash.as_ptr(), 0x14, 0x0FFF_AAED);
+    // The flash busy past the bound: nothing written.
+    set_word(flash.as_ptr(), 0x0C, 1 << 16);
+    let clock = core::cell::Cell::new(0u32);
+    let now = || {
+        clock.set(clock.get().wrapping_add(100));
+        clock.get()
+    };
+    assert_eq!(
+        clock::brown_out_reset(flash, 0, now, 10_000),
+        BrownOut::Failed
+    );
+    assert_eq!(word(flash.as_ptr(), 0x14), 0x0FFF_AAED);
+    assert_eq!(word(flash.as_ptr(), 0x08), 0, "no key written");
+    assert!(clock.get() <= 10_300, "bounded: {} cycles", clock.get());
+    // Idle: keys, BOR_LEV 00, OPTSTRT, locked again; everything else as it was.
+    set_word(flash.as_ptr(), 0x0C, 0);
+    assert_eq!(
+        clock::brown_out_reset(flash, 0, || 0, 10_000),
+        BrownOut::Programmed
+    );
+    assert_eq!(word(flash.as_ptr(), 0x08), clock::OPTION_KEYS[1]);
+    let optcr = word(flash.as_ptr(), 0x14);
+    assert_eq!(optcr & 0b1100, 0, "BOR level 3");
+    assert_eq!(optcr & 0b11, 0b11, "OPTSTRT written, OPTLOCK set again");
+    assert_eq!(optcr & !0b1111, 0x0FFF_AAE0, "RDP, nWRP and the rest kept");
+    // Already set: nothing written.
+    set_word(flash.as_ptr(), 0x08, 0);
+    assert_eq!(clock::brown_out_reset(flash, 0, || 0, 10_000), BrownOut::Set);
+    assert_eq!(word(flash.as_ptr(), 0x08), 0);
 }
 
 #[test]

@@ -307,6 +307,7 @@ pub fn init() -> (ControlHw, Rest) {
     pwm::low_speed(pac::GPIOC, BRIDGE_PINS);
     // Off-state when idle: outputs low whenever MOE is cleared.
     pwm::idle_low(pac::TIM8);
+    pwm::break_on_clock_failure(pac::TIM8);
     let mut tim8 = pac::TIM8;
     let update_at_bottom = pwm::align_update_to_bottom(&mut tim8, pwm::UPDATE_POLLS);
     pac::TIM8.sr().write(|w| w.0 = 0);
@@ -439,25 +440,33 @@ pub fn init() -> (ControlHw, Rest) {
 }
 
 /// Enables the control interrupt (the sense DMA's transfer complete, once per PWM period) at
-/// [`crate::irq::CONTROL`], and above it the deadman (TIM8's update, once per period at the
-/// counter's bottom) and the ADC's overrun at [`crate::irq::DEADMAN`].
+/// [`crate::irq::CONTROL`], and the ADC's overrun above it at [`crate::irq::DEADMAN`]. The
+/// deadman follows once the loop has run ([`arm_deadman`]).
 pub fn start_control() {
     sense::ack(pac::DMA2);
     // The NVIC kept the interrupt pending while it was masked: without this the handler
     // would run once at once, mid-sequence.
     interrupt::DMA2_STREAM0.unpend();
     interrupt::DMA2_STREAM0.set_priority(crate::irq::CONTROL);
-    pwm::deadman_arm(pac::TIM8);
-    interrupt::TIM8_UP_TIM13.unpend();
-    interrupt::TIM8_UP_TIM13.set_priority(crate::irq::DEADMAN);
     interrupt::ADC.set_priority(crate::irq::DEADMAN);
     // SAFETY: the handlers below only touch state they own, atomics, or data behind a
     // critical section; enabling them cannot break another critical section.
     unsafe {
-        interrupt::TIM8_UP_TIM13.enable();
         interrupt::ADC.enable();
         interrupt::DMA2_STREAM0.enable();
     }
+}
+
+/// Enables the deadman (TIM8's update, once per period at the counter's bottom) at
+/// [`crate::irq::DEADMAN`], above the control interrupt: after the loop's first step, so that
+/// its first periods count steps that the loop takes, not the start's own gap.
+pub fn arm_deadman() {
+    pwm::deadman_arm(pac::TIM8);
+    interrupt::TIM8_UP_TIM13.unpend();
+    interrupt::TIM8_UP_TIM13.set_priority(crate::irq::DEADMAN);
+    // SAFETY: the deadman's handler touches its own state, an atomic and the bridge's
+    // registers (`control.rs`).
+    unsafe { interrupt::TIM8_UP_TIM13.enable() };
 }
 
 /// The control interrupt before the loop is handed over: bridge off, flags cleared.

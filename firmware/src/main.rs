@@ -8,11 +8,12 @@
 //!
 //! Start-up: a first log line on the reset clock (HSI); the HSE started and waited for within
 //! a bound (a clear log line and a halt, bridge pins untouched at reset, if it does not come);
-//! clocks, the watchdog, peripherals (the bridge off); the stored parameters (defaults and a
+//! clocks, the watchdog, peripherals (the bridge off); the brown-out reset at 2.7 V in the
+//! option bytes (programmed at the first boot; `enable` refused if it cannot be); the stored parameters (defaults and a
 //! latched `invalid_params` fault when missing or invalid); the current-sense zero measured
 //! with the bridge off, each reading waited for within a bound (a latched `current_sense`
 //! fault and a log line saying why, when the chain is dead or its zero out of the board's
-//! window); the control interrupt and the deadman above it; USB. A panic, a HardFault or an
+//! window); the control interrupt, and the deadman above it once the loop has stepped; USB. A panic, a HardFault or an
 //! unhandled interrupt switches the bridge off before anything else
 //! (`board::bridge_off_now`), and so does a debug halt (TIM8 stops); so does the deadman when
 //! the control step has not run for two PWM periods, or the sense chain's DMA or ADC fails.
@@ -80,6 +81,31 @@ async fn main(spawner: Spawner) {
         "clocks up: {} Hz; clock security system on",
         board::CLOCKS.sysclk_hz()
     );
+
+    // The brown-out reset at 2.7 V, in the option bytes: programmed at the first boot, checked
+    // at every boot; a board without it refuses to drive (gms-core's `hw::BOR_LEV_2V7`).
+    let no_drive = match f4_regs::clock::brown_out_reset(
+        embassy_stm32::pac::FLASH,
+        gms_core::boards::hw::BOR_LEV_2V7,
+        cortex_m::peripheral::DWT::cycle_count,
+        board::CLOCKS.hclk_hz(),
+    ) {
+        f4_regs::clock::BrownOut::Set => {
+            info!("brown-out reset at 2.7 V");
+            None
+        }
+        f4_regs::clock::BrownOut::Programmed => {
+            info!("brown-out reset set to 2.7 V (option bytes programmed)");
+            None
+        }
+        f4_regs::clock::BrownOut::Failed => {
+            error!(
+                "brown-out reset not at 2.7 V and the option bytes could not be programmed: \
+                 `enable` is refused"
+            );
+            Some(gms_core::boards::hw::NO_BROWN_OUT_RESET)
+        }
+    };
 
     let mut faults = Faults::NONE;
     if rest.update_at_bottom {
@@ -198,7 +224,14 @@ async fn main(spawner: Spawner) {
     // `configured=0` in the status until someone sets, loads or stored this axis's settings.
     // The device front lives in a static (its task holds a reference: the task's future, built
     // on the stack by the spawn, stays small).
-    let dev = install_dev(store, start.settings, defaults, start.configured, spare);
+    let dev = install_dev(
+        store,
+        start.settings,
+        defaults,
+        start.configured,
+        spare,
+        no_drive,
+    );
     #[cfg(feature = "board-f405")]
     let port = {
         // USB CDC-ACM.
@@ -296,6 +329,7 @@ fn install_dev(
     defaults: gms_core::protocol::Settings,
     configured: bool,
     spare: device::CtrlBuf,
+    no_drive: Option<&'static str>,
 ) -> &'static mut comms::Dev {
     static DEV: StaticCell<comms::Dev> = StaticCell::new();
     // The requests' storage: the loop acts on it by reference, outside the mailbox's
@@ -314,7 +348,8 @@ fn install_dev(
             spare,
         )
         .with_configured(configured, false)
-        .with_table(),
+        .with_table()
+        .refusing_to_drive(no_drive),
     )
 }
 
@@ -389,6 +424,9 @@ async fn comms_task(
     comms::serve(port, dev, telemetry).await
 }
 
+/// How long the supervisor waits for the loop's first step before it arms the deadman \[µs\].
+const FIRST_STEP_WAIT_US: u32 = 2000;
+
 /// Starts the control interrupt, then watchdog, LEDs and fault logs, every 250 ms.
 ///
 /// The control interrupt starts here rather than in `main`: `main`'s one poll builds every
@@ -409,6 +447,14 @@ async fn supervisor(
     let mut told = false;
     let mut deepest = 0usize;
     board::start_control();
+    // The deadman once the loop has taken its first step (a period is 25-50 us: 2 ms is forty
+    // or more); armed all the same if none came, and then it trips within two periods.
+    let mut waited_us = 0u32;
+    while control::steps() == 0 && waited_us < FIRST_STEP_WAIT_US {
+        Timer::after_micros(50).await;
+        waited_us += 50;
+    }
+    board::arm_deadman();
     info!("control loop running");
     loop {
         Timer::after_millis(250).await;

@@ -627,6 +627,20 @@ fn a_board_on_its_built_in_defaults_says_it_was_never_configured() {
     assert_eq!(ask(&mut dev, "get enc.counts_per_rev").trim(), "ok 1320");
 }
 
+/// A board that found at start it must not drive (its brown-out reset not set) refuses
+/// `enable` and `enable current` with the reason, and does nothing else differently.
+#[test]
+fn a_board_refusing_to_drive_refuses_enable_with_its_reason() {
+    let why = "brown-out reset not at 2.7 V";
+    let mut dev = board_device(None).refusing_to_drive(Some(why));
+    assert_eq!(ask(&mut dev, "enable").trim(), format!("err 8 {why}"));
+    assert_eq!(ask(&mut dev, "enable current").trim(), format!("err 8 {why}"));
+    assert!(ask(&mut dev, "status").contains(" enabled=0"));
+    assert!(ask(&mut dev, "set pos.kp 0.5").starts_with("ok"));
+    let mut dev = board_device(None).refusing_to_drive(None);
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
+}
+
 #[test]
 fn the_device_s_status_reads_back_as_its_state() {
     use gms_core::device::{DriveKind, StatusReply};

@@ -349,3 +349,78 @@ fn one_conversion_at_an_end_of_the_adcs_range_latches_over_current() {
         off_with(&mut m, &["over_current"]);
     }
 }
+
+/// The HSE fails while the bridge drives: the clock failure at TIM8's break input clears MOE
+/// in hardware, so the bridge is off before the core has run one instruction of the NMI (the
+/// NMI's `bridge_off_now` only follows; without the break input the outputs stayed on until
+/// then).
+#[test]
+fn a_clock_failure_switches_the_bridge_off_in_hardware() {
+    let mut m = driving();
+    assert!(m.bridge_on());
+    m.hse_fails();
+    assert!(
+        !m.bridge_on(),
+        "the outputs still on after the clock failure event"
+    );
+    m.run_until_logged("the HSE failed", 0.5).unwrap();
+    assert!(!m.bridge_driving());
+}
+
+/// The deadman (TIM8's update, IRQ 44) is armed once the loop has taken its first step: its
+/// first tick comes after the control interrupt's first run, never in the gap before the loop
+/// starts (armed first, it ticked up to a period before the first step).
+#[test]
+fn the_deadman_starts_after_the_loops_first_step() {
+    const DEADMAN: u32 = 16 + 44;
+    let m = boot();
+    let first = |exc: u32| m.handled.iter().find(|h| h.exc == exc).map(|h| h.at);
+    let (step, tick) = (first(CONTROL), first(DEADMAN));
+    let (Some(step), Some(tick)) = (step, tick) else {
+        panic!("no step ({step:?}) or no deadman tick ({tick:?})\n{}", log(&m));
+    };
+    assert!(
+        tick > step,
+        "the deadman's first tick at cycle {tick}, the loop's first step at {step}"
+    );
+}
+
+/// A chip with its option bytes as they come from the factory (brown-out reset off): the
+/// image programs level 3 (2.7 V) at its first boot, keeping the rest of the option bytes,
+/// and finds it set at the next; a part that refuses the programming refuses `enable` with
+/// the reason, and logs it.
+#[test]
+fn the_brown_out_reset_is_set_at_the_first_boot_or_enable_is_refused() {
+    let mut m = boot();
+    assert!(
+        m.logged("brown-out reset set to 2.7 V (option bytes programmed)"),
+        "{}",
+        log(&m)
+    );
+    let optcr = m.chip().p.flash.read(0x14);
+    assert_eq!(optcr & 0b1100, 0, "BOR_LEV: level 3");
+    assert_eq!(optcr & 0xFFFF_FF00, 0x0FFF_AA00, "read and write protection kept");
+    m.power_cycle().unwrap();
+    m.run_until_logged("control loop running", 1.0).unwrap();
+    assert!(
+        m.log_lines
+            .iter()
+            .any(|l| l.text == "brown-out reset at 2.7 V"),
+        "{}",
+        log(&m)
+    );
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+
+    let mut m = boot_with(
+        |m| m.chip_mut().p.flash.refuse_options = true,
+        "control loop running",
+    );
+    assert!(m.logged("could not be programmed"), "{}", log(&m));
+    let reply = ask(&mut m, "enable");
+    assert!(
+        reply.starts_with("err 8 brown-out reset not at 2.7 V"),
+        "{reply}"
+    );
+    m.run_for(0.001).unwrap();
+    assert!(!m.bridge_driving());
+}

@@ -224,6 +224,20 @@ impl MemoryMap {
 /// the image by `rehost check`); at 8 KiB it sits at 0x20016000 and leaves 32 KiB.
 pub const STACK_GUARD_BYTES: u32 = 8192;
 
+/// The brown-out reset level the boards need, as FLASH_OPTCR.BOR_LEV holds it: 00, level 3,
+/// the reset held below about 2.7 V (RM0090 §5.2.2 "Brownout reset (BOR)": level 3 for
+/// supplies of 2.70 to 3.60 V; §3.9.10 FLASH_OPTCR: BOR_LEV 00 level 3, 01 level 2, 10 level
+/// 1, 11 off, the factory value). Flash programming at ×32 (the parameter store) and 168 MHz
+/// at 5 wait states are specified from 2.7 V only (§3.5.1 table 10, §3.6.2 table 9): without
+/// it a slow power-down with the motor supply still up runs the core out of its
+/// specification, the bridge live. RM0390 (the F446) lays the field out alike.
+pub const BOR_LEV_2V7: u8 = 0b00;
+
+/// Why a board whose brown-out reset is not at [`BOR_LEV_2V7`] refuses to drive (its
+/// `enable`'s `err 8` reason).
+pub const NO_BROWN_OUT_RESET: &str =
+    "brown-out reset not at 2.7 V (option bytes): see docs/bring-up.md, the bridge stays off";
+
 /// Whether the flash prefetch buffer may be switched on, from the part's `DBGMCU_IDCODE`
 /// (RM0090 §38.6.1: DEV_ID in bits 11:0, REV_ID in bits 31:16). The STM32F405/407/415/417
 /// (DEV_ID 0x413) of revision A (REV_ID 0x1000) do not support it: ST's own clock set-up

@@ -8,8 +8,8 @@ use super::*;
 impl Machine {
     /// The HSE fails for good (RM0090 §6.2.7): with the clock security system on, CSSF and
     /// the NMI, the HSE off and the system clock switched back to the HSI (RCC_CFGR.SWS = 00);
-    /// after a reset it never becomes ready again. (The model keeps the core's time at
-    /// 168 MHz.)
+    /// after a reset it never becomes ready again; the failure event at TIM8's break input
+    /// ([`tim::Timer::clock_failure`]). (The model keeps the core's time at 168 MHz.)
     pub fn hse_fails(&mut self) {
         let c = self.chip_mut();
         c.p.rcc.hse_dead = true;
@@ -21,6 +21,8 @@ impl Machine {
         let cfgr = c.p.rcc.read(0x08);
         c.p.rcc.write(0x08, cfgr & !3);
         c.p.rcc.css_fired();
+        // The failure event at TIM8's break input (RM0090 §7.2.7), then the NMI.
+        c.p.tim8.clock_failure();
         c.core.pending[2] = true;
         c.stop_soon();
     }

@@ -853,8 +853,10 @@ impl Machine {
         let mut rcc = c.p.rcc.clone();
         rcc.reset(rcc_flag);
         let size = self.board.flash_size();
+        let options = c.p.flash.options();
         c.p = Periphs::new(size, HZ);
         c.p.rcc = rcc;
+        c.p.flash.restore_options(options);
         c.core = CoreRegs::new(self.board.idcode());
         self.resets += 1;
         self.reset_core()

@@ -1,5 +1,6 @@
 //! The flash interface (RM0090 §3.9, RM0390 §3.8; offsets from 0x40023C00): ACR read back,
-//! the unlock keys, sector erase and programming, the status flags. The memory itself is the
+//! the unlock keys, sector erase and programming, the status flags, and the user option bytes
+//! (OPTKEYR, OPTCR: programmed by OPTSTRT, kept over resets and power cycles, §3.7.2). The memory itself is the
 //! machine's (mapped read-only to the core: a write outside a programming sequence is caught);
 //! an erase is returned to the machine as an [`Erase`] to carry out.
 
@@ -20,10 +21,24 @@ pub struct FlashIf {
     sr: u32,
     optcr: u32,
     key_step: u8,
+    opt_key_step: u8,
+    /// The option bytes as programmed (OPTCR's value at reset, with OPTLOCK set).
+    options: u32,
+    /// Option programming fails (a part that will not take it: WRPERR, nothing programmed).
+    pub refuse_options: bool,
     /// The part's flash size \[bytes\] (512 KiB on the F446RE, 1 MiB on the F405RG).
     size: u32,
 }
 
+const OPTKEY1: u32 = 0x0819_2A3B;
+const OPTKEY2: u32 = 0x4C5D_6E7F;
+/// OPTCR.OPTLOCK.
+const OPTLOCK: u32 = 1;
+/// OPTCR.OPTSTRT.
+const OPTSTRT: u32 = 1 << 1;
+/// The factory option bytes (RM0090 §3.9.10 FLASH_OPTCR's reset value: BOR off, read
+/// protection level 0, no write protection, locked).
+pub const FACTORY_OPTIONS: u32 = 0x0FFF_AAED;
 const KEY1: u32 = 0x4567_0123;
 const KEY2: u32 = 0xCDEF_89AB;
 /// CR.LOCK.
@@ -44,8 +59,11 @@ impl FlashIf {
             acr: 0,
             cr: CR_LOCK,
             sr: 0,
-            optcr: 0x0FFF_AAED,
+            optcr: FACTORY_OPTIONS,
             key_step: 0,
+            opt_key_step: 0,
+            options: FACTORY_OPTIONS,
+            refuse_options: false,
             size,
         }
     }
@@ -77,6 +95,20 @@ impl FlashIf {
             addr: 0x0800_0000 + addr,
             len,
         })
+    }
+
+    /// The option bytes as programmed and whether programming them is refused, to carry over
+    /// a reset ([`FlashIf::restore_options`]).
+    pub fn options(&self) -> (u32, bool) {
+        (self.options, self.refuse_options)
+    }
+
+    /// The interface after a reset with option bytes `options` (OPTCR loaded from them,
+    /// locked).
+    pub fn restore_options(&mut self, (options, refuse): (u32, bool)) {
+        self.options = options | OPTLOCK;
+        self.optcr = self.options;
+        self.refuse_options = refuse;
     }
 
     /// Reads the register at `off`.
@@ -119,7 +151,33 @@ impl FlashIf {
                     return self.sector(snb);
                 }
             }
-            0x14 => self.optcr = value,
+            0x08 => {
+                // OPTKEYR: OPTKEY1 then OPTKEY2 unlock OPTCR; a wrong sequence keeps it locked
+                // until reset.
+                match (self.opt_key_step, value) {
+                    (0, OPTKEY1) => self.opt_key_step = 1,
+                    (1, OPTKEY2) => {
+                        self.optcr &= !OPTLOCK;
+                        self.opt_key_step = 0;
+                    }
+                    _ => self.opt_key_step = 2,
+                }
+            }
+            0x14 => {
+                if self.optcr & OPTLOCK != 0 {
+                    return None;
+                }
+                // Programmed at once (BSY never seen set); OPTSTRT reads back 0 after.
+                self.optcr = value & !OPTSTRT;
+                if value & OPTSTRT != 0 {
+                    if self.refuse_options {
+                        self.sr |= 1 << 4; // WRPERR
+                        self.optcr = (self.options & !OPTLOCK) | (value & OPTLOCK);
+                    } else {
+                        self.options = (value & !(OPTSTRT | OPTLOCK)) | OPTLOCK;
+                    }
+                }
+            }
             _ => {}
         }
         None
@@ -145,6 +203,37 @@ mod tests {
         assert!(f.programming());
         f.write(0x10, CR_LOCK);
         assert!(!f.programming());
+    }
+
+    #[test]
+    fn option_bytes_are_programmed_by_optstrt_only_unlocked_and_kept_over_a_reset() {
+        let mut f = FlashIf::new(512 * 1024);
+        assert_eq!(f.read(0x14), FACTORY_OPTIONS);
+        // Locked: ignored.
+        f.write(0x14, (FACTORY_OPTIONS & !0b1101) | OPTSTRT);
+        assert_eq!(f.read(0x14), FACTORY_OPTIONS);
+        f.write(0x08, OPTKEY1);
+        f.write(0x08, OPTKEY2);
+        assert_eq!(f.read(0x14) & OPTLOCK, 0);
+        // Written without OPTSTRT: not programmed, a reset brings the old back.
+        f.write(0x14, FACTORY_OPTIONS & !0b1101);
+        let mut g = FlashIf::new(512 * 1024);
+        g.restore_options(f.options());
+        assert_eq!(g.read(0x14), FACTORY_OPTIONS);
+        // With OPTSTRT: programmed, kept over the reset.
+        f.write(0x14, (FACTORY_OPTIONS & !0b1101) | OPTSTRT);
+        assert_eq!(f.read(0x14) & OPTSTRT, 0);
+        let mut g = FlashIf::new(512 * 1024);
+        g.restore_options(f.options());
+        assert_eq!(g.read(0x14), (FACTORY_OPTIONS & !0b1100) | OPTLOCK);
+        // Refused: WRPERR, the options as they were.
+        let mut f = FlashIf::new(512 * 1024);
+        f.refuse_options = true;
+        f.write(0x08, OPTKEY1);
+        f.write(0x08, OPTKEY2);
+        f.write(0x14, (FACTORY_OPTIONS & !0b1101) | OPTSTRT);
+        assert_eq!(f.read(0x0C) & (1 << 4), 1 << 4);
+        assert_eq!(f.read(0x14) & 0b1100, 0b1100, "BOR still off");
     }
 
     #[test]

@@ -130,6 +130,21 @@ impl Timer {
         self.regs.get(i).copied().unwrap_or(0)
     }
 
+    /// The clock security system's failure event at the break input (advanced timers; RM0090
+    /// §7.2.7, §17.3.12): with BDTR.BKE set, MOE cleared at once (the outputs to their
+    /// off-state) and SR.BIF set; without BKE, nothing. The break pin is not modelled (no
+    /// image gives it to the timer).
+    pub fn clock_failure(&mut self) {
+        const BDTR: usize = 0x44 / 4;
+        const BKE: u32 = 1 << 12;
+        const MOE: u32 = 1 << 15;
+        const BIF: u32 = 1 << 7;
+        if self.advanced && self.regs[BDTR] & BKE != 0 {
+            self.regs[BDTR] &= !MOE;
+            self.regs[SR] |= BIF;
+        }
+    }
+
     /// The interrupt line: a status flag set whose interrupt is enabled.
     pub fn irq(&self) -> bool {
         self.regs[SR] & self.regs[DIER] & 0xFF != 0
@@ -411,6 +426,22 @@ mod tests {
             out.extend(t.take_events());
         }
         out
+    }
+
+    #[test]
+    fn a_clock_failure_breaks_only_with_bke() {
+        let mut t = Timer::new(1, 16, true);
+        t.write(0x44, 1 << 15, 0);
+        t.clock_failure();
+        assert_eq!(t.reg(0x44 / 4) & (1 << 15), 1 << 15, "no BKE: MOE kept");
+        t.write(0x44, (1 << 15) | (1 << 13) | (1 << 12), 0);
+        t.clock_failure();
+        assert_eq!(t.reg(0x44 / 4) & (1 << 15), 0, "BKE: MOE cleared");
+        assert_eq!(t.reg(SR) & (1 << 7), 1 << 7, "BIF");
+        let mut g = Timer::new(2, 16, false);
+        g.write(0x44, 1 << 12, 0);
+        g.clock_failure();
+        assert_eq!(g.reg(SR), 0, "a general-purpose timer has no break");
     }
 
     #[test]

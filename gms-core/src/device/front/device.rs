@@ -78,6 +78,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         if !self.status_now().faults.is_empty() {
             return Err("fault latched (clear first)");
         }
+        self.may_drive()?;
         self.sense_reaches_i_max()?;
         self.post(|r| r.enable = true)?;
         if self.status_now().enabled {
@@ -91,6 +92,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         if !self.status_now().faults.is_empty() {
             return Err("fault latched (clear first)");
         }
+        self.may_drive()?;
         self.sense_reaches_i_max()?;
         // One exchange: the loop takes the enable and the current in the same step.
         self.post(|r| {

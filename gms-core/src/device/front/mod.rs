@@ -67,6 +67,8 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     bufs: Bufs,
     /// The last frequency-response report read whole ([`read_frf`]).
     frf: crate::control::frf::FrfReport,
+    /// Why the board must not drive at all, found at start ([`Front::refusing_to_drive`]).
+    no_drive: Option<&'static str>,
 }
 
 /// The protocol side's share of the storage the two halves hand each other: the requests'
@@ -154,6 +156,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             has_table: false,
             upload: Upload::default(),
             frf: crate::control::frf::FrfReport::default(),
+            no_drive: None,
         }
     }
 
@@ -175,6 +178,22 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         self.configured = running;
         self.defaults_configured = defaults;
         self
+    }
+
+    /// A reason found at start why this board must not drive (its brown-out reset not at
+    /// 2.7 V, say): `enable` and `enable current` answer it as their `err 8` reason, and
+    /// nothing else changes. `None` (the default) refuses nothing.
+    pub fn refusing_to_drive(mut self, why: Option<&'static str>) -> Self {
+        self.no_drive = why;
+        self
+    }
+
+    /// The start's refusal to drive, if any ([`Front::refusing_to_drive`]).
+    fn may_drive(&self) -> Result<(), &'static str> {
+        match self.no_drive {
+            Some(why) => Err(why),
+            None => Ok(()),
+        }
     }
 
     /// The loop's latest status.
