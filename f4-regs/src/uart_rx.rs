@@ -10,8 +10,14 @@
 //! last; it polls, at a rate the caller chooses (a byte every 10.9 µs at 921,600 Bd: a
 //! 1024-byte ring holds 11 ms).
 //!
-//! Registers: the stream's CR, NDTR, PAR, M0AR, FCR (RM0090 §10.5.5-10.5.10); the USART's
-//! DR address and CR3.DMAR (§30.6.6).
+//! What the reader checks at each look ([`look`]): the USART's error flags (parity, framing,
+//! noise, overrun: SR read only — they clear when the stream's next DR read follows, §30.6.1),
+//! the stream's half- and full-transfer flags for gms-core's `protocol::RingWatch` (a lapped
+//! ring), and whether the stream still runs (EN, TEIF).
+//!
+//! Registers: the stream's CR, NDTR, PAR, M0AR, FCR (RM0090 §10.5.5-10.5.10), the DMA's
+//! LISR/HISR and LIFCR/HIFCR (§10.5.1-10.5.4); the USART's SR, DR address and CR3.DMAR
+//! (§30.6.1, §30.6.6).
 
 use crate::pac;
 
@@ -107,4 +113,46 @@ pub unsafe fn copy_out(ring: Ring, from: u16, to: u16, out: &mut [u8]) -> usize 
         *o = unsafe { core::ptr::read_volatile(ring.addr.add(at)) };
     }
     n
+}
+
+/// What one look at the reception found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Look {
+    /// The USART's SR showed a parity, framing, noise or overrun error (PE, FE, NF, ORE: bits
+    /// 0-3): a byte received since the flags last cleared was damaged or lost.
+    pub line_error: bool,
+    /// The stream reached the ring's middle since the last look (HTIF; cleared now).
+    pub half: bool,
+    /// The stream reached the ring's end since the last look (TCIF; cleared now).
+    pub full: bool,
+    /// Where the stream writes next (as [`write_pos`]).
+    pub to: u16,
+    /// The stream no longer runs (EN clear, or TEIF: a transfer error disabled it).
+    pub stopped: bool,
+}
+
+/// One look at the reception, in this order: the USART's SR (an error flag set for a byte
+/// the stream has already taken: the position read after it includes that byte), the
+/// stream's flags (HTIF and TCIF cleared where seen, by writing LIFCR/HIFCR), its position,
+/// its EN.
+pub fn look(s: RxStream, usart: pac::usart::Usart, len: u16) -> Look {
+    let sr = usart.sr().read().0;
+    let (reg, n) = (s.stream / 4, s.stream % 4);
+    let isr = s.dma.isr(reg).read();
+    let (half, full, te) = (isr.htif(n), isr.tcif(n), isr.teif(n));
+    if half || full {
+        s.dma.ifcr(reg).write(|w| {
+            w.set_htif(n, half);
+            w.set_tcif(n, full);
+        });
+    }
+    let to = write_pos(s, len);
+    let stopped = te || !s.dma.st(s.stream).cr().read().en();
+    Look {
+        line_error: sr & 0xF != 0,
+        half,
+        full,
+        to,
+        stopped,
+    }
 }

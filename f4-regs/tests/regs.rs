@@ -237,7 +237,11 @@ fn the_break_input_is_on_for_the_clock_failure_alone() {
     // (bit 10) kept.
     assert_eq!(bdtr & (1 << 12), 1 << 12, "BKE");
     assert_eq!(bdtr & (1 << 13), 1 << 13, "BKP active high");
-    assert_eq!(bdtr & (1 << 14), 0, "AOE clear: MOE stays off after a break");
+    assert_eq!(
+        bdtr & (1 << 14),
+        0,
+        "AOE clear: MOE stays off after a break"
+    );
     assert_eq!(bdtr & ((1 << 15) | (1 << 10)), (1 << 15) | (1 << 10));
 }
 
@@ -472,7 +476,10 @@ fn the_brown_out_reset_is_programmed_with_only_its_field_changed() {
     assert_eq!(optcr & !0b1111, 0x0FFF_AAE0, "RDP, nWRP and the rest kept");
     // Already set: nothing written.
     set_word(flash.as_ptr(), 0x08, 0);
-    assert_eq!(clock::brown_out_reset(flash, 0, || 0, 10_000), BrownOut::Set);
+    assert_eq!(
+        clock::brown_out_reset(flash, 0, || 0, 10_000),
+        BrownOut::Set
+    );
     assert_eq!(word(flash.as_ptr(), 0x08), 0);
 }
 

@@ -416,6 +416,9 @@ pub fn init() -> (ControlHw, Rest) {
             stream,
             ring,
             at: 0,
+            watch: gms_core::protocol::RingWatch::new(),
+            error_seen: false,
+            suspect: 0,
             started: false,
         }
     };

@@ -13,18 +13,19 @@
 //! may still reach the next host: `gms-tune` discards what arrives in its first 30 ms); the
 //! axis is not touched — it keeps holding or finishing its move, the bridge as it was, every
 //! fault check running (`disable` is a request like any other). A UART cannot tell that the
-//! host has gone: its session never ends, and bytes lost on the line (an overrun, a framing
-//! error) drop the partial line, whose request then gets no reply. A host starts with CAN LF
+//! host has gone: its session never ends; bytes damaged or lost on the line (the USART's
+//! parity, framing, noise or overrun flags, a lapped or stopped receive ring: `port.rs`) make
+//! the lines they touch end in `err 9`, not run. A host starts with CAN LF
 //! (gms-core's `protocol::CANCEL`): the half line an earlier host left is dropped, and that
 //! host's stream and experiment end (`Front::new_session`), on either link.
 
 use core::fmt::{self, Write};
 
-use defmt::info;
+use defmt::{info, warn};
 use embassy_futures::select::{Either3, select3};
 use embassy_time::{Duration, Instant, Ticker};
 use gms_core::device::{Front, LoopLink, Mailbox, Status};
-use gms_core::protocol::{self, LineReader};
+use gms_core::protocol::{self, Line, LineReader};
 
 use crate::control::{MAILBOX, TelemetryRx};
 use crate::port::{Port, Read};
@@ -132,9 +133,31 @@ pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: Telem
             };
             let event = select3(port.read(&mut packet), poll, dtr_poll.next()).await;
             match event {
-                Either3::First(Ok(Read::Bytes(n))) => {
+                Either3::First(Ok(read)) => {
+                    let (n, damaged) = match read {
+                        Read::Bytes(n) => (n, false),
+                        Read::Damaged(n) => {
+                            warn!("link: a byte damaged on the line; its line is refused");
+                            reader.damage();
+                            (n, true)
+                        }
+                        Read::Lost { mid_line } => {
+                            warn!("link: bytes lost (the receive ring lapped or stopped)");
+                            reader.drop_line(mid_line);
+                            reply.clear();
+                            let _ = protocol::execute(&mut *dev, Line::Damaged, &mut reply);
+                            if port.send(reply.as_bytes()).await.is_err() {
+                                break;
+                            }
+                            (0, false)
+                        }
+                    };
                     let mut link_ok = true;
                     for &b in packet.get(..n).unwrap_or(&[]) {
+                        if damaged {
+                            // Every line a damaged chunk touches is refused (`err 9`).
+                            reader.damage();
+                        }
                         let Some(line) = reader.push(b) else {
                             continue;
                         };

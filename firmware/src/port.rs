@@ -10,9 +10,20 @@ pub struct Gone;
 
 /// What a read brought.
 pub enum Read {
-    /// So many bytes, at the start of the buffer. (A UART's bytes damaged on the line, the
-    /// only loss left with its reception by DMA, make a line the protocol refuses: `err`.)
+    /// So many bytes, at the start of the buffer.
     Bytes(usize),
+    /// So many bytes, of which some were damaged or lost on the line (a UART's parity,
+    /// framing, noise or overrun error): the lines they belong to are not run (`err 9`).
+    #[cfg_attr(not(feature = "board-nucleo-f446"), allow(dead_code))]
+    Damaged(usize),
+    /// Bytes were lost (a UART's receive ring lapped or its stream stopped): answered `err 9`
+    /// at once; the line in progress is dropped and, when `mid_line` (the lost bytes did not
+    /// end with a LF, or nobody can tell), the rest of it too as it comes.
+    #[cfg_attr(not(feature = "board-nucleo-f446"), allow(dead_code))]
+    Lost {
+        /// The lost bytes ended inside a line.
+        mid_line: bool,
+    },
 }
 
 /// A byte link to the host.
@@ -118,6 +129,7 @@ mod uart {
     use embassy_time::Timer;
     use f4_regs::uart_rx::{self, Ring, RxStream};
     use f4_regs::uart_tx::{self, TxStream};
+    use gms_core::protocol::RingWatch;
 
     use super::{Gone, Port, Read};
 
@@ -146,7 +158,9 @@ mod uart {
     /// USART2 to the ST-LINK's virtual COM port, both ways by DMA (RM0390 table 28: DMA1
     /// stream 5 channel 4 receives, stream 6 channel 4 sends); reception into a ring the
     /// stream fills on its own (`f4_regs::uart_rx`: the data register is never read by the
-    /// CPU). A host sends one request and waits for its reply, so the ring never laps.
+    /// CPU). A host sends one request and waits for its reply, so the ring never laps; each
+    /// look checks that it did not all the same (gms-core's `RingWatch`), that the stream
+    /// still runs and that the USART saw no error on the line (`uart_rx::look`).
     /// Transmission from the port's own buffer (`f4_regs::uart_tx`): `send` copies and
     /// starts the transfer and returns, so the next batch is formatted while this one is on
     /// the line.
@@ -165,6 +179,12 @@ mod uart {
         pub ring: Ring,
         /// Where the next byte to read is in the ring.
         pub at: u16,
+        /// The ring's check for laps.
+        pub watch: RingWatch,
+        /// The last look saw a line error flag.
+        pub error_seen: bool,
+        /// Unread bytes, from `at` on, among which a damaged one is \[bytes\].
+        pub suspect: u16,
         /// A session has begun (a UART has no connection: the first `connected` returns at
         /// once, so does every later one).
         pub started: bool,
@@ -178,14 +198,60 @@ mod uart {
         }
 
         async fn read(&mut self, buf: &mut [u8]) -> Result<Read, Gone> {
-            // Cancel-safe: `at` moves only when bytes are returned.
+            // Cancel-safe: `at` and the watch move only when the look's result is returned.
+            let len = self.ring.len;
             loop {
-                let to = uart_rx::write_pos(self.stream, self.ring.len);
-                if to != self.at {
+                let look = uart_rx::look(self.stream, pac::USART2, len);
+                if look.stopped {
+                    // A stopped stream (a transfer error) is started again from the ring's
+                    // start; what it had not delivered is lost.
+                    if !uart_rx::start(self.stream, pac::USART2, self.ring) {
+                        return Err(Gone);
+                    }
+                    (self.at, self.watch) = (0, RingWatch::new());
+                    (self.error_seen, self.suspect) = (false, 0);
+                    return Ok(Read::Lost { mid_line: true });
+                }
+                let new_bytes = look.to != self.watch.last();
+                if !self
+                    .watch
+                    .intact(len, self.at, look.to, look.half, look.full)
+                {
+                    // Lapped: the unread bytes are not the ones received; all dropped. The
+                    // last byte received (just written, intact) says whether a line goes on.
+                    (self.at, self.suspect) = (look.to, 0);
+                    self.error_seen = look.line_error;
+                    let last = (look.to as usize + len as usize - 1) % len as usize;
+                    // SAFETY: `last` < len: within the ring the stream writes (`board.rs`).
+                    let byte = unsafe { core::ptr::read_volatile(self.ring.addr.add(last)) };
+                    return Ok(Read::Lost {
+                        mid_line: byte != b'\n',
+                    });
+                }
+                // A flag still set from the last look with nothing received since is the
+                // same error; with new bytes it is a new one (the stream's DR read of them,
+                // after the last look's SR read, cleared the old).
+                let fresh = look.line_error && (new_bytes || !self.error_seen);
+                self.error_seen = look.line_error;
+                let unread = ((look.to as u32 + len as u32 - self.at as u32) % len as u32) as u16;
+                if fresh {
+                    if unread == 0 {
+                        // Damaged in a byte already read: the line in progress, if any.
+                        self.suspect = 0;
+                        return Ok(Read::Damaged(0));
+                    }
+                    self.suspect = unread;
+                }
+                if unread != 0 {
                     // SAFETY: the ring is the one the stream writes (`board.rs`), and the
-                    // bytes from `at` to `to` are written and not yet reached again.
-                    let n = unsafe { uart_rx::copy_out(self.ring, self.at, to, buf) };
-                    self.at = ((self.at as usize + n) % self.ring.len as usize) as u16;
+                    // bytes from `at` to `to` are written and not yet reached again (the watch
+                    // found no lap).
+                    let n = unsafe { uart_rx::copy_out(self.ring, self.at, look.to, buf) };
+                    self.at = ((self.at as usize + n) % len as usize) as u16;
+                    if self.suspect > 0 {
+                        self.suspect = self.suspect.saturating_sub(n as u16);
+                        return Ok(Read::Damaged(n));
+                    }
                     return Ok(Read::Bytes(n));
                 }
                 Timer::after_micros(RX_POLL_US).await;

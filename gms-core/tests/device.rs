@@ -634,7 +634,10 @@ fn a_board_refusing_to_drive_refuses_enable_with_its_reason() {
     let why = "brown-out reset not at 2.7 V";
     let mut dev = board_device(None).refusing_to_drive(Some(why));
     assert_eq!(ask(&mut dev, "enable").trim(), format!("err 8 {why}"));
-    assert_eq!(ask(&mut dev, "enable current").trim(), format!("err 8 {why}"));
+    assert_eq!(
+        ask(&mut dev, "enable current").trim(),
+        format!("err 8 {why}")
+    );
     assert!(ask(&mut dev, "status").contains(" enabled=0"));
     assert!(ask(&mut dev, "set pos.kp 0.5").starts_with("ok"));
     let mut dev = board_device(None).refusing_to_drive(None);

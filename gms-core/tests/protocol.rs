@@ -297,6 +297,7 @@ fn line_reader_handles_crlf_partial_long_and_binary_lines() {
                     Line::TooLong => "LONG".into(),
                     Line::NotText => "BIN".into(),
                     Line::Cancel => "CAN".into(),
+                    Line::Damaged => "DMG".into(),
                 });
             }
         }
@@ -319,6 +320,30 @@ fn line_reader_handles_crlf_partial_long_and_binary_lines() {
     feed(&mut rd, &[protocol::CANCEL], &mut lines);
     feed(&mut rd, b"list\n", &mut lines);
     assert_eq!(lines, ["CAN", "T:", "CAN", "T:status", "CAN", "T:list"]);
+    // A line damaged on the link is reported at its LF, and only that line; a CAN drops
+    // the mark with the line.
+    let mut lines = Vec::new();
+    feed(&mut rd, b"set pos.k", &mut lines);
+    rd.damage();
+    feed(&mut rd, b"p 0.5\nstatus\n", &mut lines);
+    rd.damage();
+    feed(&mut rd, b"\n", &mut lines);
+    rd.damage();
+    feed(&mut rd, &[protocol::CANCEL], &mut lines);
+    feed(&mut rd, b"list\n", &mut lines);
+    assert_eq!(lines, ["DMG", "T:status", "DMG", "CAN", "T:list"]);
+    // A line lost mid-way: what came is dropped and, if asked, the rest up to its LF.
+    let mut lines = Vec::new();
+    feed(&mut rd, b"move 0.2", &mut lines);
+    rd.drop_line(true);
+    feed(&mut rd, b"5\nstatus\n", &mut lines);
+    feed(&mut rd, b"move 0.2", &mut lines);
+    rd.drop_line(false);
+    feed(&mut rd, b"list\nmove", &mut lines);
+    rd.drop_line(true);
+    feed(&mut rd, &[protocol::CANCEL], &mut lines);
+    feed(&mut rd, b"help\n", &mut lines);
+    assert_eq!(lines, ["T:status", "T:list", "CAN", "T:help"]);
     // Exactly MAX_LINE bytes fit; one more does not.
     let mut lines = Vec::new();
     feed(&mut rd, &[b'x'; protocol::MAX_LINE], &mut lines);

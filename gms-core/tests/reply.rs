@@ -33,12 +33,13 @@ proptest! {
 
 #[test]
 fn codes_are_the_protocols_numbers() {
-    for (n, c) in (1u8..=8).zip(ErrorCode::ALL) {
+    assert_eq!(ErrorCode::ALL.len(), 9);
+    for (n, c) in (1u8..=9).zip(ErrorCode::ALL) {
         assert_eq!(c as u8, n);
         assert_eq!(ErrorCode::from_code(n), Some(c));
     }
     assert_eq!(ErrorCode::from_code(0), None);
-    assert_eq!(ErrorCode::from_code(9), None);
+    assert_eq!(ErrorCode::from_code(10), None);
     assert_eq!(
         Reply::parse("err 8 disable before save"),
         Ok(Some(Reply::Err(ErrorCode::Refused, "disable before save")))

@@ -377,7 +377,10 @@ fn the_deadman_starts_after_the_loops_first_step() {
     let first = |exc: u32| m.handled.iter().find(|h| h.exc == exc).map(|h| h.at);
     let (step, tick) = (first(CONTROL), first(DEADMAN));
     let (Some(step), Some(tick)) = (step, tick) else {
-        panic!("no step ({step:?}) or no deadman tick ({tick:?})\n{}", log(&m));
+        panic!(
+            "no step ({step:?}) or no deadman tick ({tick:?})\n{}",
+            log(&m)
+        );
     };
     assert!(
         tick > step,
@@ -399,7 +402,11 @@ fn the_brown_out_reset_is_set_at_the_first_boot_or_enable_is_refused() {
     );
     let optcr = m.chip().p.flash.read(0x14);
     assert_eq!(optcr & 0b1100, 0, "BOR_LEV: level 3");
-    assert_eq!(optcr & 0xFFFF_FF00, 0x0FFF_AA00, "read and write protection kept");
+    assert_eq!(
+        optcr & 0xFFFF_FF00,
+        0x0FFF_AA00,
+        "read and write protection kept"
+    );
     m.power_cycle().unwrap();
     m.run_until_logged("control loop running", 1.0).unwrap();
     assert!(
@@ -423,4 +430,67 @@ fn the_brown_out_reset_is_set_at_the_first_boot_or_enable_is_refused() {
     );
     m.run_for(0.001).unwrap();
     assert!(!m.bridge_driving());
+}
+
+/// One byte of a request arrives with a framing error (noise on the line): the request is
+/// not run, its reply is `err 9`, and the next request is served as usual.
+#[test]
+fn a_byte_damaged_on_the_line_refuses_its_request_with_err_9() {
+    let mut m = boot();
+    let kp = ask(&mut m, "get pos.kp");
+    // "set pos.kp 0.55", its '5' of "0.55" damaged (it arrives as sent: only the flag says).
+    let line = b"set pos.kp 0.55\n";
+    let _ = m.take_from_image();
+    m.send_damaged_to_image(line, 13);
+    m.run_for(0.01).unwrap();
+    let reply = String::from_utf8_lossy(&m.take_from_image()).to_string();
+    assert!(
+        reply.starts_with("err 9 line damaged on the link"),
+        "{reply:?}"
+    );
+    assert_eq!(ask(&mut m, "get pos.kp"), kp, "the damaged request ran");
+    assert!(ask(&mut m, "set pos.kp 0.55").starts_with("ok"));
+}
+
+/// A host that sends requests far faster than the replies go out (250 `list`s at once: 1,250
+/// bytes against a 1,024-byte ring, each reply 14 ms of the line): the ring would lap. The
+/// image finds it, drops what it has not read and answers the line in progress `err 9`; no
+/// request is cut and run as another (before, the lapped ring's bytes ran as `lisst`: `err
+/// 1`), and the next request is served.
+#[test]
+fn a_lapped_receive_ring_drops_its_bytes_with_err_9() {
+    let mut m = boot();
+    let _ = m.take_from_image();
+    m.send_to_image(&b"list\n".repeat(250));
+    // Until the host's bytes are all on the line and the image has sent nothing for 0.1 s
+    // (at most 5 s of device time: all 250 replies take 3.5 s).
+    let mut text = String::new();
+    let mut quiet = 0;
+    for _ in 0..500 {
+        m.run_for(0.01).unwrap();
+        let out = m.take_from_image();
+        quiet = if out.is_empty() { quiet + 1 } else { 0 };
+        text.push_str(&String::from_utf8_lossy(&out));
+        if m.chip().p.usart2.from_host.is_empty() && quiet >= 10 {
+            break;
+        }
+    }
+    let ends: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("ok") || l.starts_with("err"))
+        .collect();
+    let lost = ends.iter().filter(|l| l.starts_with("err 9")).count();
+    let other: Vec<_> = ends
+        .iter()
+        .filter(|l| l.starts_with("err") && !l.starts_with("err 9"))
+        .collect();
+    assert!(lost >= 1, "no err 9 in {} replies: {ends:?}", ends.len());
+    assert!(other.is_empty(), "{other:?}");
+    assert!(
+        ends.len() < 250,
+        "{} replies: nothing was dropped",
+        ends.len()
+    );
+    m.run_for(0.05).unwrap();
+    assert!(status(&mut m).starts_with("ok"));
 }

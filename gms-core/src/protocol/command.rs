@@ -184,6 +184,9 @@ pub enum ErrorCode {
     InvalidSet = 7,
     /// 8: the device refuses now (e.g. `save` while enabled, a latched fault).
     Refused = 8,
+    /// 9: the line was damaged on the link (a UART's framing, noise, parity or overrun error,
+    /// or its receive ring lapped or stopped): not run.
+    LinkError = 9,
 }
 
 /// A parsed request.

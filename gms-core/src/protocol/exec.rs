@@ -160,6 +160,13 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
         Line::Text(t) => t,
         Line::TooLong => return err(out, ErrorCode::LineTooLong, "line too long"),
         Line::NotText => return err(out, ErrorCode::NotText, "not printable ASCII"),
+        Line::Damaged => {
+            return err(
+                out,
+                ErrorCode::LinkError,
+                "line damaged on the link: not run (send it again)",
+            );
+        }
         Line::Cancel => {
             dev.new_session();
             return Ok(());

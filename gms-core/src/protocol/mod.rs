@@ -24,6 +24,7 @@
 //! | `table …` | the table motion: `ref`/`corr START V …`, `corr off`, `set POINTS STEPS ORIGIN`, `use`, `run PERIODS`, `stop`, `read ref\|corr\|err START COUNT`, `clear`; `table`: `ok state=… period=… done=… rms=… peak=…` |
 //!
 //! - `reader`: [`LineReader`] (bytes to lines).
+//! - `ring`: [`RingWatch`] (a receive ring filled by circular DMA, checked for laps).
 //! - `command`: [`parse`] (a line to a [`Command`]), [`ErrorCode`].
 //! - `params`: [`PARAMS`] (the one parameter table: each path's field in the settings; its units
 //!   and ranges from the leaf [`crate::settings`]), [`with_value`].
@@ -43,6 +44,7 @@ mod params;
 mod reader;
 mod replies;
 mod reply;
+mod ring;
 mod status;
 
 pub use command::*;
@@ -51,6 +53,7 @@ pub use params::*;
 pub use reader::*;
 pub use replies::*;
 pub use reply::*;
+pub use ring::*;
 pub use status::*;
 
 /// The friction modes as `list` prints their range.

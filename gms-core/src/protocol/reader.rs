@@ -17,6 +17,8 @@ pub struct LineReader {
     len: usize,
     too_long: bool,
     not_text: bool,
+    damaged: bool,
+    skipping: bool,
 }
 
 impl Default for LineReader {
@@ -26,6 +28,8 @@ impl Default for LineReader {
             len: 0,
             too_long: false,
             not_text: false,
+            damaged: false,
+            skipping: false,
         }
     }
 }
@@ -41,9 +45,29 @@ pub enum Line<'a> {
     NotText,
     /// [`CANCEL`]: the line so far dropped, a new host's session.
     Cancel,
+    /// Bytes of the line were damaged or lost on the link ([`LineReader::damage`]): it is
+    /// not run.
+    Damaged,
 }
 
 impl LineReader {
+    /// The link lost or damaged bytes of the line in progress (the next byte pushed belongs
+    /// to it too): it ends as [`Line::Damaged`] at its LF, or is dropped by a [`CANCEL`].
+    pub fn damage(&mut self) {
+        self.damaged = true;
+    }
+
+    /// The line in progress was lost on the link and has been answered already: what came of
+    /// it is dropped, and when `rest` the bytes still to come of it, up to and with its LF,
+    /// are dropped too, without a line (a [`CANCEL`] ends that).
+    pub fn drop_line(&mut self, rest: bool) {
+        self.len = 0;
+        self.too_long = false;
+        self.not_text = false;
+        self.damaged = false;
+        self.skipping = rest;
+    }
+
     /// Feeds one byte; returns a line when `byte` ends one (LF), and [`Line::Cancel`] for
     /// [`CANCEL`] (the line so far dropped).
     pub fn push(&mut self, byte: u8) -> Option<Line<'_>> {
@@ -51,13 +75,24 @@ impl LineReader {
             self.len = 0;
             self.too_long = false;
             self.not_text = false;
+            self.damaged = false;
+            self.skipping = false;
             return Some(Line::Cancel);
+        }
+        if self.skipping {
+            self.skipping = byte != b'\n';
+            return None;
         }
         if byte == b'\n' {
             let (too_long, not_text, len) = (self.too_long, self.not_text, self.len);
+            let damaged = self.damaged;
             self.len = 0;
             self.too_long = false;
             self.not_text = false;
+            self.damaged = false;
+            if damaged {
+                return Some(Line::Damaged);
+            }
             if too_long {
                 return Some(Line::TooLong);
             }

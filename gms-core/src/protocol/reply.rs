@@ -64,7 +64,7 @@ impl fmt::Display for Reply<'_> {
 
 impl ErrorCode {
     /// Every code, in number order.
-    pub const ALL: [ErrorCode; 8] = [
+    pub const ALL: [ErrorCode; 9] = [
         ErrorCode::UnknownCommand,
         ErrorCode::BadArgument,
         ErrorCode::LineTooLong,
@@ -73,6 +73,7 @@ impl ErrorCode {
         ErrorCode::OutOfRange,
         ErrorCode::InvalidSet,
         ErrorCode::Refused,
+        ErrorCode::LinkError,
     ];
 
     /// The code of its number on the wire; `None` for a number the protocol does not use.

@@ -99,6 +99,16 @@ impl Machine {
         c.p.usart2.poll_host(now);
     }
 
+    /// Bytes for the image's link, the one at `bad` (an index into `bytes`) arriving with a
+    /// framing error (noise on the line).
+    pub fn send_damaged_to_image(&mut self, bytes: &[u8], bad: usize) {
+        let c = self.chip_mut();
+        let u = &mut c.p.usart2;
+        let n = u.received + u.from_host.len() as u64 + bad as u64;
+        u.framing_errors.insert(n);
+        self.send_to_image(bytes);
+    }
+
     /// Bytes the image sent on its link since the last call.
     pub fn take_from_image(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.chip_mut().p.usart2.to_host)

@@ -9,6 +9,8 @@ use std::collections::VecDeque;
 
 /// SR.ORE.
 pub const SR_ORE: u32 = 1 << 3;
+/// SR.FE.
+pub const SR_FE: u32 = 1 << 1;
 /// SR.IDLE.
 pub const SR_IDLE: u32 = 1 << 4;
 /// SR.RXNE.
@@ -54,6 +56,11 @@ pub struct Usart {
     pub from_host: VecDeque<u8>,
     /// Bytes the image sent.
     pub to_host: Vec<u8>,
+    /// Bytes received so far on the line.
+    pub received: u64,
+    /// Which received bytes (numbered from 0 by [`Usart::received`]) arrive with a framing
+    /// error (SR.FE with the byte).
+    pub framing_errors: std::collections::BTreeSet<u64>,
     /// When the byte on the receive line ends \[cycles\].
     rx_at: Option<u64>,
     /// When the byte being sent ends \[cycles\].
@@ -80,6 +87,8 @@ impl Usart {
             apb1_div,
             from_host: VecDeque::new(),
             to_host: Vec::new(),
+            received: 0,
+            framing_errors: Default::default(),
             rx_at: None,
             tx_at: None,
             tx_byte: 0,
@@ -149,7 +158,18 @@ impl Usart {
             if !self.from_host.is_empty() {
                 self.rx_at = Some(t + self.frame());
             }
-            if !self.dma_rx() {
+            let n = self.received;
+            self.received += 1;
+            if self.framing_errors.remove(&n) {
+                self.sr |= SR_FE;
+            }
+            if self.dma_rx() {
+                // The stream reads DR at once: the flags the core's last SR read showed are
+                // cleared by it (the sequence SR then DR, RM0090 §30.6.1), and so is one this
+                // byte raised if the same flag was shown.
+                self.sr &= !(self.sr_read & (SR_IDLE | SR_ORE | 7));
+                self.sr_read = 0;
+            } else {
                 if self.sr & SR_RXNE != 0 {
                     self.sr |= SR_ORE;
                 } else {
@@ -274,6 +294,28 @@ mod tests {
         u.read(0);
         u.read(4);
         assert!(!u.irq());
+    }
+
+    #[test]
+    fn a_framing_error_with_dma_stays_until_sr_is_read_and_the_next_byte_taken() {
+        let mut u = at_921600();
+        u.write(0x14, CR3_DMAR, 0);
+        u.framing_errors.insert(1);
+        u.from_host.extend(b"abc");
+        u.poll_host(0);
+        let f = u.frame();
+        u.fire(f);
+        assert_eq!(u.read(0) & SR_FE, 0, "a clean byte");
+        u.fire(2 * f);
+        assert_eq!(u.read(0) & SR_FE, SR_FE, "with the damaged byte");
+        assert_eq!(u.read(0) & SR_FE, SR_FE, "SR alone does not clear it");
+        u.fire(3 * f);
+        assert_eq!(
+            u.read(0) & SR_FE,
+            0,
+            "the stream's read of the next byte did"
+        );
+        assert_eq!(u.received, 3);
     }
 
     #[test]
