@@ -39,6 +39,8 @@ impl gms_link::DeviceLink for Fake {
                     sense_offset: 2048.0,
                     missed: 0,
                     late: 0,
+                    duty_max: 1.0,
+                    duty_limited: 0,
                     drive: DriveKind::Position,
                     configured: self.configured == Some(1),
                 }

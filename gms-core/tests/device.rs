@@ -644,6 +644,35 @@ fn a_board_refusing_to_drive_refuses_enable_with_its_reason() {
     assert!(ask(&mut dev, "enable").starts_with("ok"));
 }
 
+/// The status states the board's duty limit and counts the current steps it held: a
+/// current the loop cannot reach (the sense reads zero) drives the duty to the F405's 0.43
+/// at 40 kHz and no further.
+#[test]
+fn the_status_says_when_the_duty_limit_binds() {
+    use gms_core::device::LoopLink as _;
+    use gms_core::device::StatusReply;
+    let mut dev = board_device(None);
+    let read = |dev: &mut gms_core::device::Front<InlineLink, MemStore>| {
+        let reply = ask(dev, "status");
+        StatusReply::parse(reply.trim().strip_prefix("ok ").unwrap()).unwrap()
+    };
+    let st = read(&mut dev);
+    let dmax = board().sense.duty_max(default_settings().cur_rate_hz);
+    assert!(
+        (st.duty_max - dmax).abs() < 1e-3 && (dmax - 0.43).abs() < 0.01,
+        "{st:?}"
+    );
+    assert_eq!(st.duty_limited, 0);
+    assert!(ask(&mut dev, "enable current").starts_with("ok"));
+    assert!(ask(&mut dev, "current 0.3").starts_with("ok"));
+    for _ in 0..400 {
+        dev.link_mut().pause();
+    }
+    let st = read(&mut dev);
+    assert!(st.duty_limited > 100, "{st:?}");
+    assert!((st.duty.abs() - dmax).abs() < 1e-3, "{st:?}");
+}
+
 #[test]
 fn the_device_s_status_reads_back_as_its_state() {
     use gms_core::device::{DriveKind, StatusReply};

@@ -216,6 +216,7 @@ fn limits() -> Limits {
         pos_min: -1_000_000,
         pos_max: 1_000_000,
         budget_cycles: 6_720,
+        duty_max: 1.0,
     }
 }
 
@@ -783,4 +784,109 @@ fn the_dead_time_is_added_back_towards_the_commanded_current() {
     // Out of range: refused by the settings' check.
     s.dead_time = 6e-6;
     assert!(Controller::try_new(s).is_err());
+}
+
+/// The duty limit of the F4 boards' sense window, against the PWM's own geometry: with the
+/// compare values `bridge_compare` writes (centre-aligned, the driving side low while the
+/// counter is at or above the compare value, RM0090 §17.3.10), the drive pulse of every duty
+/// up to `duty_max` ends, and the reading settles (`edge_settle_s`), before the window opens
+/// (half the window before the bottom), and starts after it has closed; a duty 0.02 above it
+/// puts the settling in the window. At 40 kHz about 0.43, at 20 kHz about 0.72; an ideal
+/// sense has none.
+#[test]
+fn the_duty_limit_keeps_the_bridge_edges_out_of_the_sense_window() {
+    let b = gms_core::boards::f405::BOARD;
+    let sense = b.sense;
+    for (hz, near) in [(40_000.0f32, 0.43f32), (20_000.0, 0.72)] {
+        let dmax = sense.duty_max(hz);
+        assert!((dmax - near).abs() < 0.01, "{hz} Hz: {dmax}");
+        let (_, arr) = drive::pwm_timing(b.pwm_timer_hz, hz, b.pwm_max_arr).unwrap();
+        let t = 1.0 / hz as f64;
+        let half_window = sense.window_s as f64 / 2.0;
+        let settle = sense.edge_settle_s as f64;
+        // The pulse (CNT >= CCR) from CCR on the way up to CCR on the way down: the counter
+        // takes T/2 from 0 to ARR.
+        let pulse = |d: f32| {
+            let (_, ccr) = drive::bridge_compare(d, arr, true);
+            let up = ccr as f64 / arr as f64 * t / 2.0;
+            (up, t - up)
+        };
+        for k in 1..=50 {
+            let d = dmax * k as f32 / 50.0;
+            let (start, end) = pulse(d);
+            assert!(
+                end + settle <= t - half_window + 1e-9,
+                "{hz} Hz, duty {d}: settled at {:.2} us, the window opens at {:.2} us",
+                (end + settle) * 1e6,
+                (t - half_window) * 1e6
+            );
+            assert!(start >= half_window, "{hz} Hz, duty {d}");
+        }
+        let (_, end) = pulse(dmax + 0.02);
+        assert!(
+            end + settle > t - half_window,
+            "{hz} Hz: {} over the limit",
+            dmax + 0.02
+        );
+    }
+    let ideal = gms_core::device::SenseChain {
+        window_s: 0.0,
+        edge_settle_s: 0.0,
+        ..sense
+    };
+    assert_eq!(ideal.duty_max(40_000.0), 1.0);
+}
+
+/// The current loop under a duty limit: the voltage never exceeds `duty_max` × the supply,
+/// however much the error asks, the duty stays within ±`duty_max` with the dead-time
+/// compensation added, each such step says it was limited, and a command within reach is
+/// not limited.
+#[test]
+fn the_current_loop_holds_its_duty_within_the_limit() {
+    use gms_core::control::controller::Controller;
+    let mut s = gms_core::device::default_settings();
+    s.cur_rate_hz = 40_000.0;
+    s.dead_time = 220e-9;
+    let mut c = Controller::try_new(s).unwrap();
+    c.set_duty_max(0.43);
+    // A current the motor cannot reach from here (the measurement stays at 0): the integral
+    // pushes until the limit holds it.
+    c.hold_current(0.4);
+    let mut limited = 0;
+    for _ in 0..2_000 {
+        let out = c.current_step(0.0);
+        assert!(
+            out.voltage.abs() <= 0.43 * s.v_supply + 1e-5,
+            "{}",
+            out.voltage
+        );
+        assert!(out.duty.abs() <= 0.43 + 1e-6, "{}", out.duty);
+        limited += out.limited as u32;
+    }
+    assert!(limited > 1_900, "{limited} of 2000 steps limited");
+    let out = c.current_step(0.0);
+    assert!(
+        (out.duty - 0.43).abs() < 1e-6,
+        "held at the limit: {}",
+        out.duty
+    );
+    // Both ways.
+    c.hold_current(-0.4);
+    for _ in 0..2_000 {
+        c.current_step(0.0);
+    }
+    assert!((c.current_step(0.0).duty + 0.43).abs() < 1e-6);
+    // Within reach: R i = 10.6 Ω × 0.1 A = 1.06 V, duty 0.09: not limited.
+    let mut c = Controller::try_new(s).unwrap();
+    c.set_duty_max(0.43);
+    c.hold_current(0.1);
+    let out = c.current_step(0.1);
+    assert!(!out.limited);
+    // Out-of-range limits: within 0 … 1, a NaN none.
+    c.set_duty_max(1.5);
+    assert_eq!(c.duty_max(), 1.0);
+    c.set_duty_max(f32::NAN);
+    assert_eq!(c.duty_max(), 1.0);
+    c.set_duty_max(-1.0);
+    assert_eq!(c.duty_max(), 0.0);
 }

@@ -37,13 +37,27 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
             f(),
             any::<u32>(),
             any::<u32>(),
+            f(),
+            any::<u32>(),
             prop::sample::select(DriveKind::ALL.to_vec()),
             any::<bool>(),
         ),
     )
         .prop_map(
             |((mode, enabled, faults, t, pos, error_counts, moving, current), rest)| {
-                let (ff, duty, worst, mean, offset, missed, late, drive, configured) = rest;
+                let (
+                    ff,
+                    duty,
+                    worst,
+                    mean,
+                    offset,
+                    missed,
+                    late,
+                    duty_max,
+                    duty_limited,
+                    drive,
+                    configured,
+                ) = rest;
                 StatusReply {
                     mode,
                     enabled,
@@ -60,6 +74,8 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
                     sense_offset: offset,
                     missed,
                     late,
+                    duty_max,
+                    duty_limited,
                     drive,
                     configured,
                 }
@@ -97,13 +113,15 @@ fn a_reply_without_a_key_is_refused_naming_it_and_unknown_keys_are_ignored() {
         sense_offset: 2048.25,
         missed: 2,
         late: 1,
+        duty_max: 0.43,
+        duty_limited: 7,
         drive: DriveKind::Current,
         configured: true,
     };
     let text = written(&s);
     assert!(text.contains(" fault_names=over_current "), "{text}");
     let words: Vec<&str> = text.split_whitespace().collect();
-    assert_eq!(words.len(), 18, "{text}");
+    assert_eq!(words.len(), 20, "{text}");
     for (i, w) in words.iter().enumerate() {
         let key = w.split_once('=').unwrap().0;
         let without: Vec<&str> = words
@@ -158,7 +176,10 @@ proptest! {
                     // f32 values as f32; the position, the time and the integers as f64.
                     let as_f32 = v.parse::<f32>().unwrap() as f64;
                     let as_f64 = v.parse::<f64>().unwrap();
-                    let wide = matches!(key, "t" | "pos" | "missed" | "late" | "faults");
+                    let wide = matches!(
+                        key,
+                        "t" | "pos" | "missed" | "late" | "duty_limited" | "faults"
+                    );
                     prop_assert_eq!(x, if wide { as_f64 } else { as_f32 }, "{}: {}", key, v);
                 }
                 StatusValue::Text(t) => prop_assert_eq!(t, *v),

@@ -300,6 +300,8 @@ fn status_meaning(key: &str) -> (&'static str, &'static str) {
         "sense_offset" => ("current-sense zero", "ADC codes"),
         "missed" => ("control periods missed", ""),
         "late" => ("control steps that wrote their duty late", ""),
+        "duty_max" => ("largest duty the current sense allows", ""),
+        "duty_limited" => ("current steps held at duty_max", ""),
         "drive" => ("what the loop drives", ""),
         "configured" => (
             "settings chosen for this axis (1) or built-in defaults (0)",

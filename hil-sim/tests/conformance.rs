@@ -157,6 +157,8 @@ fn status_keys_are_one_set() {
         "sense_offset",
         "missed",
         "late",
+        "duty_max",
+        "duty_limited",
         "drive",
         "configured",
     ];

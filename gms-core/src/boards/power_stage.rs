@@ -81,6 +81,14 @@ pub const fn sense_timing(clocks: &F4Clocks) -> SenseTiming {
     }
 }
 
+/// How long after a PWM edge at the MCU's pin the current reading is disturbed \[s\]: the
+/// DRV8871's propagation delay (t_PD, 0.7 µs typical) and dead time (t_DEAD, 220 ns typical:
+/// the DRV8870/DRV8871 datasheets' switching characteristics), then the INA240's recovery
+/// from the output's common-mode step (about 1 µs: the hardware review of its datasheet's
+/// PWM rejection). The duty is limited so that none falls in the sense window
+/// (`device::SenseChain::duty_max`: 0.43 at 40 kHz, 0.72 at 20 kHz).
+pub const EDGE_SETTLE_S: f32 = 0.7e-6 + 0.22e-6 + 1.0e-6;
+
 /// The DRV8871 sleeps once both inputs have been low for about 1 ms (as they are while the
 /// bridge is off) and must wake before it drives: `enable` brakes (both inputs high) this long
 /// first. Taken at the 1 ms of TI's drivers of this family (a DRV8871 specific figure is to be
@@ -126,6 +134,7 @@ pub const fn board(clocks: &F4Clocks) -> Board {
             zero_tolerance: SENSE_OFFSET_TOLERANCE,
             linear_margin_v: SENSE_LINEAR_MARGIN_V,
             window_s: timing.window_s(),
+            edge_settle_s: EDGE_SETTLE_S,
         },
         limits: limits(clocks),
         has_truth: false,

@@ -384,6 +384,9 @@ pub struct CurrentOutput {
     pub voltage: f32,
     /// PWM duty in [-1, 1] (sign = direction).
     pub duty: f32,
+    /// The voltage was held at the board's duty limit ([`Controller::set_duty_max`]), below
+    /// the supply: the sense window's limit binds.
+    pub limited: bool,
 }
 
 /// The controller and its state.
@@ -425,6 +428,8 @@ pub struct Controller<const N: usize> {
     a_ref: f32,
     cur_integ: f32,
     e_cur: f32,
+    /// The largest |duty| the board's sense allows [-] (1: the supply's).
+    duty_max: f32,
     adapt: Adaptive,
     shaping: Shaping,
     /// The position map's sample at the reference: torque offset \[N·m\], friction scale [-]
@@ -497,6 +502,7 @@ impl<const N: usize> Controller<N> {
             a_ref: 0.0,
             cur_integ: 0.0,
             e_cur: 0.0,
+            duty_max: 1.0,
             out: PositionOutput::default(),
         })
     }
@@ -514,6 +520,23 @@ impl<const N: usize> Controller<N> {
     /// Current-loop period \[s\].
     pub fn dt_cur(&self) -> f32 {
         self.dt_cur
+    }
+
+    /// Limits the duty to ±`duty_max` [-] (within 0 … 1; the default 1 is the supply's): the
+    /// board's sense window must see no bridge edge ([`crate::device::SenseChain::duty_max`]).
+    /// The current loop's voltage is held within `duty_max` × the supply, its integrator
+    /// with it, and the dead-time compensation within the same bound.
+    pub fn set_duty_max(&mut self, duty_max: f32) {
+        self.duty_max = if duty_max.is_finite() {
+            duty_max.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+    }
+
+    /// The duty limit [-] ([`Controller::set_duty_max`]).
+    pub fn duty_max(&self) -> f32 {
+        self.duty_max
     }
 
     /// The adaptive scale on the friction feedforward [-] (mode `gms-adaptive`).
@@ -893,14 +916,16 @@ impl<const N: usize> Controller<N> {
         let ff = self.p.motor.r * self.i_cmd + self.p.motor.k_e * self.w_ref;
         let integ_new = self.cur_integ + c.ki * e * self.dt_cur;
         let v_unsat = c.kp * e + integ_new + ff;
-        let vmax = self.p.v_supply;
+        let supply = self.p.v_supply;
+        let vmax = supply * self.duty_max;
         let v = clamp(v_unsat, vmax);
         if v == v_unsat || (e > 0.0) != (v_unsat > 0.0) {
             self.cur_integ = clamp(integ_new, vmax);
         }
         CurrentOutput {
             voltage: v,
-            duty: v / vmax + self.dead_time_duty(),
+            duty: clamp(v / supply + self.dead_time_duty(), self.duty_max),
+            limited: v != v_unsat && self.duty_max < 1.0,
         }
     }
 

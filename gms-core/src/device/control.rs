@@ -871,7 +871,11 @@ impl ControlLoop {
             self.wake_left -= 1;
             self.duty = 0.0;
         } else if self.enabled {
-            self.duty = self.ctrl.current_step(self.current).duty;
+            let out = self.ctrl.current_step(self.current);
+            self.duty = out.duty;
+            if out.limited {
+                self.stats.record_limited();
+            }
         }
         // The next step is a position step's and runs one: its reference side now, in this step
         // that has none, so that the two share the work (with the current loop at twice the

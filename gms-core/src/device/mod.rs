@@ -96,17 +96,41 @@ pub struct SenseChain {
     /// and the control step starts at its end, so it must leave the step its budget:
     /// `window_s <= 2 (1 - budget_fraction) / rate.cur_hz` ([`prepare`] refuses other rates).
     pub window_s: f32,
+    /// How long after a PWM edge at the MCU's pin the reading is disturbed \[s\]: the
+    /// bridge's propagation delay and dead time, then the amplifier's recovery from the
+    /// common-mode step (0 for an ideal sense). Sets [`SenseChain::duty_max`].
+    pub edge_settle_s: f32,
 }
 
 impl Board {
     /// The limits the loop checks for the settings `s` on this board (the trip below the
     /// current sense's range with `s`'s `sense.v_per_a`).
     pub fn limits(&self, s: &Settings) -> crate::drive::Limits {
-        crate::drive::limits_for(s, &self.limits, self.sense.range(s.sense_v_per_a))
+        let mut l = crate::drive::limits_for(s, &self.limits, self.sense.range(s.sense_v_per_a));
+        l.duty_max = self.sense.duty_max(s.cur_rate_hz);
+        l
     }
 }
 
 impl SenseChain {
+    /// The largest |duty| [-] at which no bridge edge disturbs the sense window at a current
+    /// loop of `cur_hz` \[Hz\]: 1 − (`window_s` + 2 `edge_settle_s`) · `cur_hz`, within 0 … 1.
+    ///
+    /// The drive pulse is centred on the counter's top (`drive::bridge_compare`), the window
+    /// on its bottom. The pulse's end comes |d| T / 2 after the top, and the reading is clean
+    /// again `edge_settle_s` later; that must be before the window opens, `window_s` / 2
+    /// before the bottom: T/2 + |d| T/2 + settle ≤ T − window/2. (The pulse's start, after the
+    /// window, is the weaker bound.) An F4 board at 40 kHz: 1 − (10.4 + 2 × 1.92) µs / 25 µs =
+    /// 0.43; at 20 kHz, 0.72. An ideal sense (the simulator's): 1.
+    pub fn duty_max(&self, cur_hz: f32) -> f32 {
+        let d = 1.0 - (self.window_s + 2.0 * self.edge_settle_s) * cur_hz;
+        if d.is_finite() {
+            d.clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
     /// Current per ADC code \[A/code\] with an amplifier of `v_per_a` \[V/A\].
     pub fn amps_per_code(&self, v_per_a: f32) -> f32 {
         self.vref / self.full_scale / v_per_a

@@ -42,16 +42,18 @@ pub trait ParamStore {
 /// The loop's parameter set for `s` on `board`: the controller, the limits and the PWM timing;
 /// the error says why the board cannot run it.
 pub fn prepare(s: &Settings, board: &Board) -> Result<Applied, &'static str> {
-    let ctrl = Ctrl::try_new(*s).map_err(|_| "the parameter set is invalid")?;
+    let mut ctrl = Ctrl::try_new(*s).map_err(|_| "the parameter set is invalid")?;
     let (psc, arr) = drive::pwm_timing(board.pwm_timer_hz, s.cur_rate_hz, board.pwm_max_arr)
         .ok_or("the board's PWM timer cannot run rate.cur_hz")?;
     let window = board.sense.window_s;
     if window > 0.0 && window > 2.0 * (1.0 - board.limits.budget_fraction) / s.cur_rate_hz {
         return Err("the board's current sense cannot sample at rate.cur_hz");
     }
+    let limits = board.limits(s);
+    ctrl.set_duty_max(limits.duty_max);
     Ok(Applied {
         ctrl,
-        limits: board.limits(s),
+        limits,
         psc,
         arr,
     })

@@ -137,6 +137,9 @@ pub struct Limits {
     pub budget_cycles: u32,
     /// One PWM period [cycles of the step clock]: steps further apart missed periods.
     pub period_cycles: u32,
+    /// The largest |duty| the board's current sense allows [-] (1 from [`limits_for`]; the
+    /// board's sense window sets it: `device::SenseChain::duty_max`).
+    pub duty_max: f32,
 }
 
 /// What the board allows: the inputs of [`limits_for`].
@@ -191,6 +194,7 @@ pub fn limits_for(s: &Settings, b: &BoardLimits, sense_range: f32) -> Limits {
         pos_max: (s.pos_max as f64 / rpc as f64) as i64,
         budget_cycles: (b.clock_hz as f32 / s.cur_rate_hz * b.budget_fraction) as u32,
         period_cycles: (b.clock_hz as f64 / s.cur_rate_hz as f64 + 0.5) as u32,
+        duty_max: 1.0,
     }
 }
 

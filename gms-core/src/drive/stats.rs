@@ -50,6 +50,7 @@ pub struct StepStats {
     n: u64,
     missed: u32,
     late: u32,
+    limited: u32,
 }
 
 impl StepStats {
@@ -62,7 +63,19 @@ impl StepStats {
             n: 0,
             missed: 0,
             late: 0,
+            limited: 0,
         }
+    }
+
+    /// One current step held at the board's duty limit (the sense window's: the voltage the
+    /// loop asked for was more than the limit allows).
+    pub fn record_limited(&mut self) {
+        self.limited = self.limited.saturating_add(1);
+    }
+
+    /// Current steps held at the duty limit since start.
+    pub fn limited(&self) -> u32 {
+        self.limited
     }
 
     /// Records a step that wrote its duty after the update it was for ([`past_update`]).

@@ -3,7 +3,7 @@
 //!
 //! The reply is one line of `key=value` words (after `ok `), in this order: `mode enabled
 //! faults t pos error_counts moving current fault_names ff duty step_us_worst step_us_mean
-//! sense_offset missed drive configured`. A reader ignores keys it does not know (a newer
+//! sense_offset missed late duty_max duty_limited drive configured`. A reader ignores keys it does not know (a newer
 //! device may add some) and refuses a reply that lacks one it needs.
 
 use core::fmt::{self, Write};
@@ -79,6 +79,12 @@ pub struct StatusReply {
     /// Control steps that wrote their duty after the PWM update they were for, since start
     /// [-] (each latches `overrun`).
     pub late: u32,
+    /// The largest |duty| the board's current sense allows at `rate.cur_hz` [-]: above it a
+    /// bridge edge would fall in the sense window (1: no limit, the simulator's sense).
+    pub duty_max: f32,
+    /// Current steps held at `duty_max` since start [-]: the limit bound (the loop asked for
+    /// more voltage than it allows).
+    pub duty_limited: u32,
     /// What the loop drives.
     pub drive: DriveKind,
     /// False while the device runs on its built-in defaults (never configured for an axis:
@@ -109,7 +115,7 @@ impl StatusReply {
         write!(
             out,
             " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} late={} \
-             drive={} configured={}",
+             duty_max={} duty_limited={} drive={} configured={}",
             Num(self.ff),
             Num(self.duty),
             Num(self.step_us_worst),
@@ -117,6 +123,8 @@ impl StatusReply {
             Num(self.sense_offset),
             self.missed,
             self.late,
+            Num(self.duty_max),
+            self.duty_limited,
             self.drive.name(),
             self.configured as u8,
         )
@@ -142,6 +150,8 @@ impl StatusReply {
             sense_offset: w.number("sense_offset")?,
             missed: w.number("missed")?,
             late: w.number("late")?,
+            duty_max: w.number("duty_max")?,
+            duty_limited: w.number("duty_limited")?,
             drive: w.named("drive", DriveKind::from_name)?,
             configured: w.flag("configured")?,
         })
@@ -161,7 +171,7 @@ pub enum StatusValue {
 
 impl StatusReply {
     /// The reply's keys and values in the order the device writes them.
-    pub fn entries(&self) -> [(&'static str, StatusValue); 18] {
+    pub fn entries(&self) -> [(&'static str, StatusValue); 20] {
         use StatusValue::{Number as N, Text};
         let b = |x: bool| N(x as u8 as f64);
         [
@@ -181,6 +191,8 @@ impl StatusReply {
             ("sense_offset", N(self.sense_offset as f64)),
             ("missed", N(self.missed as f64)),
             ("late", N(self.late as f64)),
+            ("duty_max", N(self.duty_max as f64)),
+            ("duty_limited", N(self.duty_limited as f64)),
             ("drive", Text(self.drive.name())),
             ("configured", b(self.configured)),
         ]

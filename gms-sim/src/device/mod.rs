@@ -61,6 +61,7 @@ pub fn board(sc: &Scenario) -> Board {
             // The plant's ADC is linear to its ends (its range is the scenario's).
             linear_margin_v: 0.0,
             window_s: 0.0,
+            edge_settle_s: 0.0,
             ..real.sense
         },
         limits: BoardLimits {

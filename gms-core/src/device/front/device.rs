@@ -131,6 +131,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             sense_offset: st.sense_offset,
             missed: st.stats.missed(),
             late: st.stats.late(),
+            duty_max: self.board.sense.duty_max(self.settings.cur_rate_hz),
+            duty_limited: st.stats.limited(),
             drive: st.drive.kind(),
             configured: self.configured,
         }
