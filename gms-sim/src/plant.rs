@@ -249,7 +249,7 @@ impl Plant {
             rad_per_count: spec.rad_per_count,
             supply: spec.supply.volts,
             r_source: spec.supply.r_source_ohm,
-            bridge: (!spec.bridge.ideal).then_some(spec.bridge),
+            bridge: spec.real_bridge(),
             phase: 0.0,
             duty: 0.0,
             pulses: [None; 2],

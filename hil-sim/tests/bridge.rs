@@ -12,14 +12,21 @@ use hil_sim::sim;
 /// 40 kHz, the default current loop's period \[s\].
 const T: f64 = 25e-6;
 
-/// The default scenario with the real bridge at the DRV8871's figures and a stiff supply.
+/// The default scenario with the real bridge at the DRV8871's figures and a stiff supply, the
+/// device's dead-time compensation off (`drive.dead_time` 0; the default plant's device
+/// compensates it).
 fn real() -> Scenario {
     let mut sc = Scenario::default();
     sc.plant.bridge.ideal = false;
     sc.plant.bridge.dead_time_s = 220e-9;
     sc.plant.bridge.delay_s = 0.7e-6;
     sc.plant.supply.r_source_ohm = 0.0;
+    sc.controller.insert(
+        "drive".into(),
+        toml::Value::Table(toml::toml! { dead_time = 0.0 }),
+    );
     sc.check().unwrap();
+    assert_eq!(sc.controller_params().unwrap().dead_time, 0.0);
     sc
 }
 
@@ -138,6 +145,8 @@ fn the_sense_amplifier_lags_by_its_bandwidth() {
     // A held rotor (no back-EMF) and a voltage step: i = I (1 − e^(−t/τe)); through a first-
     // order lag τs the reading is I (1 − (τe e^(−t/τe) − τs e^(−t/τs)) / (τe − τs)).
     let mut sc = Scenario::default();
+    // The ideal bridge: the step's voltage from its start, the winding's resistance alone.
+    sc.plant.bridge.ideal = true;
     sc.plant.k_e = 0.0;
     sc.plant.adc_noise = 0.0;
     sc.plant.sense.bandwidth_hz = 20e3;
@@ -210,6 +219,7 @@ fn dead_time_compensation_wins_back_the_reversals() {
     let mut ideal = Scenario::default();
     ideal.plant.bridge.ideal = true;
     let real = real();
+    // The default plant's device compensates; set here all the same.
     let mut compensated = real.clone();
     compensated.controller.insert(
         "drive".into(),

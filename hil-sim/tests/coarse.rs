@@ -84,9 +84,9 @@ fn commissioning_measures_the_gear_motor() {
     eprintln!(
         "R {} -> {:.4} ({:+.2} %), k {} -> {:.4e} ({:+.2} %), J {} -> {:.3e} ({:+.1} %), \
          L {} -> {:.3e} ({:+.1} %)",
-        p.resistance,
+        p.path_resistance(),
         c.r,
-        (c.r / p.resistance - 1.0) * 100.0,
+        (c.r / p.path_resistance() - 1.0) * 100.0,
         p.k_e,
         c.k_e,
         (c.k_e / p.k_e - 1.0) * 100.0,
@@ -102,7 +102,8 @@ fn commissioning_measures_the_gear_motor() {
         "{}",
         c.lines[0]
     );
-    assert!((c.r / p.resistance - 1.0).abs() < 0.05, "R {}", c.r);
+    // The winding and the bridge's switches in its path.
+    assert!((c.r / p.path_resistance() - 1.0).abs() < 0.05, "R {}", c.r);
     assert!((c.k_e / p.k_e - 1.0).abs() < 0.05, "k_e {}", c.k_e);
     assert!(
         (c.inertia / p.inertia - 1.0).abs() < 0.15,
@@ -302,7 +303,7 @@ fn commissioning_holds_on_random_coarse_encoder_motors() {
                 .unwrap_or_else(|e| panic!("R {r} k {k} J {j} L/R {tau}: {e}"));
             let rel = |a: f64, b: f64| a / b - 1.0;
             let (er, ek, ej, el) = (
-                rel(c.r, r),
+                rel(c.r, sc.plant.path_resistance()),
                 rel(c.k_e, k),
                 rel(c.inertia, j),
                 rel(c.inductance, r * tau),

@@ -59,8 +59,9 @@ pub fn applied_duty(duty: f32, period: u32) -> f32 {
     if !duty.is_finite() || period == 0 {
         return 0.0;
     }
+    // At most `period` counts: |duty| ≤ 1 rounds to at most `period`.
     let low = (crate::math::min(abs(duty), 1.0) * period as f32 + 0.5) as u32;
-    let mag = low.min(period) as f32 / period as f32;
+    let mag = low as f32 / period as f32;
     if duty >= 0.0 { mag } else { -mag }
 }
 

@@ -287,7 +287,8 @@ impl Scenario {
 
     /// The controller's parameters: the device's defaults with the axis the user describes to
     /// the device taken from the plant (encoder resolution, motor constants, supply,
-    /// transmission ratio); the compensator's friction is the device's default model unless
+    /// transmission ratio; with a real bridge, its on-resistance in `motor.r` and its dead
+    /// time in `drive.dead_time`, as commissioning measures them); the compensator's friction is the device's default model unless
     /// `[controller.ff] start = "plant"` (then the plant's nominal friction, where the device
     /// can hold it: see [`compensator_from_plant`]); then the `[controller]` table by protocol
     /// paths, each checked against the protocol's range table, and the whole set validated.
@@ -303,7 +304,10 @@ impl Scenario {
         s.counts_per_rev = device_counts_per_rev(p.rad_per_count);
         s.sense_v_per_a = crate::device::SIM_ADC_VREF / 2.0 / p.adc_range as f32;
         s.motor.k_m = p.k_m as f32;
-        s.motor.r = p.resistance as f32;
+        // The bridge as commissioning finds it: its switches in the winding's path, its dead
+        // time compensated.
+        s.motor.r = p.path_resistance() as f32;
+        s.dead_time = p.real_bridge().map_or(0.0, |b| b.dead_time_s) as f32;
         s.motor.k_e = p.k_e as f32;
         s.v_supply = p.supply.volts as f32;
         s.ff.ratio = p.ratio() as f32;

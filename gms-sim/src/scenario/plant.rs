@@ -282,4 +282,15 @@ impl Plant {
     pub fn ratio(&self) -> f64 {
         self.lead / (2.0 * std::f64::consts::PI * self.gear_ratio)
     }
+
+    /// The real bridge, `None` for the ideal one.
+    pub fn real_bridge(&self) -> Option<BridgeSpec> {
+        (!self.bridge.ideal).then_some(self.bridge)
+    }
+
+    /// The resistance in the current's path \[ohm\]: the winding's and, for the real bridge,
+    /// its switches' (what commissioning measures).
+    pub fn path_resistance(&self) -> f64 {
+        self.resistance + self.real_bridge().map_or(0.0, |b| b.r_on_ohm)
+    }
 }
