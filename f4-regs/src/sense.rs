@@ -206,6 +206,15 @@ pub fn ack(dma: pac::dma::Dma) {
     });
 }
 
+/// True when the stream has written part of the next sequence already (NDTR below the
+/// sequence's `n` conversions; RM0090 §10.5.6: NDTR counts down per item and, circular, is
+/// reloaded at the end): the buffer summed now would mix two periods' conversions. Read right
+/// after the sum.
+#[inline(always)]
+pub fn next_sequence_started(dma: pac::dma::Dma, n: u16) -> bool {
+    dma.st(STREAM).ndtr().read().ndt() != n
+}
+
 /// True when a sequence has completed (TCIF).
 #[inline(always)]
 pub fn complete(dma: pac::dma::Dma) -> bool {

@@ -134,6 +134,17 @@ fn a_dead_dma_costs_one_bounded_wait() {
 
 /// The chain's errors: TEIF or DMEIF of stream 0 (LISR bits 3 and 2), the ADC's OVR (SR bit 5).
 #[test]
+fn a_sequence_under_way_is_seen_from_the_streams_count() {
+    let dma = block(pac::dma::Dma::from_ptr);
+    // Reloaded to the sequence's 8 after its end: not started.
+    dma.st(sense::STREAM).ndtr().write(|w| w.set_ndt(8));
+    assert!(!sense::next_sequence_started(dma, 8));
+    // One conversion of the next one written.
+    dma.st(sense::STREAM).ndtr().write(|w| w.set_ndt(7));
+    assert!(sense::next_sequence_started(dma, 8));
+}
+
+#[test]
 fn the_sense_chain_reports_its_errors() {
     let r = sense_regs();
     assert_eq!(sense::dma_error(r.dma), Stall::None);

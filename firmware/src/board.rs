@@ -197,6 +197,14 @@ impl ControlHw {
         pwm::set_bridge(pac::TIM8, in1, in2);
     }
 
+    /// True when the sense's DMA has begun the next sequence (the step started more than
+    /// about 16 µs late at 40 kHz): the sum just read may mix two periods
+    /// (`f4_regs::sense::next_sequence_started`).
+    #[inline(always)]
+    pub fn sense_stale(&self) -> bool {
+        sense::next_sequence_started(pac::DMA2, SENSE_OVERSAMPLE as u16)
+    }
+
     /// True when one of the current sense's conversions since the last call read 0 or 4095
     /// (the ADC's analog watchdog, `f4_regs::sense::clipped`).
     #[inline(always)]

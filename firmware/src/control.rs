@@ -179,6 +179,11 @@ impl Loop {
             current_codes: self.hw.current_codes(),
             since_last,
         };
+        // A buffer the DMA has begun to overwrite (a single buffer: the step started so late
+        // that the next sequence is under way) is not a reading.
+        if self.hw.sense_stale() {
+            self.core.sense_stale();
+        }
         // The exchange with nothing masked (`irq::LoopShared`): the status built and a
         // report copied here hold off neither thread mode's users of the mailbox (they cannot
         // run meanwhile anyway) nor the deadman.

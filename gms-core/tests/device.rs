@@ -125,6 +125,37 @@ fn a_late_step_latches_overrun_while_driving() {
 
 /// The board's deadman halts the loop from outside the step: the bridge off, `control_stall`
 /// latched and in the status, and an `enable` refused while it stays latched.
+/// A period's reading from a sense buffer the next sequence had begun to overwrite (the
+/// board's step started too late): while driving, `overrun` and the bridge off; at rest,
+/// nothing.
+#[test]
+fn a_stale_sense_reading_latches_overrun_while_driving() {
+    let mut lp = rest();
+    lp.sense_stale();
+    step(&mut lp, period_cycles(), None);
+    assert!(lp.status().faults.is_empty());
+    step(
+        &mut lp,
+        period_cycles(),
+        Some(Requests {
+            enable: true,
+            ..Requests::new()
+        }),
+    );
+    assert!(lp.enabled());
+    lp.sense_stale();
+    let out = {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: codes(2048),
+            since_last: period_cycles(),
+        };
+        lp.step(inp, |_, _| None)
+    };
+    assert!(!out.enabled && out.compare == (0, 0), "{out:?}");
+    assert!(lp.status().faults.contains(Faults::OVERRUN));
+}
+
 #[test]
 fn a_halt_from_the_deadman_switches_off_and_says_so() {
     let period = period_cycles();

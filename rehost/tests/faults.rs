@@ -494,3 +494,25 @@ fn a_lapped_receive_ring_drops_its_bytes_with_err_9() {
     m.run_for(0.05).unwrap();
     assert!(status(&mut m).starts_with("ok"));
 }
+
+/// A control step held off so long (2,800 cycles, 16.7 µs at 168 MHz) that the sense's DMA
+/// has begun the next period's sequence in the one buffer it has (16.0 µs after the step's
+/// due start at 40 kHz): the step sees the stream's count under way, takes the sum for no
+/// reading, latches `overrun` and switches the bridge off before it drives on it, so it is
+/// counted neither `missed` nor `late`. Before the check the same step drove on the mixed sum;
+/// it latched `overrun` only as a missed period (41.7 µs since the last start), which a late
+/// step after another late step is not.
+#[test]
+fn a_step_that_starts_after_the_next_sequence_does_not_drive_on_its_sum() {
+    let mut m = driving();
+    assert!(ask(&mut m, "move 0.02").starts_with("ok"));
+    m.start_late(CONTROL, 2800, 1);
+    m.run_for(0.002).unwrap();
+    assert!(!m.bridge_driving());
+    let st = off_with(&mut m, &["overrun"]);
+    assert_eq!(
+        (value(&st, "late"), value(&st, "missed")),
+        (0.0, 0.0),
+        "{st}"
+    );
+}

@@ -924,6 +924,17 @@ impl ControlLoop {
         }
     }
 
+    /// The period's current-sense reading was taken from a buffer the next sequence had begun
+    /// to overwrite (the step started too late: the board's single DMA buffer): while driving
+    /// `overrun` is latched and the bridge switched off, as for a step that wrote its duty
+    /// late. Call before the period's [`ControlLoop::step`].
+    pub fn sense_stale(&mut self) {
+        if self.enabled {
+            self.faults.latch(Faults::OVERRUN);
+            self.switch_off();
+        }
+    }
+
     /// The safety limits the loop checks (its over-current trip within the sense's reach).
     pub fn limits(&self) -> Limits {
         self.limits
