@@ -61,7 +61,8 @@ impl RingWatch {
             let d = ahead(start as u16, b % len);
             d != 0 && d <= path
         };
-        !(half && !passed(len / 2)) && !(full && !passed(0))
+        // Each flag set must be for a boundary the path passed.
+        (!half || passed(len / 2)) && (!full || passed(0))
     }
 }
 
