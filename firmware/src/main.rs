@@ -448,12 +448,16 @@ async fn supervisor(
     let mut deepest = 0usize;
     board::start_control();
     // The deadman once the loop has taken its first step (a period is 25-50 us: 2 ms is forty
-    // or more); armed all the same if none came, and then it trips within two periods.
-    let mut waited_us = 0u32;
-    while control::steps() == 0 && waited_us < FIRST_STEP_WAIT_US {
-        Timer::after_micros(50).await;
-        waited_us += 50;
-    }
+    // or more); armed all the same if none came, and then it trips within two periods. A
+    // bounded spin on the DWT, not a timer: the deadman must not wait on the executor (a task
+    // that never yields would keep it unarmed).
+    let t0 = cortex_m::peripheral::DWT::cycle_count();
+    let limit = board::CLOCKS.hclk_hz() / 1_000_000 * FIRST_STEP_WAIT_US;
+    // (No `spin_loop` hint: its YIELD is a no-op on the M4 and not an instruction rehost's
+    // emulator takes.)
+    while control::steps() == 0
+        && cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0) < limit
+    {}
     board::arm_deadman();
     info!("control loop running");
     loop {
