@@ -455,9 +455,9 @@ async fn supervisor(
     let limit = board::CLOCKS.hclk_hz() / 1_000_000 * FIRST_STEP_WAIT_US;
     // (No `spin_loop` hint: its YIELD is a no-op on the M4 and not an instruction rehost's
     // emulator takes.)
-    while control::steps() == 0
-        && cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0) < limit
-    {}
+    while control::steps() == 0 && cortex_m::peripheral::DWT::cycle_count().wrapping_sub(t0) < limit
+    {
+    }
     board::arm_deadman();
     info!("control loop running");
     loop {
