@@ -79,7 +79,11 @@ const MAPS: [elf::BoardMap; 2] = [
     },
 ];
 
-/// The budgets (instructions).
+/// The budgets (instructions). The table's period is allowed 2,100: its bench drives the
+/// current loop open (the sense reads a fixed 0.02 A), and since issue 55's duty limit (0.43 at
+/// 40 kHz on the F405) the loop sits at that limit, which costs 2,076 where the same period
+/// without the limit takes 1,934. The image's own table motion, closed on the plant, stays
+/// within its cycle budget (`rehost check`: 2,418 of 2,520). Back to 2,000 is issue 54's.
 const BUDGETS: [(&str, f64); 7] = [
     ("gms6_step", 300.0),
     ("controller_step", 1500.0),
@@ -87,7 +91,7 @@ const BUDGETS: [(&str, f64); 7] = [
     ("device_period", 2000.0),
     ("device_period_frf", 2000.0),
     ("device_period_map", 2000.0),
-    ("device_period_table", 2000.0),
+    ("device_period_table", 2100.0),
 ];
 
 fn main() -> ExitCode {
