@@ -127,16 +127,9 @@ impl FlashIf {
         match off {
             // ACR: LATENCY, PRFTEN, ICEN, DCEN kept; ICRST/DCRST read as 0.
             0x00 => self.acr = value & !((1 << 11) | (1 << 12)),
-            0x04 => {
-                // KEYR: KEY1 then KEY2 unlocks CR; anything else locks it until reset.
-                match (self.key_step, value) {
-                    (0, KEY1) => self.key_step = 1,
-                    (1, KEY2) => {
-                        self.cr &= !CR_LOCK;
-                        self.key_step = 0;
-                    }
-                    _ => self.key_step = 2,
-                }
+            // KEYR: KEY1 then KEY2 unlocks CR; anything else locks it until reset.
+            0x04 if key_sequence(&mut self.key_step, value, [KEY1, KEY2]) => {
+                self.cr &= !CR_LOCK;
             }
             0x0C => self.sr &= !(value & 0xF3), // write 1 to clear
             0x10 => {
@@ -151,17 +144,10 @@ impl FlashIf {
                     return self.sector(snb);
                 }
             }
-            0x08 => {
-                // OPTKEYR: OPTKEY1 then OPTKEY2 unlock OPTCR; a wrong sequence keeps it locked
-                // until reset.
-                match (self.opt_key_step, value) {
-                    (0, OPTKEY1) => self.opt_key_step = 1,
-                    (1, OPTKEY2) => {
-                        self.optcr &= !OPTLOCK;
-                        self.opt_key_step = 0;
-                    }
-                    _ => self.opt_key_step = 2,
-                }
+            // OPTKEYR: OPTKEY1 then OPTKEY2 unlock OPTCR; a wrong sequence keeps it locked
+            // until reset.
+            0x08 if key_sequence(&mut self.opt_key_step, value, [OPTKEY1, OPTKEY2]) => {
+                self.optcr &= !OPTLOCK;
             }
             0x14 => {
                 if self.optcr & OPTLOCK != 0 {
@@ -182,6 +168,21 @@ impl FlashIf {
         }
         None
     }
+}
+
+/// One write of a two-key unlock sequence (KEYR, OPTKEYR: RM0090 §3.5.1, §3.7.2): `step` is
+/// 0 before the first key, 1 after it, 2 after a wrong key (locked until reset). True when
+/// `value` completes the sequence (the caller unlocks; `step` back to 0).
+fn key_sequence(step: &mut u8, value: u32, keys: [u32; 2]) -> bool {
+    match (*step, value) {
+        (0, k) if k == keys[0] => *step = 1,
+        (1, k) if k == keys[1] => {
+            *step = 0;
+            return true;
+        }
+        _ => *step = 2,
+    }
+    false
 }
 
 #[cfg(test)]
