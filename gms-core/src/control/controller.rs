@@ -7,7 +7,7 @@
 
 use crate::control::adaptive::{AdaptInput, Adaptive, AdaptiveParams};
 use crate::control::posmap::MapGeometry;
-use crate::control::reference::{RefSample, SUB_PER_COUNT, SubCounts};
+use crate::control::reference::{RefSample, SUB_PER_COUNT, SubCounts, sub_counts};
 use crate::control::shaping::{Shaping, ShapingParams};
 use crate::friction::error::ParamError;
 use crate::friction::gms::{Gms, GmsParams};
@@ -389,6 +389,15 @@ pub struct CurrentOutput {
     pub limited: bool,
 }
 
+/// The friction feedforward's first half, worked out a step ahead: the actuator model's
+/// output [N·m] for the reference's increment `dx` \[rad\] at velocity `vel` [rad/s].
+#[derive(Debug, Clone, Copy)]
+struct FfAhead {
+    act: f32,
+    dx: f32,
+    vel: f32,
+}
+
 /// The controller and its state.
 #[derive(Debug, Clone)]
 pub struct Controller<const N: usize> {
@@ -416,9 +425,9 @@ pub struct Controller<const N: usize> {
     d_filt: f32,
     last_meas: Option<i64>,
     last_ref: Option<SubCounts>,
-    /// The friction model's output for the next position step's reference, worked out ahead
-    /// ([`Controller::feedforward_ahead`]) \[N·m\].
-    ff_ahead: Option<f32>,
+    /// The first half of the friction feedforward for the next position step's reference,
+    /// worked out ahead ([`Controller::feedforward_ahead`]).
+    ff_ahead: Option<FfAhead>,
     gms_act: Gms<N>,
     gms_guide: Option<Gms<N>>,
     map_act: StaticMap,
@@ -756,9 +765,28 @@ impl<const N: usize> Controller<N> {
     /// `dx` \[rad\] at velocity `vel` [rad/s] over one position period. Every model is advanced
     /// whatever the mode, so that switching modes finds them in the right state.
     fn friction_ff(&mut self, dx: f32, vel: f32) -> f32 {
+        let half = self.friction_ff_first(dx, vel);
+        self.friction_ff_second(half)
+    }
+
+    /// The friction feedforward's first half: the actuator's model advanced by `dx` \[rad\].
+    #[inline(always)]
+    fn friction_ff_first(&mut self, dx: f32, vel: f32) -> FfAhead {
+        FfAhead {
+            act: self.gms_act.advance(dx, self.dt_pos),
+            dx,
+            vel,
+        }
+    }
+
+    /// The friction feedforward's second half: the guideway's model advanced by the same
+    /// increment, and the mode's torque [N·m] (before the gain).
+    #[inline(always)]
+    fn friction_ff_second(&mut self, half: FfAhead) -> f32 {
+        let FfAhead { act, dx, vel } = half;
         let dt = self.dt_pos;
         let ratio = self.p.ff.ratio;
-        let gms = self.gms_act.advance(dx, dt)
+        let gms = act
             + self
                 .gms_guide
                 .as_mut()
@@ -770,15 +798,18 @@ impl<const N: usize> Controller<N> {
         }
     }
 
-    /// The friction feedforward for the next position step's reference `r`, worked out now:
-    /// the friction model advanced by the reference's increment (it depends on the reference
-    /// alone, not on the measurement). The control loop calls it in the current step before
-    /// the position step's when the current loop runs faster, so that the two steps share
-    /// the work; [`Controller::position_step`] with the same `r` then uses it (and works it out
-    /// itself when it was not).
+    /// The friction feedforward for the next position step's reference `r`, its first half
+    /// worked out now: the actuator's friction model advanced by the reference's increment
+    /// (it depends on the reference alone, not on the measurement). The control loop calls it
+    /// in the current step before the position step's when the current loop runs faster, so
+    /// that the two steps share the work; [`Controller::position_step`] with the same `r` then
+    /// advances the guideway's model and sums them, in the same order as when it works it
+    /// all out itself (bit for bit the same feedforward), which it does when this was not
+    /// called.
     pub fn feedforward_ahead(&mut self, r: &RefSample) {
-        let ff = self.friction_ff_at(r);
-        self.ff_ahead = Some(ff);
+        let dx = self.ref_increment(r);
+        let half = self.friction_ff_first(dx, r.vel);
+        self.ff_ahead = Some(half);
     }
 
     /// Forgets the feedforward worked out ahead (its position step does not run).
@@ -788,23 +819,29 @@ impl<const N: usize> Controller<N> {
 
     /// The friction model advanced to the reference `r` from the last one; its output \[N·m\].
     fn friction_ff_at(&mut self, r: &RefSample) -> f32 {
-        // Reference increment for the GMS feedforward (exact in fixed point).
+        let dx_ref = self.ref_increment(r);
+        self.friction_ff(dx_ref, r.vel)
+    }
+
+    /// The reference's increment to `r` from the last one \[rad\] (exact in fixed point; 0 at
+    /// the first), `r` kept as the last.
+    fn ref_increment(&mut self, r: &RefSample) -> f32 {
         let dx_ref = match self.last_ref {
             Some(prev) => i64_to_f32(r.pos.saturating_sub(prev)) * (self.rpc / SUB_PER_COUNT),
             None => 0.0,
         };
         self.last_ref = Some(r.pos);
-        self.friction_ff(dx_ref, r.vel)
+        dx_ref
     }
 
     /// One position-loop step: measured encoder count `meas` and the reference sample `r`.
     /// Returns the per-term breakdown; the current command is kept for the current loop.
     pub fn position_step(&mut self, meas: i64, r: &RefSample) -> PositionOutput {
         let rpc = self.rpc;
-        let meas_sub = meas.saturating_mul(SUB_PER_COUNT as i64);
+        let meas_sub = sub_counts(meas);
         let error = i64_to_f32(r.pos.saturating_sub(meas_sub)) * (rpc / SUB_PER_COUNT);
         let ff_model = match self.ff_ahead.take() {
-            Some(ff) => ff,
+            Some(half) => self.friction_ff_second(half),
             None => self.friction_ff_at(r),
         };
         // Derivative on the measurement, first-order filtered.

@@ -15,6 +15,22 @@ pub const SUB_PER_COUNT: f32 = (1u32 << SUB_BITS) as f32;
 /// A position in 1/65536 of an encoder count (fixed point, i64).
 pub type SubCounts = i64;
 
+/// `count` encoder counts in [`SubCounts`], saturating: `count.saturating_mul(1 << SUB_BITS)`
+/// by a shift and two compares (the M4F has no 64-bit multiply with an overflow flag: the
+/// multiply took 22 instructions in every position step).
+#[inline]
+pub fn sub_counts(count: i64) -> SubCounts {
+    const HI: i64 = i64::MAX >> SUB_BITS;
+    const LO: i64 = i64::MIN >> SUB_BITS;
+    if count > HI {
+        i64::MAX
+    } else if count < LO {
+        i64::MIN
+    } else {
+        count << SUB_BITS
+    }
+}
+
 /// One piece of a reference trajectory. Distances in rad (at the encoder), times in s.
 #[derive(Debug, Clone, Copy, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -850,6 +866,48 @@ pub fn sin_cos(x: f32) -> (f32, f32) {
         1 => (c, -s),
         2 => (-s, -c),
         _ => (-c, s),
+    }
+}
+
+#[cfg(test)]
+mod sub_counts_by_shift {
+    use super::{SUB_PER_COUNT, sub_counts};
+    use proptest::prelude::*;
+
+    /// What the shift replaces: the saturating multiply.
+    fn by_multiply(c: i64) -> i64 {
+        c.saturating_mul(SUB_PER_COUNT as i64)
+    }
+
+    proptest! {
+        /// The shift agrees with the saturating multiply over the whole range.
+        #[test]
+        fn sub_counts_saturate_as_the_multiply(c in any::<i64>()) {
+            prop_assert_eq!(sub_counts(c), by_multiply(c));
+        }
+    }
+
+    #[test]
+    fn sub_counts_at_the_edges_of_the_range() {
+        let hi = i64::MAX >> 16;
+        let lo = i64::MIN >> 16;
+        for c in [
+            0,
+            1,
+            -1,
+            hi,
+            hi + 1,
+            hi - 1,
+            lo,
+            lo - 1,
+            lo + 1,
+            i64::MAX,
+            i64::MIN,
+        ] {
+            assert_eq!(sub_counts(c), by_multiply(c), "{c}");
+        }
+        assert_eq!(sub_counts(lo), i64::MIN);
+        assert_eq!(sub_counts(hi + 1), i64::MAX);
     }
 }
 

@@ -359,7 +359,7 @@ impl Player {
                     self.inv_steps = 1.0 / g.steps.max(1) as f32;
                     self.points = g.points;
                     self.steps = g.steps.max(1);
-                    self.origin_sub = g.origin.saturating_mul(SUB_PER_COUNT as i64);
+                    self.origin_sub = super::reference::sub_counts(g.origin);
                     self.state = TableState::Ready;
                     self.corr = None;
                     self.pending = None;
@@ -586,9 +586,7 @@ pub fn catmull_rom(p: [f32; 4], s: f32) -> (f32, f32, f32) {
 
 /// The position `counts` from `origin` \[counts\] in 1/65536 count.
 fn to_sub(origin: i64, counts: f32) -> SubCounts {
-    origin
-        .saturating_mul(SUB_PER_COUNT as i64)
-        .saturating_add((counts * SUB_PER_COUNT) as i64)
+    super::reference::sub_counts(origin).saturating_add((counts * SUB_PER_COUNT) as i64)
 }
 
 /// Why a table is refused.

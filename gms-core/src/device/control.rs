@@ -1,6 +1,6 @@
 //! The loop half of the device core: one call per PWM period.
 
-use crate::control::reference::{Motion, RefSample, SUB_PER_COUNT};
+use crate::control::reference::{Motion, RefSample, SUB_PER_COUNT, sub_counts};
 use crate::drive::{self, CountExtender, CurrentSense, Faults, Limits, Measured, StepStats};
 
 use crate::control::frf::{CHANNELS, Frf, FrfReport, Injection};
@@ -422,7 +422,7 @@ impl ControlLoop {
         self.stop_table();
         self.ctrl.reset();
         self.current_mode = None;
-        let here = self.enc.count().saturating_mul(SUB_PER_COUNT as i64);
+        let here = sub_counts(self.enc.count());
         self.motion.hold_at(here);
         self.r = RefSample {
             pos: here,
@@ -767,7 +767,7 @@ impl ControlLoop {
             if let (true, Some(amps)) = (self.enabled, self.current_mode) {
                 // Current mode: the reference follows the axis, no position control.
                 self.r = RefSample {
-                    pos: pos.saturating_mul(SUB_PER_COUNT as i64),
+                    pos: sub_counts(pos),
                     vel: 0.0,
                     acc: 0.0,
                 };
@@ -801,7 +801,7 @@ impl ControlLoop {
                 self.out = Out::ZERO;
             } else {
                 self.r = RefSample {
-                    pos: pos.saturating_mul(SUB_PER_COUNT as i64),
+                    pos: sub_counts(pos),
                     vel: 0.0,
                     acc: 0.0,
                 };
@@ -880,7 +880,10 @@ impl ControlLoop {
         // The next step is a position step's and runs one: its reference side now, in this step
         // that has none, so that the two share the work (with the current loop at twice the
         // position loop's rate, the position step alone was 3,150 cycles of the 4,200 at 40 kHz
-        // on the M4F, the other 1,000), unless this step took requests.
+        // on the M4F, the other 1,000), unless this step took requests. Of the friction
+        // feedforward only the actuator's model is advanced here, the guideway's in the position
+        // step (this step then ran about 2,860 cycles in the M4's costs, the position step 1,680;
+        // now about 2,170 and 2,450: docs/rehost.md).
         if self.ratio > 1
             && !took
             && self.phase == 0
@@ -985,7 +988,6 @@ impl ControlLoop {
             Recorded::PeriodEnd => {
                 self.table_report = Some(self.table.report());
                 self.fresh = true;
-                self.fresh = true;
             }
             Recorded::RunEnd(at) => {
                 self.motion.hold_at(at);
@@ -1035,8 +1037,9 @@ impl ControlLoop {
     }
 
     /// The reference side of the next position step: the motion (or the table) advanced, the
-    /// frequency response's sine, the position map's sample and the friction model advanced to
-    /// the reference (the position step then needs the measurement only).
+    /// frequency response's sine, the position map's sample and the actuator's friction model
+    /// advanced to the reference (the position step then advances the guideway's and needs the
+    /// measurement).
     fn reference_side(&mut self) -> Ahead {
         // The table's correction goes where the map's offset goes (one sample a step for both).
         // `self.r` stays the running step's until the position step (the status is as of it).
