@@ -76,7 +76,15 @@ pub struct SenseLayout {
     pub channel: u8,
     /// Conversions per sequence (1 to 16).
     pub conversions: u8,
+    /// The analog watchdog's low and high thresholds \[code\] (LTR, HTR; at most
+    /// [`TOP_CODE`]): a conversion below the first or above the second sets SR.AWD. The
+    /// board's are the ends of its amplifier's linear range (gms-core's
+    /// `SenseChain::watchdog_codes`).
+    pub watchdog: (u16, u16),
 }
+
+/// The ADC's highest code at 12 bits (CR1.RES = 00, RM0090 §13.13.2).
+pub const TOP_CODE: u16 = 4095;
 
 /// DMA2's stream the ADC1 requests go to (stream 0 channel 0, RM0090 table 43).
 pub const STREAM: usize = 0;
@@ -123,11 +131,13 @@ pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
     // OVR is cleared, §13.8.1) interrupts on the ADC vector.
     let adc = r.adc;
     // The analog watchdog on the channel (RM0090 §13.3.7, §13.13.2 ADC_CR1, §13.13.7-8
-    // HTR/LTR): a conversion above 4094 or below 1, at an end of the ADC's range, sets SR.AWD,
-    // which the control step reads ([`clipped`]); no interrupt (a clipped channel would raise
-    // one per conversion). Its thresholds first, then CR1 in one read-modify-write.
-    adc.htr().write(|w| w.set_ht(AWD_HIGH));
-    adc.ltr().write(|w| w.set_lt(AWD_LOW));
+    // HTR/LTR, 12 bits each): a conversion above HTR or below LTR (the layout's: the ends of
+    // the amplifier's linear range) sets SR.AWD, which the control step reads ([`clipped`]);
+    // no interrupt (a clipped channel would raise one per conversion). Its thresholds first,
+    // then CR1 in one read-modify-write.
+    let (low, high) = layout.watchdog;
+    adc.htr().write(|w| w.set_ht(high.min(TOP_CODE)));
+    adc.ltr().write(|w| w.set_lt(low.min(TOP_CODE)));
     adc.cr1().modify(|w| {
         w.set_res(Res::BITS12);
         w.set_scan(true);
@@ -172,11 +182,6 @@ pub fn init(r: SenseRegs, layout: SenseLayout, buf: u32) {
         w.set_adon(true);
     });
 }
-
-/// The analog watchdog's high threshold \[code\]: a conversion of 4095 is above it.
-pub const AWD_HIGH: u16 = 4094;
-/// The analog watchdog's low threshold \[code\]: a conversion of 0 is below it.
-pub const AWD_LOW: u16 = 1;
 
 /// ADC_SR written to clear AWD alone: rc_w0 flags in bits 0-5 (AWD, EOC, JEOC, JSTRT,
 /// STRT, OVR), 1 leaves a flag, 0 clears it; reserved bits 0 (RM0090 §13.13.1). Not a

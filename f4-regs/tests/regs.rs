@@ -39,6 +39,7 @@ const LAYOUT: sense::SenseLayout = sense::SenseLayout {
     pin: 0,
     channel: 10,
     conversions: 16,
+    watchdog: (249, 3846),
 };
 
 #[test]
@@ -89,6 +90,12 @@ fn the_sense_chain_is_set_up_as_rm0090_says() {
         ranks.push(r.adc.sqr1().read().sq(i));
     }
     assert_eq!(ranks, vec![10u8; 16]);
+    // The analog watchdog on channel 10 alone, no interrupt, at the layout's thresholds
+    // (LTR, HTR: RM0090 §13.13.7-8).
+    assert!(cr1.awden() && !cr1.awdie());
+    assert_eq!(cr1.awdsgl(), pac::adc::vals::Awdsgl::SINGLE_CHANNEL);
+    assert_eq!(cr1.awdch(), 10);
+    assert_eq!((r.adc.ltr().read().lt(), r.adc.htr().read().ht()), (249, 3846));
     let cr2 = r.adc.cr2().read();
     assert_eq!(cr2.extsel(), 0b1110);
     assert_eq!(cr2.exten(), Exten::RISING_EDGE);

@@ -351,6 +351,7 @@ pub fn init() -> (ControlHw, Rest) {
             pin: SENSE_PIN,
             channel: SENSE_CHANNEL,
             conversions: SENSE_OVERSAMPLE as u8,
+            watchdog: sense_watchdog(),
         },
         SENSE_BUF.addr(),
     );
@@ -499,6 +500,16 @@ fn stack_region() -> (u32, u32) {
         core::ptr::addr_of!(_stack_end) as usize as u32,
         core::ptr::addr_of!(_stack_start) as usize as u32,
     )
+}
+
+/// The sense ADC's analog watchdog thresholds \[code\]: the ends of the amplifier's linear
+/// range, as gms-core decides them (`SenseChain::watchdog_codes`: 249 and 3846 for the INA240
+/// on 3.3 V), for the ADC's 12-bit codes.
+fn sense_watchdog() -> (u16, u16) {
+    let top = sense::TOP_CODE;
+    let (low, high) = BOARD.sense.watchdog_codes(u32::from(top));
+    let code = |c: u32| u16::try_from(c).unwrap_or(top).min(top);
+    (code(low), code(high))
 }
 
 /// The least stack the guard must leave above it \[bytes\].

@@ -783,6 +783,51 @@ fn enable_is_refused_when_the_sense_cannot_reach_the_current_limit() {
     assert_eq!(ask(&mut dev, "enable").trim_end(), "ok");
 }
 
+/// The analog watchdog at the ends of the INA240's linear range (0.2 V inside each rail of the
+/// 3.3 V, 4095-code ADC: 248.18 and 3846.82 codes, worked out here by hand): 248 and 3847 are
+/// past it, 249 and 3846 inside. Every trip from any calibrated zero lies inside (so a current
+/// within the trip never sets it); an ideal sense (no margin) keeps one code inside each end,
+/// so that 0 and the top code always count; a margin past the middle leaves nothing inside.
+#[test]
+fn the_sense_watchdog_sits_at_the_amplifiers_linear_range() {
+    let b = board();
+    assert_eq!(b.sense.watchdog_codes(4095), (249, 3846));
+    for (code, past) in [(248, true), (249, false), (3846, false), (3847, true)] {
+        assert_eq!(b.sense.watchdog_trips(code, 4095), past, "{code}");
+    }
+    let margin = 0.2 / 3.3 * 4095.0;
+    assert!(248.0 < margin && margin < 249.0);
+    assert!(3846.0 < 4095.0 - margin && 4095.0 - margin < 3847.0);
+    // The trip from every zero the calibration accepts: inside the thresholds.
+    let apc = 3.3 / 4095.0 / 3.4;
+    for zero in (1898..=2198).step_by(10) {
+        let a = prepare(&default_settings(), &b).unwrap();
+        let z = calibrate_sense(&b, 3.4, || Some(codes(zero)));
+        let lp = ControlLoop::new(b, a, z.sense, z.faults, 0, buffer(), ctrl_buf());
+        let trip_codes = lp.limits().i_trip / apc;
+        let (hi, lo) = (zero as f32 + trip_codes, zero as f32 - trip_codes);
+        assert!(
+            !b.sense.watchdog_trips(hi as u32, 4095)
+                && !b.sense.watchdog_trips(lo as u32 + 1, 4095),
+            "zero {zero}: the trip's codes {lo}..{hi} reach the watchdog"
+        );
+    }
+    let ideal = gms_core::device::SenseChain {
+        linear_margin_v: 0.0,
+        ..b.sense
+    };
+    assert_eq!(ideal.watchdog_codes(4095), (1, 4094));
+    assert!(ideal.watchdog_trips(0, 4095) && ideal.watchdog_trips(4095, 4095));
+    assert!(!ideal.watchdog_trips(1, 4095) && !ideal.watchdog_trips(4094, 4095));
+    let none = gms_core::device::SenseChain {
+        linear_margin_v: 2.0,
+        ..b.sense
+    };
+    for code in [0, 1, 2048, 4094, 4095] {
+        assert!(none.watchdog_trips(code, 4095), "{code}");
+    }
+}
+
 /// A conversion at an end of the ADC's range (the shell's analog watchdog): while disabled
 /// nothing; while driving `over_current` latched and the bridge off before the step.
 #[test]

@@ -324,13 +324,16 @@ fn a_step_that_writes_its_duty_past_the_update_is_an_overrun() {
     assert!(value(&st, "step_us_worst") < 18.75, "{st}");
 }
 
-/// One conversion of one period at an end of the ADC's range (a spike the average of eight
-/// hides: 2048 + 2047/8 codes is 0.06 A, far below the trip) while the bridge drives: the
-/// ADC's analog watchdog sees it, the step latches `over_current` and switches the bridge off.
-/// One conversion one code inside either end: nothing.
+/// One conversion of one period past the amplifier's linear range (0.2 V inside each rail:
+/// below 249 or above 3846 codes, the thresholds gms-core works out) or at an end of the
+/// ADC's range (a spike the average of eight hides: 2048 + 2047/8 codes is 0.06 A, far below
+/// the trip) while the bridge drives: the ADC's analog watchdog sees it, the step latches
+/// `over_current` and switches the bridge off. One conversion one code inside the linear
+/// range at either end: nothing. (With the watchdog at 1 and 4094, which the INA240's output
+/// never reaches, 3847 and 248 went unseen.)
 #[test]
-fn one_conversion_at_an_end_of_the_adcs_range_latches_over_current() {
-    for inside in [4094, 1] {
+fn one_conversion_past_the_senses_linear_range_latches_over_current() {
+    for inside in [3846, 249] {
         let mut m = driving();
         m.chip_mut().inject.sense_code_once = Some(inside);
         m.run_for(0.002).unwrap();
@@ -341,7 +344,7 @@ fn one_conversion_at_an_end_of_the_adcs_range_latches_over_current() {
             "{inside}: {st}"
         );
     }
-    for end in [4095, 0] {
+    for end in [3847, 248, 4095, 0] {
         let mut m = driving();
         m.chip_mut().inject.sense_code_once = Some(end);
         m.run_for(0.002).unwrap();

@@ -131,6 +131,49 @@ impl SenseChain {
         }
     }
 
+    /// The analog watchdog's thresholds \[code\] for an ADC whose highest code is `top`: a
+    /// conversion below the first or above the second is past the amplifier's linear range
+    /// ([`SenseChain::linear_margin_v`] inside each rail), which no current within the trip
+    /// reaches ([`SenseChain::reach`]): the board's watchdog (its ADC's LTR and HTR) and the
+    /// simulator's ADC latch `over_current` on it. At least one code inside each end of the
+    /// ADC's range, so that a conversion at 0 or `top` always counts (an ideal sense).
+    ///
+    /// The F4 boards' INA240 (0.2 V inside a 3.3 V rail, 4095 codes): 249 and 3846, so 248
+    /// (0.1998 V) and 3847 (3.1001 V) are past it. Before, the watchdog sat at 1 and 4094,
+    /// which the amplifier's output (it swings to about 0.05 V of each rail: codes 62 and
+    /// 4033) never reaches.
+    pub fn watchdog_codes(&self, top: u32) -> (u32, u32) {
+        let margin = self.linear_margin_v / self.vref * self.full_scale;
+        let margin = if margin.is_finite() && margin > 0.0 {
+            margin
+        } else {
+            0.0
+        };
+        // Float to int casts truncate (here: floor, the values are not negative) and
+        // saturate; the clamps keep low <= high + 1.
+        let whole = margin as u32;
+        let ceil = if (whole as f32) < margin {
+            whole + 1
+        } else {
+            whole
+        };
+        let low = ceil.clamp(1, top.max(1));
+        let floor = (top as f32 - margin).max(0.0) as u32;
+        let high = floor.clamp(
+            low.saturating_sub(1),
+            top.saturating_sub(1).max(low.saturating_sub(1)),
+        );
+        (low, high)
+    }
+
+    /// True when the conversion `code` of an ADC whose highest code is `top` is past the
+    /// watchdog's thresholds ([`SenseChain::watchdog_codes`]), as the board's ADC flags it
+    /// (RM0090 §13.3.7: below the low threshold or above the high one).
+    pub fn watchdog_trips(&self, code: u32, top: u32) -> bool {
+        let (low, high) = self.watchdog_codes(top);
+        code < low || code > high
+    }
+
     /// Current per ADC code \[A/code\] with an amplifier of `v_per_a` \[V/A\].
     pub fn amps_per_code(&self, v_per_a: f32) -> f32 {
         self.vref / self.full_scale / v_per_a

@@ -115,6 +115,8 @@ struct Sim {
     core: ControlLoop,
     plant: Plant,
     adc: Adc,
+    /// The board's sense chain (its analog watchdog's thresholds).
+    sense: gms_core::device::SenseChain,
     substeps: u32,
     /// Simulated time \[s\].
     t: f64,
@@ -169,8 +171,12 @@ impl Sim {
         let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
         for _ in 0..n {
             let code = self.adc.code(self.plant.sense(1.0));
-            if code == 0 || code as f64 >= self.adc.top {
-                // At an end of the ADC's range, as the board's analog watchdog sees it.
+            if self
+                .sense
+                .watchdog_trips(code, self.adc.top as u32)
+            {
+                // Past the sense's linear range (the ends of the ADC's: its margin is 0), as
+                // the board's analog watchdog sees it (gms-core decides where).
                 self.core.sense_clipped();
             }
             let inp = Inputs {
@@ -281,6 +287,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
             )),
             plant,
             adc,
+            sense: board.sense,
             substeps: sc.plant.substeps,
             t: 0.0,
             truth: None,
