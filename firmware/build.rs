@@ -74,9 +74,67 @@ fn main() {
         store0 = 0x0800_0000 + store.0,
         store1 = 0x0800_0000 + store.1,
     );
+    let text = if env::var_os("CARGO_FEATURE_RAM_CODE").is_some() {
+        text + RAM_CODE
+    } else {
+        text
+    };
     fs::write(out.join("board-memory.x"), text).expect("write board-memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=../gms-core/src/boards/f405/memory.rs");
     println!("cargo:rerun-if-changed=../gms-core/src/boards/nucleo_f446/memory.rs");
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
+
+/// With the `ram-code` feature: the control interrupt's code in `.ramcode`, loaded in flash
+/// after the vector table and run from SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE = 11,
+/// RM0090 §9.2.1: SRAM1 at 0x0000_0000, fetched through the I-bus without the flash's wait
+/// states), where the firmware copies it at start-up (`ram_code::install`). SRAM1 starts at
+/// 0x2000_0000, so the code's bytes there are kept out of RAM's use by `.ramcode.room`, the
+/// first section in RAM. The functions are picked by their sections' names (`.text.NAME`,
+/// one per function): the control interrupt (all it inlines) and the out-of-line gms-core
+/// functions it calls, as `rehost check --profile` lists them; gms-core stays free of
+/// link-section attributes (its `forbid(unsafe_code)`). `.text` of cortex-m-rt's `link.x`
+/// takes every `.text.*` it meets first, so `.ramcode` comes before it, and `_stext` (where
+/// `.text` starts) after `.ramcode`'s load image.
+const RAM_CODE: &str = "
+MEMORY
+{
+  RAMCODE : ORIGIN = 0x00000000, LENGTH = 112K
+}
+SECTIONS
+{
+  .ramcode : ALIGN(8)
+  {
+    __sramcode = .;
+    *(.text.DMA2_STREAM0 .text.DMA2_STREAM0.*)
+    *(.text._ZN8gms_core4math14stribeck_decay*)
+    *(.text.*ControlLoop14reference_side*)
+    *(.text.*ControlLoop12table_sample*)
+    *(.text.*ControlLoop12table_record*)
+    *(.text.*ControlLoop4take17h*)
+    *(.text.*ControlLoop10take_table*)
+    *(.text.*ControlLoop8stop_frf*)
+    *(.text.*MapCursor6sample*)
+    *(.text.*Gms*FrictionModel*7advance*)
+    *(.text.*Gms*15take_state_from*)
+    *(.text.*Shaping15take_state_from*)
+    *(.text.*Player4take17h*)
+    *(.text.*Player6report*)
+    . = ALIGN(8);
+    __eramcode = .;
+  } > RAMCODE AT > FLASH
+  __siramcode = LOADADDR(.ramcode);
+  _stext = ALIGN(LOADADDR(.ramcode) + SIZEOF(.ramcode), 16);
+}
+INSERT AFTER .vector_table;
+SECTIONS
+{
+  .ramcode.room (NOLOAD) : ALIGN(8)
+  {
+    . = . + SIZEOF(.ramcode);
+  } > RAM
+}
+INSERT BEFORE .data;
+ASSERT(ADDR(.ramcode.room) == ORIGIN(RAM), \"ram-code: .ramcode.room must be RAM's first section (SRAM1's start holds the code)\");
+";

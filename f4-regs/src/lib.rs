@@ -16,6 +16,8 @@
 //! - [`uart_rx`]: a UART's reception by circular DMA, read by the DMA's count (never by the
 //!   data register).
 //! - [`uart_tx`]: a UART's transmission by DMA, the next batch filled while one is on the line.
+//! - [`remap`]: code copied into SRAM1 and run from SRAM1 mapped at 0 (no flash wait
+//!   states).
 //! - [`mpu`]: the stack guard (an MPU region at the bottom of the stack) and the fault
 //!   handlers that run without the stack they overflowed ([`stack_guard_fault_handlers`]).
 #![no_std]
@@ -27,6 +29,7 @@ mod dma;
 pub mod encoder;
 pub mod mpu;
 pub mod pwm;
+pub mod remap;
 pub mod sense;
 pub mod stack;
 pub mod uart_rx;

@@ -4,7 +4,7 @@
 //! comes).
 
 use f4_regs::pac;
-use f4_regs::{clock, pwm, sense};
+use f4_regs::{clock, pwm, remap, sense};
 use gms_core::drive::{Deadman, Stall, bridge_off};
 
 /// A register block on zeroed memory (1 KiB: more than any block used here spans).
@@ -95,7 +95,10 @@ fn the_sense_chain_is_set_up_as_rm0090_says() {
     assert!(cr1.awden() && !cr1.awdie());
     assert_eq!(cr1.awdsgl(), pac::adc::vals::Awdsgl::SINGLE_CHANNEL);
     assert_eq!(cr1.awdch(), 10);
-    assert_eq!((r.adc.ltr().read().lt(), r.adc.htr().read().ht()), (249, 3846));
+    assert_eq!(
+        (r.adc.ltr().read().lt(), r.adc.htr().read().ht()),
+        (249, 3846)
+    );
     let cr2 = r.adc.cr2().read();
     assert_eq!(cr2.extsel(), 0b1110);
     assert_eq!(cr2.exten(), Exten::RISING_EDGE);
@@ -722,4 +725,40 @@ fn uart_transmission_by_dma_starts_only_when_the_last_has_ended() {
     assert_eq!(uart_tx::left(s), 0);
     assert!(unsafe { uart_tx::start(s, usart, buf.as_ptr(), 4) });
     assert_eq!(st.ndtr().read().ndt(), 4);
+}
+
+/// The code for SRAM: its words copied to their place, VTOR at the flash's vector table,
+/// SYSCFG's clock on and SRAM1 mapped at 0 (MEM_MODE 11, RM0090 §9.2.1); the other bits of
+/// the registers kept.
+#[test]
+fn code_for_sram_is_copied_and_sram1_mapped_at_zero() {
+    let rcc = block(pac::rcc::Rcc::from_ptr);
+    let syscfg = block(pac::syscfg::Syscfg::from_ptr);
+    let scb: &'static mut [u32; 64] = Box::leak(Box::new([0u32; 64]));
+    // APB2ENR (0x44) with another clock on; MEMRMP (0x00) with FB_MODE (bit 8) set.
+    set_word(rcc.as_ptr(), 0x44, 1 << 8);
+    set_word(syscfg.as_ptr(), 0x00, 1 << 8);
+    let load: Vec<u32> = (0..37u32).map(|i| i.wrapping_mul(0x9E37_79B9)).collect();
+    let mut sram = vec![0xA5A5_A5A5u32; 40];
+    let r = remap::RemapRegs {
+        rcc,
+        syscfg,
+        scb: scb.as_mut_ptr(),
+    };
+    // SAFETY: the blocks and both buffers are on this test's memory, large enough.
+    unsafe { remap::sram_at_zero(r, load.as_ptr(), sram.as_mut_ptr(), load.len(), 0x0800_0000) };
+    assert_eq!(&sram[..37], &load[..]);
+    assert_eq!(&sram[37..], &[0xA5A5_A5A5; 3]);
+    assert_eq!(scb[2], 0x0800_0000, "VTOR");
+    assert_eq!(
+        word(rcc.as_ptr(), 0x44),
+        (1 << 8) | (1 << 14),
+        "APB2ENR: SYSCFGEN added"
+    );
+    assert_eq!(syscfg.memrm().read().mem_mode(), remap::MEM_MODE_SRAM);
+    assert_eq!(
+        word(syscfg.as_ptr(), 0x00),
+        (1 << 8) | 0b11,
+        "MEMRMP: FB_MODE kept"
+    );
 }

@@ -270,6 +270,10 @@ pub fn init() -> (ControlHw, Rest) {
     let watchdog_reset = clock::watchdog_reset(pac::RCC);
 
     let p = embassy_stm32::init(config());
+    // After embassy's init, which resets SYSCFG (and with it the remap), before anything that
+    // could call into the code run from SRAM.
+    #[cfg(feature = "ram-code")]
+    run_code_from_sram();
     // The watchdog first: from here on a hang resets the MCU (the supervisor feeds it; until
     // it runs, the start-up below takes well under a second).
     let mut watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
@@ -510,6 +514,45 @@ fn sense_watchdog() -> (u16, u16) {
     let (low, high) = BOARD.sense.watchdog_codes(u32::from(top));
     let code = |c: u32| u16::try_from(c).unwrap_or(top).min(top);
     (code(low), code(high))
+}
+
+/// With the `ram-code` feature: the control interrupt's code (the linker's `.ramcode`, loaded
+/// in flash: firmware/build.rs) copied to its place in SRAM1, which is then mapped at 0, where
+/// the code was linked to run (`f4_regs::remap`).
+#[cfg(feature = "ram-code")]
+fn run_code_from_sram() {
+    unsafe extern "C" {
+        static __sramcode: u32;
+        static __eramcode: u32;
+        static __siramcode: u32;
+        static __vector_table: u32;
+    }
+    /// SRAM1's address: the code linked at 0 + x sits at SRAM1 + x.
+    const SRAM1: usize = 0x2000_0000;
+    let (start, end, load, table) = (
+        core::ptr::addr_of!(__sramcode) as usize,
+        core::ptr::addr_of!(__eramcode) as usize,
+        core::ptr::addr_of!(__siramcode),
+        core::ptr::addr_of!(__vector_table) as usize as u32,
+    );
+    let regs = f4_regs::remap::RemapRegs {
+        rcc: pac::RCC,
+        syscfg: pac::SYSCFG,
+        scb: 0xE000_ED00 as *mut u32,
+    };
+    // SAFETY: the linker put the load image at `__siramcode` and kept SRAM1's first
+    // `end - start` bytes out of RAM's sections (`.ramcode.room`, asserted there); nothing has
+    // called into the code yet (this runs right after embassy's init); the table is
+    // cortex-m-rt's.
+    unsafe {
+        f4_regs::remap::sram_at_zero(
+            regs,
+            load,
+            (SRAM1 + start) as *mut u32,
+            (end - start) / 4,
+            table,
+        );
+    }
 }
 
 /// The least stack the guard must leave above it \[bytes\].

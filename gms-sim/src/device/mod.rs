@@ -171,10 +171,7 @@ impl Sim {
         let dt_plant = self.core.controller().dt_cur() as f64 / self.substeps as f64;
         for _ in 0..n {
             let code = self.adc.code(self.plant.sense(1.0));
-            if self
-                .sense
-                .watchdog_trips(code, self.adc.top as u32)
-            {
+            if self.sense.watchdog_trips(code, self.adc.top as u32) {
                 // Past the sense's linear range (the ends of the ADC's: its margin is 0), as
                 // the board's analog watchdog sees it (gms-core decides where).
                 self.core.sense_clipped();

@@ -125,6 +125,11 @@ pub const HZ: u64 = 168_000_000;
 const FLASH: u64 = 0x0800_0000;
 const SRAM: u64 = 0x2000_0000;
 const SRAM_LEN: u64 = 128 * 1024;
+/// SRAM1, the part of the SRAM SYSCFG_MEMRMP's MEM_MODE = 11 maps at 0 (RM0090 §9.2.1,
+/// RM0390 §8.2.1: "SRAM1 (112 KB) mapped at 0x0000 0000"), fetched there through the I-bus.
+const SRAM1_LEN: u64 = 112 * 1024;
+/// SYSCFG_MEMRMP (RM0090 §9.2.1).
+const SYSCFG_MEMRMP: u32 = 0x4001_3800;
 const CCM: u64 = 0x1000_0000;
 const SYSMEM: u64 = 0x1FFF_0000;
 
@@ -271,6 +276,9 @@ pub struct Chip {
     guard: Option<(u32, u32)>,
     /// The SP that entered the guard.
     pub guard_hit: Option<u32>,
+    /// Code fetched at 0 without SRAM1 remapped there (where the chip shows the flash, which
+    /// the model does not): the address.
+    pub fetch_unremapped: Option<u32>,
     /// PRIMASK's holds.
     primask: Hold,
     /// The longest time PRIMASK was held \[cycles\].
@@ -382,6 +390,9 @@ impl Chip {
 /// The emulated board.
 pub struct Machine {
     uc: Unicorn<'static, Chip>,
+    /// The SRAM's bytes, mapped at 0x2000_0000 and (SRAM1) again at 0: the engine reads and
+    /// writes them through both (dropped after `uc`, declared before it).
+    _sram: Box<[u8]>,
     board: Board,
     image: Vec<u8>,
     /// (address, bytes) of the image's loadable segments.
@@ -483,6 +494,7 @@ impl Machine {
             sp_min_context: Vec::new(),
             guard: None,
             guard_hit: None,
+            fetch_unremapped: None,
             primask: Hold::default(),
             primask_max: 0,
             primask_max_at: 0,
@@ -508,7 +520,18 @@ impl Machine {
             .map_err(err)?;
         uc.mem_map(FLASH, board.flash_size() as u64, Prot::READ | Prot::EXEC)
             .map_err(err)?;
-        uc.mem_map(SRAM, SRAM_LEN, Prot::ALL).map_err(err)?;
+        // The SRAM at its address and SRAM1 again at 0, one memory: the image that remaps
+        // SRAM1 at 0 (SYSCFG_MEMRMP) runs code it copied there through the alias. A fetch at
+        // 0 without the remap is a fault (the hook below): there the chip shows the flash.
+        let mut sram = vec![0u8; SRAM_LEN as usize].into_boxed_slice();
+        // SAFETY: the buffer lives as long as the engine (the machine owns both, and drops
+        // the engine first); both mappings are within it.
+        unsafe {
+            let ptr = sram.as_mut_ptr().cast::<core::ffi::c_void>();
+            uc.mem_map_ptr(SRAM, SRAM_LEN, Prot::ALL, ptr)
+                .map_err(err)?;
+            uc.mem_map_ptr(0, SRAM1_LEN, Prot::ALL, ptr).map_err(err)?;
+        }
         if board == Board::F405 {
             uc.mem_map(CCM, 64 * 1024, Prot::READ | Prot::WRITE)
                 .map_err(err)?;
@@ -670,6 +693,13 @@ impl Machine {
                 (c.primask_max, c.primask_max_at) = (n, at);
             }
             let mut stop = c.cycles >= c.next_stop || unmasked;
+            if addr < SRAM1_LEN
+                && c.p.plain.get(&SYSCFG_MEMRMP).is_none_or(|m| m & 3 != 3)
+                && c.fetch_unremapped.is_none()
+            {
+                c.fetch_unremapped = Some(addr as u32);
+                stop = true;
+            }
             if let Some((g, len)) = c.guard
                 && sp >= g
                 && sp < g + len
@@ -723,6 +753,7 @@ impl Machine {
 
         let mut m = Machine {
             uc,
+            _sram: sram,
             board,
             image: elf.to_vec(),
             segments,
@@ -858,6 +889,9 @@ impl Machine {
         c.p.rcc = rcc;
         c.p.flash.restore_options(options);
         c.core = CoreRegs::new(self.board.idcode());
+        // MEMRMP back to its boot value (the plain registers are new): the code translated at
+        // the alias is dropped, the next copy is run afresh.
+        self.uc.ctl_remove_cache(0, SRAM1_LEN).map_err(err)?;
         self.resets += 1;
         self.reset_core()
     }
@@ -916,7 +950,9 @@ impl Machine {
         let c = self.uc.get_data_mut();
         c.next_stop = next;
         let pc = self.reg(R::PC);
-        let r = self.uc.emu_start((pc | 1) as u64, 0, 0, 0);
+        // `until` at an address no fetch reaches (odd): 0 stopped the engine at the code an
+        // image runs from SRAM1 remapped at 0.
+        let r = self.uc.emu_start((pc | 1) as u64, 0xFFFF_FFFF, 0, 0);
         self.uc.get_data_mut().masked_pending = None;
         if let Some(it) = self.uc.get_data_mut().it_fix.take() {
             self.set_it_state(it).map_err(Stop::Lockup)?;
@@ -967,6 +1003,12 @@ impl Machine {
                 let why = format!("{e:?} at pc {pc:#010x}");
                 self.fault(kind, pc, &why)?;
             }
+        }
+        if let Some(at) = self.chip().fetch_unremapped {
+            return Err(Stop::Lockup(format!(
+                "code fetched at {at:#010x} without SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE \
+                 not 11): the chip would run the flash's alias there"
+            )));
         }
         if let Some(sp) = self.chip().guard_hit
             && !self
