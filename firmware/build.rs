@@ -74,11 +74,15 @@ fn main() {
         store0 = 0x0800_0000 + store.0,
         store1 = 0x0800_0000 + store.1,
     );
-    let text = if env::var_os("CARGO_FEATURE_RAM_CODE").is_some() {
-        text + RAM_CODE
-    } else {
-        text
-    };
+    // The control interrupt's code in SRAM (the `ram-code` feature); the F405's capture and
+    // learning table in its CCM.
+    let mut text = text;
+    if env::var_os("CARGO_FEATURE_RAM_CODE").is_some() {
+        text += RAM_CODE;
+    }
+    if name == "f405" {
+        text += F405_CCM;
+    }
     fs::write(out.join("board-memory.x"), text).expect("write board-memory.x");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rerun-if-changed=../gms-core/src/boards/f405/memory.rs");
@@ -87,9 +91,9 @@ fn main() {
 }
 
 /// With the `ram-code` feature: the control interrupt's code in `.ramcode`, loaded in flash
-/// after the vector table and run from SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE = 11,
-/// RM0090 §9.2.1: SRAM1 at 0x0000_0000, fetched through the I-bus without the flash's wait
-/// states), where the firmware copies it at start-up (`ram_code::install`). SRAM1 starts at
+/// after the vector table and run from SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE = 11, RM0090 §9.2.1: SRAM1 at
+/// 0x0000_0000, fetched through the I-bus without the flash's wait states), where the firmware
+/// copies it at start-up (`board::init`, `f4_regs::remap`). SRAM1 starts at
 /// 0x2000_0000, so the code's bytes there are kept out of RAM's use by `.ramcode.room`, the
 /// first section in RAM. The functions are picked by their sections' names (`.text.NAME`,
 /// one per function): the control interrupt (all it inlines) and the out-of-line gms-core
@@ -136,5 +140,30 @@ SECTIONS
   } > RAM
 }
 INSERT BEFORE .data;
-ASSERT(ADDR(.ramcode.room) == ORIGIN(RAM), \"ram-code: .ramcode.room must be RAM's first section (SRAM1's start holds the code)\");
+ASSERT(ADDR(.ramcode.room) == ORIGIN(RAM), \".ramcode.room must be RAM's first section (SRAM1's start holds the code)\");
+";
+
+/// The F405's 64 KiB of core-coupled memory (RM0090 §2.3.1: on the D-bus only, so neither
+/// code nor DMA; 0x1000_0000): the statics placed in `.ccm` (the capture buffer and the
+/// learning table, which only the core reads and writes), not loaded, zeroed at start-up
+/// before they are taken (`board::init`); the SRAM they leave holds the code run from it.
+/// After `.got`, the last section of cortex-m-rt's `link.x`: after `.bss` it moved `__ebss`
+/// (assigned after that section) into the CCM, and the start-up zeroed on into unmapped
+/// memory.
+const F405_CCM: &str = "
+MEMORY
+{
+  CCM : ORIGIN = 0x10000000, LENGTH = 64K
+}
+SECTIONS
+{
+  .ccm (NOLOAD) : ALIGN(4)
+  {
+    __sccm = .;
+    *(.ccm .ccm.*);
+    . = ALIGN(4);
+    __eccm = .;
+  } > CCM
+}
+INSERT AFTER .got;
 ";

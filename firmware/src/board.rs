@@ -271,9 +271,11 @@ pub fn init() -> (ControlHw, Rest) {
 
     let p = embassy_stm32::init(config());
     // After embassy's init, which resets SYSCFG (and with it the remap), before anything that
-    // could call into the code run from SRAM.
+    // could call into the code run from SRAM or take a static from the CCM.
     #[cfg(feature = "ram-code")]
     run_code_from_sram();
+    #[cfg(feature = "board-f405")]
+    zero_ccm();
     // The watchdog first: from here on a hang resets the MCU (the supervisor feeds it; until
     // it runs, the start-up below takes well under a second).
     let mut watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
@@ -514,6 +516,25 @@ fn sense_watchdog() -> (u16, u16) {
     let (low, high) = BOARD.sense.watchdog_codes(u32::from(top));
     let code = |c: u32| u16::try_from(c).unwrap_or(top).min(top);
     (code(low), code(high))
+}
+
+/// The F405's `.ccm` statics (not loaded: firmware/build.rs) zeroed, as cortex-m-rt zeroes
+/// `.bss`, before any is taken.
+#[cfg(feature = "board-f405")]
+fn zero_ccm() {
+    unsafe extern "C" {
+        static mut __sccm: u32;
+        static mut __eccm: u32;
+    }
+    let (start, end) = (
+        core::ptr::addr_of_mut!(__sccm),
+        core::ptr::addr_of_mut!(__eccm),
+    );
+    let words = (end as usize - start as usize) / 4;
+    for i in 0..words {
+        // SAFETY: within the section the linker laid in the CCM; nothing has used it yet.
+        unsafe { core::ptr::write_volatile(start.add(i), 0) };
+    }
 }
 
 /// With the `ram-code` feature: the control interrupt's code (the linker's `.ramcode`, loaded

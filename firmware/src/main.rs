@@ -40,6 +40,9 @@ use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::control::Loop;
 
+/// The capture buffer's values: the board's (`Board::capture_values`; the F405's in its CCM).
+const CAPTURE_VALUES: usize = board::BOARD.capture_values as usize;
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     // The first line, on the reset clock, before anything that could hang.
@@ -177,10 +180,11 @@ async fn main(spawner: Spawner) {
     let sense = zero.sense;
 
     let encoder = hw.encoder_raw();
-    // The capture buffer: a zeroed static (in .bss, never copied through the stack) that the
-    // loop owns from here on.
-    static CAPTURE: ConstStaticCell<[f32; board::CAPTURE_VALUES as usize]> =
-        ConstStaticCell::new([0.0; board::CAPTURE_VALUES as usize]);
+    // The capture buffer: a zeroed static (in .bss, or the F405's CCM: firmware/build.rs;
+    // never copied through the stack) that the loop owns from here on.
+    #[cfg_attr(feature = "board-f405", unsafe(link_section = ".ccm"))]
+    static CAPTURE: ConstStaticCell<[f32; CAPTURE_VALUES]> =
+        ConstStaticCell::new([0.0; CAPTURE_VALUES]);
     let capture = CAPTURE.take();
     // The position map's table, likewise (4 KiB).
     static MAP: ConstStaticCell<[f32; gms_core::control::posmap::MAP_VALUES]> =
@@ -193,7 +197,9 @@ async fn main(spawner: Spawner) {
         Ok(false) => {}
         Err(why) => warn!("{}", why),
     }
-    // The table motion's buffer (reference, two corrections, two period errors: 20 KiB).
+    // The table motion's buffer (reference, two corrections, two period errors: 20 KiB; in
+    // the F405's CCM).
+    #[cfg_attr(feature = "board-f405", unsafe(link_section = ".ccm"))]
     static TABLE: ConstStaticCell<[f32; gms_core::control::table::TABLE_VALUES]> =
         ConstStaticCell::new([0.0; gms_core::control::table::TABLE_VALUES]);
     let (telemetry_tx, telemetry_rx) = control::telemetry();
@@ -283,7 +289,7 @@ struct LoopParts {
     sense: gms_core::drive::CurrentSense,
     faults: Faults,
     encoder: u32,
-    capture: &'static mut [f32; board::CAPTURE_VALUES as usize],
+    capture: &'static mut [f32; CAPTURE_VALUES],
 }
 
 /// Builds the control loop in its static and hands it to the interrupt: its own frame (out
