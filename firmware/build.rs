@@ -97,7 +97,9 @@ fn main() {
 /// 0x2000_0000, so the code's bytes there are kept out of RAM's use by `.ramcode.room`, the
 /// first section in RAM. The functions are picked by their sections' names (`.text.NAME`,
 /// one per function): the control interrupt (all it inlines) and the out-of-line gms-core
-/// functions it calls, as `rehost check --profile` lists them; gms-core stays free of
+/// functions it calls, as `rehost check --profile` lists them (not compiler-builtins' `memcpy`
+/// and kin, which the start-up calls before the remap: there, on the chip, address 0 is still
+/// the flash); gms-core stays free of
 /// link-section attributes (its `forbid(unsafe_code)`). `.text` of cortex-m-rt's `link.x`
 /// takes every `.text.*` it meets first, so `.ramcode` comes before it, and `_stext` (where
 /// `.text` starts) after `.ramcode`'s load image.
