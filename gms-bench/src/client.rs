@@ -94,6 +94,23 @@ pub fn capture_status(b: &mut impl Bench) -> Result<CaptureStatus, Error> {
     CaptureStatus::parse(&text).map_err(|e| Error::Device(format!("{e}: {text}")))
 }
 
+/// The capture buffer's size the device reports (values: samples × fields at most that; the
+/// board's, 8192 on the F405).
+pub fn capture_capacity(b: &mut impl Bench) -> Result<u32, Error> {
+    Ok(capture_status(b)?.capacity)
+}
+
+/// Every how many position steps `fields` fields are recorded so that `steps` steps fit in
+/// `room` values (at least 1; 1 for a room of nothing, which the device then refuses).
+pub fn decimation(steps: f64, fields: usize, room: f64) -> u32 {
+    let every = (steps * fields as f64 / room).ceil();
+    if every.is_finite() && every >= 1.0 {
+        every.min(u32::MAX as f64) as u32
+    } else {
+        1
+    }
+}
+
 /// Waits until the capture is `done`, letting `step` seconds of device time pass between
 /// looks, at most `tries` looks.
 pub fn capture_wait(b: &mut impl Bench, step: f64, tries: u32) -> Result<CaptureStatus, Error> {
@@ -361,9 +378,9 @@ pub(crate) fn timed_run(
 ) -> Result<(), Error> {
     let t_acc = v.abs() / VELOCITY_ACC;
     let steps = ((seconds + 2.0 * t_acc + 0.01) / dt).ceil();
-    // The fields per sample within the 8192 values of the buffer.
-    let nf = fields.split(',').count() as f64;
-    let every = (steps * nf / 8100.0).ceil().max(1.0);
+    // The fields per sample within the buffer's values (92 spare: 8100 of the F405's 8192).
+    let room = capture_capacity(b)?.saturating_sub(92) as f64;
+    let every = decimation(steps, fields.split(',').count(), room) as f64;
     let n = (steps / every).ceil() as u32;
     b.capture(fields, every as u32, n, true)?;
     primitive(b, velocity(v, Some((0.0, 1.0, 1.0, seconds))))?;
@@ -446,9 +463,36 @@ pub(crate) fn hold_current(
     let x0 = position(b)?;
     b.current(amps)?;
     b.wait(seconds / 2.0)?;
-    let n = ((seconds / 2.0) / dt).ceil().clamp(2.0, 2700.0) as u32;
+    // Two fields: at most half the buffer (and 2700 samples, 0.135 s at 20 kHz).
+    let most = capture_capacity(b)?.div_euclid(2).clamp(2, 2700) as f64;
+    let n = ((seconds / 2.0) / dt).ceil().clamp(2.0, most) as u32;
     let rows = capture_now(b, "current,volts", n, dt)?;
     check_faults(b)?;
     let m = means(&rows);
     Ok((m[0], m[1], position(b)? - x0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::decimation;
+
+    /// The decimation keeps `steps / every` samples of `fields` fields within the room, with the
+    /// least `every` that does: checked against a search over `every`.
+    #[test]
+    fn decimation_is_the_least_that_fits() {
+        for steps in [1.0, 100.0, 8100.0, 8101.0, 16_200.0, 123_457.0] {
+            for fields in 1..=4usize {
+                for room in [2048.0, 4004.0, 8000.0, 8100.0] {
+                    let every = decimation(steps, fields, room);
+                    let fits = |e: u32| (steps / e as f64) * fields as f64 <= room;
+                    assert!(fits(every), "{steps} {fields} {room}: {every}");
+                    assert!(every == 1 || !fits(every - 1), "{steps} {fields} {room}: {every}");
+                }
+            }
+        }
+        assert_eq!(decimation(16_200.0, 1, 8100.0), 2);
+        assert_eq!(decimation(0.0, 3, 8100.0), 1);
+        assert_eq!(decimation(100.0, 1, 0.0), 1);
+        assert_eq!(decimation(f64::NAN, 1, 8100.0), 1);
+    }
 }

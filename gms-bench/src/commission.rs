@@ -8,9 +8,9 @@ use gms_core::protocol::ParamId;
 use gms_ident::units::{num4, si};
 
 use crate::client::{
-    Bench, DeviceInfo, VELOCITY_ACC, capture_now, capture_rows, capture_wait, check_configured,
-    check_faults, get_param, guarded, hold_current, means, narrow_limits, position, primitive,
-    rad_per_count, scales_line, timed_run,
+    Bench, DeviceInfo, VELOCITY_ACC, capture_capacity, capture_now, capture_rows, capture_wait,
+    check_configured, check_faults, get_param, guarded, hold_current, means, narrow_limits,
+    position, primitive, rad_per_count, scales_line, timed_run,
 };
 use crate::estimate::{
     inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope, resistance_and_step,
@@ -966,7 +966,7 @@ pub(crate) fn inertia(
     primitive(b, Command::Enable { current: true })?;
     b.wait(0.05)?;
     for dir in [1.0, -1.0, 1.0, -1.0] {
-        let n = (plan.record / dt).ceil() as u32;
+        let n = ((plan.record / dt).ceil() as u32).min(capture_capacity(b)? / 3);
         b.capture("t,pos,current", 1, n, true)?;
         primitive(
             b,

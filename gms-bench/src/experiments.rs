@@ -305,7 +305,8 @@ pub(crate) struct Settled {
 
 /// The means of a `samples`-step capture taken now.
 pub(crate) fn settled(b: &mut impl Bench, samples: u32, dt: f64) -> Result<Settled, Error> {
-    let rows = capture_now(b, "pos,current", samples.max(2), dt)?;
+    let most = crate::client::capture_capacity(b)?.div_euclid(2).max(2);
+    let rows = capture_now(b, "pos,current", samples.clamp(2, most), dt)?;
     let origin = capture_status(b)?.origin;
     let mean =
         |r: &[Vec<f64>], c: usize| r.iter().map(|r| r[c]).sum::<f64>() / r.len().max(1) as f64;
@@ -556,7 +557,11 @@ impl LagPlan {
 pub fn lag(b: &mut impl Bench, plan: &LagPlan) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), Error> {
     guarded(b, |b| {
         let dt = DeviceInfo::read(b)?.dt();
-        let every = plan.every.max(1);
+        // The plan's decimation, or more if the buffer (two fields) needs it.
+        let room = crate::client::capture_capacity(b)? as f64;
+        let every = plan
+            .every
+            .max(crate::client::decimation(plan.seconds / dt, 2, room));
         let samples = (plan.seconds / (dt * every as f64)).floor() as u32;
         b.enable()?;
         primitive(b, velocity(plan.mean, None))?;

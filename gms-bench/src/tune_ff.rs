@@ -25,7 +25,9 @@ pub fn sine_test(b: &mut impl Bench, amp: f64, freq: f64, seconds: f64) -> Resul
     }
     guarded(b, |b| {
         let dev = DeviceInfo::read(b)?;
-        let every = (seconds * dev.pos_hz / 8000.0).ceil().max(1.0) as u32;
+        // One field, within the buffer (192 spare: 8000 of the F405's 8192).
+        let room = crate::client::capture_capacity(b)?.saturating_sub(192) as f64;
+        let every = crate::client::decimation(seconds * dev.pos_hz, 1, room);
         let samples = (seconds * dev.pos_hz / every as f64).floor() as u32;
         let v_amp = amp * 2.0 * std::f64::consts::PI * freq;
         b.enable()?;
