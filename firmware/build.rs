@@ -74,12 +74,8 @@ fn main() {
         store0 = 0x0800_0000 + store.0,
         store1 = 0x0800_0000 + store.1,
     );
-    // The control interrupt's code in SRAM (the `ram-code` feature); the F405's capture and
-    // learning table in its CCM.
-    let mut text = text;
-    if env::var_os("CARGO_FEATURE_RAM_CODE").is_some() {
-        text += RAM_CODE;
-    }
+    // The control interrupt's code in SRAM; the F405's capture and learning table in its CCM.
+    let mut text = text + RAM_CODE;
     if name == "f405" {
         text += F405_CCM;
     }
@@ -90,8 +86,8 @@ fn main() {
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
 
-/// With the `ram-code` feature: the control interrupt's code in `.ramcode`, loaded in flash
-/// after the vector table and run from SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE = 11, RM0090 §9.2.1: SRAM1 at
+/// The control interrupt's code in `.ramcode`, loaded in flash after the vector table and run
+/// from SRAM1 remapped at 0 (SYSCFG_MEMRMP.MEM_MODE = 11, RM0090 §9.2.1: SRAM1 at
 /// 0x0000_0000, fetched through the I-bus without the flash's wait states), where the firmware
 /// copies it at start-up (`board::init`, `f4_regs::remap`). SRAM1 starts at
 /// 0x2000_0000, so the code's bytes there are kept out of RAM's use by `.ramcode.room`, the

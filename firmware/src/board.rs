@@ -272,7 +272,6 @@ pub fn init() -> (ControlHw, Rest) {
     let p = embassy_stm32::init(config());
     // After embassy's init, which resets SYSCFG (and with it the remap), before anything that
     // could call into the code run from SRAM or take a static from the CCM.
-    #[cfg(feature = "ram-code")]
     run_code_from_sram();
     #[cfg(feature = "board-f405")]
     zero_ccm();
@@ -537,10 +536,9 @@ fn zero_ccm() {
     }
 }
 
-/// With the `ram-code` feature: the control interrupt's code (the linker's `.ramcode`, loaded
-/// in flash: firmware/build.rs) copied to its place in SRAM1, which is then mapped at 0, where
-/// the code was linked to run (`f4_regs::remap`).
-#[cfg(feature = "ram-code")]
+/// The control interrupt's code (the linker's `.ramcode`, loaded in flash: firmware/build.rs)
+/// copied to its place in SRAM1, which is then mapped at 0, where the code was linked to run
+/// (`f4_regs::remap`).
 fn run_code_from_sram() {
     unsafe extern "C" {
         static __sramcode: u32;

@@ -40,7 +40,8 @@ use static_cell::{ConstStaticCell, StaticCell};
 
 use crate::control::Loop;
 
-/// The capture buffer's values: the board's (`Board::capture_values`; the F405's in its CCM).
+/// The capture buffer's values: the board's (`Board::capture_values`: the F405's 8192 in its
+/// CCM, the Nucleo's 4096, for the code run from SRAM).
 const CAPTURE_VALUES: usize = board::BOARD.capture_values as usize;
 
 #[embassy_executor::main]

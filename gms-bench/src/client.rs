@@ -486,7 +486,10 @@ mod tests {
                     let every = decimation(steps, fields, room);
                     let fits = |e: u32| (steps / e as f64) * fields as f64 <= room;
                     assert!(fits(every), "{steps} {fields} {room}: {every}");
-                    assert!(every == 1 || !fits(every - 1), "{steps} {fields} {room}: {every}");
+                    assert!(
+                        every == 1 || !fits(every - 1),
+                        "{steps} {fields} {room}: {every}"
+                    );
                 }
             }
         }

@@ -28,11 +28,9 @@ mod f405;
 #[allow(dead_code)]
 mod nucleo_f446;
 
-/// The boards: name (as in `--board`), cargo features, probe-rs chip. The F405 runs its
-/// control interrupt's code from SRAM (`ram-code`: docs/firmware.md); the Nucleo, without the
-/// room for it and its stack guard, from flash.
+/// The boards: name (as in `--board`), cargo feature, probe-rs chip.
 const BOARDS: [(&str, &str, &str); 2] = [
-    ("f405", "board-f405,ram-code", f405::PROBE_RS_CHIP),
+    ("f405", "board-f405", f405::PROBE_RS_CHIP),
     (
         "nucleo-f446",
         "board-nucleo-f446",

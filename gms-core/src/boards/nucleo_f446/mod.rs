@@ -50,5 +50,16 @@ pub const MEMORY: MemoryMap = MemoryMap {
 /// How the current is sampled.
 pub const SENSE_TIMING: SenseTiming = power_stage::sense_timing(&CLOCKS);
 
-/// The board as the device core sees it.
-pub const BOARD: Board = power_stage::board(&CLOCKS);
+/// The board as the device core sees it: the power stage's, with a capture buffer of
+/// [`CAPTURE_VALUES_F446`].
+pub const BOARD: Board = Board {
+    capture_values: CAPTURE_VALUES_F446,
+    ..power_stage::board(&CLOCKS)
+};
+
+/// The Nucleo's capture buffer (values): 16 KiB, half the F405's. The F446 has no CCM, and its
+/// 128 KiB of SRAM hold the control interrupt's code (25 KiB, run from SRAM1 remapped at 0),
+/// the statics, the stack guard (8 KiB, aligned to its size) and a stack of at least 16 KiB
+/// (17 KiB used): with the F405's 32 KiB the guard found no room. 4096 samples of one field,
+/// 1024 of four; the bench tools size their captures from the capacity the device reports.
+pub const CAPTURE_VALUES_F446: u32 = 4096;
