@@ -557,7 +557,7 @@ fn run_code_from_sram() {
     let regs = f4_regs::remap::RemapRegs {
         rcc: pac::RCC,
         syscfg: pac::SYSCFG,
-        scb: 0xE000_ED00 as *mut u32,
+        scb: f4_regs::mpu::CoreRegs::CORE.scb,
     };
     // SAFETY: the linker put the load image at `__siramcode` and kept SRAM1's first
     // `end - start` bytes out of RAM's sections (`.ramcode.room`, asserted there); nothing has

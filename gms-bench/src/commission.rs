@@ -963,10 +963,11 @@ pub(crate) fn inertia(
     let amps = (plan.breakaways * i_fs).min(0.8 * dev.i_max);
     let pulse = plan.pulse;
     let mut js = Vec::new();
+    // Three fields: at most a third of the buffer.
+    let n = ((plan.record / dt).ceil() as u32).min(capture_capacity(b)? / 3);
     primitive(b, Command::Enable { current: true })?;
     b.wait(0.05)?;
     for dir in [1.0, -1.0, 1.0, -1.0] {
-        let n = ((plan.record / dt).ceil() as u32).min(capture_capacity(b)? / 3);
         b.capture("t,pos,current", 1, n, true)?;
         primitive(
             b,

@@ -761,15 +761,10 @@ impl<const N: usize> Controller<N> {
             * (self.map_act.force_at(vel) + guide.map_or(0.0, |m| ratio * m.force_at(ratio * vel)))
     }
 
-    /// The friction feedforward torque [N·m] (before the gain) for the reference moving by
-    /// `dx` \[rad\] at velocity `vel` [rad/s] over one position period. Every model is advanced
-    /// whatever the mode, so that switching modes finds them in the right state.
-    fn friction_ff(&mut self, dx: f32, vel: f32) -> f32 {
-        let half = self.friction_ff_first(dx, vel);
-        self.friction_ff_second(half)
-    }
-
-    /// The friction feedforward's first half: the actuator's model advanced by `dx` \[rad\].
+    /// The friction feedforward's first half: the actuator's model advanced by `dx` \[rad\]
+    /// (the reference's increment over one position period, at velocity `vel` [rad/s]). Every
+    /// model is advanced whatever the mode, so that switching modes finds them in the right
+    /// state.
     #[inline(always)]
     fn friction_ff_first(&mut self, dx: f32, vel: f32) -> FfAhead {
         FfAhead {
@@ -817,10 +812,12 @@ impl<const N: usize> Controller<N> {
         self.ff_ahead = None;
     }
 
-    /// The friction model advanced to the reference `r` from the last one; its output \[N·m\].
+    /// The friction models advanced to the reference `r` from the last one; the feedforward
+    /// torque \[N·m\] (before the gain).
     fn friction_ff_at(&mut self, r: &RefSample) -> f32 {
         let dx_ref = self.ref_increment(r);
-        self.friction_ff(dx_ref, r.vel)
+        let half = self.friction_ff_first(dx_ref, r.vel);
+        self.friction_ff_second(half)
     }
 
     /// The reference's increment to `r` from the last one \[rad\] (exact in fixed point; 0 at
