@@ -122,7 +122,8 @@ SECTIONS
     *(.text.*Gms*15take_state_from*)
     *(.text.*Shaping15take_state_from*)
     *(.text.*Player4take17h*)
-    *(.text.*Player6report*)
+    *(.text.*Player11report_into*)
+    *(.text.*VelocityProfile4next*)
     . = ALIGN(8);
     __eramcode = .;
   } > RAMCODE AT > FLASH

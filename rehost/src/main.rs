@@ -37,9 +37,10 @@ enum Cmd {
         /// Cycles per instruction (with `--timing cpi`).
         #[arg(long, default_value_t = 1.5)]
         cpi: f64,
-        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
-        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
-        #[arg(long, default_value = "cpi")]
+        /// The time model: `cycles` (the Cortex-M4's costs, the flash's wait states behind
+        /// the accelerator: docs/rehost.md) or `cpi` (a fixed cycles per instruction, the
+        /// older model, for comparison).
+        #[arg(long, default_value = "cycles")]
         timing: String,
     },
     /// Runs the image with its USART2 bridged to a TCP port: `gms-tune --tcp HOST:PORT` talks
@@ -62,9 +63,10 @@ enum Cmd {
         /// stored survives a restart, as on a board); none: erased at each start.
         #[arg(long, value_name = "FILE")]
         flash: Option<std::path::PathBuf>,
-        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
-        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
-        #[arg(long, default_value = "cpi")]
+        /// The time model: `cycles` (the Cortex-M4's costs, the flash's wait states behind
+        /// the accelerator: docs/rehost.md) or `cpi` (a fixed cycles per instruction, the
+        /// older model, for comparison).
+        #[arg(long, default_value = "cycles")]
         timing: String,
     },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
@@ -82,16 +84,17 @@ enum Cmd {
         /// the control interrupt's runs over 90 % of its budget.
         #[arg(long)]
         profile: bool,
-        /// The time model: `cpi` (1.5 cycles per instruction) or `cycles` (the Cortex-M4's
-        /// costs, the flash's wait states behind the accelerator: docs/rehost.md).
-        #[arg(long, default_value = "cpi")]
+        /// The time model: `cycles` (the Cortex-M4's costs, the flash's wait states behind
+        /// the accelerator: docs/rehost.md) or `cpi` (a fixed cycles per instruction, the
+        /// older model, for comparison).
+        #[arg(long, default_value = "cycles")]
         timing: String,
         /// The current loop's rate \[Hz\] the session runs at (`set rate.cur_hz` before it,
         /// the position loop at its default): the budget is 60 % of its period. The Nucleo
         /// only (the F405's link is not modelled).
         #[arg(long, default_value_t = 40_000)]
         cur_hz: u64,
-        /// A what-if for `--timing cycles`: the functions whose names contain NAME (repeat
+        /// A what-if for the `cycles` time model: the functions whose names contain NAME (repeat
         /// it) fetched as from SRAM remapped at 0 (the I-bus, no wait states), as if the image
         /// had put them there; the image is not changed. Measures what moving them would gain.
         #[arg(long, value_name = "NAME")]

@@ -275,20 +275,26 @@ pub enum Recorded {
 }
 
 impl Player {
-    /// The report for the protocol side (one copy of it in the image).
-    #[inline(never)]
+    /// The report for the protocol side.
     pub fn report(&self) -> TableReport {
-        TableReport {
-            state: self.state,
-            geometry: self.geo,
-            period: self.period,
-            periods: self.periods,
-            generation: self.generation,
-            pending: self.pending.is_some(),
-            done: self.done.map(|d| d.0),
-            held: self.held,
-            started: self.started,
-        }
+        let mut r = TableReport::default();
+        self.report_into(&mut r);
+        r
+    }
+
+    /// The report for the protocol side written into `r` field by field (the control loop's
+    /// copy: no report built on the stack and copied over it; one copy of it in the image).
+    #[inline(never)]
+    pub fn report_into(&self, r: &mut TableReport) {
+        r.state = self.state;
+        r.geometry = self.geo;
+        r.period = self.period;
+        r.periods = self.periods;
+        r.generation = self.generation;
+        r.pending = self.pending.is_some();
+        r.done = self.done.map(|d| d.0);
+        r.held = self.held;
+        r.started = self.started;
     }
 
     /// Notes what a run just asked for starts with: its first position step (the loop's

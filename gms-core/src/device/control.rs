@@ -206,8 +206,10 @@ pub struct ControlLoop {
     table_buf: Option<TableBuf>,
     /// The table motion's player.
     table: Player,
-    /// Its report for the protocol side, handed over at the next exchange.
-    table_report: Option<TableReport>,
+    /// Its report for the protocol side, written in place ([`Player::report_into`])…
+    table_report: TableReport,
+    /// … and handed over at the next exchange when set.
+    table_reported: bool,
     /// The table's correction in the last step \[N·m\] (0 when none plays).
     table_corr: f32,
     /// A chunk or a report waits for the next exchange (one test a step when none does).
@@ -298,7 +300,8 @@ impl ControlLoop {
             map_cursor: None,
             table_buf: None,
             table: Player::default(),
-            table_report: None,
+            table_report: TableReport::default(),
+            table_reported: false,
             table_corr: 0.0,
             fresh: false,
             done: None,
@@ -330,6 +333,13 @@ impl ControlLoop {
         }
     }
 
+    /// The table's report written for the next exchange.
+    fn report_table(&mut self) {
+        self.table.report_into(&mut self.table_report);
+        self.table_reported = true;
+        self.fresh = true;
+    }
+
     /// A table run ended: its correction leaves the feedforward (the map's sample alone from
     /// the next step; none without a map), its report goes over at the next exchange.
     fn table_ended(&mut self) {
@@ -337,8 +347,7 @@ impl ControlLoop {
         if self.map_cursor.is_none() {
             self.ctrl.set_map_sample(0.0, 1.0);
         }
-        self.table_report = Some(self.table.report());
-        self.fresh = true;
+        self.report_table();
     }
 
     /// The loop with a position map's table (`table`: [`crate::control::posmap::MAP_VALUES`] values,
@@ -516,8 +525,7 @@ impl ControlLoop {
                 // A table's counts, steps and speeds were checked for the old encoder and
                 // rates: it is forgotten (the next run needs a new `table set`).
                 self.table = Player::default();
-                self.table_report = Some(self.table.report());
-                self.fresh = true;
+                self.report_table();
             }
             if rates {
                 // The bridge goes off for the change.
@@ -571,8 +579,9 @@ impl ControlLoop {
             }
             None => {}
         }
-        if let Some(t) = req.table {
-            self.take_table(&t, &mut req.chunk);
+        // By reference: a write's values are not copied into the frame.
+        if let Some(t) = req.table.as_ref() {
+            self.take_table(t, &mut req.chunk);
         }
         if req.disable {
             self.switch_off();
@@ -725,7 +734,7 @@ impl ControlLoop {
                 Handover {
                     steps: self.steps,
                     frf: self.frf_report.as_ref(),
-                    table: self.table_report.as_ref(),
+                    table: self.table_reported.then_some(&self.table_report),
                     returned,
                 }
             } else {
@@ -739,7 +748,7 @@ impl ControlLoop {
             let req = exchange(&|| self.status(), h);
             if req.is_none() && self.fresh {
                 self.frf_report = None;
-                self.table_report = None;
+                self.table_reported = false;
                 self.fresh = false;
             }
             if let Some(req) = req {
@@ -988,8 +997,7 @@ impl ControlLoop {
         match self.table.record(t, self.out.error) {
             Recorded::Within => {}
             Recorded::PeriodEnd => {
-                self.table_report = Some(self.table.report());
-                self.fresh = true;
+                self.report_table();
             }
             Recorded::RunEnd(at) => {
                 self.motion.hold_at(at);
@@ -1034,8 +1042,7 @@ impl ControlLoop {
                 self.ctrl.params().pos_rate_hz,
             );
         }
-        self.table_report = Some(self.table.report());
-        self.fresh = true;
+        self.report_table();
     }
 
     /// The reference side of the next position step: the motion (or the table) advanced, the

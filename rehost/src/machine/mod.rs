@@ -102,7 +102,7 @@ impl TimeModel {
 /// How to run.
 #[derive(Debug, Clone)]
 pub struct Options {
-    /// The time model (1.5 cycles per instruction by default).
+    /// The time model (the Cortex-M4's costs by default).
     pub timing: TimeModel,
     /// The plant's scenario (hil-sim's defaults when `None`).
     pub scenario: Option<Scenario>,
@@ -113,7 +113,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Options {
-            timing: TimeModel::Cpi(1.5),
+            timing: TimeModel::Cycles,
             scenario: None,
             echo_log: false,
         }
