@@ -28,9 +28,9 @@ enum Cmd {
     Boot {
         /// The firmware ELF (`cargo fw-f446` builds target/thumbv7em-none-eabihf/firmware/firmware).
         elf: std::path::PathBuf,
-        /// The board it was built for: nucleo-f446 or f405.
-        #[arg(long, default_value = "nucleo-f446")]
-        board: String,
+        /// The board it was built for: nucleo-f446 or f405 (default: read from the image).
+        #[arg(long)]
+        board: Option<String>,
         /// Device time to run \[s\].
         #[arg(long, default_value_t = 0.5)]
         seconds: f64,
@@ -43,11 +43,16 @@ enum Cmd {
         #[arg(long, default_value = "cycles")]
         timing: String,
     },
-    /// Runs the image with its USART2 bridged to a TCP port: `gms-tune --tcp HOST:PORT` talks
-    /// to the shipped firmware (one client at a time; the log on stderr).
+    /// Runs the image with its link bridged to a TCP port: `gms-tune --tcp HOST:PORT` talks
+    /// to the shipped firmware (one client at a time; the log on stderr). The Nucleo's link
+    /// is its USART2; the F405's its USB, which an emulated host enumerates, opens (DTR) and
+    /// carries over its bulk endpoints.
     Serve {
-        /// The firmware ELF (the Nucleo's: its link is USART2).
+        /// The firmware ELF.
         elf: std::path::PathBuf,
+        /// The board it was built for: nucleo-f446 or f405 (default: read from the image).
+        #[arg(long)]
+        board: Option<String>,
         /// The address to listen on.
         #[arg(long, default_value = "127.0.0.1:7879")]
         listen: String,
@@ -76,10 +81,10 @@ enum Cmd {
     Check {
         /// The firmware ELF.
         elf: std::path::PathBuf,
-        /// The board it was built for: nucleo-f446 or f405 (the F405's USB link is not
-        /// modelled: boot and run only).
-        #[arg(long, default_value = "nucleo-f446")]
-        board: String,
+        /// The board it was built for: nucleo-f446 (its link USART2) or f405 (USB, with an
+        /// emulated host that enumerates it); default: read from the image.
+        #[arg(long)]
+        board: Option<String>,
         /// Print where the cycles go (by function): the `status` request's, and in each motion
         /// the control interrupt's runs over 90 % of its budget.
         #[arg(long)]
@@ -90,8 +95,7 @@ enum Cmd {
         #[arg(long, default_value = "cycles")]
         timing: String,
         /// The current loop's rate \[Hz\] the session runs at (`set rate.cur_hz` before it,
-        /// the position loop at its default): the budget is 60 % of its period. The Nucleo
-        /// only (the F405's link is not modelled).
+        /// the position loop at its default): the budget is 60 % of its period.
         #[arg(long, default_value_t = 40_000)]
         cur_hz: u64,
         /// A what-if for the `cycles` time model: the functions whose names contain NAME (repeat
@@ -117,6 +121,7 @@ fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::Serve {
             elf,
+            board,
             listen,
             speed,
             scenario,
@@ -124,7 +129,7 @@ fn run(cli: Cli) -> Result<(), String> {
             timing,
         } => {
             let timing = TimeModel::parse(&timing)?;
-            let (image, _) = load(&elf, "nucleo-f446")?;
+            let (image, board) = load(&elf, board.as_deref())?;
             if !(speed > 0.0 && speed.is_finite()) {
                 return Err(format!("--speed {speed}: must be above 0"));
             }
@@ -141,7 +146,7 @@ fn run(cli: Cli) -> Result<(), String> {
             };
             let m = Machine::new(
                 &image,
-                Board::NucleoF446,
+                board,
                 Options {
                     echo_log: true,
                     scenario,
@@ -165,7 +170,7 @@ fn run(cli: Cli) -> Result<(), String> {
             if !what_if_sram.is_empty() && timing != TimeModel::Cycles {
                 return Err("--what-if-sram needs --timing cycles".into());
             }
-            let (image, board) = load(&elf, &board)?;
+            let (image, board) = load(&elf, board.as_deref())?;
             let mut m = Machine::new(
                 &image,
                 board,
@@ -215,7 +220,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 TimeModel::Cpi(_) => TimeModel::Cpi(cpi),
                 t => t,
             };
-            let (image, board) = load(&elf, &board)?;
+            let (image, board) = load(&elf, board.as_deref())?;
             let mut m = Machine::new(
                 &image,
                 board,
@@ -259,6 +264,19 @@ fn run(cli: Cli) -> Result<(), String> {
                 );
             }
             println!("pc now {:#010x}", m.pc());
+            if m.board() == Board::F405 {
+                let h = m.usb_host();
+                println!(
+                    "USB host: {:?}, {} enumeration(s), DTR {}",
+                    h.link, h.enumerations, h.dtr
+                );
+                for l in h.desc.describe() {
+                    println!("  {l}");
+                }
+                for e in &h.errors {
+                    println!("  USB error: {e}");
+                }
+            }
             for f in &m.faults {
                 println!("{f}");
             }
@@ -271,8 +289,17 @@ fn run(cli: Cli) -> Result<(), String> {
     }
 }
 
-/// The image's bytes and the board named.
-fn load(elf: &std::path::Path, board: &str) -> Result<(Vec<u8>, Board), String> {
+/// The image's bytes and the board named, or the one the image was built for.
+fn load(elf: &std::path::Path, board: Option<&str>) -> Result<(Vec<u8>, Board), String> {
     let image = std::fs::read(elf).map_err(|e| format!("{}: {e}", elf.display()))?;
-    Ok((image, Board::parse(board)?))
+    let board = match board {
+        Some(b) => Board::parse(b)?,
+        None => Board::of_image(&image).ok_or_else(|| {
+            format!(
+                "{}: not a gms image rehost can tell the board of: name it with --board",
+                elf.display()
+            )
+        })?,
+    };
+    Ok((image, board))
 }

@@ -30,7 +30,10 @@ pub fn run(
     let addr = listener
         .local_addr()
         .map_err(|e| format!("listen on {listen}: {e}"))?;
-    eprintln!("rehost: the image's USART2 on {addr} (gms-tune --tcp {addr})");
+    let usb = m.board() == rehost::Board::F405;
+    let link = if usb { "USB" } else { "USART2" };
+    eprintln!("rehost: the image's {link} on {addr} (gms-tune --tcp {addr})");
+    let mut enumerations = 0;
     let wall = Instant::now();
     let device0 = m.seconds();
     let mut client: Option<TcpStream> = None;
@@ -45,6 +48,11 @@ pub fn run(
             let _ = c.set_nodelay(true);
             eprintln!("rehost: client {peer}");
             client = Some(c);
+            if usb {
+                // The client is the application that opens the port (DTR up) …
+                let (h, _, now) = m.usb();
+                h.open_port(now);
+            }
         }
         if let Some(c) = client.as_mut() {
             match c.read(&mut buf) {
@@ -63,8 +71,22 @@ pub fn run(
                 Err(_) => client = None,
             }
         }
+        if usb && client.is_none() && m.usb_host().want_open {
+            // … and closes it when it goes (DTR down: the image ends its session).
+            let (h, _, now) = m.usb();
+            h.close_port(now);
+        }
         m.run_for(SLICE)
             .map_err(|e| format!("the image stopped: {e:?}"))?;
+        if usb && m.usb_host().enumerations != enumerations {
+            enumerations = m.usb_host().enumerations;
+            for l in m.usb_host().desc.describe() {
+                eprintln!("rehost: USB: {l}");
+            }
+            for e in &m.usb_host().errors {
+                eprintln!("rehost: USB error: {e}");
+            }
+        }
         if let Some(f) = flash
             && m.chip().inject.flash_writes != writes
         {

@@ -28,6 +28,7 @@ impl Machine {
             p.tim4.next_event(),
             p.adc.next_event(),
             p.usart2.next_event(),
+            p.usb_host.next_event(),
             p.iwdg.expires,
         ]
         .into_iter()
@@ -46,6 +47,7 @@ impl Machine {
                 (1, p.tim4.next_event()),
                 (2, p.adc.next_event()),
                 (3, p.usart2.next_event()),
+                (4, p.usb_host.next_event()),
             ];
             let Some((which, t)) = cands
                 .into_iter()
@@ -63,7 +65,11 @@ impl Machine {
                     c.p.tim4.take_events();
                 }
                 2 => self.fire_adc(t),
-                _ => self.fire_usart(t),
+                3 => self.fire_usart(t),
+                _ => {
+                    let p = &mut self.chip_mut().p;
+                    p.usb_host.fire(t, &mut p.otg);
+                }
             }
         }
         // A DMA transmit waiting for the line.

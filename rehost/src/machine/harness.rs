@@ -91,12 +91,20 @@ impl Machine {
         c.stop_soon();
     }
 
-    /// Bytes for the image's link (USART2's receive line).
+    /// Bytes for the image's link: USART2's receive line (the Nucleo), the USB host's bulk
+    /// OUT stream (the F405).
     pub fn send_to_image(&mut self, bytes: &[u8]) {
+        let usb = self.board == Board::F405;
         let c = self.chip_mut();
-        c.p.usart2.from_host.extend(bytes);
         let now = c.cycles;
-        c.p.usart2.poll_host(now);
+        if usb {
+            c.p.usb_host.from_host.extend(bytes);
+            c.p.usb_host.kick(now);
+            c.stop_soon();
+        } else {
+            c.p.usart2.from_host.extend(bytes);
+            c.p.usart2.poll_host(now);
+        }
     }
 
     /// Bytes for the image's link, the one at `bad` (an index into `bytes`) arriving with a
@@ -111,7 +119,60 @@ impl Machine {
 
     /// Bytes the image sent on its link since the last call.
     pub fn take_from_image(&mut self) -> Vec<u8> {
-        std::mem::take(&mut self.chip_mut().p.usart2.to_host)
+        if self.board == Board::F405 {
+            std::mem::take(&mut self.chip_mut().p.usb_host.to_host)
+        } else {
+            std::mem::take(&mut self.chip_mut().p.usart2.to_host)
+        }
+    }
+
+    /// The link ready for requests within `seconds` of device time: the F405's USB
+    /// enumerated by the emulated host and its port opened (DTR up; an error names what the
+    /// host found wrong); the Nucleo's UART is always ready.
+    pub fn link_ready(&mut self, seconds: f64) -> Result<(), String> {
+        use crate::periph::usb_host::Link;
+        if self.board != Board::F405 {
+            return Ok(());
+        }
+        let (h, _, now) = self.usb();
+        h.open_port(now);
+        let until = self.seconds() + seconds;
+        let open = |m: &Machine| m.usb_host().link == Link::Open && m.usb_host().dtr;
+        while !open(self) && self.seconds() < until {
+            self.run_for(0.001).map_err(|e| format!("{e:?}"))?;
+        }
+        let h = self.usb_host();
+        if !h.errors.is_empty() {
+            return Err(format!("the USB host: {}", h.errors.join("; ")));
+        }
+        if !open(self) {
+            return Err(format!(
+                "the USB host did not open the port within {seconds} s: {:?}, DTR {}",
+                h.link, h.dtr
+            ));
+        }
+        Ok(())
+    }
+
+    /// The USB host (the F405's link): its state, the descriptors it read, its errors.
+    pub fn usb_host(&self) -> &crate::periph::usb_host::Host {
+        &self.chip().p.usb_host
+    }
+
+    /// The USB host to act on (pull the cable, stop reading, a class request), and the device
+    /// it talks to.
+    pub fn usb(
+        &mut self,
+    ) -> (
+        &mut crate::periph::usb_host::Host,
+        &mut crate::periph::otg::OtgFs,
+        u64,
+    ) {
+        let c = self.chip_mut();
+        c.stop_soon();
+        let now = c.cycles;
+        let p = &mut c.p;
+        (&mut p.usb_host, &mut p.otg, now)
     }
 
     /// Whether a log line containing `text` has come.

@@ -44,7 +44,7 @@ use crate::rtt;
 pub enum Board {
     /// NUCLEO-F446RE (USART2 to the host).
     NucleoF446,
-    /// The F405 board (USB; the link is not modelled).
+    /// The F405 board (USB OTG FS to the host).
     F405,
 }
 
@@ -64,6 +64,26 @@ impl Board {
             Board::NucleoF446 => 0x1000_6421,
             Board::F405 => 0x1001_6413,
         }
+    }
+
+    /// The board an image was built for, read from it: the F405's image binds the USB
+    /// OTG FS interrupt to a handler of its own (its link), the Nucleo's leaves it at
+    /// cortex-m-rt's `DefaultHandler`. None when the image says neither.
+    pub fn of_image(elf: &[u8]) -> Option<Board> {
+        use object::read::elf::ElfFile32;
+        use object::{Object, ObjectSymbol};
+        let file = ElfFile32::<object::Endianness>::parse(elf).ok()?;
+        let addr = |name: &str| {
+            file.symbols()
+                .find(|s| s.name() == Ok(name))
+                .map(|s| s.address())
+        };
+        let (otg, default) = (addr("OTG_FS")?, addr("DefaultHandler")?);
+        Some(if otg != default {
+            Board::F405
+        } else {
+            Board::NucleoF446
+        })
     }
 
     /// Parses `nucleo-f446` or `f405`.
@@ -535,6 +555,8 @@ impl Machine {
         if board == Board::F405 {
             uc.mem_map(CCM, 64 * 1024, Prot::READ | Prot::WRITE)
                 .map_err(err)?;
+            // Its link is USB: a host at the other end of the cable from power-up.
+            uc.get_data_mut().p.usb_host.plug(0);
         }
         // System memory and OTP: the unique ID (0x1FFF7A10) and the flash size (0x1FFF7A22).
         uc.mem_map(SYSMEM, 0x1_0000, Prot::READ).map_err(err)?;
@@ -560,12 +582,44 @@ impl Machine {
             ),
         )
         .map_err(err)?;
-        // USB OTG FS (the F405's link) reads as zero: the image's USB stays unattached.
+        // USB OTG FS (the F405's link): its register model (`periph::otg`), word-wide as the
+        // driver accesses it; a narrower write merges into the value without a read's side
+        // effects (GRXSTSP's pop, the FIFO's).
         uc.mmio_map(
-            0x5000_0000,
+            u64::from(base::OTG_FS),
             0x4_0000,
-            Some(|_: &mut Unicorn<'_, Chip>, _: u64, _: usize| 0u64),
-            Some(|_: &mut Unicorn<'_, Chip>, _: u64, _: usize, _: u64| {}),
+            Some(|uc: &mut Unicorn<'_, Chip>, off: u64, size: usize| {
+                let c = uc.get_data_mut();
+                let off = off as u32;
+                let v = if size == 4 {
+                    c.p.otg.read(off & !3)
+                } else {
+                    c.p.otg.peek(off & !3)
+                };
+                let v = v >> ((off & 3) * 8);
+                u64::from(match size {
+                    1 => v & 0xFF,
+                    2 => v & 0xFFFF,
+                    _ => v,
+                })
+            }),
+            Some(
+                |uc: &mut Unicorn<'_, Chip>, off: u64, size: usize, v: u64| {
+                    let c = uc.get_data_mut();
+                    let off = off as u32;
+                    let word = off & !3;
+                    let v = if size < 4 {
+                        let shift = (off & 3) * 8;
+                        let mask = if size == 1 { 0xFF } else { 0xFFFF } << shift;
+                        (c.p.otg.peek(word) & !mask) | (((v as u32) << shift) & mask)
+                    } else {
+                        v as u32
+                    };
+                    c.p.otg.write(word, v);
+                    // The line and the host's next transaction looked at again.
+                    c.stop_soon();
+                },
+            ),
         )
         .map_err(err)?;
         uc.mmio_map(
@@ -885,8 +939,10 @@ impl Machine {
         rcc.reset(rcc_flag);
         let size = self.board.flash_size();
         let options = c.p.flash.options();
+        let host = std::mem::take(&mut c.p.usb_host);
         c.p = Periphs::new(size, HZ);
         c.p.rcc = rcc;
+        c.p.usb_host = host;
         c.p.flash.restore_options(options);
         c.core = CoreRegs::new(self.board.idcode());
         // MEMRMP back to its boot value (the plain registers are new): the code translated at

@@ -8,8 +8,10 @@ pub mod clock;
 pub mod dma;
 pub mod flash;
 pub mod iwdg;
+pub mod otg;
 pub mod tim;
 pub mod usart;
+pub mod usb_host;
 
 use std::collections::HashMap;
 
@@ -39,6 +41,8 @@ pub mod base {
     pub const DMA1: u32 = 0x4002_6000;
     /// DMA2.
     pub const DMA2: u32 = 0x4002_6400;
+    /// USB OTG FS (the F405's link), on the AHB2 (RM0090 §2.3 Table 1).
+    pub const OTG_FS: u32 = 0x5000_0000;
 }
 
 /// Interrupt numbers (RM0090 Table 61, RM0390 Table 38).
@@ -61,6 +65,8 @@ pub mod irq {
     pub const TIM8_CC: usize = 46;
     /// DMA1 stream 0-4 and 7 are 11-15 and 47; DMA2 stream 0.
     pub const DMA2_STREAM0: usize = 56;
+    /// USB OTG FS global interrupt (RM0090 Table 61: position 67, 0x0000_014C).
+    pub const OTG_FS: usize = 67;
 }
 
 /// The peripherals.
@@ -88,6 +94,11 @@ pub struct Periphs {
     pub dma2: dma::Dma,
     /// USART2.
     pub usart2: usart::Usart,
+    /// USB OTG FS in device mode.
+    pub otg: otg::OtgFs,
+    /// The host at the other end of the USB cable (kept over the chip's resets: the PC
+    /// stays; it sees the device let go of D+ and enumerates it again).
+    pub usb_host: usb_host::Host,
     /// Every other register, read back as written.
     pub plain: HashMap<u32, u32>,
 }
@@ -108,6 +119,8 @@ impl Periphs {
             dma1: dma::Dma::default(),
             dma2: dma::Dma::default(),
             usart2: usart::Usart::new(4),
+            otg: otg::OtgFs::new(),
+            usb_host: usb_host::Host::default(),
             plain: HashMap::new(),
         }
     }
@@ -135,6 +148,9 @@ impl Periphs {
         }
         if self.usart2.irq() {
             v.push(irq::USART2);
+        }
+        if self.otg.irq() {
+            v.push(irq::OTG_FS);
         }
         v
     }

@@ -57,6 +57,7 @@ impl Served {
             for line in BufReader::new(stderr).lines().map_while(Result::ok) {
                 if let Some(addr) = line
                     .strip_prefix("rehost: the image's USART2 on ")
+                    .or_else(|| line.strip_prefix("rehost: the image's USB on "))
                     .and_then(|r| r.split_whitespace().next())
                 {
                     let _ = tx.send(addr.to_string());
