@@ -267,11 +267,15 @@ async fn main(spawner: Spawner) {
             STATE.init(embassy_usb::class::cdc_acm::State::new()),
             64,
         );
+        // The bus events that end a session (a reset, a suspend, the configuration dropped).
+        static BUS_WATCH: StaticCell<port::BusWatch> = StaticCell::new();
+        builder.handler(BUS_WATCH.init(port::BusWatch));
         let usb = builder.build();
         spawner.spawn(unwrap!(usb_task(usb)));
         port::HostPort {
             class,
             dtr_seen: false,
+            bus_events: 0,
         }
     };
     #[cfg(feature = "board-nucleo-f446")]

@@ -44,8 +44,13 @@ pub(crate) trait Port {
 
 #[cfg(feature = "board-f405")]
 mod usb {
+    use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+
+    use embassy_futures::select::{Either, select};
     use embassy_stm32::peripherals::USB_OTG_FS;
     use embassy_stm32::usb::Driver;
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::signal::Signal;
     use embassy_time::{Duration, with_timeout};
     use embassy_usb::class::cdc_acm::CdcAcmClass;
 
@@ -55,24 +60,75 @@ mod usb {
     /// as over (a reading host takes one every 1 ms USB frame).
     pub const WRITE_TIMEOUT_MS: u64 = 200;
 
+    /// Bus events that end a session, counted: a bus reset (the cable pulled and put back,
+    /// the host's re-enumeration), a suspend (the cable pulled: the bus idle), the
+    /// configuration dropped.
+    static BUS_EVENTS: AtomicU32 = AtomicU32::new(0);
+    /// Raised with each of them (and a resume), for a write waiting for the host and a
+    /// session waiting for the bus.
+    static BUS_EVENT: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+    /// The bus is suspended (no session starts until it resumes or is reset).
+    static SUSPENDED: AtomicBool = AtomicBool::new(false);
+
+    /// embassy-usb's device-level callbacks (`Builder::handler`), counting the bus events
+    /// that end a session: embassy-usb neither fails nor wakes a pending endpoint write at a
+    /// bus reset, and once the host configured the device again the write went on into the
+    /// new session with the rest of the old reply (found in rehost: a cable pulled in the
+    /// middle of a `list`, `rehost/tests/usb.rs`).
+    pub struct BusWatch;
+
+    impl embassy_usb::Handler for BusWatch {
+        fn reset(&mut self) {
+            SUSPENDED.store(false, Ordering::Relaxed);
+            bus_event();
+        }
+        fn suspended(&mut self, suspended: bool) {
+            SUSPENDED.store(suspended, Ordering::Relaxed);
+            if suspended {
+                bus_event();
+            } else {
+                BUS_EVENT.signal(());
+            }
+        }
+        fn configured(&mut self, configured: bool) {
+            if !configured {
+                bus_event();
+            }
+        }
+    }
+
+    fn bus_event() {
+        BUS_EVENTS.fetch_add(1, Ordering::Relaxed);
+        BUS_EVENT.signal(());
+    }
+
     /// USB CDC-ACM (see `comms.rs` for how a session ends).
     pub struct UsbPort {
         /// The CDC-ACM class on the OTG FS driver.
         pub class: CdcAcmClass<'static, Driver<'static, USB_OTG_FS>>,
         /// The host raised DTR in this session.
         pub dtr_seen: bool,
+        /// [`BUS_EVENTS`] when the session started.
+        pub bus_events: u32,
     }
 
     impl UsbPort {
-        /// Writes one packet, or gives up after [`WRITE_TIMEOUT_MS`].
+        /// A bus event since the session started.
+        fn bus_changed(&self) -> bool {
+            BUS_EVENTS.load(Ordering::Relaxed) != self.bus_events
+        }
+
+        /// Writes one packet, or gives up after [`WRITE_TIMEOUT_MS`] or at a bus event.
         async fn write(&mut self, chunk: &[u8]) -> Result<(), Gone> {
-            match with_timeout(
+            if self.bus_changed() {
+                return Err(Gone);
+            }
+            let write = with_timeout(
                 Duration::from_millis(WRITE_TIMEOUT_MS),
                 self.class.write_packet(chunk),
-            )
-            .await
-            {
-                Ok(Ok(())) => Ok(()),
+            );
+            match select(write, BUS_EVENT.wait()).await {
+                Either::First(Ok(Ok(()))) if !self.bus_changed() => Ok(()),
                 _ => Err(Gone),
             }
         }
@@ -81,8 +137,21 @@ mod usb {
     impl Port for UsbPort {
         const NAME: &'static str = "USB";
 
+        /// Configured and not suspended: a session that started on a suspended bus (the
+        /// cable pulled, the configuration kept) would take the next host's first bytes and
+        /// end at its bus reset, unanswered.
         async fn connected(&mut self) {
-            self.class.wait_connection().await;
+            loop {
+                BUS_EVENT.reset();
+                self.bus_events = BUS_EVENTS.load(Ordering::Relaxed);
+                self.class.wait_connection().await;
+                if !SUSPENDED.load(Ordering::Relaxed) && !self.bus_changed() {
+                    break;
+                }
+                if SUSPENDED.load(Ordering::Relaxed) {
+                    BUS_EVENT.wait().await;
+                }
+            }
             self.dtr_seen = false;
         }
 
@@ -108,6 +177,9 @@ mod usb {
         }
 
         fn host_here(&mut self) -> bool {
+            if self.bus_changed() {
+                return false;
+            }
             if self.class.dtr() {
                 self.dtr_seen = true;
                 true
@@ -119,7 +191,7 @@ mod usb {
 }
 
 #[cfg(feature = "board-f405")]
-pub use usb::UsbPort as HostPort;
+pub use usb::{BusWatch, UsbPort as HostPort};
 
 #[cfg(feature = "board-nucleo-f446")]
 mod uart {

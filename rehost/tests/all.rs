@@ -7,6 +7,7 @@ mod faults;
 #[path = "../../hil-sim/tests/suite/mod.rs"]
 mod suite;
 mod support;
+mod usb;
 
 /// The virtual device, when this binary is started as one (`hil_sim::harness::Server::child`
 /// runs it again with the filter `serve_child --exact`: this test's name at the crate root).
