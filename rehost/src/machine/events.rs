@@ -68,6 +68,8 @@ impl Machine {
                 3 => self.fire_usart(t),
                 _ => {
                     let p = &mut self.chip_mut().p;
+                    // The boards' 8 MHz crystal (board.rs of both).
+                    p.otg.clk48_hz = p.rcc.pll48_hz(8_000_000);
                     p.usb_host.fire(t, &mut p.otg);
                 }
             }

@@ -103,6 +103,33 @@ impl Rcc {
         }
     }
 
+    /// The main PLL's 48 MHz output (PLL48CLK, the OTG FS core's clock: RM0090 §7.2, Figure
+    /// 21) \[Hz\] with an HSE of `hse_hz`: the PLL on and its source (PLLCFGR.PLLSRC: HSE or
+    /// the 16 MHz HSI) divided by PLLM, multiplied by PLLN and divided by PLLQ (§7.3.2); none
+    /// while the PLL is off, its dividers invalid, or the OTG FS clock not enabled
+    /// (AHB2ENR.OTGFSEN, §7.3.11).
+    pub fn pll48_hz(&self, hse_hz: u64) -> Option<u64> {
+        let (cr, cfg) = (self.regs[0], self.regs[1]);
+        let enabled = self.regs[0x34 / 4] & (1 << 7) != 0;
+        if cr & (1 << 25) == 0 || !enabled {
+            return None;
+        }
+        let src = if cfg & (1 << 22) != 0 {
+            if self.hse_dead {
+                return None;
+            }
+            hse_hz
+        } else {
+            16_000_000
+        };
+        let (m, n, q) = (
+            u64::from(cfg & 0x3F),
+            u64::from((cfg >> 6) & 0x1FF),
+            u64::from((cfg >> 24) & 0xF),
+        );
+        (m >= 2 && n >= 2 && q >= 2).then(|| src * n / m / q)
+    }
+
     /// The clock security system found the HSE failed: RCC_CIR.CSSF.
     pub fn css_fired(&mut self) {
         self.regs[3] |= 0x80;
@@ -211,5 +238,32 @@ mod tests {
         assert_eq!(p.read(4), (1 << 14) | (1 << 16));
         p.write(0, (1 << 16) | (1 << 17));
         assert_eq!(p.read(4), (1 << 14) | (1 << 16) | (1 << 17));
+    }
+}
+
+#[cfg(test)]
+mod pll48_tests {
+    use super::*;
+
+    /// The boards' set-up (HSE 8 MHz, M 4, N 168, Q 7: gms-core's boards/f405) gives 48 MHz;
+    /// Q 8 gives 42 MHz, which the OTG core's check refuses; the PLL off or OTGFSEN clear
+    /// gives none.
+    #[test]
+    fn the_pll_s_48_mhz_output_follows_its_dividers() {
+        let mut r = Rcc::new();
+        let cfg = |q: u32| (1 << 22) | 4 | (168 << 6) | (q << 24);
+        r.write(0x04, cfg(7));
+        assert_eq!(r.pll48_hz(8_000_000), None, "PLL off");
+        r.write(0x00, (1 << 16) | (1 << 24));
+        assert_eq!(r.pll48_hz(8_000_000), None, "OTGFSEN clear");
+        r.write(0x34, 1 << 7);
+        assert_eq!(r.pll48_hz(8_000_000), Some(48_000_000));
+        r.write(0x04, cfg(8));
+        assert_eq!(r.pll48_hz(8_000_000), Some(42_000_000));
+        let mut o = super::super::otg::OtgFs::new();
+        o.clk48_hz = r.pll48_hz(8_000_000);
+        assert!(o.signalling().is_err());
+        o.clk48_hz = Some(48_100_000);
+        assert!(o.signalling().is_ok());
     }
 }

@@ -146,6 +146,8 @@ pub struct OtgFs {
     cur: VecDeque<u32>,
     /// Registers the model gives no behaviour (read back as written).
     plain: HashMap<u32, u32>,
+    /// The core's 48 MHz clock as the RCC makes it \[Hz\] (none: off), set by the machine.
+    pub clk48_hz: Option<u64>,
 }
 
 impl Default for OtgFs {
@@ -179,6 +181,7 @@ impl OtgFs {
             rx: VecDeque::new(),
             cur: VecDeque::new(),
             plain: HashMap::new(),
+            clk48_hz: None,
         };
         for e in &mut o.outs {
             e.nak = true;
@@ -190,6 +193,18 @@ impl OtgFs {
     /// (DCTL.SDIS), VBUS taken as present (GCCFG.NOVBUSSENS) — RM0090 §34.5.2.
     pub fn pulled_up(&self) -> bool {
         self.gccfg & (1 << 16) != 0 && self.gccfg & (1 << 21) != 0 && self.dctl & 2 == 0
+    }
+
+    /// The full-speed signalling the host can read: the core's clock within USB 2.0's
+    /// ±0.25 % of 48 MHz (§7.1.11: 12 Mb/s ±0.25 %); else why not.
+    pub fn signalling(&self) -> Result<(), String> {
+        match self.clk48_hz {
+            Some(f) if f.abs_diff(48_000_000) <= 120_000 => Ok(()),
+            Some(f) => Err(format!(
+                "the OTG FS core's clock is {f} Hz, not 48 MHz ±0.25 %: the host reads no valid packet"
+            )),
+            None => Err("the OTG FS core has no 48 MHz clock (PLL off or OTGFSEN clear)".into()),
+        }
     }
 
     /// The device address the application set (DCFG.DAD).

@@ -442,7 +442,15 @@ impl Host {
                 }
             }
             Link::Attached(_) => {
-                if dev.pulled_up() {
+                if let (true, Err(e)) = (dev.pulled_up(), dev.signalling()) {
+                    // D+ pulled up, but nothing the device sends can be read: Linux's "device
+                    // descriptor read/64, error -71" and no device.
+                    if !self.errors.contains(&e) {
+                        self.errors.push(e);
+                    }
+                    self.link = Link::Detached;
+                    self.at = now + 100 * MS;
+                } else if dev.pulled_up() {
                     dev.bus_reset();
                     self.link = Link::Resetting(now + RESET);
                     self.at = now + RESET;
@@ -701,5 +709,79 @@ impl Host {
                 now + MS
             };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The configuration a CDC ACM function with an interface association presents (USB
+    /// 2.0 §9.6.3, the IAD ECN, CDC PSTN §5.3): 70 bytes.
+    fn acm_config() -> Vec<u8> {
+        let mut c = vec![0x09, 0x02, 70, 0x00, 0x02, 0x01, 0x00, 0x80, 0x32];
+        c.extend([0x08, 0x0B, 0x00, 0x02, 0x02, 0x02, 0x00, 0x00]);
+        c.extend([0x09, 0x04, 0x00, 0x00, 0x01, 0x02, 0x02, 0x00, 0x00]);
+        c.extend([0x05, 0x24, 0x00, 0x10, 0x01]);
+        c.extend([0x04, 0x24, 0x02, 0x02]);
+        c.extend([0x05, 0x24, 0x06, 0x00, 0x01]);
+        c.extend([0x07, 0x05, 0x81, 0x03, 0x08, 0x00, 0xFF]);
+        c.extend([0x09, 0x04, 0x01, 0x00, 0x02, 0x0A, 0x00, 0x00, 0x00]);
+        c.extend([0x07, 0x05, 0x01, 0x02, 0x40, 0x00, 0x00]);
+        c.extend([0x07, 0x05, 0x82, 0x02, 0x40, 0x00, 0x00]);
+        assert_eq!(c.len(), 70);
+        c
+    }
+
+    fn descriptors() -> Descriptors {
+        Descriptors {
+            device: vec![
+                0x12, 0x01, 0x10, 0x02, 0xEF, 0x02, 0x01, 0x40, 0x09, 0x12, 0x01, 0x00, 0x10, 0x00,
+                0x01, 0x02, 0x03, 0x01,
+            ],
+            config: acm_config(),
+            ..Descriptors::default()
+        }
+    }
+
+    #[test]
+    fn a_cdc_acm_function_is_found_with_its_endpoints() {
+        let d = descriptors();
+        assert_eq!(d.ids(), Some((0x1209, 0x0001)));
+        assert_eq!(
+            d.acm(),
+            Ok(AcmPorts {
+                comm_interface: 0,
+                notify_in: 0x81,
+                data_out: (0x01, 64),
+                data_in: (0x82, 64),
+            })
+        );
+    }
+
+    /// What a driver would not bind: the IAD missing on an EF/02/01 device, a data interface
+    /// without its bulk IN, a configuration shorter than its wTotalLength, EP0 of 7 bytes.
+    #[test]
+    fn descriptors_a_driver_would_refuse_are_refused() {
+        let mut d = descriptors();
+        d.config.drain(9..17);
+        d.config[2] = d.config.len() as u8;
+        assert!(d.acm().unwrap_err().contains("interface association"));
+        let mut d = descriptors();
+        d.config.truncate(63);
+        d.config[2] = 63;
+        assert!(d.acm().unwrap_err().contains("bulk IN"));
+        let mut d = descriptors();
+        d.config.pop();
+        assert!(d.acm().unwrap_err().contains("configuration descriptor"));
+        let mut d = descriptors();
+        d.device[7] = 7;
+        assert!(d.acm().unwrap_err().contains("EP0"));
+    }
+
+    /// The bus time of a 64-byte packet at 12 Mbit/s with 16 bytes of overhead: 53.3 µs.
+    #[test]
+    fn a_full_packet_takes_its_bits_time() {
+        assert_eq!(bus_time(64), 80 * 8 * 14);
     }
 }
