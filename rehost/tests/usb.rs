@@ -264,3 +264,38 @@ fn requests_split_across_packets_and_at_a_packets_end_are_taken_whole() {
     }
     loop_unharmed(&mut m);
 }
+
+/// The host suspends the bus for 50 ms (a PC asleep) with the port open, then resumes it: the
+/// session that was on ends at the suspend, a new one starts after the resume without a new
+/// enumeration, and a request is answered; the axis held, no period missed.
+#[test]
+fn a_suspended_and_resumed_bus_gives_a_new_session() {
+    let Some(mut m) = boot() else { return };
+    assert!(ask(&mut m, "enable").starts_with("ok"));
+    let before = m.usb_host().enumerations;
+    {
+        let (h, dev, now) = m.usb();
+        h.set_suspended(true, now, dev);
+    }
+    m.run_until_logged("host gone", 0.1)
+        .unwrap_or_else(|e| panic!("suspended: {e}\n{}", log(&m)));
+    m.run_for(0.05).unwrap();
+    assert_eq!(
+        log(&m).matches("USB session start").count(),
+        1,
+        "a session on a suspended bus"
+    );
+    {
+        let (h, dev, now) = m.usb();
+        h.set_suspended(false, now, dev);
+    }
+    until_sessions(&mut m, 2);
+    assert_eq!(
+        m.usb_host().enumerations,
+        before,
+        "resumed, not enumerated again"
+    );
+    assert!(ask(&mut m, "get pos.kp").starts_with("ok "));
+    assert_eq!(value(&ask(&mut m, "status"), "enabled"), "1");
+    loop_unharmed(&mut m);
+}

@@ -332,6 +332,8 @@ pub struct Host {
     out_turn: bool,
     /// When the IN endpoint is next polled \[cycles\].
     in_at: u64,
+    /// The bus is suspended: no transactions.
+    pub suspended: bool,
 }
 
 impl Default for Host {
@@ -356,6 +358,7 @@ impl Default for Host {
             errors: Vec::new(),
             out_turn: true,
             in_at: 0,
+            suspended: false,
         }
     }
 }
@@ -380,6 +383,14 @@ impl Host {
         dev.suspend(true);
     }
 
+    /// The host suspends the bus (a PC going to sleep: no traffic, the device sees the
+    /// bus idle for 3 ms: USBSUSP) or resumes it (resume signalling: WKUPINT), the port kept.
+    pub fn set_suspended(&mut self, suspended: bool, now: u64, dev: &mut OtgFs) {
+        self.suspended = suspended;
+        dev.suspend(suspended);
+        self.kick(now);
+    }
+
     /// The cable in again (the attach seen at `now`).
     pub fn plug(&mut self, now: u64) {
         self.plugged = true;
@@ -389,6 +400,7 @@ impl Host {
 
     fn reset_state(&mut self) {
         self.link = Link::Detached;
+        self.suspended = false;
         self.queue.clear();
         self.run = None;
         self.ports = None;
@@ -480,6 +492,10 @@ impl Host {
                 if !dev.pulled_up() {
                     // The device let go of D+ (a soft disconnect).
                     self.reset_state();
+                    self.at = now + MS;
+                    return;
+                }
+                if self.suspended {
                     self.at = now + MS;
                     return;
                 }
