@@ -78,8 +78,12 @@ pub struct CoreRegs {
     /// DWT_CYCCNT at the instant `cyccnt_base_at` (cycles).
     cyccnt_base: u32,
     cyccnt_base_at: u64,
-    /// SysTick CTRL/LOAD/VAL (read back; the firmware does not use SysTick).
+    /// SysTick CTRL/LOAD/VAL (the firmware does not use SysTick; `cargo target-bench`'s
+    /// image counts with it): VAL counts down at the core clock (CLKSOURCE 1) from LOAD while
+    /// ENABLE is set, from the time it was last written or enabled.
     pub systick: [u32; 3],
+    /// When VAL was last set \[cycles\].
+    systick_at: u64,
     /// DBGMCU_CR, APB1_FZ, APB2_FZ.
     pub dbgmcu: [u32; 3],
     /// DBGMCU_IDCODE.
@@ -123,6 +127,7 @@ impl CoreRegs {
             cyccnt_base: 0,
             cyccnt_base_at: 0,
             systick: [0; 3],
+            systick_at: 0,
             dbgmcu: [0; 3],
             idcode,
             reset_requested: false,
@@ -198,6 +203,24 @@ impl CoreRegs {
         })
     }
 
+    /// SysTick's VAL at `now`: while enabled on the core clock (CTRL.ENABLE, CLKSOURCE), it
+    /// counts down one per cycle, reloading from LOAD after 0 (a VAL of 0 reloads at the next
+    /// cycle).
+    fn systick_val(&self, now: u64) -> u32 {
+        let (ctrl, load, val) = (self.systick[0], u64::from(self.systick[1]), self.systick[2]);
+        if ctrl & 0b101 != 0b101 {
+            return val;
+        }
+        let n = now.saturating_sub(self.systick_at);
+        let val = u64::from(val);
+        if n <= val {
+            return (val - n) as u32;
+        }
+        // Past 0: reloaded, then counting in periods of LOAD + 1.
+        let left = n - val - 1;
+        (load - left % (load + 1)) as u32
+    }
+
     /// Reads the register at `addr` (a PPB address) at `now` \[cycles\].
     pub fn read(&self, addr: u32, now: u64) -> u32 {
         match addr {
@@ -206,7 +229,7 @@ impl CoreRegs {
             0xE000_E004 => 2, // ICTR: 96 interrupts
             0xE000_E010 => self.systick[0],
             0xE000_E014 => self.systick[1],
-            0xE000_E018 => self.systick[2],
+            0xE000_E018 => self.systick_val(now),
             0xE000_E100..=0xE000_E10C => self.bits(&self.enabled, 0, addr - 0xE000_E100),
             0xE000_E180..=0xE000_E18C => self.bits(&self.enabled, 0, addr - 0xE000_E180),
             0xE000_E200..=0xE000_E20C => self.bits(&self.pending, 16, addr - 0xE000_E200),
@@ -309,9 +332,19 @@ impl CoreRegs {
                 self.cyccnt_base = value;
                 self.cyccnt_base_at = now;
             }
-            0xE000_E010 => self.systick[0] = value,
-            0xE000_E014 => self.systick[1] = value,
-            0xE000_E018 => self.systick[2] = 0,
+            0xE000_E010 => {
+                // Counting from the current value (ARMv7-M ARM B3.3.3), at the core clock only.
+                let val = self.systick_val(now);
+                self.systick[0] = value;
+                self.systick[2] = val;
+                self.systick_at = now;
+            }
+            0xE000_E014 => self.systick[1] = value & 0x00FF_FFFF,
+            0xE000_E018 => {
+                // A write clears VAL (and COUNTFLAG); the count restarts from LOAD.
+                self.systick[2] = 0;
+                self.systick_at = now;
+            }
             0xE000_E100..=0xE000_E10C => {
                 Self::set_bits(&mut self.enabled, 0, addr - 0xE000_E100, value, true)
             }
@@ -416,6 +449,28 @@ mod tests {
         c.write(0xE000_ED24, 4, 1 << 16, 0);
         assert!(c.fault_enabled(exc::MEM_MANAGE));
         assert_eq!(c.priority(exc::HARD_FAULT), -1);
+    }
+
+    /// SysTick on the core clock: VAL counts down from LOAD once a cycle while enabled,
+    /// reloads after 0 (a period of LOAD + 1), holds while disabled, restarts when written.
+    #[test]
+    fn systick_counts_down_on_the_core_clock_and_reloads() {
+        let mut c = CoreRegs::new(0);
+        c.write(0xE000_E014, 4, 999, 0);
+        c.write(0xE000_E018, 4, 0, 0);
+        c.write(0xE000_E010, 4, 0b101, 100);
+        assert_eq!(c.read(0xE000_E018, 100), 0);
+        assert_eq!(c.read(0xE000_E018, 101), 999, "reloaded a cycle after 0");
+        assert_eq!(c.read(0xE000_E018, 600), 500);
+        assert_eq!(c.read(0xE000_E018, 1100), 0);
+        assert_eq!(c.read(0xE000_E018, 1101), 999, "a period of LOAD + 1");
+        c.write(0xE000_E010, 4, 0b100, 1200);
+        assert_eq!(c.read(0xE000_E018, 5000), 900, "held while disabled");
+        c.write(0xE000_E010, 4, 0b101, 5000);
+        assert_eq!(c.read(0xE000_E018, 5100), 800);
+        // Not on the core clock (CLKSOURCE 0: the external reference): not modelled, held.
+        c.write(0xE000_E010, 4, 0b001, 5100);
+        assert_eq!(c.read(0xE000_E018, 9000), 800);
     }
 
     #[test]

@@ -74,6 +74,16 @@ enum Cmd {
         #[arg(long, default_value = "cycles")]
         timing: String,
     },
+    /// Runs a semihosted bare-metal program (`cargo target-bench`'s: its `calib` and `cost`
+    /// lines then count cycles, SysTick on the core clock) in the Cortex-M4's costs and prints
+    /// what it wrote; the exit status is its own.
+    Bench {
+        /// The program's ELF.
+        elf: std::path::PathBuf,
+        /// Device time to run at most \[s\].
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+    },
     /// The bench's first hour on the image: boot, status, enable, a move, a set of gains
     /// while moving, save, a power cycle, the setting back; the figures printed, the
     /// image's faults and its stack held to the board's limits (non-zero exit otherwise, with
@@ -151,9 +161,29 @@ fn run(cli: Cli) -> Result<(), String> {
                     echo_log: true,
                     scenario,
                     timing,
+                    ..Options::default()
                 },
             )?;
             serve::run(m, &listen, speed, flash.as_deref())
+        }
+        Cmd::Bench { elf, seconds } => {
+            let image = std::fs::read(&elf).map_err(|e| format!("{}: {e}", elf.display()))?;
+            // `cargo target-bench`'s image is built for QEMU's STM32F405 (netduinoplus2).
+            let mut m = Machine::new(
+                &image,
+                Board::F405,
+                Options {
+                    semihosting: true,
+                    ..Options::default()
+                },
+            )?;
+            let (ok, text) = m.run_semihosted(seconds)?;
+            print!("{text}");
+            if ok {
+                Ok(())
+            } else {
+                Err("the program exited with a failure".into())
+            }
         }
         Cmd::Check {
             elf,

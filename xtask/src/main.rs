@@ -540,6 +540,53 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
     for (name, n) in &figures {
         println!("{name} {}", n.round() as u64);
     }
+    // The same program in rehost's cycle model (the Cortex-M4's costs, the flash's 5 wait
+    // states behind the accelerator, SysTick on the core clock: ticks are cycles), beside the
+    // instruction counts; rehost is built by CI's earlier steps (`cargo build -p rehost`).
+    let rehost = target_dir.join(format!("debug/rehost{}", std::env::consts::EXE_SUFFIX));
+    if rehost.is_file() {
+        let out = Command::new(&rehost)
+            .arg("bench")
+            .arg(&elf)
+            .output()
+            .map_err(|e| format!("cannot run {}: {e}", rehost.display()))?;
+        let text = String::from_utf8_lossy(&out.stdout);
+        if !out.status.success() || !text.lines().any(|l| l == "done") {
+            return Err(format!(
+                "the benchmark failed in rehost: {}{}",
+                text.trim(),
+                String::from_utf8_lossy(&out.stderr).trim()
+            ));
+        }
+        let mut cycles: Vec<(String, f64)> = Vec::new();
+        for line in text.lines() {
+            if let ["cost", name, ticks, calls] =
+                line.split_whitespace().collect::<Vec<_>>().as_slice()
+            {
+                cycles.push((
+                    name.to_string(),
+                    parse::<f64>(ticks)? / parse::<f64>(calls)?,
+                ));
+            }
+        }
+        if let (Some(a), Some(b)) = (
+            get(&cycles, "gms6_step_sticking"),
+            get(&cycles, "gms6_step_slipping"),
+        ) {
+            cycles.insert(0, ("gms6_step".into(), a.max(b)));
+        }
+        for (name, c) in &cycles {
+            let per = get(&figures, name).map_or(String::new(), |n| {
+                format!(" ({:.2} per instruction)", c / n.max(1.0))
+            });
+            println!("cycles {name} {}{per}", c.round() as u64);
+        }
+    } else {
+        println!(
+            "cycles: not counted ({} not built: cargo build -p rehost)",
+            rehost.display()
+        );
+    }
     let mut code = 0u8;
     // Host/target equivalence: the same workload, the same bits.
     let host = [

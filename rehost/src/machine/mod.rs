@@ -128,6 +128,10 @@ pub struct Options {
     pub scenario: Option<Scenario>,
     /// Print log lines as they come.
     pub echo_log: bool,
+    /// Serve ARM semihosting (`BKPT 0xAB`: writes to the console, the exit) as a debugger
+    /// would, for a bare-metal program such as `cargo target-bench`'s
+    /// ([`Machine::run_semihosted`]); without it the breakpoint is a fault.
+    pub semihosting: bool,
 }
 
 impl Default for Options {
@@ -136,6 +140,7 @@ impl Default for Options {
             timing: TimeModel::Cycles,
             scenario: None,
             echo_log: false,
+            semihosting: false,
         }
     }
 }
@@ -247,6 +252,15 @@ impl Hold {
 }
 
 /// The state the engine's hooks reach.
+/// What a semihosted program wrote and how it ended.
+#[derive(Debug, Clone, Default)]
+pub struct Semihost {
+    /// The console's bytes.
+    pub out: Vec<u8>,
+    /// Its exit: success (ADP_Stopped_ApplicationExit) or not; none while it runs.
+    pub exited: Option<bool>,
+}
+
 pub struct Chip {
     /// The core's registers.
     pub core: CoreRegs,
@@ -338,6 +352,8 @@ pub struct Chip {
     profile_over: u64,
     /// The blocks of the profiled exception's run in progress: address, instructions, cycles.
     run_blocks: Vec<(u64, u32, u64)>,
+    /// Semihosting's console and exit, when served.
+    pub semihost: Option<Semihost>,
 }
 
 impl Chip {
@@ -533,6 +549,7 @@ impl Machine {
             profile_exc: None,
             profile_over: 0,
             run_blocks: Vec::new(),
+            semihost: opts.semihosting.then(Semihost::default),
         };
         let mut uc =
             Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, chip).map_err(err)?;
@@ -872,6 +889,106 @@ impl Machine {
         Ok(())
     }
 
+    /// The semihosting breakpoint (`BKPT 0xAB`, 0xBEAB) the engine stopped at: at `pc`, or
+    /// just before it.
+    fn semihost_at(&self, pc: u32) -> Option<u32> {
+        let half = |a: u32| {
+            let mut b = [0u8; 2];
+            self.uc.mem_read(u64::from(a), &mut b).ok()?;
+            Some(u16::from_le_bytes(b))
+        };
+        [pc, pc.wrapping_sub(2)]
+            .into_iter()
+            .find(|&a| half(a) == Some(0xBEAB))
+    }
+
+    /// One semihosting call (ARM's "Semihosting for AArch32 and AArch64", the operation in
+    /// r0, its argument or argument block at r1, the result in r0): SYS_OPEN (":tt" only),
+    /// SYS_CLOSE, SYS_WRITEC, SYS_WRITE0, SYS_WRITE to the console, SYS_EXIT and
+    /// SYS_EXIT_EXTENDED; anything else returns −1. The program goes on after the breakpoint.
+    fn semihost_call(&mut self, pc: u32) -> Result<(), String> {
+        let at = self.semihost_at(pc).ok_or("no semihosting breakpoint")?;
+        let (op, arg) = (self.reg(R::R0), self.reg(R::R1));
+        let word = |m: &Machine, i: u32| m.read_u32(arg.wrapping_add(4 * i));
+        let mut out = Vec::new();
+        let mut exit = None;
+        let ret: u32 = match op {
+            0x01 => 1,
+            0x02 => 0,
+            0x03 => {
+                let mut b = [0u8; 1];
+                self.uc.mem_read(u64::from(arg), &mut b).map_err(err)?;
+                out.push(b[0]);
+                0
+            }
+            0x04 => {
+                let mut a = arg;
+                loop {
+                    let mut b = [0u8; 1];
+                    self.uc.mem_read(u64::from(a), &mut b).map_err(err)?;
+                    if b[0] == 0 || out.len() > 1 << 16 {
+                        break;
+                    }
+                    out.push(b[0]);
+                    a += 1;
+                }
+                0
+            }
+            0x05 => {
+                let (ptr, len) = (word(self, 1)?, word(self, 2)?);
+                let mut b = vec![0u8; len.min(1 << 16) as usize];
+                self.uc.mem_read(u64::from(ptr), &mut b).map_err(err)?;
+                out.extend_from_slice(&b);
+                0
+            }
+            0x18 => {
+                exit = Some(arg == 0x2_0026);
+                0
+            }
+            0x20 => {
+                exit = Some(word(self, 0)? == 0x2_0026 && word(self, 1)? == 0);
+                0
+            }
+            _ => u32::MAX,
+        };
+        self.uc.reg_write(R::R0, u64::from(ret)).map_err(err)?;
+        self.uc.reg_write(R::PC, u64::from(at + 2)).map_err(err)?;
+        let c = self.chip_mut();
+        c.add_instructions(1);
+        if let Some(sh) = c.semihost.as_mut() {
+            sh.out.extend(out);
+            if exit.is_some() {
+                sh.exited = exit;
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs a semihosted program until it exits, at most `seconds` of device time: whether it
+    /// exited with success, and what it wrote.
+    pub fn run_semihosted(&mut self, seconds: f64) -> Result<(bool, String), String> {
+        let until = self.chip().cycles + (seconds * HZ as f64) as u64;
+        let text = |m: &Machine| {
+            String::from_utf8_lossy(m.chip().semihost.as_ref().map_or(&[][..], |s| &s.out))
+                .to_string()
+        };
+        loop {
+            if let Some(ok) = self.chip().semihost.as_ref().and_then(|s| s.exited) {
+                return Ok((ok, text(self)));
+            }
+            if self.chip().cycles >= until {
+                return Err(format!(
+                    "no exit within {seconds} s of device time: {}",
+                    text(self)
+                ));
+            }
+            let slice = (self.chip().cycles + HZ / 100).min(until);
+            if let Err(e) = self.run_until(slice) {
+                return Err(format!("{e:?}: {}", text(self)));
+            }
+        }
+    }
+
     fn read_u32(&self, addr: u32) -> Result<u32, String> {
         let mut b = [0u8; 4];
         self.uc.mem_read(addr as u64, &mut b).map_err(err)?;
@@ -1043,6 +1160,11 @@ impl Machine {
                         }
                     }
                 }
+            }
+            Err(uc_error::EXCEPTION)
+                if self.chip().semihost.is_some() && self.semihost_at(pc).is_some() =>
+            {
+                self.semihost_call(pc).map_err(Stop::Lockup)?;
             }
             // EXC_RETURN: the engine stops at the fetch (unmapped, or its own exception-exit
             // trap at 0xFFFFFFF0 and above).
