@@ -124,6 +124,7 @@ SECTIONS
     *(.text.*Player4take17h*)
     *(.text.*Player11report_into*)
     *(.text.*VelocityProfile4next*)
+    *(.text.*ControlLoop9hold_here*)
     . = ALIGN(8);
     __eramcode = .;
   } > RAMCODE AT > FLASH

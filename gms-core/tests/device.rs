@@ -851,3 +851,63 @@ fn a_clipped_conversion_latches_over_current_while_driving() {
         lp.faults()
     );
 }
+
+/// A speed profile asked for while one runs at the same speed continues the reference
+/// without a jump: the front plans it ahead to the step the loop first works out with it,
+/// and the loop catches up only with what a later take adds. Over the take the reference
+/// advances by the steps' count times the constant increment (a profile a step ahead or
+/// behind would jump by a whole step's, 43,000 sub-counts at 0.05 rad/s).
+#[test]
+fn a_speed_profile_taken_later_continues_the_reference_without_a_jump() {
+    continues_the_reference("velocity 0.05");
+}
+
+/// `request` twice over: the reference over the second take advances by the steps' count
+/// times the constant increment.
+fn continues_the_reference(request: &str) {
+    use gms_core::device::LoopLink as _;
+    let mut dev = board_device(None);
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
+    assert!(ask(&mut dev, request).starts_with("ok"));
+    // At its constant speed (a speed's ramp takes 1 ms, a move's jerk-limited one longer).
+    for _ in 0..4000 {
+        dev.link_mut().pause();
+    }
+    // Sampled at one phase of the position period: just after a position step.
+    let at = |dev: &mut gms_core::device::Front<InlineLink, MemStore>| {
+        let s = dev.link_mut().lp.status().steps;
+        while dev.link_mut().lp.status().steps == s {
+            dev.link_mut().pause();
+        }
+        let st = dev.link_mut().lp.status();
+        (st.steps, st.reference.pos)
+    };
+    let (s0, p0) = at(&mut dev);
+    let (s1, p1) = at(&mut dev);
+    assert_eq!(
+        s1,
+        s0 + 1,
+        "one position step per two periods at the defaults"
+    );
+    let inc = p1 - p0;
+    assert!(inc > 40_000, "{inc} sub-counts a step");
+    for _ in 0..3 {
+        let (sa, pa) = at(&mut dev);
+        assert!(ask(&mut dev, request).starts_with("ok"));
+        for _ in 0..10 {
+            dev.link_mut().pause();
+        }
+        let (sb, pb) = at(&mut dev);
+        let expected = (sb - sa) as i64 * inc;
+        assert!(
+            (pb - pa - expected).abs() <= 2 * (sb - sa) as i64,
+            "over the take ({sa} -> {sb}): {} sub-counts, {expected} expected",
+            pb - pa
+        );
+        let st = ask(&mut dev, "status");
+        assert!(
+            st.contains("fault_names=none") && st.contains("moving=1"),
+            "{st}"
+        );
+    }
+}

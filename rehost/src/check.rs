@@ -638,6 +638,43 @@ fn budgets(s: &Session<'_>, status_cost: u64) -> Result<(), String> {
             c.held_max
         ));
     }
+    // The control interrupt's code from flash: the project's own (gms-core, f4-regs, the
+    // firmware) belongs in `.ramcode`, and a function the compiler moved out of line lost
+    // its place there (seen: the swept speed's VelocityProfile::next, 2,409 -> 2,618
+    // cycles); the compiler's and libm's routines are listed (some the start-up calls before
+    // the remap, which must stay in flash).
+    let mut from_flash: std::collections::BTreeMap<String, u64> = Default::default();
+    for (&addr, &n) in &c.watch_flash {
+        *from_flash.entry(m.symbol_at(u64::from(addr))).or_default() += n;
+    }
+    let allowed = |f: &str| {
+        !["gms_core", "f4_regs", "firmware"]
+            .iter()
+            .any(|c| f.contains(&format!("{c}::")))
+    };
+    let stray: Vec<String> = from_flash
+        .iter()
+        .filter(|(f, _)| !allowed(f))
+        .map(|(f, n)| format!("{f} ({n} instructions)"))
+        .collect();
+    println!(
+        "the control interrupt's code from flash: {}",
+        if from_flash.is_empty() {
+            "none".to_string()
+        } else {
+            from_flash
+                .iter()
+                .map(|(f, n)| format!("{f} {n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    );
+    if !stray.is_empty() {
+        over.push(format!(
+            "the control interrupt ran code from flash (add it to firmware/build.rs's .ramcode): {}",
+            stray.join("; ")
+        ));
+    }
     if c.dr_reads_under_dma > 0 {
         over.push(format!(
             "{} reads of USART2's DR by the CPU while its DMA received (each could take a byte \

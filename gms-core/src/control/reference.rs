@@ -759,8 +759,10 @@ impl Motion {
 
     /// Plays the speed profile `p` from now on (replacing any move under way); it runs
     /// until replaced or stopped.
-    pub fn start_velocity(&mut self, p: VelocityProfile) {
-        self.velocity = Some(p);
+    pub fn start_velocity(&mut self, p: &VelocityProfile) {
+        // Copied once, from the request into place (by value it was copied out of the
+        // request first, then into the option: two `memcpy` calls in the control step).
+        self.velocity = Some(*p);
         self.moving = None;
     }
 

@@ -660,11 +660,15 @@ impl ControlLoop {
                 self.hold_here();
             }
             self.stop_table();
-            // Catch up with the steps since `from_step`, as a move does (in place: the
-            // profile is copied once).
-            let behind = self.steps.saturating_add(1).saturating_sub(v.from_step);
+            // Catch up with the steps since `from_step` (in place: the profile is copied
+            // once): to step `steps`, since `VelocityProfile::next` advances before it returns
+            // (a move's plan is sampled, then advanced) and the reference side after this take
+            // calls it for the next step. (It caught up to `steps + 1`, as a move does: a speed
+            // asked for while one ran jumped by a position step's travel, 13 counts at
+            // 1 rad/s: `gms-core/tests/device.rs`.)
+            let behind = self.steps.saturating_sub(v.from_step);
             let dt = self.ctrl.dt_pos();
-            self.motion.start_velocity(v.profile);
+            self.motion.start_velocity(&v.profile);
             if let Some(p) = self.motion.velocity_mut() {
                 for _ in 0..behind.min(1000) {
                     p.next(dt);

@@ -322,6 +322,9 @@ pub struct Chip {
     /// The exception whose hold-off by a mask is measured (the control interrupt), if any:
     /// [`Chip::held_max`]. Cleared at a reset.
     pub watch: Option<u32>,
+    /// Instructions the watched exception ran from flash, by block address (its code belongs
+    /// in SRAM: `firmware/build.rs`'s `.ramcode`).
+    pub watch_flash: rustc_hash::FxHashMap<u32, u64>,
     /// The watched exception's holds.
     held: Hold,
     /// The watched exception's own blocks' cycles by what they went to (under
@@ -535,6 +538,7 @@ impl Machine {
             primask_max: 0,
             primask_max_at: 0,
             watch: None,
+            watch_flash: rustc_hash::FxHashMap::default(),
             held: Hold::default(),
             held_max: 0,
             watch_spent: cycles::Spent::default(),
@@ -753,6 +757,12 @@ impl Machine {
                 {
                     (c.held_max, c.held_max_at) = (n, at);
                 }
+            }
+            if c.watch.is_some()
+                && (FLASH..FLASH + 0x10_0000).contains(&addr)
+                && c.active.last().map(|a| a.exc) == c.watch
+            {
+                *c.watch_flash.entry(addr as u32).or_default() += u64::from(n);
             }
             if sp < c.sp_min {
                 c.sp_min = sp;

@@ -3,6 +3,13 @@
 
 use super::*;
 
+/// Position steps a speed profile is advanced on the protocol side from the status it is
+/// planned on: the status published at step `n`'s exchange, the request taken at the next,
+/// when `n + 1` steps have run, where the loop catches the profile up to step `n + 1` and its
+/// reference side then works out step `n + 2`'s. Advanced here, the loop has nothing to catch
+/// up with unless the request waited longer.
+const VELOCITY_AHEAD: u64 = 1;
+
 impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
     fn new_session(&mut self) {
         self.disconnected();
@@ -224,12 +231,20 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             return Err("disabled (enable first)");
         }
         let rpc = self.settings.rad_per_count();
-        let profile = VelocityProfile::new(st.reference, vel, sweep, MOVE_AMAX, rpc)
+        let dt = self.settings.dt_pos();
+        let mut profile = VelocityProfile::new(st.reference, vel, sweep, MOVE_AMAX, rpc)
             .map_err(|_| "bad velocity (|VEL| + AMP <= 20 rad/s; frequencies and duration > 0)")?
-            .for_step(self.settings.dt_pos());
+            .for_step(dt);
+        // Advanced to the step the loop takes the request at (the loop's arithmetic, bit for
+        // bit): each catch-up step is one more `VelocityProfile::next` in the step that takes
+        // the request, which with two of them was the longest, 2,538 cycles in `rehost check`
+        // (2,122 now).
+        for _ in 0..VELOCITY_AHEAD {
+            profile.next(dt);
+        }
         let req = VelocityRequest {
             profile,
-            from_step: st.steps,
+            from_step: st.steps.saturating_add(VELOCITY_AHEAD),
         };
         self.post(|r| r.velocity = Some(req))
     }
