@@ -411,6 +411,41 @@ fn flash(args: &[String]) -> Result<u8, String> {
     Ok(if status.success() { 0 } else { 1 })
 }
 
+/// The `cost` lines of a target-bench run, per call: ticks over calls, divided by the
+/// `calib` line's ticks per instruction when `calibrated` (QEMU's icount), as they are
+/// otherwise (rehost's SysTick: cycles); `gms6_step` added first as the larger of its
+/// sticking and slipping figures.
+fn costs(text: &str, calibrated: bool) -> Result<Vec<(String, f64)>, String> {
+    let mut per_tick = if calibrated { None } else { Some(1.0) };
+    let mut figures: Vec<(String, f64)> = Vec::new();
+    for line in text.lines() {
+        match line.split_whitespace().collect::<Vec<_>>().as_slice() {
+            ["calib", ticks, instr] if calibrated => {
+                let (t, i): (f64, f64) = (parse(ticks)?, parse(instr)?);
+                per_tick = Some(t / i);
+            }
+            ["cost", name, ticks, calls] => {
+                let r = per_tick.ok_or("cost before calib")?;
+                let n = parse::<f64>(ticks)? / r / parse::<f64>(calls)?;
+                figures.push((name.to_string(), n));
+            }
+            _ => {}
+        }
+    }
+    if let (Some(a), Some(b)) = (
+        get(&figures, "gms6_step_sticking"),
+        get(&figures, "gms6_step_slipping"),
+    ) {
+        figures.insert(0, ("gms6_step".into(), a.max(b)));
+    }
+    Ok(figures)
+}
+
+/// The figure named `n`.
+fn get(figs: &[(String, f64)], n: &str) -> Option<f64> {
+    figs.iter().find(|f| f.0 == n).map(|f| f.1)
+}
+
 /// Runs `elf` on QEMU's `netduinoplus2` (Cortex-M4F) with semihosting, `-icount shift=0`
 /// when `icount` (every instruction 1 ns of virtual time), at most 120 s of host time; whether
 /// it exited with success, and what it printed (stdout, then stderr).
@@ -511,31 +546,13 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
             text.trim()
         ));
     }
-    let mut per_instr = None;
-    let mut figures: Vec<(String, f64)> = Vec::new();
+    // QEMU's ticks are instructions times the calibration's ratio.
+    let figures = costs(&text, true)?;
     let mut target_hashes: Vec<(String, u64)> = Vec::new();
     for line in text.lines() {
-        let f: Vec<&str> = line.split_whitespace().collect();
-        match f.as_slice() {
-            ["calib", ticks, instr] => {
-                let (t, i): (f64, f64) = (parse(ticks)?, parse(instr)?);
-                per_instr = Some(t / i);
-            }
-            ["cost", name, ticks, calls] => {
-                let r = per_instr.ok_or("cost before calib")?;
-                let n = parse::<f64>(ticks)? / r / parse::<f64>(calls)?;
-                figures.push((name.to_string(), n));
-            }
-            ["equiv", name, hash] => target_hashes.push((name.to_string(), parse(hash)?)),
-            _ => {}
+        if let ["equiv", name, hash] = line.split_whitespace().collect::<Vec<_>>().as_slice() {
+            target_hashes.push((name.to_string(), parse(hash)?));
         }
-    }
-    let get = |figs: &[(String, f64)], n: &str| figs.iter().find(|f| f.0 == n).map(|f| f.1);
-    if let (Some(a), Some(b)) = (
-        get(&figures, "gms6_step_sticking"),
-        get(&figures, "gms6_step_slipping"),
-    ) {
-        figures.insert(0, ("gms6_step".into(), a.max(b)));
     }
     for (name, n) in &figures {
         println!("{name} {}", n.round() as u64);
@@ -558,23 +575,8 @@ fn target_bench(report_only: bool) -> Result<u8, String> {
                 String::from_utf8_lossy(&out.stderr).trim()
             ));
         }
-        let mut cycles: Vec<(String, f64)> = Vec::new();
-        for line in text.lines() {
-            if let ["cost", name, ticks, calls] =
-                line.split_whitespace().collect::<Vec<_>>().as_slice()
-            {
-                cycles.push((
-                    name.to_string(),
-                    parse::<f64>(ticks)? / parse::<f64>(calls)?,
-                ));
-            }
-        }
-        if let (Some(a), Some(b)) = (
-            get(&cycles, "gms6_step_sticking"),
-            get(&cycles, "gms6_step_slipping"),
-        ) {
-            cycles.insert(0, ("gms6_step".into(), a.max(b)));
-        }
+        // rehost's ticks are cycles.
+        let cycles = costs(&text, false)?;
         for (name, c) in &cycles {
             let per = get(&figures, name).map_or(String::new(), |n| {
                 format!(" ({:.2} per instruction)", c / n.max(1.0))
