@@ -9,6 +9,7 @@
 use rehost::{Board, Machine, Options};
 
 use crate::support;
+use support::{ask, log};
 
 /// The control interrupt (DMA2 stream 0, IRQ 56).
 const CONTROL: u32 = 16 + 56;
@@ -34,22 +35,6 @@ fn boot_with(before: impl FnOnce(&mut Machine), until: &str) -> Machine {
 
 fn boot() -> Machine {
     boot_with(|_| {}, "control loop running")
-}
-
-fn log(m: &Machine) -> String {
-    m.log_lines
-        .iter()
-        .map(|l| l.text.clone())
-        .collect::<Vec<_>>()
-        .join("\n")
-}
-
-/// `line`'s reply line (the last).
-fn ask(m: &mut Machine, line: &str) -> String {
-    let r = m
-        .request(line, 0.5)
-        .unwrap_or_else(|e| panic!("{e}\n{}", log(m)));
-    r.last().cloned().unwrap_or_default()
 }
 
 fn status(m: &mut Machine) -> String {

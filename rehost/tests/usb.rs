@@ -7,14 +7,7 @@
 use rehost::{Board, Machine, Options};
 
 use crate::support;
-
-fn log(m: &Machine) -> String {
-    m.log_lines
-        .iter()
-        .map(|l| l.text.clone())
-        .collect::<Vec<_>>()
-        .join("\n")
-}
+use support::{ask, log};
 
 /// The F405 image booted, enumerated and its port open; none for another board's image.
 fn boot() -> Option<Machine> {
@@ -29,13 +22,6 @@ fn boot() -> Option<Machine> {
     m.link_ready(1.0)
         .unwrap_or_else(|e| panic!("USB: {e}\n{}", log(&m)));
     Some(m)
-}
-
-fn ask(m: &mut Machine, line: &str) -> String {
-    let r = m
-        .request(line, 0.5)
-        .unwrap_or_else(|e| panic!("{e}\n{}", log(m)));
-    r.last().cloned().unwrap_or_default()
 }
 
 /// A key's value in a reply.

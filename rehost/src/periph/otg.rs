@@ -322,16 +322,7 @@ impl OtgFs {
                 let n = ((off - 0x900) / 0x20) as usize;
                 let e = &self.ins[n];
                 match off & 0x1F {
-                    0x00 => {
-                        let mut v = e.ctl;
-                        if e.nak {
-                            v |= epctl::NAKSTS;
-                        }
-                        if n == 0 {
-                            v |= epctl::USBAEP;
-                        }
-                        v
-                    }
+                    0x00 => ep_ctl_read(e.ctl, e.nak, n),
                     0x08 => e.int | if self.txfe(n) { epint::TXFE } else { 0 },
                     0x10 => e.tsiz,
                     0x18 => (self.txf_depth(n).saturating_sub(e.fifo.len())) as u32,
@@ -342,16 +333,7 @@ impl OtgFs {
                 let n = ((off - 0xB00) / 0x20) as usize;
                 let e = &self.outs[n];
                 match off & 0x1F {
-                    0x00 => {
-                        let mut v = e.ctl;
-                        if e.nak {
-                            v |= epctl::NAKSTS;
-                        }
-                        if n == 0 {
-                            v |= epctl::USBAEP;
-                        }
-                        v
-                    }
+                    0x00 => ep_ctl_read(e.ctl, e.nak, n),
                     0x08 => e.int,
                     0x10 => e.tsiz,
                     _ => 0,
@@ -470,18 +452,10 @@ impl OtgFs {
         self.gintsts |= gint::USBRST;
         self.enumspd = 0;
         for (n, e) in self.ins.iter_mut().enumerate() {
-            e.ctl &= !(epctl::EPENA | epctl::STALL);
-            if n > 0 {
-                e.ctl &= !epctl::USBAEP;
-            }
-            e.nak = true;
+            ep_reset(&mut e.ctl, &mut e.nak, n);
         }
         for (n, e) in self.outs.iter_mut().enumerate() {
-            e.ctl &= !(epctl::EPENA | epctl::STALL);
-            if n > 0 {
-                e.ctl &= !epctl::USBAEP;
-            }
-            e.nak = true;
+            ep_reset(&mut e.ctl, &mut e.nak, n);
         }
     }
 
@@ -622,6 +596,28 @@ impl OtgFs {
         }
         Handshake::Ack(data)
     }
+}
+
+/// An endpoint control register's value: as stored, with NAKSTS from the NAK status and
+/// USBAEP always set on endpoint 0 (RM0090 §34.16.4 "always active").
+fn ep_ctl_read(ctl: u32, nak: bool, n: usize) -> u32 {
+    let mut v = ctl;
+    if nak {
+        v |= epctl::NAKSTS;
+    }
+    if n == 0 {
+        v |= epctl::USBAEP;
+    }
+    v
+}
+
+/// Endpoint `n` at a bus reset: its transfer and halt ended, NAKing, inactive but endpoint 0.
+fn ep_reset(ctl: &mut u32, nak: &mut bool, n: usize) {
+    *ctl &= !(epctl::EPENA | epctl::STALL);
+    if n > 0 {
+        *ctl &= !epctl::USBAEP;
+    }
+    *nak = true;
 }
 
 /// An endpoint control register written: CNAK/SNAK act on the NAK status, SD0PID/SODDFRM on

@@ -49,8 +49,6 @@ pub enum Request {
     SetConfiguration(u8),
     /// CDC SET_LINE_CODING (baud, 8N1).
     SetLineCoding(u32),
-    /// CDC GET_LINE_CODING.
-    GetLineCoding,
     /// CDC SET_CONTROL_LINE_STATE (bit 0 DTR, bit 1 RTS).
     SetControlLineState(u16),
 }
@@ -86,7 +84,6 @@ impl Request {
                 d.extend_from_slice(&[0, 0, 8]);
                 (pkt(0x21, 0x20, 0, iface, 7), d)
             }
-            Request::GetLineCoding => (pkt(0xA1, 0x21, 0, iface, 7), vec![]),
             Request::SetControlLineState(v) => (pkt(0x21, 0x22, v, iface, 0), vec![]),
         }
     }
@@ -281,12 +278,12 @@ struct ControlRun {
 pub enum Link {
     /// No cable, or the device not pulled up.
     Detached,
-    /// Seen attached at this time \[cycles\]: debouncing.
-    Attached(u64),
-    /// Driving the bus reset until this time.
-    Resetting(u64),
-    /// The reset over: requests from this time.
-    Enumerating(u64),
+    /// Seen attached: debouncing.
+    Attached,
+    /// Driving the bus reset.
+    Resetting,
+    /// The reset over: the enumeration's requests.
+    Enumerating,
     /// Configured: the port exists (the bulk stream runs while an application has it open).
     Open,
 }
@@ -324,7 +321,7 @@ pub struct Host {
     out_zlp: bool,
     /// Bytes the device sent on its bulk IN endpoint.
     pub to_host: Vec<u8>,
-    /// Bulk IN packets received, and those that were short (ending a transfer).
+    /// Bulk IN packets received.
     pub in_packets: u64,
     /// What went wrong (a request stalled or timed out, a descriptor a driver refuses).
     pub errors: Vec<String>,
@@ -447,13 +444,13 @@ impl Host {
         match self.link {
             Link::Detached => {
                 if dev.pulled_up() {
-                    self.link = Link::Attached(now);
+                    self.link = Link::Attached;
                     self.at = now + DEBOUNCE;
                 } else {
                     self.at = now + MS;
                 }
             }
-            Link::Attached(_) => {
+            Link::Attached => {
                 if let (true, Err(e)) = (dev.pulled_up(), dev.signalling()) {
                     // D+ pulled up, but nothing the device sends can be read: Linux's "device
                     // descriptor read/64, error -71" and no device.
@@ -464,14 +461,14 @@ impl Host {
                     self.at = now + 100 * MS;
                 } else if dev.pulled_up() {
                     dev.bus_reset();
-                    self.link = Link::Resetting(now + RESET);
+                    self.link = Link::Resetting;
                     self.at = now + RESET;
                 } else {
                     self.link = Link::Detached;
                     self.at = now + MS;
                 }
             }
-            Link::Resetting(_) => {
+            Link::Resetting => {
                 dev.enumeration_done();
                 self.desc = Descriptors::default();
                 self.queue.clear();
@@ -485,10 +482,10 @@ impl Host {
                     Request::GetDescriptor(15, 0, 0),
                     Request::GetDescriptor(3, 0, 255),
                 ]);
-                self.link = Link::Enumerating(now + RECOVERY);
+                self.link = Link::Enumerating;
                 self.at = now + RECOVERY;
             }
-            Link::Enumerating(_) | Link::Open => {
+            Link::Enumerating | Link::Open => {
                 if !dev.pulled_up() {
                     // The device let go of D+ (a soft disconnect).
                     self.reset_state();

@@ -28,6 +28,23 @@ pub fn elf() -> String {
     p.display().to_string()
 }
 
+/// The image's log so far, a line each (for a failure's message).
+pub fn log(m: &rehost::Machine) -> String {
+    m.log_lines
+        .iter()
+        .map(|l| l.text.clone())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `line`'s reply line (the last), within 0.5 s of device time.
+pub fn ask(m: &mut rehost::Machine, line: &str) -> String {
+    let r = m
+        .request(line, 0.5)
+        .unwrap_or_else(|e| panic!("{e}\n{}", log(m)));
+    r.last().cloned().unwrap_or_default()
+}
+
 /// `rehost serve` on the image from reset, on a free port.
 pub struct Served {
     child: Child,
