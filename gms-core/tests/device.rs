@@ -58,6 +58,7 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
             encoder: 0,
             current_codes: codes(2048),
             since_last,
+            supply_code: None,
         };
         lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -149,6 +150,7 @@ fn a_stale_sense_reading_latches_overrun_while_driving() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
+            supply_code: None,
         };
         lp.step(inp, |_, _| None)
     };
@@ -205,6 +207,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
             },
             current_codes: codes(2048),
             since_last: period,
+            supply_code: None,
         };
         let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -284,6 +287,7 @@ fn a_capture_records_what_the_loop_saw() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period,
+            supply_code: None,
         };
         lp.step(inp, |_, h| {
             if let Some(r) = h.returned {
@@ -431,6 +435,7 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
                 } else {
                     period
                 },
+                supply_code: None,
             };
             lp.step(inp, |_, _| None);
             lp.finish(1000, false);
@@ -456,6 +461,7 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
             encoder,
             current_codes: codes,
             since_last: period_cycles(),
+            supply_code: None,
         };
         while let Some(r) = req.take() {
             let mut once = Some(r);
@@ -554,6 +560,7 @@ impl gms_core::device::LoopLink for InlineLink {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
+            supply_code: None,
         };
         let mb = &mut self.mb;
         self.lp.step(inp, |st, c| mb.exchange(st, c));
@@ -910,4 +917,115 @@ fn continues_the_reference(request: &str) {
             "{st}"
         );
     }
+}
+
+/// A board with a 1:11 supply divider on the sense ADC (3.3 V at 4095: 36.3 V full scale)
+/// and the DRV8871's 6.5 … 45 V.
+fn supply_board() -> Board {
+    Board {
+        supply: Some(gms_core::device::SupplySense {
+            divider: 11.0,
+            range_v: (6.5, 45.0),
+        }),
+        ..board()
+    }
+}
+
+/// The divider's code for `volts` on [`supply_board`].
+fn supply_code(volts: f32) -> u32 {
+    (volts / 11.0 / 3.3 * 4095.0).round() as u32
+}
+
+/// A current-mode loop on [`supply_board`] whose measured supply is `volts`, enabled with a
+/// current command; its duty after the supply's filter settled (0.1 s), and its faults.
+fn current_mode_duty(volts: f32) -> (f32, Faults) {
+    let b = supply_board();
+    let a = prepare(&default_settings(), &b).unwrap();
+    let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
+    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
+    let mut req = Some(leak(Requests {
+        enable: true,
+        current: Some(0.05),
+        ..Requests::default()
+    }));
+    let mut duty = 0.0;
+    for _ in 0..4000 {
+        let inp = Inputs {
+            encoder: 0,
+            // The sense reads zero current: the PI's output grows; its first steps are the
+            // proportional part alone on the same error, whatever the supply.
+            current_codes: codes(2048),
+            since_last: period_cycles(),
+            supply_code: Some(supply_code(volts)),
+        };
+        let o = lp.step(inp, |_, _| req.take());
+        lp.finish(1000, false);
+        if o.enabled && duty == 0.0 {
+            duty = o.duty;
+        }
+    }
+    (duty, lp.faults())
+}
+
+/// The current loop's gain follows the measured supply: the same voltage for the same
+/// error is half the duty on 24 V as on 12 V (a 24 V supply under the 12 V setting doubled
+/// the loop's gain before).
+#[test]
+fn the_current_loops_duty_follows_the_measured_supply() {
+    let (d12, f12) = current_mode_duty(12.0);
+    let (d24, f24) = current_mode_duty(24.0);
+    assert_eq!((f12, f24), (Faults::NONE, Faults::NONE));
+    assert!(d12 > 0.0, "{d12}");
+    // The divider's codes round the supply to 9 mV.
+    assert!(
+        (d12 / d24 - 2.0).abs() < 2e-3,
+        "{d12} on 12 V, {d24} on 24 V"
+    );
+}
+
+/// Outside the bridge's range the loop refuses `enable`; a supply that falls below it while
+/// driving latches `supply` and switches the bridge off.
+#[test]
+fn a_supply_outside_the_bridges_range_refuses_enable_and_latches_while_driving() {
+    let (d, f) = current_mode_duty(5.0);
+    assert_eq!(d, 0.0, "enabled on 5 V");
+    assert_eq!(f, Faults::NONE, "a refusal is not a fault");
+    let b = supply_board();
+    let a = prepare(&default_settings(), &b).unwrap();
+    let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
+    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
+    let mut req = Some(leak(Requests {
+        enable: true,
+        ..Requests::default()
+    }));
+    let mut volts = 12.0;
+    let mut off_at = None;
+    for k in 0..2000 {
+        if k == 400 {
+            // The supply collapses to 3 V (unplugged under load).
+            volts = 3.0;
+        }
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: codes(2048),
+            since_last: period_cycles(),
+            supply_code: Some(supply_code(volts)),
+        };
+        let o = lp.step(inp, |_, _| req.take());
+        lp.finish(1000, false);
+        if k > 400 && !o.enabled && off_at.is_none() {
+            off_at = Some(k - 400);
+        }
+    }
+    assert!(lp.faults().contains(Faults::SUPPLY), "{:?}", lp.faults());
+    // The filter (a = T / τ per period, τ 2 ms) takes the reading from 12 V under 6.5 V
+    // after n periods, (1 − a)^n = 3.5 / 9: about 75 (1.9 ms); the bridge is off in that
+    // step's period.
+    let a = (1.0 / default_settings().cur_rate_hz) / gms_core::device::SUPPLY_TAU_S;
+    let n = ((6.5f32 - 3.0) / (12.0 - 3.0)).ln() / (1.0 - a).ln();
+    let off = off_at.expect("the bridge stayed on");
+    assert!(
+        (off as f32 - n).abs() <= 2.0,
+        "off {off} periods after the drop, {n:.1} expected"
+    );
 }

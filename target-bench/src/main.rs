@@ -196,6 +196,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
+                supply_code: None,
             },
             |_, _| first.take(),
         );
@@ -238,6 +239,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: 0,
                         current_codes: codes,
                         since_last: 0,
+                        supply_code: None,
                     },
                     |st, c| mb.exchange(st, c).or_else(|| r.take()),
                 );
@@ -259,6 +261,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
+                supply_code: None,
             },
             |_, _| mv.take(),
         );
@@ -273,6 +276,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: black_box(encoder),
                         current_codes: black_box(codes),
                         since_last: black_box(period),
+                        supply_code: None,
                     },
                     |st, c| {
                         let r = mb.exchange(st, c);

@@ -140,5 +140,6 @@ pub const fn board(clocks: &F4Clocks) -> Board {
         has_truth: false,
         bridge_wake_s: BRIDGE_WAKE_S,
         capture_values: CAPTURE_VALUES,
+        supply: None,
     }
 }

@@ -439,6 +439,9 @@ pub struct Controller<const N: usize> {
     e_cur: f32,
     /// The largest |duty| the board's sense allows [-] (1: the supply's).
     duty_max: f32,
+    /// The supply the board measures \[V\], used for the duty instead of `lim.v_supply`
+    /// ([`Controller::set_measured_supply`]); none: the parameter.
+    v_meas: Option<f32>,
     adapt: Adaptive,
     shaping: Shaping,
     /// The position map's sample at the reference: torque offset \[N·m\], friction scale [-]
@@ -512,6 +515,7 @@ impl<const N: usize> Controller<N> {
             cur_integ: 0.0,
             e_cur: 0.0,
             duty_max: 1.0,
+            v_meas: None,
             out: PositionOutput::default(),
         })
     }
@@ -541,6 +545,19 @@ impl<const N: usize> Controller<N> {
         } else {
             1.0
         };
+    }
+
+    /// The motor supply as the board measures it \[V\] (none: `lim.v_supply` as set): the
+    /// current loop's duty is its voltage over this, so that its gain follows the supply (a
+    /// 24 V supply under a 12 V setting doubled the loop's gain, +6 dB against the 4 dB of
+    /// margin it has). Values that are not finite or under 0.1 V are taken as none.
+    pub fn set_measured_supply(&mut self, v: Option<f32>) {
+        self.v_meas = v.filter(|v| v.is_finite() && *v >= 0.1);
+    }
+
+    /// The supply the current loop divides by \[V\]: the measured one, else `lim.v_supply`.
+    pub fn supply(&self) -> f32 {
+        self.v_meas.unwrap_or(self.p.v_supply)
     }
 
     /// The duty limit [-] ([`Controller::set_duty_max`]).
@@ -667,6 +684,7 @@ impl<const N: usize> Controller<N> {
         self.w_ref = old.w_ref;
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
+        self.v_meas = old.v_meas;
         self.shaping.take_state_from(&old.shaping);
         // The map's sample is this controller's own (the loop sets it, for the new settings,
         // before the hand-over): a map switched on or off changes the feedforward, and the
@@ -950,7 +968,7 @@ impl<const N: usize> Controller<N> {
         let ff = self.p.motor.r * self.i_cmd + self.p.motor.k_e * self.w_ref;
         let integ_new = self.cur_integ + c.ki * e * self.dt_cur;
         let v_unsat = c.kp * e + integ_new + ff;
-        let supply = self.p.v_supply;
+        let supply = self.supply();
         let vmax = supply * self.duty_max;
         let v = clamp(v_unsat, vmax);
         if v == v_unsat || (e > 0.0) != (v_unsat > 0.0) {

@@ -103,6 +103,11 @@ pub fn calibrate_sense(
     }
 }
 
+/// The measured supply's filter time constant \[s\]: a reading per PWM period, its
+/// conversion noise (a few codes of a 1:11 divider: tens of mV) averaged over 2 ms, a supply
+/// sagging under a current step followed within a few ms.
+pub const SUPPLY_TAU_S: f32 = 2e-3;
+
 /// What the hardware measured at the start of a PWM period.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Inputs {
@@ -114,6 +119,9 @@ pub struct Inputs {
     /// `BoardLimits::clock_hz`]; 0 when not measured. A call more than 1.5 PWM periods after
     /// the last one missed a period: counted, and an `overrun` while the bridge drives.
     pub since_last: u32,
+    /// The supply divider's ADC code \[code\] ([`Board::supply`]), when the board has one and
+    /// converted it for this period; none otherwise (the loop keeps its last reading).
+    pub supply_code: Option<u32>,
 }
 
 /// What the shell writes to the hardware after a PWM period.
@@ -210,6 +218,9 @@ pub struct ControlLoop {
     table_report: TableReport,
     /// … and handed over at the next exchange when set.
     table_reported: bool,
+    /// The motor supply the board measures \[V\], filtered ([`Board::supply`]); none before
+    /// the first reading or without a divider.
+    supply_v: Option<f32>,
     /// The table's correction in the last step \[N·m\] (0 when none plays).
     table_corr: f32,
     /// A chunk or a report waits for the next exchange (one test a step when none does).
@@ -302,6 +313,7 @@ impl ControlLoop {
             table: Player::default(),
             table_report: TableReport::default(),
             table_reported: false,
+            supply_v: None,
             table_corr: 0.0,
             fresh: false,
             done: None,
@@ -441,10 +453,20 @@ impl ControlLoop {
         self.last_pos = self.enc.count();
     }
 
+    /// The supply allows driving: the board has no divider, or the supply it measures is
+    /// within the bridge's range.
+    fn supply_ok(&self) -> bool {
+        match self.board.supply {
+            None => true,
+            Some(ss) => self.supply_v.is_some_and(|v| ss.within(v)),
+        }
+    }
+
     /// The status as of the last position step.
     pub fn status(&self) -> Status {
         Status {
             steps: self.steps,
+            supply_v: self.supply_v,
             pos_rate_hz: self.ctrl.params().pos_rate_hz,
             pos: self.enc.count(),
             reference: self.r,
@@ -586,7 +608,7 @@ impl ControlLoop {
         if req.disable {
             self.switch_off();
         }
-        if req.enable && self.faults.is_empty() && !self.enabled {
+        if req.enable && self.faults.is_empty() && !self.enabled && self.supply_ok() {
             self.hold_here();
             self.enabled = true;
             let wake = self.board.bridge_wake_s * self.ctrl.params().cur_rate_hz;
@@ -697,6 +719,20 @@ impl ControlLoop {
                 .sense
                 .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
         let mut new_faults = Faults::NONE;
+        if let (Some(ss), Some(code)) = (self.board.supply, inp.supply_code) {
+            let v = ss.volts(code, self.board.sense.vref, self.board.sense.full_scale);
+            // A first-order filter of SUPPLY_TAU_S (a reading per period); the first at once.
+            let a = (self.ctrl.dt_cur() / SUPPLY_TAU_S).min(1.0);
+            let f = match self.supply_v {
+                Some(f) => f + a * (v - f),
+                None => v,
+            };
+            self.supply_v = Some(f);
+            self.ctrl.set_measured_supply(Some(f));
+            if self.enabled && !ss.within(f) {
+                new_faults.latch(Faults::SUPPLY);
+            }
+        }
         let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
         if missed > 0 {
             self.missed_since_pos = self.missed_since_pos.saturating_add(missed);
@@ -716,7 +752,7 @@ impl ControlLoop {
         // This period's current and the voltage it was driven with (the duty as the timer's
         // counts apply it: the bridge drives whole counts), for the capture's means.
         let volts = if self.enabled {
-            drive::applied_duty(self.duty, self.arr) * self.ctrl.params().v_supply
+            drive::applied_duty(self.duty, self.arr) * self.ctrl.supply()
         } else {
             0.0
         };

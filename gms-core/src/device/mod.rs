@@ -31,8 +31,8 @@ pub use capture::{
 
 pub use crate::protocol::{CaptureState, DriveKind, StatusError, StatusReply, StatusValue};
 pub use control::{
-    ControlLoop, Inputs, MapTable, Outputs, SenseStart, SenseTrouble, TableBuf, ZERO_SAMPLES,
-    calibrate_sense,
+    ControlLoop, Inputs, MapTable, Outputs, SUPPLY_TAU_S, SenseStart, SenseTrouble, TableBuf,
+    ZERO_SAMPLES, calibrate_sense,
 };
 pub use front::{Front, LoopLink};
 pub use record::*;
@@ -71,6 +71,33 @@ pub struct Board {
     pub bridge_wake_s: f32,
     /// The capture buffer's size (values) (the loop's `CaptureBuf`).
     pub capture_values: u32,
+    /// The motor supply's divider on a spare channel of the sense ADC, if the board has one:
+    /// the loop then measures the supply, its current loop's gain follows it, and driving
+    /// outside the bridge's range is refused or latched (`supply`). Without one the supply
+    /// is `lim.v_supply` as set.
+    pub supply: Option<SupplySense>,
+}
+
+/// A board's motor-supply divider, read by the sense ADC (its `vref` and `full_scale`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupplySense {
+    /// Supply volts per volt at the ADC's pin \[-\]: (R_top + R_bottom) / R_bottom.
+    pub divider: f32,
+    /// The bridge's operating range \[V\] (low, high): the DRV8871's 6.5 … 45 V.
+    pub range_v: (f32, f32),
+}
+
+impl SupplySense {
+    /// The supply \[V\] a divider's ADC `code` reads, with the sense ADC's `vref` \[V\] and
+    /// `full_scale` \[code\].
+    pub fn volts(&self, code: u32, vref: f32, full_scale: f32) -> f32 {
+        code as f32 / full_scale * vref * self.divider
+    }
+
+    /// Whether `v` \[V\] is within the bridge's range.
+    pub fn within(&self, v: f32) -> bool {
+        v >= self.range_v.0 && v <= self.range_v.1
+    }
 }
 
 /// A board's current-sense chain: its ADC, the zero the start-up calibration expects, and its
@@ -403,6 +430,8 @@ impl Default for Requests {
 pub struct Status {
     /// Position steps since start (the step whose values these are).
     pub steps: u64,
+    /// The motor supply the board measures \[V\] (filtered), none without a divider.
+    pub supply_v: Option<f32>,
     /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
     /// Encoder position \[counts\].
@@ -538,6 +567,7 @@ impl Mailbox {
             returned: None,
             status: Status {
                 steps: 0,
+                supply_v: None,
                 pos_rate_hz: 0.0,
                 pos: 0,
                 reference: RefSample {

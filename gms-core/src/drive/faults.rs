@@ -35,9 +35,12 @@ impl Faults {
     /// running, or the sense chain's DMA or ADC failed), or the stack ran low: terminal, the
     /// watchdog resets.
     pub const CONTROL_STALL: Faults = Faults(1 << 8);
+    /// The measured motor supply left the bridge's operating range while driving (a board
+    /// with a supply divider: [`crate::device::SupplySense`]).
+    pub const SUPPLY: Faults = Faults(1 << 9);
 
     /// Names of the bits, lowest first.
-    pub const NAMES: [&'static str; 9] = [
+    pub const NAMES: [&'static str; 10] = [
         "over_current",
         "following_error",
         "encoder_jump",
@@ -47,10 +50,11 @@ impl Faults {
         "current_sense",
         "watchdog_reset",
         "control_stall",
+        "supply",
     ];
 
     /// What each bit means to the user, in [`Self::NAMES`]' order.
-    pub const MEANINGS: [&'static str; 9] = [
+    pub const MEANINGS: [&'static str; 10] = [
         "the measured current exceeded the trip level (lim.i_max with margin): a runaway, a \
          short, a reversed current sense",
         "the position error exceeded its limit: the axis cannot follow (blocked, too little \
@@ -64,6 +68,8 @@ impl Faults {
         "the last reset was by the watchdog",
         "the control step stopped running, its current sampling failed or the stack ran low: \
          the bridge was switched off at once and the board resets",
+        "the measured motor supply left the bridge's operating range while driving (a supply \
+         sagging under load, unplugged, or above the bridge's rating)",
     ];
 
     /// The meaning of the fault named `name` (one of [`Self::NAMES`]).

@@ -182,6 +182,7 @@ impl Sim {
                 // Simulated time: the steps are exactly one period apart (in the board's
                 // step clock, ns), so none is ever missed.
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
+                supply_code: None,
             };
             let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);

@@ -87,6 +87,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         }
         self.may_drive()?;
         self.sense_reaches_i_max()?;
+        self.supply_in_range()?;
         self.post(|r| r.enable = true)?;
         if self.status_now().enabled {
             Ok(())
@@ -101,6 +102,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         }
         self.may_drive()?;
         self.sense_reaches_i_max()?;
+        self.supply_in_range()?;
         // One exchange: the loop takes the enable and the current in the same step.
         self.post(|r| {
             r.enable = true;

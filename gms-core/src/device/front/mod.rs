@@ -196,6 +196,20 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         }
     }
 
+    /// Refuses to drive when the board measures its supply outside the bridge's range (or
+    /// has no reading yet).
+    fn supply_in_range(&mut self) -> Result<(), &'static str> {
+        let Some(ss) = self.board.supply else {
+            return Ok(());
+        };
+        match self.status_now().supply_v {
+            Some(v) if ss.within(v) => Ok(()),
+            Some(v) if v < ss.range_v.0 => Err("motor supply below the bridge's range"),
+            Some(_) => Err("motor supply above the bridge's range"),
+            None => Err("motor supply not measured yet"),
+        }
+    }
+
     /// The loop's latest status.
     pub fn status_now(&mut self) -> Status {
         self.link.with_mailbox(|m| m.status)
