@@ -263,3 +263,47 @@ pub fn next_sum<const N: usize>(
         }
     }
 }
+
+/// The motor supply's divider as an injected conversion of the sense ADC: its pin analog,
+/// sampled 84 cycles (4 µs at 21 MHz: the divider's ~9.4 kΩ source, RM0090 §13.3.11 and the
+/// datasheet's R_AIN), one injected rank (ADC_JSQR: JL = 0 converts JSQ4, RM0090 §13.13.12)
+/// started by software (JEXTEN = 00). The regular sequence (the current's) is untouched; an
+/// injected conversion started while it runs would reset and resume it (§13.3.5), so the
+/// control step starts it right after the sequence it read ([`supply_start`]).
+pub fn supply_init(adc: pac::adc::Adc, gpio: pac::gpio::Gpio, pin: usize, channel: u8) {
+    use pac::adc::vals::{Exten, SampleTime};
+    gpio.moder()
+        .modify(|w| w.set_moder(pin, pac::gpio::vals::Moder::ANALOG));
+    if channel >= 10 {
+        adc.smpr1()
+            .modify(|w| w.set_smp((channel - 10) as usize, SampleTime::CYCLES84));
+    } else {
+        adc.smpr2()
+            .modify(|w| w.set_smp(channel as usize, SampleTime::CYCLES84));
+    }
+    adc.jsqr().write(|w| {
+        w.set_jl(0);
+        w.set_jsq(3, channel);
+    });
+    adc.cr2().modify(|w| w.set_jexten(Exten::DISABLED));
+}
+
+/// ADC_SR written to clear JEOC alone (rc_w0, see [`SR_CLEAR_AWD`]).
+pub const SR_CLEAR_JEOC: u32 = 0x3B;
+
+/// Starts the supply's injected conversion (ADC_CR2.JSWSTART, RM0090 §13.13.3).
+#[inline(always)]
+pub fn supply_start(adc: pac::adc::Adc) {
+    adc.cr2().modify(|w| w.set_jswstart(true));
+}
+
+/// The supply's code once its conversion has finished (SR.JEOC, then cleared; ADC_JDR1,
+/// §13.13.14), else none.
+#[inline(always)]
+pub fn supply_read(adc: pac::adc::Adc) -> Option<u16> {
+    if !adc.sr().read().jeoc() {
+        return None;
+    }
+    adc.sr().write(|w| w.0 = SR_CLEAR_JEOC);
+    Some(adc.jdr(0).read().jdata())
+}

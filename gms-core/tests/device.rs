@@ -5,10 +5,13 @@ use gms_core::device::{
 };
 use gms_core::drive::Faults;
 
-/// The F405 board (gms-core's description), its bridge driving at once on `enable`.
+/// The F405 board (gms-core's description), its bridge driving at once on `enable`, its
+/// supply taken as set (`lim.v_supply`: these tests' inputs carry no divider's reading; the
+/// divider's own tests use [`supply_board`]).
 fn board() -> Board {
     Board {
         bridge_wake_s: 0.0,
+        supply: None,
         ..gms_core::boards::f405::BOARD
     }
 }
@@ -919,21 +922,18 @@ fn continues_the_reference(request: &str) {
     }
 }
 
-/// A board with a 1:11 supply divider on the sense ADC (3.3 V at 4095: 36.3 V full scale)
-/// and the DRV8871's 6.5 … 45 V.
+/// The F405 board with its supply divider (1:16 on the sense ADC: 52.8 V full scale) and the
+/// DRV8871's 6.5 … 45 V.
 fn supply_board() -> Board {
     Board {
-        supply: Some(gms_core::device::SupplySense {
-            divider: 11.0,
-            range_v: (6.5, 45.0),
-        }),
-        ..board()
+        bridge_wake_s: 0.0,
+        ..gms_core::boards::f405::BOARD
     }
 }
 
-/// The divider's code for `volts` on [`supply_board`].
+/// The divider's code for `volts` on [`supply_board`] (1:16, 3.3 V at 4095).
 fn supply_code(volts: f32) -> u32 {
-    (volts / 11.0 / 3.3 * 4095.0).round() as u32
+    (volts / 16.0 / 3.3 * 4095.0).round() as u32
 }
 
 /// A current-mode loop on [`supply_board`] whose measured supply is `volts`, enabled with a

@@ -130,6 +130,9 @@ pub struct Plant {
     /// The supply's open-circuit voltage \[V\] and source resistance \[ohm\].
     supply: f64,
     r_source: f64,
+    /// The bridge's supply terminal \[V\] over the last step: the supply less its source
+    /// resistance's drop (what a board's divider reads).
+    bus: f64,
     /// The real bridge (`None`: the ideal one).
     bridge: Option<crate::scenario::BridgeSpec>,
     /// The PWM period now: the time since it started \[s\], its duty (quantised, \[-1, 1\])
@@ -249,6 +252,7 @@ impl Plant {
             rad_per_count: spec.rad_per_count,
             supply: spec.supply.volts,
             r_source: spec.supply.r_source_ohm,
+            bus: spec.supply.volts,
             bridge: spec.real_bridge(),
             phase: 0.0,
             duty: 0.0,
@@ -490,6 +494,12 @@ impl Plant {
         self.r + self.bridge.map_or(0.0, |b| b.r_on_ohm)
     }
 
+    /// The bridge's supply terminal \[V\] (the supply less its source resistance's drop
+    /// under the current drawn in the last step): what a board's divider reads.
+    pub fn supply_volts(&self) -> f64 {
+        self.bus
+    }
+
     /// Advances the plant by `dt` \[s\] at the applied voltage.
     pub fn step(&mut self, dt: f64) {
         // The bridge: the step's mean voltage from the fraction it drives, at the supply's
@@ -497,6 +507,7 @@ impl Plant {
         // start).
         let drive = self.drive_fraction(dt);
         let bus = self.supply - self.r_source * drive * self.i;
+        self.bus = bus;
         self.voltage = drive * bus;
         self.phase += dt;
         // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step;

@@ -11,6 +11,7 @@
 //! | encoder B | PA1 | TIM2_CH2 | encoder B |
 //! | USB D- / D+ | PA11 / PA12 | OTG_FS | USB connector (CDC-ACM) |
 //! | SWD | PA13 / PA14 | | probe (probe-rs: flash, defmt logs over RTT) |
+//! | motor supply | PC1 | ADC1_IN11 (injected) | VM through 150 kΩ over 10 kΩ to GND (1:16) |
 //!
 //! The DRV8871 (a cheap 3.6 A H-bridge breakout): VM = motor supply (6.5-45 V, `lim.v_supply`),
 //! ILIM resistor for its own hardware current limit above our trip level, GND common with the
@@ -24,7 +25,7 @@
 //! hardware, centred on the counter's bottom (`board.rs`).
 
 use crate::boards::hw::F4Clocks;
-use crate::device::{Board, SenseChain};
+use crate::device::{Board, SenseChain, SupplySense};
 use crate::drive::{BoardLimits, SenseTiming};
 
 /// GPIOC pins of the bridge inputs IN1, IN2 (TIM8_CH1, TIM8_CH2).
@@ -140,6 +141,19 @@ pub const fn board(clocks: &F4Clocks) -> Board {
         has_truth: false,
         bridge_wake_s: BRIDGE_WAKE_S,
         capture_values: CAPTURE_VALUES,
-        supply: None,
+        supply: Some(SupplySense {
+            divider: SUPPLY_DIVIDER,
+            range_v: SUPPLY_RANGE_V,
+        }),
     }
 }
+
+/// GPIOC pin of the motor supply's divider (PC1; on the NUCLEO-F446RE's Arduino A4).
+pub const SUPPLY_PIN: usize = 1;
+/// Its ADC1 channel (PC1 = ADC123_IN11), converted as an injected channel.
+pub const SUPPLY_CHANNEL: u8 = 11;
+/// The divider, 150 kΩ over 10 kΩ \[-\]: 45 V (the DRV8871's most) reads 2.81 V of the
+/// ADC's 3.3, one code 12.9 mV.
+pub const SUPPLY_DIVIDER: f32 = 16.0;
+/// The DRV8871's operating supply \[V\] (its datasheet's V_M, 6.5 to 45 V).
+pub const SUPPLY_RANGE_V: (f32, f32) = (6.5, 45.0);

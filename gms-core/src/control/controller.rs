@@ -440,8 +440,11 @@ pub struct Controller<const N: usize> {
     /// The largest |duty| the board's sense allows [-] (1: the supply's).
     duty_max: f32,
     /// The supply the board measures \[V\], used for the duty instead of `lim.v_supply`
-    /// ([`Controller::set_measured_supply`]); none: the parameter.
-    v_meas: Option<f32>,
+    /// ([`Controller::set_measured_supply`]); 0: none, the parameter.
+    v_meas: f32,
+    /// 1 / [`Controller::supply`] \[1/V\], kept with it: the duty a multiplication, not a
+    /// division, in each current step.
+    inv_supply: f32,
     adapt: Adaptive,
     shaping: Shaping,
     /// The position map's sample at the reference: torque offset \[N·m\], friction scale [-]
@@ -515,7 +518,8 @@ impl<const N: usize> Controller<N> {
             cur_integ: 0.0,
             e_cur: 0.0,
             duty_max: 1.0,
-            v_meas: None,
+            v_meas: 0.0,
+            inv_supply: 1.0 / p.v_supply,
             out: PositionOutput::default(),
         })
     }
@@ -552,12 +556,18 @@ impl<const N: usize> Controller<N> {
     /// 24 V supply under a 12 V setting doubled the loop's gain, +6 dB against the 4 dB of
     /// margin it has). Values that are not finite or under 0.1 V are taken as none.
     pub fn set_measured_supply(&mut self, v: Option<f32>) {
-        self.v_meas = v.filter(|v| v.is_finite() && *v >= 0.1);
+        self.v_meas = v.filter(|v| v.is_finite() && *v >= 0.1).unwrap_or(0.0);
+        self.inv_supply = 1.0 / self.supply();
     }
 
     /// The supply the current loop divides by \[V\]: the measured one, else `lim.v_supply`.
+    #[inline]
     pub fn supply(&self) -> f32 {
-        self.v_meas.unwrap_or(self.p.v_supply)
+        if self.v_meas > 0.0 {
+            self.v_meas
+        } else {
+            self.p.v_supply
+        }
     }
 
     /// The duty limit [-] ([`Controller::set_duty_max`]).
@@ -685,6 +695,7 @@ impl<const N: usize> Controller<N> {
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
         self.v_meas = old.v_meas;
+        self.inv_supply = 1.0 / self.supply();
         self.shaping.take_state_from(&old.shaping);
         // The map's sample is this controller's own (the loop sets it, for the new settings,
         // before the hand-over): a map switched on or off changes the feedforward, and the
@@ -976,7 +987,7 @@ impl<const N: usize> Controller<N> {
         }
         CurrentOutput {
             voltage: v,
-            duty: clamp(v / supply + self.dead_time_duty(), self.duty_max),
+            duty: clamp(v * self.inv_supply + self.dead_time_duty(), self.duty_max),
             limited: v != v_unsat && self.duty_max < 1.0,
         }
     }

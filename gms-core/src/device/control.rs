@@ -103,7 +103,7 @@ pub fn calibrate_sense(
     }
 }
 
-/// The measured supply's filter time constant \[s\]: a reading per PWM period, its
+/// The measured supply's filter time constant \[s\]: a reading per position period, its
 /// conversion noise (a few codes of a 1:11 divider: tens of mV) averaged over 2 ms, a supply
 /// sagging under a current step followed within a few ms.
 pub const SUPPLY_TAU_S: f32 = 2e-3;
@@ -221,6 +221,11 @@ pub struct ControlLoop {
     /// The motor supply the board measures \[V\], filtered ([`Board::supply`]); none before
     /// the first reading or without a divider.
     supply_v: Option<f32>,
+    /// The supply's volts per divider code and its filter's gain per period [V, -]
+    /// ([`ControlLoop::supply_k_for`]).
+    supply_k: (f32, f32),
+    /// The divider's latest code \[code\] (0: none yet).
+    supply_code: u32,
     /// The table's correction in the last step \[N·m\] (0 when none plays).
     table_corr: f32,
     /// A chunk or a report waits for the next exchange (one test a step when none does).
@@ -314,12 +319,15 @@ impl ControlLoop {
             table_report: TableReport::default(),
             table_reported: false,
             supply_v: None,
+            supply_k: (0.0, 0.0),
+            supply_code: 0,
             table_corr: 0.0,
             fresh: false,
             done: None,
             ahead: None,
         };
         lp.limits = lp.reachable(lp.limits);
+        lp.supply_k = Self::supply_k_for(&lp.board, lp.ctrl.dt_pos());
         lp
     }
 
@@ -453,6 +461,37 @@ impl ControlLoop {
         self.last_pos = self.enc.count();
     }
 
+    /// The supply's volts per divider code and its filter's gain per position period.
+    fn supply_k_for(board: &Board, dt_pos: f32) -> (f32, f32) {
+        let per_code = board.supply.map_or(0.0, |ss| {
+            ss.volts(1, board.sense.vref, board.sense.full_scale)
+        });
+        (per_code, (dt_pos / SUPPLY_TAU_S).min(1.0))
+    }
+
+    /// The position period's supply reading (the divider's latest code): filtered (a first
+    /// order of [`SUPPLY_TAU_S`]; the first reading at once), handed to the current loop,
+    /// and `supply` latched while driving outside the bridge's range. Nothing without a
+    /// divider or before its first code.
+    fn take_supply(&mut self, faults: &mut Faults) {
+        let Some(ss) = self.board.supply else {
+            return;
+        };
+        if self.supply_code == 0 {
+            return;
+        }
+        let v = self.supply_code as f32 * self.supply_k.0;
+        let f = match self.supply_v {
+            Some(f) => f + self.supply_k.1 * (v - f),
+            None => v,
+        };
+        self.supply_v = Some(f);
+        self.ctrl.set_measured_supply(Some(f));
+        if self.enabled && !ss.within(f) {
+            faults.latch(Faults::SUPPLY);
+        }
+    }
+
     /// The supply allows driving: the board has no divider, or the supply it measures is
     /// within the bridge's range.
     fn supply_ok(&self) -> bool {
@@ -535,6 +574,7 @@ impl ControlLoop {
                 || old.sense_v_per_a != new.sense_v_per_a;
             let amps_per_code = self.board.sense.amps_per_code(new.sense_v_per_a);
             let new_enc_dir = new.enc_dir;
+            let next_dt_pos = next.dt_pos();
             if dirs {
                 // The bridge goes off, and the count goes on from where it is, counting the
                 // new way (the same count is the same place: a new resolution reads it in
@@ -556,6 +596,7 @@ impl ControlLoop {
                 self.phase = 0;
                 self.psc = a.psc;
                 self.arr = a.arr;
+                self.supply_k = Self::supply_k_for(&self.board, next_dt_pos);
                 timing = Some((a.psc, a.arr));
             }
             // The running controller swapped for the new one by reference (no copy in the
@@ -719,19 +760,10 @@ impl ControlLoop {
                 .sense
                 .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
         let mut new_faults = Faults::NONE;
-        if let (Some(ss), Some(code)) = (self.board.supply, inp.supply_code) {
-            let v = ss.volts(code, self.board.sense.vref, self.board.sense.full_scale);
-            // A first-order filter of SUPPLY_TAU_S (a reading per period); the first at once.
-            let a = (self.ctrl.dt_cur() / SUPPLY_TAU_S).min(1.0);
-            let f = match self.supply_v {
-                Some(f) => f + a * (v - f),
-                None => v,
-            };
-            self.supply_v = Some(f);
-            self.ctrl.set_measured_supply(Some(f));
-            if self.enabled && !ss.within(f) {
-                new_faults.latch(Faults::SUPPLY);
-            }
+        // The divider's latest code (a reading per period where the board has one), taken up
+        // once per position period (`take_supply`).
+        if let Some(code) = inp.supply_code {
+            self.supply_code = code;
         }
         let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
         if missed > 0 {
@@ -800,6 +832,7 @@ impl ControlLoop {
             }
         }
         if self.phase == 0 {
+            self.take_supply(&mut new_faults);
             self.steps = self.steps.wrapping_add(1);
             let pos = self.enc.count();
             let delta = pos.saturating_sub(self.last_pos);

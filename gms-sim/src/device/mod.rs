@@ -117,6 +117,8 @@ struct Sim {
     adc: Adc,
     /// The board's sense chain (its analog watchdog's thresholds).
     sense: gms_core::device::SenseChain,
+    /// The board's supply divider, read on the sense's ADC.
+    supply: Option<gms_core::device::SupplySense>,
     substeps: u32,
     /// Simulated time \[s\].
     t: f64,
@@ -182,7 +184,14 @@ impl Sim {
                 // Simulated time: the steps are exactly one period apart (in the board's
                 // step clock, ns), so none is ever missed.
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
-                supply_code: None,
+                // The board's supply divider, read as its ADC would (no noise: a 1:16
+                // divider's codes are 13 mV).
+                supply_code: self.supply.map(|ss| {
+                    let v = self.plant.supply_volts() / ss.divider as f64;
+                    (v / self.sense.vref as f64 * self.sense.full_scale as f64)
+                        .round()
+                        .clamp(0.0, self.sense.full_scale as f64) as u32
+                }),
             };
             let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);
@@ -286,6 +295,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
             plant,
             adc,
             sense: board.sense,
+            supply: board.supply,
             substeps: sc.plant.substeps,
             t: 0.0,
             truth: None,

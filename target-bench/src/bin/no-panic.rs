@@ -30,6 +30,10 @@ use gms_core::protocol::{self, LineReader};
 use gms_core::{FrictionModel, Gms, LuGre, LugreParams, StaticMap, StaticParams, selftest};
 use panic_never as _;
 
+/// The supply divider's code at 12 V on the F405 board (1:16, 3.3 V at 4095): the loop
+/// measures its supply every period.
+const SUPPLY_12V: u32 = 931;
+
 /// The device core's link on this check: the mailbox here, and waiting on the loop runs
 /// the loop one PWM period on inputs the optimiser cannot see (so `ControlLoop::step`, the
 /// exchange and the request handling are all covered).
@@ -56,7 +60,7 @@ impl LoopLink for CheckLink {
             encoder: black_box(7),
             current_codes: black_box(16 * 2048), // zero current: 16 conversions at mid-scale
             since_last: black_box(8400),
-            supply_code: None,
+            supply_code: Some(black_box(SUPPLY_12V)),
         };
         let mb = &mut self.mailbox;
         let out = self.core.step(inp, |st, c| mb.exchange(st, c));
