@@ -61,7 +61,7 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
             encoder: 0,
             current_codes: codes(2048),
             since_last,
-            supply_code: None,
+            supply_code: 0,
         };
         lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -153,7 +153,7 @@ fn a_stale_sense_reading_latches_overrun_while_driving() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: None,
+            supply_code: 0,
         };
         lp.step(inp, |_, _| None)
     };
@@ -210,7 +210,7 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
             },
             current_codes: codes(2048),
             since_last: period,
-            supply_code: None,
+            supply_code: 0,
         };
         let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -290,7 +290,7 @@ fn a_capture_records_what_the_loop_saw() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period,
-            supply_code: None,
+            supply_code: 0,
         };
         lp.step(inp, |_, h| {
             if let Some(r) = h.returned {
@@ -438,7 +438,7 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
                 } else {
                     period
                 },
-                supply_code: None,
+                supply_code: 0,
             };
             lp.step(inp, |_, _| None);
             lp.finish(1000, false);
@@ -464,7 +464,7 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
             encoder,
             current_codes: codes,
             since_last: period_cycles(),
-            supply_code: None,
+            supply_code: 0,
         };
         while let Some(r) = req.take() {
             let mut once = Some(r);
@@ -549,6 +549,8 @@ struct InlineLink {
     lp: ControlLoop,
     mb: gms_core::device::Mailbox,
     t_us: u64,
+    /// The supply divider's code each period carries.
+    supply: Option<u32>,
 }
 
 impl gms_core::device::LoopLink for InlineLink {
@@ -563,7 +565,7 @@ impl gms_core::device::LoopLink for InlineLink {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: None,
+            supply_code: self.supply.unwrap_or(0),
         };
         let mb = &mut self.mb;
         self.lp.step(inp, |st, c| mb.exchange(st, c));
@@ -602,8 +604,23 @@ fn board_device_at(
     stored: Option<[u8; gms_core::device::RECORD_LEN]>,
     zero: u32,
 ) -> gms_core::device::Front<InlineLink, MemStore> {
+    board_device_with(board(), stored, zero)
+}
+
+/// As [`board_device`] on board `b`.
+fn board_device_on(
+    b: Board,
+    stored: Option<[u8; gms_core::device::RECORD_LEN]>,
+) -> gms_core::device::Front<InlineLink, MemStore> {
+    board_device_with(b, stored, 2048)
+}
+
+fn board_device_with(
+    b: Board,
+    stored: Option<[u8; gms_core::device::RECORD_LEN]>,
+    zero: u32,
+) -> gms_core::device::Front<InlineLink, MemStore> {
     use gms_core::device::{Front, ParamStore as _, startup};
-    let b = board();
     let mut store = MemStore(stored);
     let defaults = default_settings();
     let start = startup(store.load(), &defaults, &b, &mut |_| {}).unwrap();
@@ -622,7 +639,12 @@ fn board_device_at(
         status: lp.status(),
         ..gms_core::device::Mailbox::new()
     };
-    let link = InlineLink { lp, mb, t_us: 0 };
+    let link = InlineLink {
+        lp,
+        mb,
+        t_us: 0,
+        supply: None,
+    };
     Front::new(
         link,
         store,
@@ -936,9 +958,9 @@ fn supply_code(volts: f32) -> u32 {
     (volts / 16.0 / 3.3 * 4095.0).round() as u32
 }
 
-/// A current-mode loop on [`supply_board`] whose measured supply is `volts`, enabled with a
-/// current command; its duty after the supply's filter settled (0.1 s), and its faults.
-fn current_mode_duty(volts: f32) -> (f32, Faults) {
+/// A current-mode loop on [`supply_board`] handed a measured supply of `volts` (as the
+/// protocol side's supervision does), enabled with a current command: its first duty.
+fn current_mode_duty(volts: f32) -> f32 {
     let b = supply_board();
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
@@ -946,25 +968,26 @@ fn current_mode_duty(volts: f32) -> (f32, Faults) {
     let mut req = Some(leak(Requests {
         enable: true,
         current: Some(0.05),
+        supply_v: Some(volts),
         ..Requests::default()
     }));
-    let mut duty = 0.0;
-    for _ in 0..4000 {
+    for _ in 0..100 {
         let inp = Inputs {
             encoder: 0,
-            // The sense reads zero current: the PI's output grows; its first steps are the
-            // proportional part alone on the same error, whatever the supply.
+            // The sense reads zero current: the PI's first output is its proportional part
+            // on the same error, whatever the supply.
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: Some(supply_code(volts)),
+            supply_code: supply_code(volts),
         };
         let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
-        if o.enabled && duty == 0.0 {
-            duty = o.duty;
+        if o.enabled && o.duty != 0.0 {
+            assert_eq!(lp.faults(), Faults::NONE);
+            return o.duty;
         }
     }
-    (duty, lp.faults())
+    panic!("never drove");
 }
 
 /// The current loop's gain follows the measured supply: the same voltage for the same
@@ -972,60 +995,63 @@ fn current_mode_duty(volts: f32) -> (f32, Faults) {
 /// the loop's gain before).
 #[test]
 fn the_current_loops_duty_follows_the_measured_supply() {
-    let (d12, f12) = current_mode_duty(12.0);
-    let (d24, f24) = current_mode_duty(24.0);
-    assert_eq!((f12, f24), (Faults::NONE, Faults::NONE));
+    let (d12, d24) = (current_mode_duty(12.0), current_mode_duty(24.0));
     assert!(d12 > 0.0, "{d12}");
-    // The divider's codes round the supply to 9 mV.
     assert!(
-        (d12 / d24 - 2.0).abs() < 2e-3,
+        (d12 / d24 - 2.0).abs() < 1e-5,
         "{d12} on 12 V, {d24} on 24 V"
     );
 }
 
-/// Outside the bridge's range the loop refuses `enable`; a supply that falls below it while
-/// driving latches `supply` and switches the bridge off.
+/// The protocol side measures the supply from the loop's divider codes (`Front::supervise`):
+/// outside the bridge's range `enable` is refused with the reason; a supply that collapses
+/// while driving latches `supply` and the bridge goes off; the measured supply is handed to
+/// the loop.
 #[test]
 fn a_supply_outside_the_bridges_range_refuses_enable_and_latches_while_driving() {
-    let (d, f) = current_mode_duty(5.0);
-    assert_eq!(d, 0.0, "enabled on 5 V");
-    assert_eq!(f, Faults::NONE, "a refusal is not a fault");
-    let b = supply_board();
-    let a = prepare(&default_settings(), &b).unwrap();
-    let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
-    let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
-    let mut req = Some(leak(Requests {
-        enable: true,
-        ..Requests::default()
-    }));
-    let mut volts = 12.0;
-    let mut off_at = None;
-    for k in 0..2000 {
-        if k == 400 {
-            // The supply collapses to 3 V (unplugged under load).
-            volts = 3.0;
-        }
-        let inp = Inputs {
-            encoder: 0,
-            current_codes: codes(2048),
-            since_last: period_cycles(),
-            supply_code: Some(supply_code(volts)),
-        };
-        let o = lp.step(inp, |_, _| req.take());
-        lp.finish(1000, false);
-        if k > 400 && !o.enabled && off_at.is_none() {
-            off_at = Some(k - 400);
-        }
-    }
-    assert!(lp.faults().contains(Faults::SUPPLY), "{:?}", lp.faults());
-    // The filter (a = T / τ per period, τ 2 ms) takes the reading from 12 V under 6.5 V
-    // after n periods, (1 − a)^n = 3.5 / 9: about 75 (1.9 ms); the bridge is off in that
-    // step's period.
-    let a = (1.0 / default_settings().cur_rate_hz) / gms_core::device::SUPPLY_TAU_S;
-    let n = ((6.5f32 - 3.0) / (12.0 - 3.0)).ln() / (1.0 - a).ln();
-    let off = off_at.expect("the bridge stayed on");
-    assert!(
-        (off as f32 - n).abs() <= 2.0,
-        "off {off} periods after the drop, {n:.1} expected"
+    use gms_core::device::LoopLink as _;
+    let mut dev = board_device_on(supply_board(), None);
+    dev.link_mut().supply = Some(supply_code(5.0));
+    // A position period: its status carries the code.
+    dev.link_mut().pause();
+    dev.link_mut().pause();
+    assert_eq!(
+        ask(&mut dev, "enable").trim(),
+        "err 8 motor supply below the bridge's range"
     );
+    dev.link_mut().supply = Some(supply_code(50.0));
+    // The filter (0.2 s) follows over a second of the calls' time.
+    for _ in 0..50 {
+        dev.link_mut().t_us += 20_000;
+        dev.link_mut().pause();
+        dev.supervise();
+    }
+    assert_eq!(
+        ask(&mut dev, "enable").trim(),
+        "err 8 motor supply above the bridge's range"
+    );
+    dev.link_mut().supply = Some(supply_code(12.0));
+    // From 50 V: (1 - 0.1)^100 of the 38 V step left, 1 mV.
+    for _ in 0..100 {
+        dev.link_mut().t_us += 20_000;
+        dev.link_mut().pause();
+        dev.supervise();
+    }
+    let v = dev.supply_v().unwrap();
+    assert!((v - 12.0).abs() < 0.05, "{v}");
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
+    // The supply collapses to 3 V while driving: latched within the filter's time.
+    dev.link_mut().supply = Some(supply_code(3.0));
+    let mut calls = 0;
+    while !ask(&mut dev, "status").contains("fault_names=supply") {
+        dev.link_mut().t_us += 20_000;
+        dev.link_mut().pause();
+        dev.supervise();
+        calls += 1;
+        assert!(calls < 100, "never latched");
+    }
+    // From 12 V through 6.5 V toward 3 V with a 0.2 s filter, at 20 ms a call:
+    // (1 - 0.1)^n = 3.5 / 9, n = 9 calls.
+    assert!((8..=11).contains(&calls), "{calls} calls");
+    assert!(ask(&mut dev, "status").contains("enabled=0"));
 }

@@ -200,7 +200,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
-                supply_code: Some(black_box(SUPPLY_12V)),
+                supply_code: black_box(SUPPLY_12V),
             },
             |_, _| first.take(),
         );
@@ -243,7 +243,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: 0,
                         current_codes: codes,
                         since_last: 0,
-                        supply_code: Some(black_box(SUPPLY_12V)),
+                        supply_code: black_box(SUPPLY_12V),
                     },
                     |st, c| mb.exchange(st, c).or_else(|| r.take()),
                 );
@@ -265,7 +265,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
-                supply_code: Some(black_box(SUPPLY_12V)),
+                supply_code: black_box(SUPPLY_12V),
             },
             |_, _| mv.take(),
         );
@@ -280,7 +280,7 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: black_box(encoder),
                         current_codes: black_box(codes),
                         since_last: black_box(period),
-                        supply_code: Some(black_box(SUPPLY_12V)),
+                        supply_code: black_box(SUPPLY_12V),
                     },
                     |st, c| {
                         let r = mb.exchange(st, c);

@@ -439,11 +439,11 @@ pub struct Controller<const N: usize> {
     e_cur: f32,
     /// The largest |duty| the board's sense allows [-] (1: the supply's).
     duty_max: f32,
-    /// The supply the board measures \[V\], used for the duty instead of `lim.v_supply`
-    /// ([`Controller::set_measured_supply`]); 0: none, the parameter.
-    v_meas: f32,
-    /// 1 / [`Controller::supply`] \[1/V\], kept with it: the duty a multiplication, not a
-    /// division, in each current step.
+    /// The supply the current loop divides by \[V\]: the board's measured one
+    /// ([`Controller::set_measured_supply`]), else `lim.v_supply`.
+    v_eff: f32,
+    /// 1 / `v_eff` \[1/V\], kept with it: the duty a multiplication, not a division, in each
+    /// current step.
     inv_supply: f32,
     adapt: Adaptive,
     shaping: Shaping,
@@ -518,7 +518,7 @@ impl<const N: usize> Controller<N> {
             cur_integ: 0.0,
             e_cur: 0.0,
             duty_max: 1.0,
-            v_meas: 0.0,
+            v_eff: p.v_supply,
             inv_supply: 1.0 / p.v_supply,
             out: PositionOutput::default(),
         })
@@ -556,18 +556,16 @@ impl<const N: usize> Controller<N> {
     /// 24 V supply under a 12 V setting doubled the loop's gain, +6 dB against the 4 dB of
     /// margin it has). Values that are not finite or under 0.1 V are taken as none.
     pub fn set_measured_supply(&mut self, v: Option<f32>) {
-        self.v_meas = v.filter(|v| v.is_finite() && *v >= 0.1).unwrap_or(0.0);
-        self.inv_supply = 1.0 / self.supply();
+        self.v_eff = v
+            .filter(|v| v.is_finite() && *v >= 0.1)
+            .unwrap_or(self.p.v_supply);
+        self.inv_supply = 1.0 / self.v_eff;
     }
 
     /// The supply the current loop divides by \[V\]: the measured one, else `lim.v_supply`.
     #[inline]
     pub fn supply(&self) -> f32 {
-        if self.v_meas > 0.0 {
-            self.v_meas
-        } else {
-            self.p.v_supply
-        }
+        self.v_eff
     }
 
     /// The duty limit [-] ([`Controller::set_duty_max`]).
@@ -694,8 +692,11 @@ impl<const N: usize> Controller<N> {
         self.w_ref = old.w_ref;
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
-        self.v_meas = old.v_meas;
-        self.inv_supply = 1.0 / self.supply();
+        // A supply the board measured stays (the new set's `lim.v_supply` is the nominal).
+        if old.v_eff != old.p.v_supply {
+            self.v_eff = old.v_eff;
+            self.inv_supply = old.inv_supply;
+        }
         self.shaping.take_state_from(&old.shaping);
         // The map's sample is this controller's own (the loop sets it, for the new settings,
         // before the hand-over): a map switched on or off changes the feedforward, and the

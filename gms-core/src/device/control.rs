@@ -103,10 +103,10 @@ pub fn calibrate_sense(
     }
 }
 
-/// The measured supply's filter time constant \[s\]: a reading per position period, its
-/// conversion noise (a few codes of a 1:11 divider: tens of mV) averaged over 2 ms, a supply
-/// sagging under a current step followed within a few ms.
-pub const SUPPLY_TAU_S: f32 = 2e-3;
+/// The measured supply's filter time constant \[s\] ([`crate::device::Front::supervise`],
+/// a reading each time it runs: at each request and the shell's periodic tick): a divider
+/// code's noise (13 mV a code at 1:16) averaged, a sag under load followed within a second.
+pub const SUPPLY_TAU_S: f32 = 0.2;
 
 /// What the hardware measured at the start of a PWM period.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -119,9 +119,9 @@ pub struct Inputs {
     /// `BoardLimits::clock_hz`]; 0 when not measured. A call more than 1.5 PWM periods after
     /// the last one missed a period: counted, and an `overrun` while the bridge drives.
     pub since_last: u32,
-    /// The supply divider's ADC code \[code\] ([`Board::supply`]), when the board has one and
-    /// converted it for this period; none otherwise (the loop keeps its last reading).
-    pub supply_code: Option<u32>,
+    /// The supply divider's ADC code \[code\] ([`Board::supply`]); 0 where the board has
+    /// none.
+    pub supply_code: u32,
 }
 
 /// What the shell writes to the hardware after a PWM period.
@@ -218,13 +218,8 @@ pub struct ControlLoop {
     table_report: TableReport,
     /// … and handed over at the next exchange when set.
     table_reported: bool,
-    /// The motor supply the board measures \[V\], filtered ([`Board::supply`]); none before
-    /// the first reading or without a divider.
-    supply_v: Option<f32>,
-    /// The supply's volts per divider code and its filter's gain per period [V, -]
-    /// ([`ControlLoop::supply_k_for`]).
-    supply_k: (f32, f32),
-    /// The divider's latest code \[code\] (0: none yet).
+    /// The supply divider's latest code \[code\] (0: none yet), for the status (the protocol
+    /// side measures the supply from it: [`crate::device::Front::supervise`]).
     supply_code: u32,
     /// The table's correction in the last step \[N·m\] (0 when none plays).
     table_corr: f32,
@@ -318,8 +313,6 @@ impl ControlLoop {
             table: Player::default(),
             table_report: TableReport::default(),
             table_reported: false,
-            supply_v: None,
-            supply_k: (0.0, 0.0),
             supply_code: 0,
             table_corr: 0.0,
             fresh: false,
@@ -327,7 +320,6 @@ impl ControlLoop {
             ahead: None,
         };
         lp.limits = lp.reachable(lp.limits);
-        lp.supply_k = Self::supply_k_for(&lp.board, lp.ctrl.dt_pos());
         lp
     }
 
@@ -461,51 +453,11 @@ impl ControlLoop {
         self.last_pos = self.enc.count();
     }
 
-    /// The supply's volts per divider code and its filter's gain per position period.
-    fn supply_k_for(board: &Board, dt_pos: f32) -> (f32, f32) {
-        let per_code = board.supply.map_or(0.0, |ss| {
-            ss.volts(1, board.sense.vref, board.sense.full_scale)
-        });
-        (per_code, (dt_pos / SUPPLY_TAU_S).min(1.0))
-    }
-
-    /// The position period's supply reading (the divider's latest code): filtered (a first
-    /// order of [`SUPPLY_TAU_S`]; the first reading at once), handed to the current loop,
-    /// and `supply` latched while driving outside the bridge's range. Nothing without a
-    /// divider or before its first code.
-    fn take_supply(&mut self, faults: &mut Faults) {
-        let Some(ss) = self.board.supply else {
-            return;
-        };
-        if self.supply_code == 0 {
-            return;
-        }
-        let v = self.supply_code as f32 * self.supply_k.0;
-        let f = match self.supply_v {
-            Some(f) => f + self.supply_k.1 * (v - f),
-            None => v,
-        };
-        self.supply_v = Some(f);
-        self.ctrl.set_measured_supply(Some(f));
-        if self.enabled && !ss.within(f) {
-            faults.latch(Faults::SUPPLY);
-        }
-    }
-
-    /// The supply allows driving: the board has no divider, or the supply it measures is
-    /// within the bridge's range.
-    fn supply_ok(&self) -> bool {
-        match self.board.supply {
-            None => true,
-            Some(ss) => self.supply_v.is_some_and(|v| ss.within(v)),
-        }
-    }
-
     /// The status as of the last position step.
     pub fn status(&self) -> Status {
         Status {
             steps: self.steps,
-            supply_v: self.supply_v,
+            supply_code: self.supply_code,
             pos_rate_hz: self.ctrl.params().pos_rate_hz,
             pos: self.enc.count(),
             reference: self.r,
@@ -574,7 +526,6 @@ impl ControlLoop {
                 || old.sense_v_per_a != new.sense_v_per_a;
             let amps_per_code = self.board.sense.amps_per_code(new.sense_v_per_a);
             let new_enc_dir = new.enc_dir;
-            let next_dt_pos = next.dt_pos();
             if dirs {
                 // The bridge goes off, and the count goes on from where it is, counting the
                 // new way (the same count is the same place: a new resolution reads it in
@@ -596,7 +547,6 @@ impl ControlLoop {
                 self.phase = 0;
                 self.psc = a.psc;
                 self.arr = a.arr;
-                self.supply_k = Self::supply_k_for(&self.board, next_dt_pos);
                 timing = Some((a.psc, a.arr));
             }
             // The running controller swapped for the new one by reference (no copy in the
@@ -649,7 +599,10 @@ impl ControlLoop {
         if req.disable {
             self.switch_off();
         }
-        if req.enable && self.faults.is_empty() && !self.enabled && self.supply_ok() {
+        if let Some(v) = req.supply_v {
+            self.ctrl.set_measured_supply(Some(v));
+        }
+        if req.enable && self.faults.is_empty() && !self.enabled {
             self.hold_here();
             self.enabled = true;
             let wake = self.board.bridge_wake_s * self.ctrl.params().cur_rate_hz;
@@ -760,11 +713,10 @@ impl ControlLoop {
                 .sense
                 .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
         let mut new_faults = Faults::NONE;
-        // The divider's latest code (a reading per period where the board has one), taken up
-        // once per position period (`take_supply`).
-        if let Some(code) = inp.supply_code {
-            self.supply_code = code;
-        }
+        // The divider's latest code (a reading per period where the board has one), for the
+        // status: the protocol side works out the supply from it (thread mode: the control
+        // step's budget has no room for it).
+        self.supply_code = inp.supply_code;
         let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
         if missed > 0 {
             self.missed_since_pos = self.missed_since_pos.saturating_add(missed);
@@ -832,7 +784,6 @@ impl ControlLoop {
             }
         }
         if self.phase == 0 {
-            self.take_supply(&mut new_faults);
             self.steps = self.steps.wrapping_add(1);
             let pos = self.enc.count();
             let delta = pos.saturating_sub(self.last_pos);

@@ -367,6 +367,9 @@ pub struct Requests {
     pub clear: bool,
     /// Latch these faults.
     pub latch: Faults,
+    /// The motor supply the protocol side measured \[V\] ([`Front::supervise`]): the current
+    /// loop's duty follows it from this exchange on.
+    pub supply_v: Option<f32>,
     /// Start a move (ignored while disabled).
     pub motion: Option<MoveRequest>,
     /// Start a speed profile (ignored while disabled).
@@ -403,6 +406,7 @@ impl Requests {
             disable: false,
             clear: false,
             latch: Faults::NONE,
+            supply_v: None,
             motion: None,
             velocity: None,
             current: None,
@@ -430,8 +434,8 @@ impl Default for Requests {
 pub struct Status {
     /// Position steps since start (the step whose values these are).
     pub steps: u64,
-    /// The motor supply the board measures \[V\] (filtered), none without a divider.
-    pub supply_v: Option<f32>,
+    /// The supply divider's latest ADC code \[code\] (0: none, or no divider).
+    pub supply_code: u32,
     /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
     /// Encoder position \[counts\].
@@ -567,7 +571,7 @@ impl Mailbox {
             returned: None,
             status: Status {
                 steps: 0,
-                supply_v: None,
+                supply_code: 0,
                 pos_rate_hz: 0.0,
                 pos: 0,
                 reference: RefSample {

@@ -186,7 +186,7 @@ impl Sim {
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
                 // The board's supply divider, read as its ADC would (no noise: a 1:16
                 // divider's codes are 13 mV).
-                supply_code: self.supply.map(|ss| {
+                supply_code: self.supply.map_or(0, |ss| {
                     let v = self.plant.supply_volts() / ss.divider as f64;
                     (v / self.sense.vref as f64 * self.sense.full_scale as f64)
                         .round()

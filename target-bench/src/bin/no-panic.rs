@@ -60,7 +60,7 @@ impl LoopLink for CheckLink {
             encoder: black_box(7),
             current_codes: black_box(16 * 2048), // zero current: 16 conversions at mid-scale
             since_last: black_box(8400),
-            supply_code: Some(black_box(SUPPLY_12V)),
+            supply_code: black_box(SUPPLY_12V),
         };
         let mb = &mut self.mailbox;
         let out = self.core.step(inp, |st, c| mb.exchange(st, c));

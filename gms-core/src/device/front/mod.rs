@@ -69,6 +69,10 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     frf: crate::control::frf::FrfReport,
     /// Why the board must not drive at all, found at start ([`Front::refusing_to_drive`]).
     no_drive: Option<&'static str>,
+    /// The motor supply measured \[V\] (filtered), the time of its last reading \[µs\], and the
+    /// value last handed to the loop ([`Front::supervise`]).
+    supply: Option<(f32, u64)>,
+    supply_posted: Option<f32>,
 }
 
 /// The protocol side's share of the storage the two halves hand each other: the requests'
@@ -157,6 +161,8 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             upload: Upload::default(),
             frf: crate::control::frf::FrfReport::default(),
             no_drive: None,
+            supply: None,
+            supply_posted: None,
         }
     }
 
@@ -196,13 +202,60 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         }
     }
 
+    /// The motor supply, where the board has a divider (thread mode: the control step has
+    /// no room for it): the loop's latest divider code in volts, filtered over
+    /// [`SUPPLY_TAU_S`](crate::device::SUPPLY_TAU_S) of the calls' own times (the first
+    /// reading at once); handed to the loop when it moved by more than 0.5 % since the last
+    /// (its current loop's duty follows it); while driving outside the bridge's range,
+    /// `supply` latched (the loop switches off). Called at each request that may drive and
+    /// by the shell's periodic tick. A refused hand-over (a lost loop) changes nothing.
+    pub fn supervise(&mut self) {
+        let Some(ss) = self.board.supply else {
+            return;
+        };
+        let st = self.status_now();
+        if st.supply_code == 0 {
+            return;
+        }
+        let v = ss.volts(
+            st.supply_code,
+            self.board.sense.vref,
+            self.board.sense.full_scale,
+        );
+        let now = self.link.now_us();
+        let f = match self.supply {
+            Some((f, at)) => {
+                let dt = now.saturating_sub(at) as f32 * 1e-6;
+                f + (dt / crate::device::SUPPLY_TAU_S).min(1.0) * (v - f)
+            }
+            None => v,
+        };
+        self.supply = Some((f, now));
+        if st.enabled && !ss.within(f) {
+            let _ = self.post(|r| r.latch = crate::drive::Faults::SUPPLY);
+        } else if self
+            .supply_posted
+            .is_none_or(|p| (f / p - 1.0).abs() > 0.005)
+            && self.post(|r| r.supply_v = Some(f)).is_ok()
+        {
+            self.supply_posted = Some(f);
+        }
+    }
+
+    /// The motor supply measured \[V\] ([`Front::supervise`]), none without a divider or
+    /// before its first reading.
+    pub fn supply_v(&self) -> Option<f32> {
+        self.supply.map(|s| s.0)
+    }
+
     /// Refuses to drive when the board measures its supply outside the bridge's range (or
     /// has no reading yet).
     fn supply_in_range(&mut self) -> Result<(), &'static str> {
         let Some(ss) = self.board.supply else {
             return Ok(());
         };
-        match self.status_now().supply_v {
+        self.supervise();
+        match self.supply_v() {
             Some(v) if ss.within(v) => Ok(()),
             Some(v) if v < ss.range_v.0 => Err("motor supply below the bridge's range"),
             Some(_) => Err("motor supply above the bridge's range"),
