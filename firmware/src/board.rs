@@ -24,7 +24,7 @@ use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::InterruptExt;
-use embassy_stm32::peripherals::{ADC1, PC0, TIM2, TIM8};
+use embassy_stm32::peripherals::{ADC1, PC0, PC1, TIM2, TIM8};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::qei::{Qei, QeiMode};
@@ -166,6 +166,9 @@ pub struct ControlHw {
     _isense: Peri<'static, PC0>,
     _pwm: SimplePwm<'static, TIM8>,
     _qei: Qei<'static, TIM2>,
+    _vsupply: Peri<'static, PC1>,
+    /// The supply divider's latest code (0 before the first conversion).
+    supply: u32,
 }
 
 impl ControlHw {
@@ -210,6 +213,19 @@ impl ControlHw {
     #[inline(always)]
     pub fn sense_clipped(&self) -> bool {
         sense::clipped(pac::ADC1)
+    }
+
+    /// The supply divider's code from the injected conversion the last step started (0 while
+    /// none has finished), and the next one started: the step runs after the sense's
+    /// sequence ended, so the conversion (96 ADC clocks, 4.6 µs) is done before the next
+    /// sequence's trigger (`f4_regs::sense::supply_init`).
+    #[inline(always)]
+    pub fn supply_code(&mut self) -> u32 {
+        if let Some(c) = sense::supply_read(pac::ADC1) {
+            self.supply = u32::from(c);
+        }
+        sense::supply_start(pac::ADC1);
+        self.supply
     }
 
     /// Where the PWM timer is in its period now (gms-core's `drive::pwm_phase`).
@@ -360,6 +376,9 @@ pub fn init() -> (ControlHw, Rest) {
         },
         SENSE_BUF.addr(),
     );
+    // The motor supply's divider (PC1, ADC1_IN11): an injected conversion the control step
+    // starts after it read its sequence and reads in the next (`supply_code`).
+    sense::supply_init(pac::ADC1, pac::GPIOC, SUPPLY_PIN, SUPPLY_CHANNEL);
 
     // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
     // the reset priority 0, above the loop (time_driver/gp16.rs); the host link lowest.
@@ -443,6 +462,8 @@ pub fn init() -> (ControlHw, Rest) {
         _isense: p.PC0,
         _pwm: pwm,
         _qei: qei,
+        _vsupply: p.PC1,
+        supply: 0,
     };
     let rest = Rest {
         link,

@@ -179,6 +179,9 @@ pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: Telem
                 }
                 Either3::First(Err(_)) => break,
                 Either3::Third(()) => {
+                    // The motor supply's supervision (thread mode's: gms-core's
+                    // `Front::supervise`), at the DTR poll's pace.
+                    dev.supervise();
                     if !port.host_here() {
                         break;
                     }

@@ -178,7 +178,7 @@ impl Loop {
             encoder: self.hw.encoder_raw(),
             current_codes: self.hw.current_codes(),
             since_last,
-            supply_code: 0,
+            supply_code: self.hw.supply_code(),
         };
         // A buffer the DMA has begun to overwrite (a single buffer: the step started so late
         // that the next sequence is under way) is not a reading.

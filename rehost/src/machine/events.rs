@@ -168,6 +168,15 @@ impl Machine {
 
     pub(super) fn fire_adc(&mut self, t: u64) {
         self.advance_plant(t);
+        if self.chip().p.adc.injected_due(t) {
+            // The supply divider's injected conversion (the boards' PC1: the plant's supply
+            // terminal through gms-core's power stage's 1:16, 4095 codes over 3.3 V).
+            let v = self.plant.supply_volts()
+                / f64::from(gms_core::boards::power_stage::SUPPLY_DIVIDER);
+            let code = (v / 3.3 * 4095.0).round().clamp(0.0, 4095.0) as u32;
+            self.chip_mut().p.adc.take_injected(code);
+            return;
+        }
         // The current at the sampling instant through the board's sense chain: 3.4 V/A
         // around 1.65 V, 4095 codes over 3.3 V (power_stage.rs). One conversion of the
         // sequence the firmware averages: the scenario's noise is the average's, so one

@@ -50,7 +50,16 @@ pub struct Adc {
     pub dr_full: bool,
     /// The data register.
     dr: u32,
+    /// The injected conversion in progress: when it ends \[cycles\].
+    injected: Option<u64>,
 }
+
+/// SR.JEOC.
+pub const SR_JEOC: u32 = 1 << 2;
+/// SR.JSTRT.
+pub const SR_JSTRT: u32 = 1 << 3;
+/// CR2.JSWSTART.
+const JSWSTART: u32 = 1 << 22;
 
 const SR: usize = 0;
 const CR1: usize = 1;
@@ -62,6 +71,8 @@ const LTR: usize = 10;
 const SQR1: usize = 11;
 const SQR3: usize = 13;
 const DR: usize = 19;
+const JSQR: usize = 14;
+const JDR1: usize = 15;
 
 impl Adc {
     /// The ADC at reset on a core whose APB2 clock is 1/`apb2_div` of the core's.
@@ -76,6 +87,7 @@ impl Adc {
             apb2_div,
             dr_full: false,
             dr: 0,
+            injected: None,
         }
     }
 
@@ -92,7 +104,11 @@ impl Adc {
     /// One conversion's time \[cycles\]: the sampling time of its channel (SMPR: 3, 15, 28,
     /// 56, 84, 112, 144, 480 cycles) + 12.
     pub fn conversion_cycles(&self) -> u64 {
-        let ch = self.first_channel();
+        self.conversion_cycles_of(self.first_channel())
+    }
+
+    /// Channel `ch`'s conversion time \[cycles\] (see [`Adc::conversion_cycles`]).
+    fn conversion_cycles_of(&self, ch: u32) -> u64 {
         let smp = if ch >= 10 {
             (self.regs[SMPR1] >> (3 * (ch - 10))) & 7
         } else {
@@ -131,9 +147,29 @@ impl Adc {
         ));
     }
 
-    /// When the next conversion ends \[cycles\].
+    /// When the next conversion ends \[cycles\] (regular or injected).
     pub fn next_event(&self) -> Option<u64> {
-        self.running.map(|(t, _)| t)
+        match (self.running.map(|(t, _)| t), self.injected) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// The injected channel (one rank: JL = 0 converts JSQ4, RM0090 §13.13.12).
+    pub fn injected_channel(&self) -> u32 {
+        (self.regs[JSQR] >> 15) & 0x1F
+    }
+
+    /// Whether the conversion due at `t` is the injected one.
+    pub fn injected_due(&self, t: u64) -> bool {
+        self.injected.is_some_and(|i| i <= t)
+    }
+
+    /// Ends the injected conversion with the result `code`: into JDR1, JEOC set.
+    pub fn take_injected(&mut self, code: u32) {
+        self.injected = None;
+        self.regs[JDR1] = code & 0xFFF;
+        self.regs[SR] |= SR_JEOC;
     }
 
     /// Ends the conversion due at `t` with the result `code`: into DR, EOC set, OVR if the
@@ -208,9 +244,21 @@ impl Adc {
             0x00 => self.regs[SR] &= value, // rc_w0
             0x08 => {
                 let was_on = self.on();
-                self.regs[CR2] = value & !(1 << 30);
+                self.regs[CR2] = value & !((1 << 30) | JSWSTART);
+                if value & JSWSTART != 0 && was_on && self.injected.is_none() {
+                    // A software start of the injected rank (RM0090 §13.3.5): a regular
+                    // conversion under way is interrupted and resumed after it, its end
+                    // later by the injected conversion's time.
+                    let d = self.conversion_cycles_of(self.injected_channel());
+                    self.injected = Some(now + LATENCY * self.adc_clock() + d);
+                    self.regs[SR] |= SR_JSTRT;
+                    if let Some((t, left)) = self.running {
+                        self.running = Some((t + d, left));
+                    }
+                }
                 if !self.on() {
                     self.running = None;
+                    self.injected = None;
                 }
                 if value & (1 << 30) != 0 && was_on {
                     self.trigger(now);
@@ -315,5 +363,40 @@ mod tests {
         assert_ne!(a.read(0) & SR_OVR, 0);
         assert!(a.irq());
         assert_eq!(a.next_event(), None, "the sequence stopped");
+    }
+}
+
+#[cfg(test)]
+mod injected_tests {
+    use super::*;
+
+    /// A software-started injected conversion (JSWSTART) of JSQ4's channel ends after the
+    /// trigger latency and its channel's conversion time, JSTRT at the start, JEOC and JDR1 at
+    /// the end; a regular sequence under way is delayed by it (RM0090 §13.3.5).
+    #[test]
+    fn an_injected_conversion_delays_the_regular_one_it_interrupts() {
+        let mut a = Adc::new(2);
+        a.write(0x304, 1 << 16, 0); // ADCPRE /4: an ADC clock of 8 core cycles
+        a.write(0x0C, (1 << 0) | (4 << 3), 0); // SMPR1: ch 10 at 15, ch 11 at 84 cycles
+        a.write(0x34, 10, 0); // SQ1 = 10, one conversion
+        a.write(0x38, 11 << 15, 0); // JL 0, JSQ4 = 11
+        a.write(0x08, 1, 0); // ADON
+        a.trigger(1000);
+        let regular = a.next_event().unwrap();
+        assert_eq!(regular, 1000 + (LATENCY + 15 + 12) * 8);
+        a.write(0x08, 1 | (1 << 22), 1010);
+        assert_ne!(a.read(0x00) & SR_JSTRT, 0);
+        assert_eq!(a.read(0x08) & (1 << 22), 0, "JSWSTART clears itself");
+        let inj = 1010 + (LATENCY + 84 + 12) * 8;
+        assert_eq!(a.next_event(), Some(inj.min(regular + 96 * 8)));
+        assert!(!a.injected_due(inj - 1) && a.injected_due(inj));
+        a.take_injected(931);
+        assert_ne!(a.read(0x00) & SR_JEOC, 0);
+        assert_eq!(a.read(0x3C), 931);
+        assert_eq!(
+            a.next_event(),
+            Some(regular + 96 * 8),
+            "the regular one resumed later"
+        );
     }
 }
