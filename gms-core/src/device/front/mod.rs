@@ -75,6 +75,9 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     supply_posted: Option<f32>,
 }
 
+/// Loop pauses `enable` waits at most for the supply's first reading (each a period or more).
+const SUPPLY_WAIT_PAUSES: u32 = 100;
+
 /// The protocol side's share of the storage the two halves hand each other: the requests'
 /// (while not posted or with the loop) and the spare controller's (where the next parameter
 /// set is built, outside the control interrupt).
@@ -254,6 +257,14 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         let Some(ss) = self.board.supply else {
             return Ok(());
         };
+        // Right after the start the loop may not have published a reading yet: a few
+        // periods' wait for its first.
+        for _ in 0..SUPPLY_WAIT_PAUSES {
+            if self.status_now().supply_code != 0 {
+                break;
+            }
+            self.link.pause();
+        }
         self.supervise();
         match self.supply_v() {
             Some(v) if ss.within(v) => Ok(()),
