@@ -507,6 +507,11 @@ struct Stalling {
     latency: f64,
     /// Whether a `hold` was accepted.
     held: bool,
+    /// A current \[A\] set just before the stall, if any: an axis that broke away and runs
+    /// on under it, whatever the plant's edge between creep and runaway.
+    push: Option<f64>,
+    /// How many requests stalled.
+    stalls: u32,
 }
 
 impl gms_link::DeviceLink for Stalling {
@@ -515,7 +520,14 @@ impl gms_link::DeviceLink for Stalling {
         c: gms_core::protocol::Command<'_>,
     ) -> Result<(Vec<String>, String), gms_link::Error> {
         if c.to_string() == self.on {
+            if let Some(amps) = self.push {
+                self.dev.request(gms_core::protocol::Command::Current {
+                    amps: amps as f32,
+                    seconds: None,
+                })?;
+            }
             self.dev.pass(self.stall)?;
+            self.stalls += 1;
         }
         if self.latency > 0.0 {
             self.dev.pass(self.latency)?;
@@ -553,6 +565,8 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
             on: "status",
             latency: 0.0,
             held: false,
+            push: None,
+            stalls: 0,
         };
         let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
         plan.guard = guard;
@@ -589,9 +603,13 @@ fn a_stalling_host_cannot_run_the_staircase_away() {
 }
 
 /// A host late with the hold after it saw the breakaway (1 s of device time: a loaded host
-/// against `hil-sim serve --speed 20`, as once in CI): the axis, still under the staircase's
-/// current, runs on to the guard, the hold is refused (the bridge is off) — the staircase's
-/// end, as when the guard is reached during a step: its data kept, the fault cleared.
+/// against `hil-sim serve --speed 20`, as once in CI): the axis, still under current, runs on
+/// to the guard, the hold is refused (the bridge is off) — the staircase's end, as when the
+/// guard is reached during a step: its data kept, the fault cleared. On this plant the
+/// staircase may see its "breakaway" in pre-sliding (the Table 1 blocks' last breakpoints
+/// lie beyond the 20 mrad window: 24 mrad at 82 % of Fs, creeping at 30 µrad/s), where the
+/// staircase's current does not run the axis away; so the late host holds 1.5 × Fs / k_M
+/// over its stall, as an axis that had broken away would run under it.
 #[test]
 fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
     use gms_bench::{Bench, position, presliding};
@@ -602,9 +620,12 @@ fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
         on: "hold",
         latency: 0.0,
         held: false,
+        push: None,
+        stalls: 0,
     };
     // The identification's own staircase (the erase first, the measuring loop, its guard).
     let info = gms_bench::DeviceInfo::read(&mut b).unwrap();
+    b.push = Some(1.5 * info.fs / info.k_m);
     let plan = gms_bench::Plans::new(&info, &gms_bench::Ranges::default())
         .unwrap()
         .presliding;
@@ -613,8 +634,15 @@ fn a_host_late_with_the_hold_ends_the_staircase_at_the_guard() {
     b.dev.wait(0.5).unwrap();
     let x = position(&mut b).unwrap();
     let (_, st) = b.dev.console("status").unwrap();
-    eprintln!("{} steps, stopped at {x:.3} rad; {st}", pre.len());
+    eprintln!(
+        "{} steps, a hold asked {} time(s), accepted {}; stopped at {x:.3} rad; {st}",
+        pre.len(),
+        b.stalls,
+        b.held
+    );
     r.unwrap();
+    // The staircase ended by its hold, which came after the guard: refused.
+    assert!(b.stalls == 1 && !b.held, "{} {}", b.stalls, b.held);
     assert!(pre.len() > 80 && pre.len() < 150, "{} steps", pre.len());
     assert!(x > 0.5 && x < 0.6, "x {x}");
     assert!(st.contains("faults=0") && st.contains("enabled=0"), "{st}");
@@ -637,6 +665,8 @@ fn a_hold_at_the_guards_edge_leaves_no_fault() {
             on: "hold",
             latency: 2e-3,
             held: false,
+            push: None,
+            stalls: 0,
         };
         let mut plan = PreslidingPlan::new(220e-6 / 100.0 / 6.6e-3, 150);
         plan.erase = false;

@@ -189,20 +189,24 @@ fn the_map_survives_save_and_a_power_cycle() {
     assert_eq!(posmap::read(&mut dev).unwrap(), before);
 }
 
-/// Switching the map on and off while the axis holds is bumpless: the current commanded does
-/// not step by the map's offset at the switch (the position loop's integrator takes it over).
+/// Switching the map on and off while the axis holds is bumpless: the current does not step
+/// by the map's offset at the switch (the position loop's integrator takes it over). The
+/// switch is found in the capture by the feedforward's step (the map's offset, so the test
+/// fails if the map never switched), and the current's mean over the 1 ms on each side of it
+/// is compared: without the hand-over it would step by the offset's 7.6 mA.
 #[test]
 fn switching_the_map_is_bumpless() {
     let sc = Scenario::parse(RIPPLE, "ripple").unwrap();
     let mut dev = LocalDevice::new(&sc).unwrap();
     // A map of a constant offset of 50 µN·m (7.6 mA at k_M 6.6 mN·m/A) and scale 1.
     let n = 64;
+    let offset = 50e-6;
     let map = posmap::PosMap {
         period: std::f64::consts::TAU,
         angle: (0..n)
             .map(|i| std::f64::consts::TAU * i as f64 / n as f64)
             .collect(),
-        offset: vec![50e-6; n],
+        offset: vec![offset; n],
         scale: vec![1.0; n],
         friction: f64::NAN,
         residual: (0.0, 0.0),
@@ -211,23 +215,37 @@ fn switching_the_map_is_bumpless() {
     use gms_bench::Bench;
     dev.console("enable").unwrap();
     dev.wait(0.3).unwrap();
-    let mut steps = Vec::new();
-    for on in ["0", "1", "0"] {
-        dev.capture("t,current", 1, 400, false).unwrap();
+    let k_m = sc.plant.k_m;
+    // Samples on each side of the switch: 1 ms at the capture's 20 kHz.
+    let side = 20;
+    for on in ["1", "0"] {
+        dev.capture("t,current,ff", 1, 400, false).unwrap();
         dev.wait(0.01).unwrap();
         dev.console(&format!("set map.enable {on}")).unwrap();
         dev.wait(0.05).unwrap();
         let rows = gms_bench::capture_rows(&mut dev).unwrap();
-        let d: Vec<f64> = rows.windows(2).map(|w| (w[1][1] - w[0][1]).abs()).collect();
-        steps.push(d.iter().fold(0.0f64, |a, x| a.max(*x)));
+        // The switch: the feedforward steps by the map's offset there.
+        let at = rows
+            .windows(2)
+            .position(|w| (w[1][2] - w[0][2]).abs() > 0.5 * offset)
+            .unwrap_or_else(|| panic!("no switch of the map {on} seen in the capture"));
+        let ff_step = rows[at + 1][2] - rows[at][2];
+        assert!(
+            (ff_step.abs() - offset).abs() < 0.1 * offset,
+            "the feedforward stepped by {ff_step:.3e} N·m, the map's offset is {offset:.1e}"
+        );
+        assert!(
+            at + 1 >= side && at + 1 + side <= rows.len(),
+            "switch at {at}"
+        );
+        let mean = |r: &[Vec<f64>]| r.iter().map(|x| x[1]).sum::<f64>() / r.len() as f64;
+        let before = mean(&rows[at + 1 - side..=at]);
+        let after = mean(&rows[at + 1..at + 1 + side]);
+        let bump = (after - before).abs();
+        let offset_a = offset / k_m;
+        println!(
+            "map {on}: the current's mean {before:.2e} A before the switch, {after:.2e} A after (a step of {bump:.2e} A; the offset is {offset_a:.2e} A)"
+        );
+        assert!(bump < 0.25 * offset_a, "{bump:.3e} A");
     }
-    println!(
-        "largest step of the current between samples: holding {:.2e} A; around the switch on {:.2e} A, off {:.2e} A (the offset is 7.6e-3 A)",
-        steps[0], steps[1], steps[2]
-    );
-    // No larger than the sense's noise and the loop's dither while it holds.
-    assert!(
-        steps[1] < 1.5 * steps[0] && steps[2] < 1.5 * steps[0],
-        "{steps:?}"
-    );
 }
