@@ -288,22 +288,17 @@ pub fn supply_init(adc: pac::adc::Adc, gpio: pac::gpio::Gpio, pin: usize, channe
     adc.cr2().modify(|w| w.set_jexten(Exten::DISABLED));
 }
 
-/// ADC_SR written to clear JEOC alone (rc_w0, see [`SR_CLEAR_AWD`]).
-pub const SR_CLEAR_JEOC: u32 = 0x3B;
-
 /// Starts the supply's injected conversion (ADC_CR2.JSWSTART, RM0090 §13.13.3).
 #[inline(always)]
 pub fn supply_start(adc: pac::adc::Adc) {
     adc.cr2().modify(|w| w.set_jswstart(true));
 }
 
-/// The supply's code once its conversion has finished (SR.JEOC, then cleared; ADC_JDR1,
-/// §13.13.14), else none.
+/// The supply's latest code (ADC_JDR1, §13.13.14: it holds the last injected conversion's
+/// result, 0 from reset until the first), read from any context: SR.JEOC is left alone
+/// (its interrupt is not enabled), so no flag is written that the control step's own
+/// writes of ADC_SR could race.
 #[inline(always)]
-pub fn supply_read(adc: pac::adc::Adc) -> Option<u16> {
-    if !adc.sr().read().jeoc() {
-        return None;
-    }
-    adc.sr().write(|w| w.0 = SR_CLEAR_JEOC);
-    Some(adc.jdr(0).read().jdata())
+pub fn supply_latest(adc: pac::adc::Adc) -> u16 {
+    adc.jdr(0).read().jdata()
 }

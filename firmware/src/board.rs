@@ -167,8 +167,6 @@ pub struct ControlHw {
     _pwm: SimplePwm<'static, TIM8>,
     _qei: Qei<'static, TIM2>,
     _vsupply: Peri<'static, PC1>,
-    /// The supply divider's latest code (0 before the first conversion).
-    supply: u32,
 }
 
 impl ControlHw {
@@ -215,17 +213,13 @@ impl ControlHw {
         sense::clipped(pac::ADC1)
     }
 
-    /// The supply divider's code from the injected conversion the last step started (0 while
-    /// none has finished), and the next one started: the step runs after the sense's
+    /// Starts the supply divider's injected conversion: the step runs after the sense's
     /// sequence ended, so the conversion (96 ADC clocks, 4.6 µs) is done before the next
-    /// sequence's trigger (`f4_regs::sense::supply_init`).
+    /// sequence's trigger (`f4_regs::sense::supply_init`); thread mode reads its result
+    /// ([`supply_code`]).
     #[inline(always)]
-    pub fn supply_code(&mut self) -> u32 {
-        if let Some(c) = sense::supply_read(pac::ADC1) {
-            self.supply = u32::from(c);
-        }
+    pub fn supply_start(&mut self) {
         sense::supply_start(pac::ADC1);
-        self.supply
     }
 
     /// Where the PWM timer is in its period now (gms-core's `drive::pwm_phase`).
@@ -277,6 +271,12 @@ pub struct Rest {
     /// True when TIM8's update event was seen at the counter's bottom (see
     /// [`align_update_to_bottom`]); false means the compare values may be taken mid-step.
     pub update_at_bottom: bool,
+}
+
+/// The supply divider's latest code (ADC1's JDR1: 0 before the first conversion), read in
+/// thread mode: the control step only starts the conversions ([`ControlHw::supply_start`]).
+pub fn supply_code() -> u32 {
+    u32::from(sense::supply_latest(pac::ADC1))
 }
 
 /// Sets up the board. The bridge starts off (both inputs low) and the PWM timer's update
@@ -377,7 +377,7 @@ pub fn init() -> (ControlHw, Rest) {
         SENSE_BUF.addr(),
     );
     // The motor supply's divider (PC1, ADC1_IN11): an injected conversion the control step
-    // starts after it read its sequence and reads in the next (`supply_code`).
+    // starts after it read its sequence; thread mode reads its data register (`supply_code`).
     sense::supply_init(pac::ADC1, pac::GPIOC, SUPPLY_PIN, SUPPLY_CHANNEL);
 
     // Below the control loop (`irq.rs`): embassy's time driver enabled TIM4's interrupt at
@@ -463,7 +463,6 @@ pub fn init() -> (ControlHw, Rest) {
         _pwm: pwm,
         _qei: qei,
         _vsupply: p.PC1,
-        supply: 0,
     };
     let rest = Rest {
         link,

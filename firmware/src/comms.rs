@@ -22,7 +22,7 @@
 use core::fmt::{self, Write};
 
 use defmt::{info, warn};
-use embassy_futures::select::{Either3, select3};
+use embassy_futures::select::{Either, Either3, select, select3};
 use embassy_time::{Duration, Instant, Ticker};
 use gms_core::device::{Front, LoopLink, Mailbox, Status};
 use gms_core::protocol::{self, Line, LineReader};
@@ -49,6 +49,9 @@ impl LoopLink for IrqLink {
         Instant::now().as_micros()
     }
     fn pause(&mut self) {}
+    fn supply_code(&mut self) -> u32 {
+        crate::board::supply_code()
+    }
 }
 
 /// The firmware's side of the protocol.
@@ -106,9 +109,14 @@ pub async fn serve<P: Port>(mut port: P, dev: &'static mut Dev, telemetry: Telem
     let mut reply = Buf::<REPLY>::new();
     let mut lines = Buf::<512>::new();
     let mut packet = [0u8; 64];
+    // The supply's supervision between sessions too (a hold stays on without a host).
+    let mut idle = Ticker::every(Duration::from_millis(gms_core::device::SUPERVISE_MS));
     loop {
-        // USB: configured by the host (the port itself may not be open yet).
-        port.connected().await;
+        // USB: configured by the host (the port itself may not be open yet). Cancel-safe:
+        // `connected` starts its wait over each time.
+        while let Either::Second(()) = select(port.connected(), idle.next()).await {
+            dev.supervise();
+        }
         info!("{} session start", P::NAME);
         // A new session: no partial line from the last one.
         let mut reader = LineReader::default();

@@ -178,8 +178,9 @@ impl Loop {
             encoder: self.hw.encoder_raw(),
             current_codes: self.hw.current_codes(),
             since_last,
-            supply_code: self.hw.supply_code(),
         };
+        // The supply divider's conversion, for thread mode (`comms::IrqLink::supply_code`).
+        self.hw.supply_start();
         // A buffer the DMA has begun to overwrite (a single buffer: the step started so late
         // that the next sequence is under way) is not a reading.
         if self.hw.sense_stale() {

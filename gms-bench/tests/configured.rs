@@ -41,6 +41,7 @@ impl gms_link::DeviceLink for Fake {
                     late: 0,
                     duty_max: 1.0,
                     duty_limited: 0,
+                    supply: 12.0,
                     drive: DriveKind::Position,
                     configured: self.configured == Some(1),
                 }

@@ -5,13 +5,11 @@ use gms_core::device::{
 };
 use gms_core::drive::Faults;
 
-/// The F405 board (gms-core's description), its bridge driving at once on `enable`, its
-/// supply taken as set (`lim.v_supply`: these tests' inputs carry no divider's reading; the
-/// divider's own tests use [`supply_board`]).
+/// The F405 board (gms-core's description), its bridge driving at once on `enable` (its
+/// supply divider reads 12 V in [`board_device`]'s link).
 fn board() -> Board {
     Board {
         bridge_wake_s: 0.0,
-        supply: None,
         ..gms_core::boards::f405::BOARD
     }
 }
@@ -61,7 +59,6 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
             encoder: 0,
             current_codes: codes(2048),
             since_last,
-            supply_code: 0,
         };
         lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -153,7 +150,6 @@ fn a_stale_sense_reading_latches_overrun_while_driving() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: 0,
         };
         lp.step(inp, |_, _| None)
     };
@@ -210,7 +206,6 @@ fn after_enable_the_bridge_wakes_in_brake_before_control() {
             },
             current_codes: codes(2048),
             since_last: period,
-            supply_code: 0,
         };
         let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -290,7 +285,6 @@ fn a_capture_records_what_the_loop_saw() {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period,
-            supply_code: 0,
         };
         lp.step(inp, |_, h| {
             if let Some(r) = h.returned {
@@ -438,7 +432,6 @@ fn an_encoder_increment_is_checked_against_the_periods_that_elapsed() {
                 } else {
                     period
                 },
-                supply_code: 0,
             };
             lp.step(inp, |_, _| None);
             lp.finish(1000, false);
@@ -464,7 +457,6 @@ fn a_new_encoder_resolution_or_sense_scale_switches_the_bridge_off_and_rescales(
             encoder,
             current_codes: codes,
             since_last: period_cycles(),
-            supply_code: 0,
         };
         while let Some(r) = req.take() {
             let mut once = Some(r);
@@ -549,7 +541,7 @@ struct InlineLink {
     lp: ControlLoop,
     mb: gms_core::device::Mailbox,
     t_us: u64,
-    /// The supply divider's code each period carries.
+    /// The supply divider's code its ADC register holds (none: 0).
     supply: Option<u32>,
 }
 
@@ -565,12 +557,14 @@ impl gms_core::device::LoopLink for InlineLink {
             encoder: 0,
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: self.supply.unwrap_or(0),
         };
         let mb = &mut self.mb;
         self.lp.step(inp, |st, c| mb.exchange(st, c));
         self.lp.finish(1000, false);
         self.t_us += (1e6 / default_settings().cur_rate_hz) as u64;
+    }
+    fn supply_code(&mut self) -> u32 {
+        self.supply.unwrap_or(0)
     }
 }
 
@@ -643,7 +637,7 @@ fn board_device_with(
         lp,
         mb,
         t_us: 0,
-        supply: None,
+        supply: b.supply.map(|_| supply_code(12.0)),
     };
     Front::new(
         link,
@@ -978,7 +972,6 @@ fn current_mode_duty(volts: f32) -> f32 {
             // on the same error, whatever the supply.
             current_codes: codes(2048),
             since_last: period_cycles(),
-            supply_code: supply_code(volts),
         };
         let o = lp.step(inp, |_, _| req.take());
         lp.finish(1000, false);
@@ -1054,4 +1047,67 @@ fn a_supply_outside_the_bridges_range_refuses_enable_and_latches_while_driving()
     // (1 - 0.1)^n = 3.5 / 9, n = 9 calls.
     assert!((8..=11).contains(&calls), "{calls} calls");
     assert!(ask(&mut dev, "status").contains("enabled=0"));
+}
+
+/// `status` says the supply the current loop works for: the measured one where the board has
+/// a divider, `lim.v_supply` where it has none.
+#[test]
+fn the_status_states_the_supply() {
+    use gms_core::device::LoopLink as _;
+    let field = |st: &str| -> f32 {
+        let w = st
+            .split_whitespace()
+            .find(|w| w.starts_with("supply="))
+            .unwrap();
+        w["supply=".len()..].parse().unwrap()
+    };
+    let mut dev = board_device_on(supply_board(), None);
+    dev.link_mut().supply = Some(supply_code(24.0));
+    dev.link_mut().pause();
+    dev.supervise();
+    // The code's own step: 24 V reads code 1862, 23.998 V.
+    let v = field(&ask(&mut dev, "status"));
+    assert!((v - 24.0).abs() < 0.013, "{v}");
+    let mut dev = board_device_on(no_divider_board(), None);
+    assert!(ask(&mut dev, "set lim.v_supply 36").starts_with("ok"));
+    assert_eq!(field(&ask(&mut dev, "status")), 36.0);
+}
+
+/// The F405 board without its supply divider.
+fn no_divider_board() -> Board {
+    Board {
+        supply: None,
+        ..board()
+    }
+}
+
+/// A board that does not measure its supply drives only once `lim.v_supply` is confirmed:
+/// refused on the built-in defaults (with the reason), driving after a `set` of it (to the
+/// same value too), refused again after `defaults`; a `commit` that changes it confirms it,
+/// and so does a stored set.
+#[test]
+fn a_board_without_a_divider_drives_only_once_its_supply_is_confirmed() {
+    let why = "err 8 this board does not measure its motor supply: set lim.v_supply first";
+    let mut dev = board_device_on(no_divider_board(), None);
+    assert_eq!(ask(&mut dev, "enable").trim(), why);
+    assert_eq!(ask(&mut dev, "enable current").trim(), why);
+    // Another parameter does not confirm it.
+    assert!(ask(&mut dev, "set pos.kp 0.5").starts_with("ok"));
+    assert_eq!(ask(&mut dev, "enable").trim(), why);
+    // The same value, set: confirmed.
+    assert!(ask(&mut dev, "set lim.v_supply 12").starts_with("ok"));
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
+    assert!(ask(&mut dev, "disable").starts_with("ok"));
+    assert!(ask(&mut dev, "defaults").starts_with("ok"));
+    assert_eq!(ask(&mut dev, "enable").trim(), why);
+    // A staged change, committed.
+    assert!(ask(&mut dev, "stage lim.v_supply 24").starts_with("ok"));
+    assert!(ask(&mut dev, "commit").starts_with("ok"));
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
+    assert!(ask(&mut dev, "disable").starts_with("ok"));
+    // Saved, the board powers up on the stored set: confirmed.
+    assert!(ask(&mut dev, "save").starts_with("ok"));
+    let stored = dev.into_parts().1.0;
+    let mut dev = board_device_on(no_divider_board(), stored);
+    assert!(ask(&mut dev, "enable").starts_with("ok"));
 }

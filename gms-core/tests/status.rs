@@ -39,6 +39,7 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
             any::<u32>(),
             f(),
             any::<u32>(),
+            f(),
             prop::sample::select(DriveKind::ALL.to_vec()),
             any::<bool>(),
         ),
@@ -55,6 +56,7 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
                     late,
                     duty_max,
                     duty_limited,
+                    supply,
                     drive,
                     configured,
                 ) = rest;
@@ -76,6 +78,7 @@ fn any_reply() -> impl Strategy<Value = StatusReply> {
                     late,
                     duty_max,
                     duty_limited,
+                    supply,
                     drive,
                     configured,
                 }
@@ -115,13 +118,14 @@ fn a_reply_without_a_key_is_refused_naming_it_and_unknown_keys_are_ignored() {
         late: 1,
         duty_max: 0.43,
         duty_limited: 7,
+        supply: 23.75,
         drive: DriveKind::Current,
         configured: true,
     };
     let text = written(&s);
     assert!(text.contains(" fault_names=over_current "), "{text}");
     let words: Vec<&str> = text.split_whitespace().collect();
-    assert_eq!(words.len(), 20, "{text}");
+    assert_eq!(words.len(), 21, "{text}");
     for (i, w) in words.iter().enumerate() {
         let key = w.split_once('=').unwrap().0;
         let without: Vec<&str> = words

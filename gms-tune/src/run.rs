@@ -302,6 +302,7 @@ fn status_meaning(key: &str) -> (&'static str, &'static str) {
         "late" => ("control steps that wrote their duty late", ""),
         "duty_max" => ("largest duty the current sense allows", ""),
         "duty_limited" => ("current steps held at duty_max", ""),
+        "supply" => ("motor supply (measured where the board has a divider)", "V"),
         "drive" => ("what the loop drives", ""),
         "configured" => (
             "settings chosen for this axis (1) or built-in defaults (0)",

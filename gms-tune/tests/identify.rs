@@ -73,7 +73,7 @@ fn old_firmware() -> (String, std::sync::Arc<std::sync::Mutex<Vec<String>>>) {
                     ["status"] => "ok mode=gms enabled=0 faults=0 t=1 pos=0 error_counts=0 \
                                    moving=0 current=0 fault_names=none ff=0 duty=0 \
                                    step_us_worst=0 step_us_mean=0 sense_offset=2048 \
-                                   missed=0 late=0 duty_max=1 duty_limited=0 \
+                                   missed=0 late=0 duty_max=1 duty_limited=0 supply=12 \
                                    drive=position configured=1"
                         .into(),
                     ["enable"] | ["disable"] => "ok".into(),

@@ -256,7 +256,9 @@ fn tell(sc: &mut Scenario, table: &str, key: &str, value: f64) {
 /// finds R and k_e within 5 %, J within 15 %, L within 20 % (k_e read 4-18 % low before its
 /// runs averaged the current and the voltage over each sample's steps).
 ///
-/// Worst of the ten: R −0.41 %, k_e −2.66 %, J −2.7 %, L +7.1 %. One case read k_e +5.2 % and
+/// Worst of the ten: R −0.16 %, k_e +0.91 %, J −1.4 %, L +7.3 % (with 0.1 s of each back-EMF
+/// run averaged: k_e −2.66 %, and the R 4.19 Ω motor's k_e moved between +1 % and −6 % with
+/// a one-ulp change of the duty's arithmetic; now 0.3 s: `KE_RUN`). One case read k_e +5.2 % and
 /// J +7.0 % before (R 4.19 Ω, k 9.56 mN·m/A, J 2.69e-6 kg·m², L/R 385 µs, Fs 2.2 mN·m; now
 /// +1.03 % and +2.3 %): the k_e runs alternate their direction under a soft loop (ki / 8), and
 /// a plain integral, holding the last run's friction (ten times the device's model of it),

@@ -159,6 +159,7 @@ fn status_keys_are_one_set() {
         "late",
         "duty_max",
         "duty_limited",
+        "supply",
         "drive",
         "configured",
     ];

@@ -49,7 +49,6 @@ fn the_run_schedule_is_the_device_core_s_duty_for_duty() {
             encoder: count as u32,
             current_codes: codes,
             since_last: (168e6 / s.cur_rate_hz) as u32,
-            supply_code: 0,
         };
         let phase0 = k % ratio == 0;
         // (The loop asks for requests once a position period, in its last current step.)

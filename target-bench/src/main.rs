@@ -34,10 +34,6 @@ fn panic(_: &core::panic::PanicInfo) -> ! {
 }
 
 /// Repetitions of each measured call.
-/// The supply divider's code at 12 V on the F405 board (1:16, 3.3 V at 4095): the loop
-/// measures its supply every period.
-const SUPPLY_12V: u32 = 931;
-
 const CALLS: u32 = 2000;
 /// Repetitions of the calibration block.
 const CALIB_REPS: u32 = 2000;
@@ -200,7 +196,6 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
-                supply_code: black_box(SUPPLY_12V),
             },
             |_, _| first.take(),
         );
@@ -243,7 +238,6 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: 0,
                         current_codes: codes,
                         since_last: 0,
-                        supply_code: black_box(SUPPLY_12V),
                     },
                     |st, c| mb.exchange(st, c).or_else(|| r.take()),
                 );
@@ -265,7 +259,6 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                 encoder: 0,
                 current_codes: codes,
                 since_last: 0,
-                supply_code: black_box(SUPPLY_12V),
             },
             |_, _| mv.take(),
         );
@@ -280,7 +273,6 @@ fn device_period(out: &mut hio::HostStream, shaped: bool, mapped: bool, table: b
                         encoder: black_box(encoder),
                         current_codes: black_box(codes),
                         since_last: black_box(period),
-                        supply_code: black_box(SUPPLY_12V),
                     },
                     |st, c| {
                         let r = mb.exchange(st, c);

@@ -108,6 +108,10 @@ pub fn calibrate_sense(
 /// code's noise (13 mV a code at 1:16) averaged, a sag under load followed within a second.
 pub const SUPPLY_TAU_S: f32 = 0.2;
 
+/// How often a shell calls [`crate::device::Front::supervise`] \[ms\] (besides each request
+/// that may drive), with or without a host: a quarter of [`SUPPLY_TAU_S`].
+pub const SUPERVISE_MS: u64 = 50;
+
 /// What the hardware measured at the start of a PWM period.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Inputs {
@@ -119,9 +123,6 @@ pub struct Inputs {
     /// `BoardLimits::clock_hz`]; 0 when not measured. A call more than 1.5 PWM periods after
     /// the last one missed a period: counted, and an `overrun` while the bridge drives.
     pub since_last: u32,
-    /// The supply divider's ADC code \[code\] ([`Board::supply`]); 0 where the board has
-    /// none.
-    pub supply_code: u32,
 }
 
 /// What the shell writes to the hardware after a PWM period.
@@ -218,9 +219,6 @@ pub struct ControlLoop {
     table_report: TableReport,
     /// … and handed over at the next exchange when set.
     table_reported: bool,
-    /// The supply divider's latest code \[code\] (0: none yet), for the status (the protocol
-    /// side measures the supply from it: [`crate::device::Front::supervise`]).
-    supply_code: u32,
     /// The table's correction in the last step \[N·m\] (0 when none plays).
     table_corr: f32,
     /// A chunk or a report waits for the next exchange (one test a step when none does).
@@ -313,7 +311,6 @@ impl ControlLoop {
             table: Player::default(),
             table_report: TableReport::default(),
             table_reported: false,
-            supply_code: 0,
             table_corr: 0.0,
             fresh: false,
             done: None,
@@ -457,7 +454,6 @@ impl ControlLoop {
     pub fn status(&self) -> Status {
         Status {
             steps: self.steps,
-            supply_code: self.supply_code,
             pos_rate_hz: self.ctrl.params().pos_rate_hz,
             pos: self.enc.count(),
             reference: self.r,
@@ -713,10 +709,6 @@ impl ControlLoop {
                 .sense
                 .amps_sum(inp.current_codes, self.board.sense_oversample.max(1));
         let mut new_faults = Faults::NONE;
-        // The divider's latest code (a reading per period where the board has one), for the
-        // status: the protocol side works out the supply from it (thread mode: the control
-        // step's budget has no room for it).
-        self.supply_code = inp.supply_code;
         let missed = drive::missed_periods(inp.since_last, self.limits.period_cycles);
         if missed > 0 {
             self.missed_since_pos = self.missed_since_pos.saturating_add(missed);

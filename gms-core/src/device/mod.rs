@@ -31,8 +31,8 @@ pub use capture::{
 
 pub use crate::protocol::{CaptureState, DriveKind, StatusError, StatusReply, StatusValue};
 pub use control::{
-    ControlLoop, Inputs, MapTable, Outputs, SUPPLY_TAU_S, SenseStart, SenseTrouble, TableBuf,
-    ZERO_SAMPLES, calibrate_sense,
+    ControlLoop, Inputs, MapTable, Outputs, SUPERVISE_MS, SUPPLY_TAU_S, SenseStart, SenseTrouble,
+    TableBuf, ZERO_SAMPLES, calibrate_sense,
 };
 pub use front::{Front, LoopLink};
 pub use record::*;
@@ -434,8 +434,6 @@ impl Default for Requests {
 pub struct Status {
     /// Position steps since start (the step whose values these are).
     pub steps: u64,
-    /// The supply divider's latest ADC code \[code\] (0: none, or no divider).
-    pub supply_code: u32,
     /// Position-loop rate \[Hz\].
     pub pos_rate_hz: f32,
     /// Encoder position \[counts\].
@@ -571,7 +569,6 @@ impl Mailbox {
             returned: None,
             status: Status {
                 steps: 0,
-                supply_code: 0,
                 pos_rate_hz: 0.0,
                 pos: 0,
                 reference: RefSample {

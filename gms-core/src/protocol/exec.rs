@@ -16,6 +16,9 @@ pub trait Device {
     /// Applies a validated set (between two control steps); refused when the device cannot
     /// run it, and then nothing changes.
     fn apply(&mut self, new: Settings) -> Result<(), &'static str>;
+    /// `lim.v_supply` was set by the host (a `set` of it, even to the value it had): on a
+    /// board that does not measure its supply, that confirms it. Nothing by default.
+    fn supply_confirmed(&mut self) {}
     /// Persists the current set.
     fn save(&mut self) -> Result<(), &'static str>;
     /// Restores the persisted set.
@@ -219,7 +222,11 @@ pub fn execute<D: Device, W: Write>(dev: &mut D, line: Line<'_>, out: &mut W) ->
             Ok(new) => {
                 // A set made beside a staging would be undone by its commit: drop it.
                 *dev.staged() = None;
-                done(out, dev.apply(new))
+                let r = dev.apply(new);
+                if r.is_ok() && path == crate::settings::ParamId::LimVSupply.path() {
+                    dev.supply_confirmed();
+                }
+                done(out, r)
             }
             Err(e) => err(out, e.code, e.reason),
         },

@@ -3,8 +3,9 @@
 //!
 //! The reply is one line of `key=value` words (after `ok `), in this order: `mode enabled
 //! faults t pos error_counts moving current fault_names ff duty step_us_worst step_us_mean
-//! sense_offset missed late duty_max duty_limited drive configured`. A reader ignores keys it does not know (a newer
-//! device may add some) and refuses a reply that lacks one it needs.
+//! sense_offset missed late duty_max duty_limited supply drive configured`. A reader ignores
+//! keys it does not know (a newer device may add some) and refuses a reply that lacks one it
+//! needs.
 
 use core::fmt::{self, Write};
 
@@ -85,6 +86,9 @@ pub struct StatusReply {
     /// Current steps held at `duty_max` since start [-]: the limit bound (the loop asked for
     /// more voltage than it allows).
     pub duty_limited: u32,
+    /// The motor supply the current loop's duty is worked out for \[V\]: measured (the
+    /// board's divider, filtered over 0.2 s) where the board has one, else `lim.v_supply`.
+    pub supply: f32,
     /// What the loop drives.
     pub drive: DriveKind,
     /// False while the device runs on its built-in defaults (never configured for an axis:
@@ -115,7 +119,7 @@ impl StatusReply {
         write!(
             out,
             " ff={} duty={} step_us_worst={} step_us_mean={} sense_offset={} missed={} late={} \
-             duty_max={} duty_limited={} drive={} configured={}",
+             duty_max={} duty_limited={} supply={} drive={} configured={}",
             Num(self.ff),
             Num(self.duty),
             Num(self.step_us_worst),
@@ -125,6 +129,7 @@ impl StatusReply {
             self.late,
             Num(self.duty_max),
             self.duty_limited,
+            Num(self.supply),
             self.drive.name(),
             self.configured as u8,
         )
@@ -152,6 +157,7 @@ impl StatusReply {
             late: w.number("late")?,
             duty_max: w.number("duty_max")?,
             duty_limited: w.number("duty_limited")?,
+            supply: w.number("supply")?,
             drive: w.named("drive", DriveKind::from_name)?,
             configured: w.flag("configured")?,
         })
@@ -171,7 +177,7 @@ pub enum StatusValue {
 
 impl StatusReply {
     /// The reply's keys and values in the order the device writes them.
-    pub fn entries(&self) -> [(&'static str, StatusValue); 20] {
+    pub fn entries(&self) -> [(&'static str, StatusValue); 21] {
         use StatusValue::{Number as N, Text};
         let b = |x: bool| N(x as u8 as f64);
         [
@@ -193,6 +199,7 @@ impl StatusReply {
             ("late", N(self.late as f64)),
             ("duty_max", N(self.duty_max as f64)),
             ("duty_limited", N(self.duty_limited as f64)),
+            ("supply", N(self.supply as f64)),
             ("drive", Text(self.drive.name())),
             ("configured", b(self.configured)),
         ]

@@ -10,6 +10,9 @@ use gms_link::DeviceLink;
 /// scripted experiments.
 pub struct LocalDevice {
     dev: Front<LocalLink, FlashStore<HostFlash>>,
+    /// The simulated time of the next supply supervision \[s\] (every
+    /// [`gms_core::device::SUPERVISE_MS`], as a board's shell).
+    next_supervise: f64,
 }
 
 /// The in-process link: waiting on the loop runs it one position period.
@@ -28,6 +31,9 @@ impl LoopLink for LocalLink {
     }
     fn pause(&mut self) {
         self.tick();
+    }
+    fn supply_code(&mut self) -> u32 {
+        self.sim.supply_code
     }
 }
 
@@ -77,6 +83,7 @@ impl LocalDevice {
             )
             .with_configured(true, true)
             .with_table(),
+            next_supervise: 0.0,
         })
     }
 
@@ -135,10 +142,18 @@ impl LocalDevice {
 
     /// Runs the device for `seconds` of simulated time.
     pub fn run(&mut self, seconds: f64) {
-        let link = self.dev.link_mut();
-        let end = link.sim.t + seconds;
-        while link.sim.t < end {
+        let end = self.dev.link_mut().sim.t + seconds;
+        loop {
+            let link = self.dev.link_mut();
+            if link.sim.t >= end {
+                break;
+            }
             link.tick();
+            let t = link.sim.t;
+            if t >= self.next_supervise {
+                self.next_supervise = t + gms_core::device::SUPERVISE_MS as f64 * 1e-3;
+                self.dev.supervise();
+            }
         }
     }
 

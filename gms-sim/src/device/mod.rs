@@ -119,6 +119,9 @@ struct Sim {
     sense: gms_core::device::SenseChain,
     /// The board's supply divider, read on the sense's ADC.
     supply: Option<gms_core::device::SupplySense>,
+    /// Its code after the last tick (0: no divider), as the board's ADC data register holds
+    /// it for thread mode.
+    supply_code: u32,
     substeps: u32,
     /// Simulated time \[s\].
     t: f64,
@@ -155,6 +158,17 @@ impl Truth {
 }
 
 impl Sim {
+    /// The board's supply divider read as its ADC would (no noise: a 1:16 divider's codes
+    /// are 13 mV) at the plant's supply terminal now; 0 without a divider.
+    fn supply_code_now(&self) -> u32 {
+        self.supply.map_or(0, |ss| {
+            let v = self.plant.supply_volts() / ss.divider as f64;
+            (v / self.sense.vref as f64 * self.sense.full_scale as f64)
+                .round()
+                .clamp(0.0, self.sense.full_scale as f64) as u32
+        })
+    }
+
     /// One position period: `ratio` PWM periods of the core, the plant between them.
     /// `exchange` is the mailbox's (behind a mutex or local); step durations are timed on the
     /// host when `timed` (real time), else counted as 0 (simulated time).
@@ -184,14 +198,6 @@ impl Sim {
                 // Simulated time: the steps are exactly one period apart (in the board's
                 // step clock, ns), so none is ever missed.
                 since_last: (self.core.controller().dt_cur() as f64 * 1e9) as u32,
-                // The board's supply divider, read as its ADC would (no noise: a 1:16
-                // divider's codes are 13 mV).
-                supply_code: self.supply.map_or(0, |ss| {
-                    let v = self.plant.supply_volts() / ss.divider as f64;
-                    (v / self.sense.vref as f64 * self.sense.full_scale as f64)
-                        .round()
-                        .clamp(0.0, self.sense.full_scale as f64) as u32
-                }),
             };
             let t0 = timed.then(Instant::now);
             let out = self.core.step(inp, &mut exchange);
@@ -213,6 +219,7 @@ impl Sim {
             }
             self.t += dt_plant * self.substeps as f64;
         }
+        self.supply_code = self.supply_code_now();
         if let Some(truth) = &mut self.truth {
             let st = self.core.status();
             truth.push(Truth {
@@ -296,6 +303,7 @@ fn power_up(sc: &Scenario, flash: HostFlash) -> Result<PowerUp, String> {
             adc,
             sense: board.sense,
             supply: board.supply,
+            supply_code: 0,
             substeps: sc.plant.substeps,
             t: 0.0,
             truth: None,

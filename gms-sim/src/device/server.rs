@@ -7,6 +7,8 @@ use super::*;
 struct Shared {
     mailbox: Mutex<Mailbox>,
     telemetry: Mutex<VecDeque<Sample>>,
+    /// The supply divider's code after the loop's last tick (a board's ADC data register).
+    supply_code: std::sync::atomic::AtomicU32,
 }
 
 impl Shared {
@@ -39,6 +41,11 @@ impl LoopLink for HostLink {
     fn timeout_us(&self) -> u64 {
         2_000_000
     }
+    fn supply_code(&mut self) -> u32 {
+        self.shared
+            .supply_code
+            .load(std::sync::atomic::Ordering::Relaxed)
+    }
 }
 
 /// The virtual device's protocol side.
@@ -64,7 +71,9 @@ fn serve_client<C: Read + Write>(
     let mut reader = LineReader::default();
     let mut buf = [0u8; 512];
     shared.telemetry().clear();
+    let mut supervised = Instant::now();
     loop {
+        supervise_every(dev, &mut supervised);
         // Read first: a client that has just left is seen gone (end of stream) before the
         // next one, which connected after it left, would be refused.
         match conn.read(&mut buf) {
@@ -100,6 +109,15 @@ fn serve_client<C: Read + Write>(
     }
     // A new client starts without a stream.
     dev.disconnected();
+}
+
+/// The supply's supervision, as a board's shell runs it: every
+/// [`gms_core::device::SUPERVISE_MS`] of wall time, in a session and between sessions.
+fn supervise_every(dev: &mut Dev, last: &mut Instant) {
+    if last.elapsed() >= Duration::from_millis(gms_core::device::SUPERVISE_MS) {
+        *last = Instant::now();
+        dev.supervise();
+    }
 }
 
 /// The simulation's longest run of steps without a pause \[wall time\].
@@ -202,6 +220,7 @@ fn serve_inner(
             ..Mailbox::new()
         }),
         telemetry: Mutex::new(VecDeque::with_capacity(QUEUE)),
+        supply_code: std::sync::atomic::AtomicU32::new(0),
     });
     let rt = Arc::clone(&shared);
     std::thread::spawn(move || {
@@ -217,6 +236,8 @@ fn serve_inner(
             while sim.t + dt <= due && slice.elapsed() < SLICE {
                 sim.tick(|st, c| rt.mailbox().exchange(st, c), &rt.telemetry, true);
             }
+            rt.supply_code
+                .store(sim.supply_code, std::sync::atomic::Ordering::Relaxed);
             clock.behind(sim.t);
             std::thread::sleep(PAUSE);
         }
@@ -272,12 +293,20 @@ fn serve_inner(
                     }
                 }
             };
+            let mut supervised = Instant::now();
             loop {
                 let next = waiting.borrow_mut().pop_front().map(|(c, _)| c);
                 let c = match next {
                     Some(c) => c,
-                    None => match rx.recv() {
+                    None => match rx
+                        .recv_timeout(Duration::from_millis(gms_core::device::SUPERVISE_MS))
+                    {
                         Ok(c) => c,
+                        // No client: the supply is still supervised (a hold stays on).
+                        Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                            supervise_every(&mut dev, &mut supervised);
+                            continue;
+                        }
                         Err(_) => break,
                     },
                 };

@@ -23,6 +23,10 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         &mut self.staged
     }
 
+    fn supply_confirmed(&mut self) {
+        self.supply_confirmed = true;
+    }
+
     fn apply(&mut self, new: Settings) -> Result<(), &'static str> {
         let a = prepare(&new, &self.board)?;
         // The new controller built in the spare storage here, on the protocol side; the loop
@@ -37,6 +41,8 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             taken: false,
         };
         self.post(|r| r.apply = Some(staged))?;
+        // A commit (or a load) that changed the supply confirms it.
+        self.supply_confirmed |= new.v_supply != self.settings.v_supply;
         self.settings = new;
         self.configured = true;
         Ok(())
@@ -71,6 +77,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         };
         let s = decode_settings(&rec, &self.defaults).map_err(|_| "stored set invalid")?;
         self.apply(s.settings)?;
+        self.supply_confirmed = true;
         self.load_map()
     }
 
@@ -78,6 +85,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
         let d = self.defaults;
         self.apply(d)?;
         self.configured = self.defaults_configured;
+        self.supply_confirmed = self.defaults_configured;
         Ok(())
     }
 
@@ -142,6 +150,7 @@ impl<L: LoopLink, S: ParamStore> Device for Front<L, S> {
             late: st.stats.late(),
             duty_max: self.board.sense.duty_max(self.settings.cur_rate_hz),
             duty_limited: st.stats.limited(),
+            supply: self.supply_v().unwrap_or(self.settings.v_supply),
             drive: st.drive.kind(),
             configured: self.configured,
         }

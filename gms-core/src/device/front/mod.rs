@@ -42,6 +42,13 @@ pub trait LoopLink {
     fn timeout_us(&self) -> u64 {
         50_000
     }
+    /// The motor supply divider's latest ADC code \[code\] ([`Board::supply`]): 0 where the
+    /// board has none or before its first conversion. Read in thread mode (a board's ADC
+    /// data register, which the control step's conversion keeps current): the control step
+    /// carries nothing for it.
+    fn supply_code(&mut self) -> u32 {
+        0
+    }
 }
 
 /// The protocol side of a device: implements [`Device`] over a [`LoopLink`] to the loop and a
@@ -73,6 +80,9 @@ pub struct Front<L: LoopLink, S: ParamStore> {
     /// value last handed to the loop ([`Front::supervise`]).
     supply: Option<(f32, u64)>,
     supply_posted: Option<f32>,
+    /// On a board without a supply divider: `lim.v_supply` came from the store, the shell,
+    /// a `set` of it or a change by `commit`, so `enable` may trust it.
+    supply_confirmed: bool,
 }
 
 /// Loop pauses `enable` waits at most for the supply's first reading (each a period or more).
@@ -166,6 +176,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
             no_drive: None,
             supply: None,
             supply_posted: None,
+            supply_confirmed: false,
         }
     }
 
@@ -186,6 +197,7 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     pub fn with_configured(mut self, running: bool, defaults: bool) -> Self {
         self.configured = running;
         self.defaults_configured = defaults;
+        self.supply_confirmed = running;
         self
     }
 
@@ -216,15 +228,12 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
         let Some(ss) = self.board.supply else {
             return;
         };
-        let st = self.status_now();
-        if st.supply_code == 0 {
+        let code = self.link.supply_code();
+        if code == 0 {
             return;
         }
-        let v = ss.volts(
-            st.supply_code,
-            self.board.sense.vref,
-            self.board.sense.full_scale,
-        );
+        let st = self.status_now();
+        let v = ss.volts(code, self.board.sense.vref, self.board.sense.full_scale);
         let now = self.link.now_us();
         let f = match self.supply {
             Some((f, at)) => {
@@ -255,12 +264,18 @@ impl<L: LoopLink, S: ParamStore> Front<L, S> {
     /// has no reading yet).
     fn supply_in_range(&mut self) -> Result<(), &'static str> {
         let Some(ss) = self.board.supply else {
-            return Ok(());
+            // Nothing measures it: the duty is worked out for `lim.v_supply`, which a 24 V
+            // supply under the 12 V default would make twice the loop's gain.
+            return if self.supply_confirmed {
+                Ok(())
+            } else {
+                Err("this board does not measure its motor supply: set lim.v_supply first")
+            };
         };
         // Right after the start the loop may not have published a reading yet: a few
         // periods' wait for its first.
         for _ in 0..SUPPLY_WAIT_PAUSES {
-            if self.status_now().supply_code != 0 {
+            if self.link.supply_code() != 0 {
                 break;
             }
             self.link.pause();
