@@ -22,8 +22,10 @@ const PRIMASK_BUDGET: u64 = 200;
 /// (3,326 cycles) later at 40 kHz: the step's budget leaves 806 cycles, half of them for this
 /// (the mailbox's lock copies the loop's 120-byte status in about 240 of them).
 const HELD_BUDGET: u64 = 400;
-/// A `status` request and its reply, and a telemetry line, at most \[cycles of thread mode\].
-const STATUS_BUDGET: u64 = 75_000;
+/// A `status` request and its reply, and a telemetry line, at most \[cycles of thread mode\]:
+/// 506 µs at 168 MHz. It was 75,000 for 20 keys; the 21st (`supply=`, issue 55) brought the
+/// Nucleo's reply (over the UART's DMA) to 77,992, the F405's (USB) to 50,884.
+const STATUS_BUDGET: u64 = 85_000;
 /// The stack above the guard the image may use, at most \[bytes\]: the Nucleo's 24 KiB (its
 /// SRAM also holds the control interrupt's code; the F405 has 56 KiB) less the 2 KiB the
 /// supervisor keeps as its margin.
