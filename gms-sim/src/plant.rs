@@ -146,6 +146,13 @@ pub struct Plant {
     /// The sense amplifier's time constant \[s\] (0: none) and its output now \[A\].
     sense_tau: f64,
     sensed: f64,
+    /// The amplifier's recovery after an edge of the bridge's output \[s\] and its
+    /// disturbance meanwhile \[A\] (`[plant.sense] recovery_s`, `edge_a`).
+    recovery: f64,
+    edge_a: f64,
+    /// The last edge of the bridge's output: its time \[s\] (as `t`) and direction (+1 rising:
+    /// a drive's start; −1 falling: its end).
+    last_edge: Option<(f64, f64)>,
     adc_lsb: f64,
     adc_max: f64,
     sense_offset_codes: f64,
@@ -264,6 +271,9 @@ impl Plant {
                 0.0
             },
             sensed: 0.0,
+            recovery: spec.sense.recovery_s,
+            edge_a: spec.sense.edge_a,
+            last_edge: None,
             adc_lsb: lsb,
             adc_max: spec.adc_range,
             sense_offset_codes: spec.sense.offset_codes,
@@ -375,7 +385,20 @@ impl Plant {
         } else {
             self.i
         };
-        self.sense_sign * i + noise_scale * self.noise.sample(&mut self.rng)
+        self.sense_sign * i
+            + self.edge_disturbance()
+            + noise_scale * self.noise.sample(&mut self.rng)
+    }
+
+    /// The amplifier's disturbance now \[A\]: `edge_a` (+ after a rising edge of the bridge's
+    /// output, − after a falling one) for `recovery_s` after the last edge, else 0. The
+    /// edges are the real bridge's (after its delay and dead time); the ideal bridge has
+    /// none.
+    pub fn edge_disturbance(&self) -> f64 {
+        match self.last_edge {
+            Some((at, dir)) if self.t >= at && self.t - at < self.recovery => dir * self.edge_a,
+            _ => 0.0,
+        }
     }
 
     /// The current-sense chain's zero off the ADC's mid-scale \[codes\] (`[plant.sense]
@@ -464,27 +487,40 @@ impl Plant {
         };
         let (a, e) = (self.phase, self.phase + dt);
         let i = self.i;
+        // The period's phase `a` is the time `t` now: an edge at phase x is at t + x - a.
+        let t_of = |x: f64| self.t + x - a;
+        let mut edge = self.last_edge;
         let mut sum = 0.0;
         for p in self.pulses.iter_mut().flatten() {
             // The current in the pulse's direction: during the dead time it flows on through
             // the low side's diode (the brake's voltage) and the pulse starts late; against
             // it, through the high side's (the drive's) and the pulse ends late.
             let along = p.sign * i >= 0.0;
+            // The output's edges, for the amplifier's recovery: the drive's start lifts one
+            // motor lead from the brake's ground to the supply (a rising common-mode step at
+            // an inline shunt), its end brings it back (falling), whichever the direction.
             if !p.on_fixed && p.on <= e {
                 if p.edges && along {
                     p.on += b.dead_time_s;
                 }
                 p.on_fixed = true;
+                if p.edges {
+                    edge = later(edge, (t_of(p.on), 1.0));
+                }
             }
             if !p.off_fixed && p.off <= e {
                 if p.edges && !along {
                     p.off += b.dead_time_s;
                 }
                 p.off_fixed = true;
+                if p.edges {
+                    edge = later(edge, (t_of(p.off), -1.0));
+                }
             }
             let overlap = (p.off.min(e) - p.on.max(a)).max(0.0);
             sum += p.sign * overlap;
         }
+        self.last_edge = edge;
         (sum / dt).clamp(-1.0, 1.0)
     }
 
@@ -581,5 +617,13 @@ impl Plant {
                     + 0.5 * m.j_l * self.omega_slide * self.omega_slide;
             }
         }
+    }
+}
+
+/// The later of the last edge `last` and a new one `(time, direction)`.
+fn later(last: Option<(f64, f64)>, new: (f64, f64)) -> Option<(f64, f64)> {
+    match last {
+        Some(l) if l.0 > new.0 => Some(l),
+        _ => Some(new),
     }
 }

@@ -13,7 +13,8 @@
 //! position loop's gains the defaults.
 //!
 //! `cargo run --release -p hil-sim --example robustness [--measure] [--stages-only]
-//! [--cur-hz HZ]`
+//! [--cur-hz HZ] [--real-bridge] [--nominal]` (`--real-bridge`: the plant's bridge the
+//! DRV8871's, not the ideal one; `--nominal`: the nominal plant alone, and no stages)
 
 use gms_bench::frf::{self, Loop, Plan};
 use gms_bench::settings;
@@ -53,6 +54,9 @@ fn plant(kx: f64, jx: f64, fx: f64) -> Result<Scenario, String> {
     // 40 substeps, as the scenario asks of a 3 kHz stage's mode.
     let mut sc = Scenario::parse("[plant]\nvariability = 0.0\nsubsteps = 40\n", "robustness")
         .map_err(|e| e.to_string())?;
+    // `--real-bridge`: the DRV8871's dead time, delay and switches (the device told them, as
+    // commissioning would: its defaults follow the scenario's bridge).
+    sc.plant.bridge.ideal = !std::env::args().any(|a| a == "--real-bridge");
     // The device told the nominal inertia (its feedforward's), the plant another.
     let told = sc.plant.inertia;
     sc.plant.inertia *= jx;
@@ -172,7 +176,10 @@ fn main() -> Result<(), String> {
         if measuring { "---|---|" } else { "" }
     );
     let mut worst: Option<(f64, String)> = None;
-    for (kx, jx, fx) in PLANTS.iter().copied().filter(|_| !stages_only) {
+    // `--nominal`: the nominal plant alone.
+    let nominal = std::env::args().any(|a| a == "--nominal");
+    let plants = if nominal { &PLANTS[..1] } else { &PLANTS[..] };
+    for (kx, jx, fx) in plants.iter().copied().filter(|_| !stages_only) {
         let sc = plant(kx, jx, fx)?;
         let (rest, slide) = models(&sc)?;
         let name = format!("×{kx} | ×{jx} | ×{fx}");
@@ -194,6 +201,9 @@ fn main() -> Result<(), String> {
     }
     if let Some((_, w)) = worst {
         println!("worst (the model's, against 45° and 8 dB): {w}");
+    }
+    if nominal {
+        return Ok(());
     }
     println!();
     println!(

@@ -298,3 +298,64 @@ fn commissioning_measures_the_bridges_dead_time() {
         );
     }
 }
+
+/// The sense amplifier's recovery after the bridge's edges (`[plant.sense] recovery_s`,
+/// `edge_a`): +edge_a for recovery_s from the drive's start (after the delay, and the dead
+/// time when the current flows along the drive), −edge_a from its end; nothing between. And
+/// the board's duty limit (gms-core's `SenseChain::duty_max`, worked out from the window and
+/// the edge's settling) keeps every disturbed instant out of its sense window around the
+/// counter's bottom, which a duty above it does not.
+#[test]
+fn the_amplifier_recovers_after_each_edge_and_the_duty_limit_keeps_it_out_of_the_window() {
+    let sc = real();
+    let (td, delay) = (sc.plant.bridge.dead_time_s, sc.plant.bridge.delay_s);
+    let (rec, a) = (sc.plant.sense.recovery_s, sc.plant.sense.edge_a);
+    assert_eq!((rec, a), (1e-6, 0.0147));
+    // One period in 2,500 steps of 10 ns after a first one (the spill-over of its pulse): the
+    // disturbance after each step, at the step's end.
+    let disturbed = |duty: f64| {
+        let mut p = Plant::new(&sc.plant, 1).unwrap();
+        period_with_current(&mut p, duty, 0.1, 10);
+        p.start_period(duty, T);
+        let n = 2500;
+        let dt = T / n as f64;
+        let mut out = Vec::new();
+        for k in 0..2 * n {
+            if k == n {
+                p.start_period(duty, T);
+            }
+            p.i = 0.1;
+            p.step(dt);
+            out.push(((k + 1) as f64 * dt, p.edge_disturbance()));
+        }
+        out
+    };
+    let d = 0.3;
+    let on = T / 2.0 - d * T / 2.0 + delay + td;
+    let off = T / 2.0 + d * T / 2.0 + delay;
+    for (t, g) in disturbed(d) {
+        // Within a step (10 ns) of an interval's ends either way.
+        let within = |from: f64| t > from + 10e-9 && t < from + rec - 10e-9;
+        let outside = |from: f64| t < from - 10e-9 || t > from + rec + 10e-9;
+        let at = t % T;
+        if within(on) || within(on + T) {
+            assert_eq!(g, a, "at {at}");
+        } else if within(off) || within(off + T) {
+            assert_eq!(g, -a, "at {at}");
+        } else if outside(on) && outside(off) && outside(on + T) && outside(off + T) {
+            assert_eq!(g, 0.0, "at {at}");
+        }
+    }
+    // The board's window: centred on the counter's bottom (t = T), w wide.
+    let board = gms_core::boards::f405::BOARD.sense;
+    let w = board.window_s as f64;
+    let limit = board.duty_max(40_000.0) as f64;
+    let in_window = |duty: f64| {
+        disturbed(duty)
+            .iter()
+            .filter(|(t, g)| (t - T).abs() <= w / 2.0 && *g != 0.0)
+            .count()
+    };
+    assert_eq!(in_window(limit), 0, "at the limit {limit}");
+    assert!(in_window(limit + 0.05) > 0, "above the limit {limit}");
+}

@@ -211,6 +211,12 @@ impl Scenario {
         if !(in_range(p.sense.swing_v, 0.0, 1.0) && p.sense.swing_v < 1.0) {
             return Err("plant.sense.swing_v must be a finite number in [0, 1) V".into());
         }
+        if !in_range(p.sense.recovery_s, 0.0, 10e-6) {
+            return Err("plant.sense.recovery_s must be a finite number in [0, 10e-6] s".into());
+        }
+        if !in_range(p.sense.edge_a, 0.0, 10.0) {
+            return Err("plant.sense.edge_a must be a finite number in [0, 10] A".into());
+        }
         let b = &p.bridge;
         for (key, v, hi) in [
             ("plant.bridge.dead_time_s", b.dead_time_s, 5e-6),

@@ -114,6 +114,14 @@ pub struct SenseSpec {
     /// How close to each rail of the ADC's 3.3 V span the amplifier's output can swing \[V\],
     /// in [0, 1): readings beyond are held there, short of the ADC's end codes.
     pub swing_v: f64,
+    /// How long the amplifier's output is disturbed after each edge of the bridge's output
+    /// (its common-mode step) \[s\], in [0, 10 µs]; 0: never (INA240, enhanced PWM rejection:
+    /// about 1 µs).
+    pub recovery_s: f64,
+    /// The disturbance meanwhile, as a current \[A\], in [0, 10]: added to the reading after a
+    /// rising edge of the bridge's output, taken off after a falling one (the INA240's
+    /// residual coupling, about 50 mV at its output: 14.7 mA at the boards' 3.4 V/A).
+    pub edge_a: f64,
 }
 
 impl SenseSpec {
