@@ -242,6 +242,11 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
 /// runs [-] (`pos.ki_fric`; the device's own is put back after them).
 const KE_RUN_FRICTION_SHARE: f64 = 0.5;
 
+/// How many times the voltage the bridge's dead time takes (half its step at a reversal) the
+/// back-EMF at the runs' top speed should reach \[-\]; under it commissioning warns that k_e is
+/// uncertain.
+pub const KE_EMF_OVER_STEP: f64 = 10.0;
+
 /// The length of each back-EMF run at constant speed \[s\] (0.1 s settling, 0.3 s averaged).
 /// With 0.1 s averaged, k_e on a coarse-encoder motor with ten times the modelled friction
 /// (`hil-sim/tests/coarse.rs`: R 4.19 Ω, 2000 counts) read anywhere from +1 % to −6 % as a
@@ -509,6 +514,29 @@ pub(crate) fn commission_steps(
         pts.len(),
         3.0 * speed
     ));
+    // Beside a bridge's dead time the runs' back-EMF must stand well clear of its step: where
+    // the current's ripple crosses zero the bridge loses less than the step, and the fit's
+    // c' sign(ω) no longer takes all of it (k_e read −35 % on a coarse motor of
+    // `hil-sim/tests/coarse.rs` with 0.12 V of back-EMF against a 0.106 V step).
+    let emf = c.k_e * 3.0 * speed;
+    if dead > DEAD_TIME_SEEN && emf < KE_EMF_OVER_STEP * step {
+        let needed = KE_EMF_OVER_STEP * step / (3.0 * c.k_e.max(f64::MIN_POSITIVE));
+        let remedy = if needed <= VELOCITY_MAX_BENCH / 3.0 {
+            format!("commission again with --speed {needed:.3} or more if the stroke allows")
+        } else {
+            format!(
+                "no speed the bench allows reaches it (--speed {:.3} at most): check k_e \
+                 against the motor's datasheet (k_e = k_M in SI)",
+                VELOCITY_MAX_BENCH / 3.0
+            )
+        };
+        c.lines.push(format!(
+            "  warning: the back-EMF at the runs' top speed is {}, under {KE_EMF_OVER_STEP} \
+             times the voltage the bridge's dead time takes ({}): k_e is uncertain; {remedy}",
+            si(emf, "V"),
+            si(step, "V"),
+        ));
+    }
     // 6. The inertia: current pulses that the device ends by itself, and the coast after.
     c.inertia = inertia(b, &mut c, dev, dt, i_fs)?;
     // 7. The inductance: the current loop's step response at standstill.
