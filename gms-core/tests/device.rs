@@ -1111,3 +1111,25 @@ fn a_board_without_a_divider_drives_only_once_its_supply_is_confirmed() {
     let mut dev = board_device_on(no_divider_board(), stored);
     assert!(ask(&mut dev, "enable").starts_with("ok"));
 }
+
+/// A measured supply survives a parameter hand-over, even one equal to the old set's
+/// `lim.v_supply` while the new set's differs: the current loop keeps dividing by what the
+/// board measured, not by the new nominal.
+#[test]
+fn a_measured_supply_survives_a_hand_over_whatever_the_nominal() {
+    use gms_core::control::controller::Controller;
+    let s = default_settings();
+    let mut a: Controller<6> = Controller::try_new(s).unwrap();
+    a.set_measured_supply(Some(s.v_supply));
+    let mut s24 = s;
+    s24.v_supply = 2.0 * s.v_supply;
+    let mut b: Controller<6> = Controller::try_new(s24).unwrap();
+    assert_eq!(b.supply(), 2.0 * s.v_supply);
+    b.take_state_from(&a);
+    assert_eq!(b.supply(), s.v_supply);
+    // Not measured: the new set's nominal.
+    let c: Controller<6> = Controller::try_new(s).unwrap();
+    let mut d: Controller<6> = Controller::try_new(s24).unwrap();
+    d.take_state_from(&c);
+    assert_eq!(d.supply(), 2.0 * s.v_supply);
+}

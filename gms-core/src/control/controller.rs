@@ -442,6 +442,8 @@ pub struct Controller<const N: usize> {
     /// The supply the current loop divides by \[V\]: the board's measured one
     /// ([`Controller::set_measured_supply`]), else `lim.v_supply`.
     v_eff: f32,
+    /// `v_eff` is the board's measurement (kept across a hand-over), not `lim.v_supply`.
+    measured: bool,
     /// 1 / `v_eff` \[1/V\], kept with it: the duty a multiplication, not a division, in each
     /// current step.
     inv_supply: f32,
@@ -519,6 +521,7 @@ impl<const N: usize> Controller<N> {
             e_cur: 0.0,
             duty_max: 1.0,
             v_eff: p.v_supply,
+            measured: false,
             inv_supply: 1.0 / p.v_supply,
             out: PositionOutput::default(),
         })
@@ -556,9 +559,9 @@ impl<const N: usize> Controller<N> {
     /// 24 V supply under a 12 V setting doubled the loop's gain, +6 dB against the 4 dB of
     /// margin it has). Values that are not finite or under 0.1 V are taken as none.
     pub fn set_measured_supply(&mut self, v: Option<f32>) {
-        self.v_eff = v
-            .filter(|v| v.is_finite() && *v >= 0.1)
-            .unwrap_or(self.p.v_supply);
+        let v = v.filter(|v| v.is_finite() && *v >= 0.1);
+        self.measured = v.is_some();
+        self.v_eff = v.unwrap_or(self.p.v_supply);
         self.inv_supply = 1.0 / self.v_eff;
     }
 
@@ -692,10 +695,10 @@ impl<const N: usize> Controller<N> {
         self.w_ref = old.w_ref;
         self.a_ref = old.a_ref;
         self.e_cur = old.e_cur;
-        // A supply the board measured stays (the new set's `lim.v_supply` is the nominal).
-        if old.v_eff != old.p.v_supply {
-            self.v_eff = old.v_eff;
-            self.inv_supply = old.inv_supply;
+        // A supply the board measured stays (the new set's `lim.v_supply` is the nominal),
+        // even one that happens to equal the old set's nominal.
+        if old.measured {
+            self.set_measured_supply(Some(old.v_eff));
         }
         self.shaping.take_state_from(&old.shaping);
         // The map's sample is this controller's own (the loop sets it, for the new settings,
