@@ -94,6 +94,16 @@ impl SupplySense {
         code as f32 / full_scale * vref * self.divider
     }
 
+    /// The ADC code \[code\] a supply of `volts` \[V\] gives through the divider, with the
+    /// sense ADC's `vref` \[V\] and `full_scale` \[code\] (rounded, within 0 … `full_scale`):
+    /// the inverse of [`SupplySense::volts`], for the boards' models.
+    pub fn code(&self, volts: f64, vref: f32, full_scale: f32) -> u32 {
+        let fs = f64::from(full_scale);
+        (volts / f64::from(self.divider) / f64::from(vref) * fs)
+            .round()
+            .clamp(0.0, fs) as u32
+    }
+
     /// Whether `v` \[V\] is within the bridge's range.
     pub fn within(&self, v: f32) -> bool {
         v >= self.range_v.0 && v <= self.range_v.1

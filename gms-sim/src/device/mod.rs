@@ -162,10 +162,11 @@ impl Sim {
     /// are 13 mV) at the plant's supply terminal now; 0 without a divider.
     fn supply_code_now(&self) -> u32 {
         self.supply.map_or(0, |ss| {
-            let v = self.plant.supply_volts() / ss.divider as f64;
-            (v / self.sense.vref as f64 * self.sense.full_scale as f64)
-                .round()
-                .clamp(0.0, self.sense.full_scale as f64) as u32
+            ss.code(
+                self.plant.supply_volts(),
+                self.sense.vref,
+                self.sense.full_scale,
+            )
         })
     }
 

@@ -170,10 +170,12 @@ impl Machine {
         self.advance_plant(t);
         if self.chip().p.adc.injected_due(t) {
             // The supply divider's injected conversion (the boards' PC1: the plant's supply
-            // terminal through gms-core's power stage's 1:16, 4095 codes over 3.3 V).
-            let v = self.plant.supply_volts()
-                / f64::from(gms_core::boards::power_stage::SUPPLY_DIVIDER);
-            let code = (v / 3.3 * 4095.0).round().clamp(0.0, 4095.0) as u32;
+            // terminal through the divider gms-core's power stage describes for both boards).
+            let b = gms_core::boards::f405::BOARD;
+            let v = self.plant.supply_volts();
+            let code = b
+                .supply
+                .map_or(0, |ss| ss.code(v, b.sense.vref, b.sense.full_scale));
             self.chip_mut().p.adc.take_injected(code);
             return;
         }
