@@ -938,24 +938,15 @@ fn continues_the_reference(request: &str) {
     }
 }
 
-/// The F405 board with its supply divider (1:16 on the sense ADC: 52.8 V full scale) and the
-/// DRV8871's 6.5 … 45 V.
-fn supply_board() -> Board {
-    Board {
-        bridge_wake_s: 0.0,
-        ..gms_core::boards::f405::BOARD
-    }
-}
-
-/// The divider's code for `volts` on [`supply_board`] (1:16, 3.3 V at 4095).
+/// The divider's code for `volts` on [`board`]'s divider (1:16, 3.3 V at 4095).
 fn supply_code(volts: f32) -> u32 {
     (volts / 16.0 / 3.3 * 4095.0).round() as u32
 }
 
-/// A current-mode loop on [`supply_board`] handed a measured supply of `volts` (as the
+/// A current-mode loop on [`board`] handed a measured supply of `volts` (as the
 /// protocol side's supervision does), enabled with a current command: its first duty.
 fn current_mode_duty(volts: f32) -> f32 {
-    let b = supply_board();
+    let b = board();
     let a = prepare(&default_settings(), &b).unwrap();
     let zero = calibrate_sense(&b, 3.4, || Some(codes(2048)));
     let mut lp = ControlLoop::new(b, a, zero.sense, zero.faults, 0, buffer(), ctrl_buf());
@@ -996,40 +987,39 @@ fn the_current_loops_duty_follows_the_measured_supply() {
     );
 }
 
-/// The protocol side measures the supply from the loop's divider codes (`Front::supervise`):
+/// `calls` of the shell's supply supervision 20 ms apart, a PWM period of the loop before
+/// each.
+fn supervise_every_20_ms(dev: &mut gms_core::device::Front<InlineLink, MemStore>, calls: u32) {
+    use gms_core::device::LoopLink as _;
+    for _ in 0..calls {
+        dev.link_mut().t_us += 20_000;
+        dev.link_mut().pause();
+        dev.supervise();
+    }
+}
+
+/// The protocol side measures the supply from the divider's codes (`Front::supervise`):
 /// outside the bridge's range `enable` is refused with the reason; a supply that collapses
 /// while driving latches `supply` and the bridge goes off; the measured supply is handed to
 /// the loop.
 #[test]
 fn a_supply_outside_the_bridges_range_refuses_enable_and_latches_while_driving() {
-    use gms_core::device::LoopLink as _;
-    let mut dev = board_device_on(supply_board(), None);
+    let mut dev = board_device_on(board(), None);
     dev.link_mut().supply = Some(supply_code(5.0));
-    // A position period: its status carries the code.
-    dev.link_mut().pause();
-    dev.link_mut().pause();
     assert_eq!(
         ask(&mut dev, "enable").trim(),
         "err 8 motor supply below the bridge's range"
     );
     dev.link_mut().supply = Some(supply_code(50.0));
     // The filter (0.2 s) follows over a second of the calls' time.
-    for _ in 0..50 {
-        dev.link_mut().t_us += 20_000;
-        dev.link_mut().pause();
-        dev.supervise();
-    }
+    supervise_every_20_ms(&mut dev, 50);
     assert_eq!(
         ask(&mut dev, "enable").trim(),
         "err 8 motor supply above the bridge's range"
     );
     dev.link_mut().supply = Some(supply_code(12.0));
     // From 50 V: (1 - 0.1)^100 of the 38 V step left, 1 mV.
-    for _ in 0..100 {
-        dev.link_mut().t_us += 20_000;
-        dev.link_mut().pause();
-        dev.supervise();
-    }
+    supervise_every_20_ms(&mut dev, 100);
     let v = dev.supply_v().unwrap();
     assert!((v - 12.0).abs() < 0.05, "{v}");
     assert!(ask(&mut dev, "enable").starts_with("ok"));
@@ -1037,9 +1027,7 @@ fn a_supply_outside_the_bridges_range_refuses_enable_and_latches_while_driving()
     dev.link_mut().supply = Some(supply_code(3.0));
     let mut calls = 0;
     while !ask(&mut dev, "status").contains("fault_names=supply") {
-        dev.link_mut().t_us += 20_000;
-        dev.link_mut().pause();
-        dev.supervise();
+        supervise_every_20_ms(&mut dev, 1);
         calls += 1;
         assert!(calls < 100, "never latched");
     }
@@ -1061,7 +1049,7 @@ fn the_status_states_the_supply() {
             .unwrap();
         w["supply=".len()..].parse().unwrap()
     };
-    let mut dev = board_device_on(supply_board(), None);
+    let mut dev = board_device_on(board(), None);
     dev.link_mut().supply = Some(supply_code(24.0));
     dev.link_mut().pause();
     dev.supervise();

@@ -364,11 +364,6 @@ mod tests {
         assert!(a.irq());
         assert_eq!(a.next_event(), None, "the sequence stopped");
     }
-}
-
-#[cfg(test)]
-mod injected_tests {
-    use super::*;
 
     /// A software-started injected conversion (JSWSTART) of JSQ4's channel ends after the
     /// trigger latency and its channel's conversion time, JSTRT at the start, JEOC and JDR1 at
