@@ -99,9 +99,9 @@ impl SupplySense {
     /// the inverse of [`SupplySense::volts`], for the boards' models.
     pub fn code(&self, volts: f64, vref: f32, full_scale: f32) -> u32 {
         let fs = f64::from(full_scale);
-        (volts / f64::from(self.divider) / f64::from(vref) * fs)
-            .round()
-            .clamp(0.0, fs) as u32
+        // Rounded by hand (no_std has no f64::round): the value is within 0 … fs here.
+        let x = (volts / f64::from(self.divider) / f64::from(vref) * fs).clamp(0.0, fs);
+        (x + 0.5) as u32
     }
 
     /// Whether `v` \[V\] is within the bridge's range.
