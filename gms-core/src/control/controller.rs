@@ -697,8 +697,12 @@ impl<const N: usize> Controller<N> {
         self.e_cur = old.e_cur;
         // A supply the board measured stays (the new set's `lim.v_supply` is the nominal),
         // even one that happens to equal the old set's nominal.
+        // (Copied, not re-validated: the hand-over runs in a control step, where a division
+        // and the filter cost cycles the step does not have.)
         if old.measured {
-            self.set_measured_supply(Some(old.v_eff));
+            self.measured = true;
+            self.v_eff = old.v_eff;
+            self.inv_supply = old.inv_supply;
         }
         self.shaping.take_state_from(&old.shaping);
         // The map's sample is this controller's own (the loop sets it, for the new settings,
