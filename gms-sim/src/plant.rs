@@ -475,22 +475,51 @@ impl Plant {
         self.outputs_on = on;
     }
 
-    /// The fraction of the next `dt` \[s\] that the bridge drives, signed by the direction
-    /// \[-1, 1\]: the duty for the ideal bridge; the real one's pulses, each edge fixed when
-    /// reached with its dead time on the side the current's direction gives it.
-    fn drive_fraction(&mut self, dt: f64) -> f64 {
+    /// The bridge's drive at the period's phase `x` \[s\], as a signed fraction of the
+    /// supply \[-1, 1\]: the duty for the ideal bridge; for the real one ±1 inside a pulse
+    /// (as its edges stand now), 0 in the brake; 0 with the outputs off.
+    fn drive_at(&self, x: f64) -> f64 {
         if !self.outputs_on {
             return 0.0;
         }
-        let Some(b) = self.bridge else {
+        if self.bridge.is_none() {
             return self.duty;
+        }
+        let mut s = 0.0;
+        for p in self.pulses.iter().flatten() {
+            if p.on <= x && x < p.off {
+                s += p.sign;
+            }
+        }
+        s.clamp(-1.0, 1.0)
+    }
+
+    /// The first pulse edge after the phase `x` and before `end` \[s\] (else `end`): where
+    /// the drive may change.
+    fn next_edge(&self, x: f64, end: f64) -> f64 {
+        let mut n = end;
+        for p in self.pulses.iter().flatten() {
+            for y in [p.on, p.off] {
+                if y > x && y < n {
+                    n = y;
+                }
+            }
+        }
+        n
+    }
+
+    /// Fixes the real bridge's edges reached by the phase `x` \[s\], each with its dead time
+    /// on the side the current's direction at that instant gives it (`t_at`: the time `t`
+    /// of that phase). With the outputs off nothing switches.
+    fn fix_edges(&mut self, x: f64, t_at: f64) {
+        let Some(b) = self.bridge else {
+            return;
         };
-        let (a, e) = (self.phase, self.phase + dt);
+        if !self.outputs_on {
+            return;
+        }
         let i = self.i;
-        // The period's phase `a` is the time `t` now: an edge at phase x is at t + x - a.
-        let t_of = |x: f64| self.t + x - a;
         let mut edge = self.last_edge;
-        let mut sum = 0.0;
         for p in self.pulses.iter_mut().flatten() {
             // The current in the pulse's direction: during the dead time it flows on through
             // the low side's diode (the brake's voltage) and the pulse starts late; against
@@ -499,29 +528,26 @@ impl Plant {
             // The output's edges, for the amplifier's recovery: the drive's start lifts one
             // motor lead from the brake's ground to the supply (a rising common-mode step at
             // an inline shunt), its end brings it back (falling), whichever the direction.
-            if !p.on_fixed && p.on <= e {
+            if !p.on_fixed && p.on <= x {
                 if p.edges && along {
                     p.on += b.dead_time_s;
                 }
                 p.on_fixed = true;
                 if p.edges {
-                    edge = later(edge, (t_of(p.on), 1.0));
+                    edge = later(edge, (t_at + p.on - x, 1.0));
                 }
             }
-            if !p.off_fixed && p.off <= e {
+            if !p.off_fixed && p.off <= x {
                 if p.edges && !along {
                     p.off += b.dead_time_s;
                 }
                 p.off_fixed = true;
                 if p.edges {
-                    edge = later(edge, (t_of(p.off), -1.0));
+                    edge = later(edge, (t_at + p.off - x, -1.0));
                 }
             }
-            let overlap = (p.off.min(e) - p.on.max(a)).max(0.0);
-            sum += p.sign * overlap;
         }
         self.last_edge = edge;
-        (sum / dt).clamp(-1.0, 1.0)
     }
 
     /// The resistance in the current's path \[ohm\]: the winding's and, for the real bridge,
@@ -538,35 +564,85 @@ impl Plant {
 
     /// Advances the plant by `dt` \[s\] at the applied voltage.
     pub fn step(&mut self, dt: f64) {
-        // The bridge: the step's mean voltage from the fraction it drives, at the supply's
-        // voltage less its source resistance's drop under the current drawn (the step's
-        // start).
-        let drive = self.drive_fraction(dt);
-        let bus = self.supply - self.r_source * drive * self.i;
-        self.bus = bus;
-        self.voltage = drive * bus;
-        self.phase += dt;
-        // Electrical: L di/dt = V - R i - k_E ω, exact for constant V and ω over the step;
-        // R the winding's and, for the real bridge, the switches' in the current's path.
+        // The electrical side exactly, piece by piece: within a step the bridge's voltage
+        // changes only at its pulses' edges, and between them L di/dt = V - R i - k_E ω has
+        // its closed form (ω held over the step); R the winding's and, for the real bridge,
+        // the switches' in the current's path. Each edge is fixed with the current at its own
+        // instant, so the dead time takes its side from the current's direction there (the
+        // ripple's, near a zero crossing), and the sense amplifier's lag follows the
+        // current's exponentials exactly. (Averaging each step's voltage instead, at 10
+        // steps a period, moved a sub-step pulse's charge by up to a step: the reading at the
+        // counter's bottom came out +0.74 % against the period's mean current on the default
+        // motor, where the pieces give +0.27 %, the amplifier's lag.)
+        let (a, end) = (self.phase, self.phase + dt);
         let r = self.r_path();
-        let a = r / self.l;
-        let i_ss = (self.voltage - self.k_e * self.omega) / r;
-        let d0 = self.i - i_ss;
-        let e = per_step(&mut self.decay_memo, dt, |dt| (-a * dt).exp());
-        let i_int = i_ss * dt + d0 * (1.0 - e) / a; // ∫ i dt
-        let i2_int = i_ss * i_ss * dt
-            + 2.0 * i_ss * d0 * (1.0 - e) / a
-            + d0 * d0 * (1.0 - e * e) / (2.0 * a); // ∫ i² dt
-        self.i = i_ss + d0 * e;
+        let rate = r / self.l;
+        let emf = self.k_e * self.omega;
+        let k_s = if self.sense_tau > 0.0 {
+            1.0 / self.sense_tau
+        } else {
+            0.0
+        };
+        let (mut i_int, mut i2_int, mut v_int, mut bus_int, mut vi_int) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut x = a;
+        loop {
+            self.fix_edges(x, self.t + x - a);
+            let y = self.next_edge(x, end);
+            let h = y - x;
+            if h > 0.0 {
+                let drive = self.drive_at(0.5 * (x + y));
+                // The supply's terminal sags by its source resistance times the current it
+                // delivers (the drive's share of the motor's), at the piece's start.
+                let bus = self.supply - self.r_source * drive * self.i;
+                let v = drive * bus;
+                let i_ss = (v - emf) / r;
+                let d0 = self.i - i_ss;
+                let whole = h == dt;
+                let e = if whole {
+                    per_step(&mut self.decay_memo, dt, |dt| (-rate * dt).exp())
+                } else {
+                    (-rate * h).exp()
+                };
+                let int = i_ss * h + d0 * (1.0 - e) / rate; // ∫ i dt
+                i_int += int;
+                i2_int += i_ss * i_ss * h
+                    + 2.0 * i_ss * d0 * (1.0 - e) / rate
+                    + d0 * d0 * (1.0 - e * e) / (2.0 * rate); // ∫ i² dt
+                vi_int += v * int;
+                v_int += v * h;
+                bus_int += bus * h;
+                if k_s > 0.0 {
+                    // The amplifier, y' = (i - y) / tau, driven by i = i_ss + d0 e^(-rate t).
+                    let es = if whole {
+                        per_step(&mut self.sense_memo, dt, |dt| (-dt * k_s).exp())
+                    } else {
+                        (-h * k_s).exp()
+                    };
+                    let gap = k_s - rate;
+                    let forced = if gap.abs() > 1e-9 * k_s {
+                        d0 * k_s / gap * (e - es)
+                    } else {
+                        d0 * k_s * h * es
+                    };
+                    self.sensed = i_ss + (self.sensed - i_ss) * es + forced;
+                }
+                self.i = i_ss + d0 * e;
+            }
+            x = y;
+            if x >= end {
+                break;
+            }
+        }
+        self.bus = bus_int / dt;
+        self.voltage = v_int / dt;
+        self.phase = end;
         let i_avg = i_int / dt;
-        self.energy.input += self.voltage * i_int;
+        self.energy.input += vi_int;
         self.energy.copper += r * i2_int;
-        self.energy.converted += self.k_e * self.omega * i_int;
+        self.energy.converted += emf * i_int;
         self.energy.magnetic = 0.5 * self.l * self.i * self.i;
-        if self.sense_tau > 0.0 {
-            let tau = self.sense_tau;
-            let lag = per_step(&mut self.sense_memo, dt, |dt| (-dt / tau).exp());
-            self.sensed = self.i + (self.sensed - self.i) * lag;
+        if k_s == 0.0 {
+            self.sensed = self.i;
         }
         // Mechanics: semi-implicit Euler with the friction, cogging and coupling of the
         // current state.
