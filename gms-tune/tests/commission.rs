@@ -9,8 +9,18 @@ use std::process::{Command, Stdio};
 use crate::support;
 use support::*;
 
+/// The resistance commissioning measures on the scenario at `path`: the winding's and the
+/// real bridge's switches' in the current's path (the plant's truth, the tool not told it).
+fn path_resistance(path: &std::path::Path) -> f64 {
+    let text = std::fs::read_to_string(path).unwrap();
+    hil_sim::scenario::Scenario::parse(&text, "test")
+        .unwrap()
+        .plant
+        .path_resistance()
+}
+
 /// `commission --apply` on a virtual device 10× faster than real time whose motor the device
-/// does not know (R 7.5 Ω, k 8 mN·m/A) and whose encoder and sense are both wired the other
+/// does not know (R 7.5 Ω and the bridge's switches, k 8 mN·m/A) and whose encoder and sense are both wired the other
 /// way: found, written, applied; a blocked axis: exit 1, nothing changed.
 #[test]
 fn commission_measures_a_hidden_motor_and_applies_it() {
@@ -29,8 +39,9 @@ fn commission_measures_a_hidden_motor_and_applies_it() {
     assert!(out.contains("current sense: reversed"), "{out}");
     let get = |p: &str| tune(&srv, &["get", p], d).1.trim().parse::<f64>().unwrap();
     assert_eq!((get("enc.dir"), get("sense.dir")), (-1.0, -1.0));
+    let r_path = path_resistance(&sc);
     assert!(
-        (get("motor.r") / 7.5 - 1.0).abs() < 0.05,
+        (get("motor.r") / r_path - 1.0).abs() < 0.05,
         "{}",
         get("motor.r")
     );
@@ -55,7 +66,7 @@ fn commission_measures_a_hidden_motor_and_applies_it() {
     let j: serde_json::Value =
         serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out}"));
     assert!(
-        (j["settings"]["motor.r"].as_f64().unwrap() / 7.5 - 1.0).abs() < 0.05,
+        (j["settings"]["motor.r"].as_f64().unwrap() / r_path - 1.0).abs() < 0.05,
         "{j}"
     );
     drop(srv);
@@ -79,9 +90,9 @@ fn commission_measures_a_hidden_motor_and_applies_it() {
 
 /// A property over motors the tool is not told (proptest, a fixed seed, five cases): R 5-20
 /// ohm, k 4-10 mN·m/A, J 3-12e-8 kg·m², L/R 12-60 µs (a faster winding settles within the
-/// 50 µs current period and shows too little of its L), either wiring reversed or not, each
-/// behind `hil-sim serve --speed 10`: `gms-tune commission --out m.toml` finds R and k_e
-/// within 5 %, J within 15 %, the current loop's kp within 20 % of the rule's for the true
+/// 25 µs current period and shows too little of its L), either wiring reversed or not, each
+/// behind `hil-sim serve --speed 10`: `gms-tune commission --out m.toml` finds R (the
+/// winding's and the bridge's switches') and k_e within 5 %, J within 15 %, the current loop's kp within 20 % of the rule's for the true
 /// winding, and both directions.
 #[test]
 fn commission_finds_random_hidden_motors() {
@@ -125,19 +136,19 @@ fn commission_finds_random_hidden_motors() {
             let got = |p: &str| dev[p].as_float().unwrap();
             let rel = |a: f64, b: f64| (a / b - 1.0).abs();
             let rate = gms_core::device::default_settings().cur_rate_hz as f64;
-            let kp_true = gms_ident::gains::current_pi(r, l, rate).0;
+            let kp_true = gms_ident::gains::current_pi(path_resistance(&sc), l, rate).0;
             eprintln!(
                 "R {r:.3} -> {:+.2} %, k {k:.3e} -> {:+.2} %, J {j:.3e} -> {:+.2} %, L {l:.3e} -> \
                  {:+.2} %, enc {enc} sense {sense}",
-                (got("motor.r") / r - 1.0) * 100.0,
+                (got("motor.r") / path_resistance(&sc) - 1.0) * 100.0,
                 (got("motor.k_e") / k - 1.0) * 100.0,
                 (got("ff.inertia") / j - 1.0) * 100.0,
                 (got("cur.kp") / kp_true - 1.0) * 100.0,
             );
-            assert!(rel(got("motor.r"), r) < 0.05, "{text}");
+            assert!(rel(got("motor.r"), path_resistance(&sc)) < 0.05, "{text}");
             assert!(rel(got("motor.k_e"), k) < 0.05, "{text}");
             assert!(rel(got("ff.inertia"), j) < 0.15, "{text}");
-            // cur.kp: the rule's for the true winding at the loop's rate (it holds L through
+            // cur.kp: the rule's for the true winding and switches at the loop's rate (it holds L through
             // |j ω₁₈₀ L + R|).
             assert!(rel(got("cur.kp"), kp_true) < 0.20, "{text}");
             let sign = |rev: bool| if rev { -1.0 } else { 1.0 };

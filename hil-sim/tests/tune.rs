@@ -214,8 +214,16 @@ fn tune_ff_widens_the_range_to_an_optimum_below_it() {
 
 /// A plant whose motor the device does not know (`r`, `k` = k_e = k_M, inertia `j`,
 /// inductance `l`), with the encoder and the sense reversed or not; the device believes the
-/// default motor.
-fn hidden_motor(r: f64, k: f64, j: f64, l: f64, enc_rev: bool, sense_rev: bool) -> LocalDevice {
+/// default motor. Also the resistance in the current's path \[Ω\] (the winding's and the
+/// real bridge's switches': what commissioning measures).
+fn hidden_motor(
+    r: f64,
+    k: f64,
+    j: f64,
+    l: f64,
+    enc_rev: bool,
+    sense_rev: bool,
+) -> (LocalDevice, f64) {
     let text = format!(
         "{QUIET}\n[plant]\nresistance = {r}\nk_m = {k}\nk_e = {k}\ninertia = {j}\ninductance = {l}\n\
          encoder_reversed = {enc_rev}\nsense_reversed = {sense_rev}\n\
@@ -227,7 +235,8 @@ fn hidden_motor(r: f64, k: f64, j: f64, l: f64, enc_rev: bool, sense_rev: bool) 
         .replacen("[controller.ff]\nguideway = false\n", "", 1)
         .replacen("[plant]\nvariability = 0.0\n", "", 1)
         .replacen("[plant]\n", "[plant]\nvariability = 0.0\n", 1);
-    LocalDevice::new(&Scenario::parse(&text, "test").unwrap()).unwrap()
+    let sc = Scenario::parse(&text, "test").unwrap();
+    (LocalDevice::new(&sc).unwrap(), sc.plant.path_resistance())
 }
 
 #[test]
@@ -239,15 +248,15 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         (14.0, 5.5e-3, 4e-8, 0.18e-3, false, true),
         (12.0, 7.0e-3, 7e-8, 0.3e-3, true, true),
     ] {
-        let mut dev = hidden_motor(r, k, j, l, enc_rev, sense_rev);
+        let (mut dev, r_path) = hidden_motor(r, k, j, l, enc_rev, sense_rev);
         let c = commission(&mut dev, 1.0).unwrap();
         for l in &c.lines {
             eprintln!("  {l}");
         }
         eprintln!(
-            "R {r} -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), J {j} -> {:.3e} ({:+.1} %), L {l} -> {:.3e} ({:+.1} %), dirs {} {}",
+            "R {r} (path {r_path:.3}) -> {:.4} ({:+.2} %), k {k} -> {:.4e} ({:+.2} %), J {j} -> {:.3e} ({:+.1} %), L {l} -> {:.3e} ({:+.1} %), dirs {} {}",
             c.r,
-            (c.r / r - 1.0) * 100.0,
+            (c.r / r_path - 1.0) * 100.0,
             c.k_e,
             (c.k_e / k - 1.0) * 100.0,
             c.inertia,
@@ -259,7 +268,11 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         );
         assert_eq!(c.enc_dir, if enc_rev { -1.0 } else { 1.0 });
         assert_eq!(c.sense_dir, if sense_rev { -1.0 } else { 1.0 });
-        assert!((c.r / r - 1.0).abs() < 0.05, "R {}", c.r);
+        assert!(
+            (c.r / r_path - 1.0).abs() < 0.05,
+            "R {} against {r_path}",
+            c.r
+        );
         assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
         assert!((c.inertia / j - 1.0).abs() < 0.15, "J {}", c.inertia);
         assert!((c.inductance / l - 1.0).abs() < 0.20, "L {}", c.inductance);
