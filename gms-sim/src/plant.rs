@@ -116,6 +116,55 @@ struct Pulse {
     off_fixed: bool,
     /// False for a full-period pulse (|duty| = 1): its outputs never switch, no dead time.
     edges: bool,
+    /// With a node capacitance (`c_node_f`): the dead time's windows after the on-edge and
+    /// after the off-edge, `(start, end, share)` with the share of the drive the slewing
+    /// node gives over it; and the current's magnitude at the on-edge when it slewed the node
+    /// towards the drive (else `None`).
+    on_win: Option<(f64, f64, f64)>,
+    off_win: Option<(f64, f64, f64)>,
+    on_slew: Option<f64>,
+}
+
+impl Pulse {
+    /// The same pulse in the time of a period starting `dt` \[s\] later.
+    fn shifted(&self, dt: f64) -> Pulse {
+        let w = |v: Option<(f64, f64, f64)>| v.map(|(a, b, f)| (a - dt, b - dt, f));
+        Pulse {
+            on: self.on - dt,
+            off: self.off - dt,
+            on_win: w(self.on_win),
+            off_win: w(self.off_win),
+            ..*self
+        }
+    }
+
+    /// Its drive at the phase `x` \[s\], as a signed fraction of the supply.
+    fn drive_at(&self, x: f64) -> f64 {
+        let inside = |w: Option<(f64, f64, f64)>| w.filter(|w| w.0 <= x && x < w.1).map(|w| w.2);
+        if let Some(f) = inside(self.on_win).or(inside(self.off_win)) {
+            self.sign * f
+        } else if self.on <= x && x < self.off {
+            self.sign
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The share of the drive rail's voltage over a window of `window` \[s\] that a node of
+/// capacitance `c` \[F\] gives when a current of magnitude `amps` \[A\] slews it from the
+/// other rail towards it across `volts` \[V\] (clamped at the rail): 1 at once (`c` 0), the
+/// ramp's half while it lasts.
+fn slew_share(amps: f64, c: f64, volts: f64, window: f64) -> f64 {
+    if c <= 0.0 {
+        return 1.0;
+    }
+    if window <= 0.0 || volts <= 0.0 {
+        return 0.0;
+    }
+    // The window over the time to cross: past 1 the node reached the rail.
+    let q = amps * window / (c * volts);
+    if q >= 1.0 { 1.0 - 0.5 / q } else { 0.5 * q }
 }
 
 /// The plant's state and models.
@@ -443,12 +492,8 @@ impl Plant {
             .pulses
             .iter()
             .flatten()
-            .map(|p| Pulse {
-                on: p.on - elapsed,
-                off: p.off - elapsed,
-                ..*p
-            })
-            .rfind(|p| p.off > 0.0 || !p.off_fixed);
+            .map(|p| p.shifted(elapsed))
+            .rfind(|p| p.off > 0.0 || !p.off_fixed || p.off_win.is_some_and(|w| w.1 > 0.0));
         let new = match self.bridge {
             Some(b) if duty != 0.0 && period_s > 0.0 => {
                 let half = 0.5 * duty.abs() * period_s;
@@ -460,6 +505,9 @@ impl Plant {
                     on_fixed: false,
                     off_fixed: false,
                     edges: duty.abs() < 1.0,
+                    on_win: None,
+                    off_win: None,
+                    on_slew: None,
                 })
             }
             _ => None,
@@ -485,12 +533,7 @@ impl Plant {
         if self.bridge.is_none() {
             return self.duty;
         }
-        let mut s = 0.0;
-        for p in self.pulses.iter().flatten() {
-            if p.on <= x && x < p.off {
-                s += p.sign;
-            }
-        }
+        let s: f64 = self.pulses.iter().flatten().map(|p| p.drive_at(x)).sum();
         s.clamp(-1.0, 1.0)
     }
 
@@ -499,7 +542,11 @@ impl Plant {
     fn next_edge(&self, x: f64, end: f64) -> f64 {
         let mut n = end;
         for p in self.pulses.iter().flatten() {
-            for y in [p.on, p.off] {
+            let wins = [p.on_win, p.off_win].into_iter().flatten();
+            for y in [p.on, p.off]
+                .into_iter()
+                .chain(wins.flat_map(|w| [w.0, w.1]))
+            {
                 if y > x && y < n {
                     n = y;
                 }
@@ -520,6 +567,14 @@ impl Plant {
         }
         let i = self.i;
         let mut edge = self.last_edge;
+        if b.c_node_f > 0.0 {
+            let (c, v, td) = (b.c_node_f, self.supply, b.dead_time_s);
+            for p in self.pulses.iter_mut().flatten() {
+                fix_slewing(p, x, t_at, i, (c, v, td), &mut edge);
+            }
+            self.last_edge = edge;
+            return;
+        }
         for p in self.pulses.iter_mut().flatten() {
             // The current in the pulse's direction: during the dead time it flows on through
             // the low side's diode (the brake's voltage) and the pulse starts late; against
@@ -691,6 +746,65 @@ impl Plant {
                 self.energy.spring = 0.5 * m.k * d * d;
                 self.energy.kinetic = 0.5 * m.j_m * self.omega * self.omega
                     + 0.5 * m.j_l * self.omega_slide * self.omega_slide;
+            }
+        }
+    }
+}
+
+/// Fixes `p`'s edges reached by the phase `x` \[s\] (`t_at` the time `t` of that phase) with
+/// the current `i` \[A\] now, the switching node of capacitance `c` \[F\] slewed by it during
+/// the dead time `td` \[s\] across `volts` \[V\]; the output's edges into `edge`.
+///
+/// At the on-edge the low side turns off: a current along the drive holds the node at the
+/// brake's rail through the low side's diode until the high side comes on `td` later; one
+/// against it slews the node towards the drive's rail. At the off-edge the high side turns
+/// off: a current against the drive holds the node at the drive's rail through the high
+/// side's diode until the low side comes on; one along it slews the node towards the brake's.
+/// A pulse shorter than `td` never turns the high side on: both switches stay off from its
+/// on-edge to `td` after its off-edge, the node slewed by the on-edge's current throughout.
+fn fix_slewing(
+    p: &mut Pulse,
+    x: f64,
+    t_at: f64,
+    i: f64,
+    (c, volts, td): (f64, f64, f64),
+    edge: &mut Option<(f64, f64)>,
+) {
+    let along = p.sign * i >= 0.0;
+    let at = |y: f64| t_at + y - x;
+    if !p.on_fixed && p.on <= x {
+        p.on_fixed = true;
+        if p.edges {
+            let x0 = p.on;
+            p.on = x0 + td;
+            if along {
+                *edge = later(*edge, (at(x0 + td), 1.0));
+            } else {
+                p.on_slew = Some(i.abs());
+                p.on_win = Some((x0, x0 + td, slew_share(i.abs(), c, volts, td)));
+                *edge = later(*edge, (at(x0), 1.0));
+            }
+        }
+    }
+    if !p.off_fixed && p.off <= x {
+        p.off_fixed = true;
+        if p.edges {
+            let x1 = p.off;
+            if x1 < p.on {
+                // The high side never came on.
+                let x0 = p.on - td;
+                p.on = x1 + td;
+                p.off = x1 + td;
+                p.on_win = p
+                    .on_slew
+                    .map(|amps| (x0, x1 + td, slew_share(amps, c, volts, x1 + td - x0)));
+                *edge = later(*edge, (at(x1 + td), -1.0));
+            } else if along {
+                p.off_win = Some((x1, x1 + td, 1.0 - slew_share(i.abs(), c, volts, td)));
+                *edge = later(*edge, (at(x1), -1.0));
+            } else {
+                p.off = x1 + td;
+                *edge = later(*edge, (at(x1 + td), -1.0));
             }
         }
     }

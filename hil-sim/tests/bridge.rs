@@ -84,6 +84,48 @@ fn the_dead_time_takes_its_side_from_the_currents_direction() {
     }
 }
 
+/// With a switching node's capacitance (`c_node_f`), the dead time's loss goes through zero
+/// current continuously: the current slews the node at i / C during the dead time, so the
+/// period's mean voltage is `(d − sign(i) · t_dead · s(|i|) / T) · V`, s the share of the
+/// ramp: |i| t_dead / (2 C V) until the node reaches the rail within the dead time, then
+/// 1 − C V / (2 |i| t_dead). 0 F gives the binary model's step at any current, however small.
+#[test]
+fn a_node_capacitance_makes_the_dead_time_continuous_through_zero_current() {
+    let (td, v, c, d) = (220e-9, 12.0, 100e-12, 0.3);
+    let share = |amps: f64| {
+        let q = amps * td / (c * v);
+        if q >= 1.0 { 1.0 - 0.5 / q } else { 0.5 * q }
+    };
+    for amps in [0.1, 0.01, 0.002, 1e-6, -1e-6, -0.002, -0.01, -0.1] {
+        let mut sc = real();
+        sc.plant.bridge.c_node_f = c;
+        // A winding slow enough that the current held at each step's start is the current
+        // at the edges within it (12 nA of change in a 10 ns step).
+        sc.plant.inductance = 10.0;
+        sc.check().unwrap();
+        let mut p = Plant::new(&sc.plant, 1).unwrap();
+        let (mean, _) = period_with_current(&mut p, d, amps, 2500);
+        let expect = (d - f64::signum(amps) * td * share(amps.abs()) / T) * v;
+        assert!(
+            (mean - expect).abs() < 1e-6,
+            "{amps} A: {mean} V against {expect}"
+        );
+    }
+    // The binary model (0 F): the full step from the smallest current on.
+    let mut p = Plant::new(&real().plant, 1).unwrap();
+    let (mean, _) = period_with_current(&mut p, d, 1e-6, 2500);
+    assert!((mean - (d - td / T) * v).abs() < 1e-9, "{mean}");
+    // Out of range: refused.
+    let mut sc = real();
+    sc.plant.bridge.c_node_f = 1e-6;
+    assert!(
+        sc.check()
+            .unwrap_err()
+            .to_string()
+            .contains("plant.bridge.c_node_f")
+    );
+}
+
 #[test]
 fn the_pulse_is_centred_on_the_counters_top_after_the_delay() {
     let sc = real();

@@ -222,6 +222,7 @@ impl Scenario {
             ("plant.bridge.dead_time_s", b.dead_time_s, 5e-6),
             ("plant.bridge.delay_s", b.delay_s, 5e-6),
             ("plant.bridge.r_on_ohm", b.r_on_ohm, 10.0),
+            ("plant.bridge.c_node_f", b.c_node_f, 10e-9),
             ("plant.supply.r_source_ohm", p.supply.r_source_ohm, 10.0),
         ] {
             if !in_range(v, 0.0, hi) {

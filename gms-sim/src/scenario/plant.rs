@@ -87,6 +87,13 @@ pub struct BridgeSpec {
     /// The on-resistance in the current's path, high side plus low side \[ohm\], in [0, 10]
     /// (307 + 258 mΩ typical at 24 V, 1 A).
     pub r_on_ohm: f64,
+    /// The switching node's capacitance \[F\], in [0, 10e-9]: during the dead time the
+    /// current slews the node at i / C instead of taking it to the diode's rail at once, so
+    /// that the dead time's loss goes continuously through zero current, below about
+    /// C × volts / dead_time_s. 0: the node follows the current's sign at once (the binary
+    /// model). The DRV8871's datasheet gives no C_oss.
+    #[serde(default)]
+    pub c_node_f: f64,
 }
 
 /// The motor supply (`[plant.supply]`): its voltage sags by `r_source_ohm` times the current
