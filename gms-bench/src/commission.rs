@@ -13,7 +13,8 @@ use crate::client::{
     position, primitive, rad_per_count, scales_line, timed_run,
 };
 use crate::estimate::{
-    inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope, resistance_and_step,
+    BridgeLoss, inductance_from_step, inertia_from_pulse, local_parabolas, ls_slope,
+    resistance_and_loss, resistance_and_step,
 };
 use crate::settings::restoring;
 
@@ -194,8 +195,9 @@ pub fn slide(b: &mut impl Bench, dev: &DeviceInfo, dt: f64) -> Result<Slide, Err
 /// polarity (a reversed sense makes the current loop run away at once: `over_current`, then
 /// `sense.dir` flipped and tried again); the encoder's direction (current steps of a quarter
 /// of the expected Fs until the axis slides 2 mrad, which way the counts say; flipped by
-/// `enc.dir`; each step a pulse of 10 ms the device ends by itself); the winding resistance (current mode at ±40 % of the expected breakaway, the
-/// axis held by friction: R from the voltage and current differences, offsets cancelled); the
+/// `enc.dir`; each step a pulse of 10 ms the device ends by itself); the winding resistance and the
+/// bridge's dead time (current mode at ±40, ±60 and ±80 % of the expected breakaway, the axis
+/// held by friction: `v = R i + sign(i) (α − β / |i|)`, offsets cancelled); the
 /// back-EMF constant (timed velocity runs at 1, 2 and 3 × `speed` each way: the voltage less
 /// R × current against the speed, the slope); the reflected inertia (timed current pulses and
 /// the coasts after them); the inductance (the current loop's step response). The device's
@@ -364,22 +366,24 @@ pub(crate) fn commission_steps(
             si(moved, "rad")
         ));
     }
-    // 4. R and the bridge's dead time at standstill, friction holding the axis: ±40 % and
-    //    ±80 % of the breakaway (the expected one, or three quarters of the pulse that slid
-    //    it, the last one below it having held). The bridge loses sign(i) t_dead / T × V of
-    //    every period's voltage; the status's volts are the duty's, the firmware's own
-    //    compensation (`drive.dead_time`) included, so they carry the whole loss whatever it
-    //    is set to: v = R i + c sign(i) over the four holds, t_dead = c T / V. (Two holds, as
-    //    before, read R + c / |i|: 24.6 Ω for 10.6 at the default motor's 7.5 mA holds.)
+    // 4. R and the bridge's dead time at standstill, friction holding the axis: ±40, ±60
+    //    and ±80 % of the breakaway (the expected one, or three quarters of the pulse that
+    //    slid it, the last one below it having held). The bridge loses sign(i) t_dead / T × V
+    //    of every period's voltage, less what the current gives back slewing the switching
+    //    node in the dead time (β / |i|); the status's volts are the duty's, the firmware's
+    //    own compensation (`drive.dead_time`) included, so they carry the whole loss whatever
+    //    it is set to: v = R i + sign(i) (α − β / |i|) over the six holds, t_dead = α T / V.
+    //    (v = R i + c sign(i) over two magnitudes read the fall of the loss as resistance:
+    //    R +4.8 % and k_e −8 % after it on a 7.5 Ω motor with a 10 pF node, +25 % with 100
+    //    pF. Two holds, before that, read R + c / |i|: 24.6 Ω for 10.6.)
     let base = i_fs.min(0.75 * sl.amps);
-    let mut holds = Vec::with_capacity(4);
-    for share in [0.4, -0.4, 0.8, -0.8] {
+    let mut holds = Vec::with_capacity(6);
+    for share in [0.4, -0.4, 0.6, -0.6, 0.8, -0.8] {
         let (i, v, _) = hold_current(b, share * base, 0.2, dt)?;
         holds.push((i, v));
     }
     b.current(0.0)?;
-    let (ip, vp) = holds[0];
-    let (in_, vn) = holds[1];
+    let (ip, in_) = (holds[0].0, holds[1].0);
     if (ip - in_).abs() < 0.2 * base {
         return Err(Error::Device(format!(
             "commanded ±{:.3e} A, measured {ip:.3e} and {in_:.3e} A: no current flows (the motor \
@@ -387,52 +391,79 @@ pub(crate) fn commission_steps(
             0.4 * base
         )));
     }
-    let (r, step) = resistance_and_step(&holds).ok_or_else(|| {
+    let unfit = || {
         Error::Device(format!(
             "the held currents do not fit a resistance: {holds:?} (A, V)"
         ))
-    })?;
-    c.r = r;
+    };
     let v_supply = get_param(b, ParamId::LimVSupply)?;
     let rate = get_param(b, ParamId::RateCurHz)?;
-    let dead = step / v_supply / rate;
+    // Where the bridge loses no dead time (an ideal one), the fading term's extra unknown
+    // only adds the holds' noise to R (+0.44 % on the default motor against −0.14 % without
+    // it, and k_e's plain slope below takes ten times that: −6.3 %): then `v = R i + c
+    // sign(i)`.
+    let loss = resistance_and_loss(&holds).ok_or_else(unfit)?;
+    let loss = if loss.alpha / v_supply / rate > DEAD_TIME_SEEN {
+        loss
+    } else {
+        let (r, alpha) = resistance_and_step(&holds).ok_or_else(unfit)?;
+        BridgeLoss {
+            r,
+            alpha,
+            beta: 0.0,
+        }
+    };
+    c.r = loss.r;
+    // The loss the holds saw at their largest current: what the speed runs below meet.
+    let step = loss.alpha - loss.beta / holds[4].0.abs().max(f64::MIN_POSITIVE);
+    let dead = loss.alpha / v_supply / rate;
     let (lo, hi) = DEAD_TIME_RANGE;
     c.dead_time = dead.clamp(lo, hi);
+    let held: Vec<String> = holds
+        .iter()
+        .map(|(i, v)| format!("{} at {}", si(*v, "V"), si(*i, "A")))
+        .collect();
     c.lines.push(format!(
-        "winding resistance: {} ({} at {}, {} at {}; {} at {}, {} at {})",
+        "winding resistance: {} ({})",
         si(c.r, "Ω"),
-        si(vp, "V"),
-        si(ip, "A"),
-        si(vn, "V"),
-        si(in_, "A"),
-        si(holds[2].1, "V"),
-        si(holds[2].0, "A"),
-        si(holds[3].1, "V"),
-        si(holds[3].0, "A")
+        held.join(", ")
     ));
+    // The node's capacitance that β gives (reported, not a parameter: the firmware's band
+    // around zero current covers the range where the loss fades).
+    let node = 2.0 * loss.beta / (v_supply * v_supply * rate);
+    let fades = if loss.beta > 0.0 && dead > DEAD_TIME_SEEN {
+        format!(
+            ", less by {} at {} (a switching node of about {} slewed by the current)",
+            si(loss.beta / holds[0].0.abs().max(f64::MIN_POSITIVE), "V"),
+            si(holds[0].0.abs(), "A"),
+            si(node, "F")
+        )
+    } else {
+        String::new()
+    };
     c.lines.push(if dead > hi {
         format!(
-            "bridge dead time: {} from a step of {} at zero current, more than a bridge's \
+            "bridge dead time: {} from a loss of {} at large currents, more than a bridge's \
              {}: taken as {} (the sense's zero or the motor, not the bridge?)",
             si(dead, "s"),
-            si(2.0 * step, "V"),
+            si(loss.alpha, "V"),
             si(hi, "s"),
             si(c.dead_time, "s")
         )
     } else if dead > lo {
         format!(
-            "bridge dead time: {} (the voltage steps by {} through zero current at {} and {}): \
-             drive.dead_time",
+            "bridge dead time: {} (the bridge loses {} of the voltage in the current's \
+             direction at {} and {}{fades}): drive.dead_time",
             si(dead, "s"),
-            si(2.0 * step, "V"),
+            si(loss.alpha, "V"),
             si(v_supply, "V"),
             si(rate, "Hz")
         )
     } else {
         format!(
-            "bridge dead time: none seen (the voltage steps by {} through zero current): \
+            "bridge dead time: none seen (a loss of {} in the current's direction): \
              drive.dead_time 0",
-            si(2.0 * step, "V")
+            si(loss.alpha, "V")
         )
     });
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is

@@ -114,11 +114,8 @@ pub fn identify_on<B: Bench>(
     use gms_ident::identify::{Data, Table, identify_data};
     let (xs, fs): (Vec<f64>, Vec<f64>) = g.presliding.iter().copied().unzip();
     let (vs, fv): (Vec<f64>, Vec<f64>) = g.sliding.iter().copied().unzip();
-    // The load's direction, as `presliding_csv` writes it.
-    let dir: Vec<f64> = fs
-        .iter()
-        .map(|f| if *f < 0.0 { -1.0 } else { 1.0 })
-        .collect();
+    // The load's direction, as `presliding_csv` writes it: the staircase's, positive.
+    let dir: Vec<f64> = vec![1.0; fs.len()];
     let pre = Table {
         name: pre.display().to_string(),
         cols: vec![xs, fs, dir],

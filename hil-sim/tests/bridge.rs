@@ -12,14 +12,16 @@ use hil_sim::sim;
 /// 40 kHz, the default current loop's period \[s\].
 const T: f64 = 25e-6;
 
-/// The default scenario with the real bridge at the DRV8871's figures and a stiff supply, the
-/// device's dead-time compensation off (`drive.dead_time` 0; the default plant's device
-/// compensates it).
+/// The default scenario with the real bridge at the DRV8871's figures, its switching node
+/// switched at once (the binary model, `c_node_f` 0: the closed forms below are its), and a
+/// stiff supply, the device's dead-time compensation off (`drive.dead_time` 0; the default
+/// plant's device compensates it).
 fn real() -> Scenario {
     let mut sc = Scenario::default();
     sc.plant.bridge.ideal = false;
     sc.plant.bridge.dead_time_s = 220e-9;
     sc.plant.bridge.delay_s = 0.7e-6;
+    sc.plant.bridge.c_node_f = 0.0;
     sc.plant.supply.r_source_ohm = 0.0;
     sc.controller.insert(
         "drive".into(),
@@ -293,7 +295,9 @@ fn medians(sc: &Scenario, seeds: std::ops::RangeInclusive<u64>) -> (f64, f64) {
 fn dead_time_compensation_wins_back_the_reversals() {
     let mut ideal = Scenario::default();
     ideal.plant.bridge.ideal = true;
-    let real = real();
+    // The default plant's switching node.
+    let mut real = real();
+    real.plant.bridge.c_node_f = Scenario::default().plant.bridge.c_node_f;
     // The default plant's device compensates; set here all the same.
     let mut compensated = real.clone();
     compensated.controller.insert(

@@ -25,6 +25,11 @@ fn stage(f_hz: f64, zeta: f64, j_l: f64) -> Scenario {
         fc = 0.0
         vs = 1.0
         sigma = 0.0
+        # The mechanics alone: the real bridge's dead time distorts the sine's torque at each
+        # zero of the current (its harmonics and a drift of the frictionless stage read +5.5 %
+        # at 50 Hz), which is not what these formulas are about.
+        [plant.bridge]
+        ideal = true
         "#,
         "test",
     )
