@@ -375,7 +375,7 @@ pub(crate) fn timed_run(
     seconds: f64,
     fields: &str,
     dt: f64,
-) -> Result<(), Error> {
+) -> Result<u32, Error> {
     let t_acc = v.abs() / VELOCITY_ACC;
     let steps = ((seconds + 2.0 * t_acc + 0.01) / dt).ceil();
     // The fields per sample within the buffer's values (92 spare: 8100 of the F405's 8192).
@@ -388,7 +388,7 @@ pub(crate) fn timed_run(
     capture_wait(b, 0.01, 200)?;
     check_faults(b)?;
     b.hold()?;
-    Ok(())
+    Ok(every as u32)
 }
 
 /// Moves the axis to `x` \\[rad\\] (the protocol's position) in the position loop at up to `vel`

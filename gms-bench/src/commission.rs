@@ -244,6 +244,16 @@ pub fn commission(b: &mut impl Bench, speed: f64) -> Result<Commissioned, Error>
 /// runs [-] (`pos.ki_fric`; the device's own is put back after them).
 const KE_RUN_FRICTION_SHARE: f64 = 0.5;
 
+/// The winding's L/R, as a share of the current loop's period, under which commissioning
+/// warns that the sense reads the ripple under its mean \[-\]: on the simulated DRV8871 a
+/// 14 Ω winding at 0.54 (measured; 0.49 true) read R +6.5 % and k_e +8.5 %, the default
+/// motor at 0.9 R +0.03 %.
+pub const FAST_WINDING: f64 = 0.6;
+
+/// The derivative filter's corner during the back-EMF runs, as a division of its own \[-\]
+/// (see the runs in [`commission`]).
+pub const KE_RUN_D_FILTER_DIV: f64 = 16.0;
+
 /// How many times the voltage the bridge's dead time takes (half its step at a reversal) the
 /// back-EMF at the runs' top speed should reach \[-\]; under it commissioning warns that k_e is
 /// uncertain.
@@ -469,9 +479,14 @@ pub(crate) fn commission_steps(
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
     //    not known yet, and a loop tuned for a heavier one may be unstable on it: the runs
     //    use a softer position loop (kp / 4, ki / 8, kd / 2, the derivative's filter at a
-    //    quarter of its corner; `commission` puts them back), which tracks a constant speed
+    //    sixteenth of its corner; `commission` puts them back), which tracks a constant speed
     //    well enough. (With the filter left at the default 8 kHz, a coarse encoder's count
-    //    steps drive the bridge voltage in spikes, and k_e on the gear motor read 12 % low.)
+    //    steps drive the bridge voltage in spikes, and k_e on the gear motor read 12 % low. At
+    //    a quarter, they still swing the current through zero at the count rate, where a real
+    //    bridge's dead time turns its loss over: over ten random gear motors with the real
+    //    bridge, k_e read −7 to −59 % at a quarter, −15 and −25 % at worst with the loss
+    //    taken out by the current's sign below, −12.7 % at an eighth, within ±4.5 % at a
+    //    sixteenth; the ideal bridge within ±2.3 % at a sixteenth.)
     //    The runs alternate their direction, and the friction they meet is the motor's, not
     //    the device's model of it (a gear motor's is ten times Table 1's): a plain integral,
     //    still holding the last run's friction, unwinds it into the next run's samples (k_e
@@ -489,8 +504,9 @@ pub(crate) fn commission_steps(
     b.set(ParamId::PosKd, kd / 2.0)?;
     b.set(ParamId::PosKp, kp / 4.0)?;
     b.set(ParamId::PosKi, ki / 8.0)?;
-    b.set(ParamId::PosDFilterHz, d_filter / 4.0)?;
+    b.set(ParamId::PosDFilterHz, d_filter / KE_RUN_D_FILTER_DIV)?;
     b.hold()?;
+    let loss_seen = dead > DEAD_TIME_SEEN;
     let mut pts = Vec::new();
     for k in 1..=3 {
         for dir in [1.0, -1.0] {
@@ -501,10 +517,35 @@ pub(crate) fn commission_steps(
             // point samples alias the position loop's ripple at the encoder's count rate
             // into their means (a coarse encoder's k_e read 4 to 18 % low, depending on the
             // phase of the counts against the samples).
-            timed_run(b, v, run, "t,pos,current_mean,volts_mean", dt)?;
+            // Beside a bridge's dead time, the current's sign too (`sign_mean`, every period
+            //    counted): on a coarse encoder the loop swings the current through zero at the
+            //    count rate, more often the faster it runs, and the bridge's loss is α times
+            //    that mean, not α (k_e read −58 % on a 1.5 Ω gear motor of
+            //    `hil-sim/tests/coarse.rs`: its current was negative 16, 32 and 44 % of the
+            //    time at 5, 10 and 15 rad/s). With four fields at most, the time is then the
+            //    sample's index × its steps.
+            let fields = if loss_seen {
+                "pos,current_mean,volts_mean,sign_mean"
+            } else {
+                "t,pos,current_mean,volts_mean"
+            };
+            let every = f64::from(timed_run(b, v, run, fields, dt)?);
+            // (t, pos, current, volts, sign)
             let rows: Vec<Vec<f64>> = capture_rows(b)?
                 .into_iter()
-                .filter(|r| r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
+                .enumerate()
+                .map(|(j, r)| {
+                    if loss_seen {
+                        let mut row = vec![j as f64 * every * dt];
+                        row.extend_from_slice(&r);
+                        row
+                    } else {
+                        let mut row = r;
+                        row.push(0.0);
+                        row
+                    }
+                })
+                .filter(|r| r.len() == 5 && r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
                 .collect();
             if rows.len() < 2 {
                 return Err(Error::Device("an empty capture".into()));
@@ -514,7 +555,7 @@ pub(crate) fn commission_steps(
             let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
             let x: Vec<f64> = rows.iter().map(|r| r[1]).collect();
             let w = ls_slope(&t, &x, dt * dt).unwrap_or(0.0);
-            pts.push((w, m[3] - c.r * m[2]));
+            pts.push((w, m[3] - c.r * m[2] - loss.alpha * m[4]));
         }
     }
     // The derivative's filter back: the position gains' rule below starts from it.
@@ -1199,6 +1240,15 @@ pub(crate) fn inductance(
             "  warning: L/R is below a sixth of the current period ({:.1} µs): the winding \
              settles within a period, so L is poorly resolved (cur.kp = ωL matters little there)",
             h / 6.0 * 1e6
+        ));
+    } else if l / r < FAST_WINDING * h {
+        c.lines.push(format!(
+            "  warning: L/R is under {FAST_WINDING} of the current period ({:.1} µs): the \
+             current's ripple decays within the period, and the sense's window at the \
+             counter's bottom reads under the period's mean: R and k_e read high (+6.5 % and \
+             +8.5 % at half the period on the simulated DRV8871); a faster current loop \
+             (rate.cur_hz) or an inductor in series resolves it",
+            FAST_WINDING * h * 1e6
         ));
     }
     Ok(l)

@@ -242,6 +242,10 @@ fn capture_field_lists() {
         capture_fields("current,current_mean"),
         Ok(([5, 8, 0, 0], 2))
     );
+    assert_eq!(
+        capture_fields("pos,current_mean,volts_mean,sign_mean"),
+        Ok(([1, 8, 9, 10], 4))
+    );
     for bad in ["", "t,", ",t", "t,,pos", "speed", "t,pos,ref,error,ff", "T"] {
         assert!(capture_fields(bad).is_err(), "{bad:?}");
     }
@@ -328,6 +332,7 @@ fn current_mean_is_the_boxcar_of_the_decimated_steps() {
             rad_per_count: 3.8e-6,
             current: current(k),
             current_period: current(k),
+            periods: 1,
             ..StepValues::default()
         });
     }
@@ -348,6 +353,88 @@ fn current_mean_is_the_boxcar_of_the_decimated_steps() {
     }
     // The alternating part: sampled +1 (even steps), its mean 0.
     assert_eq!((c.values[2], c.values[3]), (1.0, 0.0));
+}
+
+/// `sign_mean` is the mean of the measured current's sign over every PWM period a sample
+/// stands for: a current that alternates +300 and −100 codes from period to period (two
+/// periods a position step) reads a sign of 0 and a mean current of +100 codes' worth; held at
+/// −100 codes it reads −1.
+#[test]
+fn sign_mean_counts_each_periods_current_direction() {
+    use gms_core::device::{CaptureRequest, CaptureSpec, CaptureState};
+    let period = period_cycles();
+    let mut lp = rest();
+    let s = default_settings();
+    assert_eq!((s.cur_rate_hz / s.pos_rate_hz).round(), 2.0);
+    let spec = CaptureSpec {
+        fields: [8, 10, 5, 0],
+        nfields: 3,
+        every: 1,
+        samples: 20,
+        on_next: false,
+    };
+    step(
+        &mut lp,
+        period,
+        Some(Requests {
+            capture: Some(CaptureRequest::Arm(spec)),
+            ..Requests::default()
+        }),
+    );
+    let run = |lp: &mut ControlLoop, code: &dyn Fn(usize) -> u32, n: usize| {
+        for k in 0..n {
+            let inp = Inputs {
+                encoder: 0,
+                current_codes: codes(code(k)),
+                since_last: period,
+            };
+            lp.step(inp, |_, _| None);
+            lp.finish(1000, false);
+        }
+    };
+    // 10 position steps alternating, then 10 held negative.
+    run(&mut lp, &|k| if k % 2 == 0 { 2348 } else { 1948 }, 20);
+    run(&mut lp, &|_| 1948, 20);
+    for _ in 0..4 {
+        step(&mut lp, period, None);
+    }
+    let st = lp.status();
+    assert_eq!((st.capture, st.captured), (CaptureState::Done, 20));
+    let mut chunk = None;
+    let mut req = Some(leak(Requests {
+        capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
+        ..Requests::default()
+    }));
+    for _ in 0..4 {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: codes(2048),
+            since_last: period,
+        };
+        lp.step(inp, |_, h| {
+            if let Some(r) = h.returned {
+                chunk = Some(r.chunk);
+            }
+            req.take()
+        });
+    }
+    let c = chunk.expect("a chunk");
+    let row = |j: usize| (c.values[3 * j], c.values[3 * j + 1], c.values[3 * j + 2]);
+    // The held part: the sampled current is −100 codes' worth, the sign −1.
+    let (mean_neg, sign_neg, i_neg) = row(15);
+    assert!(i_neg < 0.0 && (mean_neg - i_neg).abs() < 1e-6 * i_neg.abs());
+    assert_eq!(sign_neg, -1.0);
+    // The alternating part (the first sample is the trigger's step alone): sign 0, and the
+    // current's mean a third of the +300 codes' current (−100 and +300 over two).
+    for j in 1..9 {
+        let (mean, sign, _) = row(j);
+        assert_eq!(sign, 0.0, "sample {j}");
+        assert!(
+            (mean - (-3.0 * i_neg + i_neg) / 2.0).abs() < 1e-3 * i_neg.abs(),
+            "sample {j}: {mean} against {}",
+            (-3.0 * i_neg + i_neg) / 2.0
+        );
+    }
 }
 
 /// `current AMPS SECONDS`: the current held for so many position steps, then 0 A, still in

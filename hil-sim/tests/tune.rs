@@ -268,12 +268,22 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         );
         assert_eq!(c.enc_dir, if enc_rev { -1.0 } else { 1.0 });
         assert_eq!(c.sense_dir, if sense_rev { -1.0 } else { 1.0 });
+        // A winding faster than the sense resolves (L/R under 0.6 of the 25 µs period: the 14
+        // Ω one's 12.4 µs with the switches) is flagged; with the real bridge its ripple reads
+        // under the period's mean, R +6.5 % and k_e +8.5 % (docs/results.md): 10 % there.
+        let fast = l / r_path < gms_bench::commission::FAST_WINDING * 25e-6;
+        let flagged = c
+            .lines
+            .iter()
+            .any(|l| l.contains("reads under the period's mean"));
+        assert_eq!(flagged, fast, "{:?}", c.lines);
+        let tol = if fast { 0.10 } else { 0.05 };
         assert!(
-            (c.r / r_path - 1.0).abs() < 0.05,
+            (c.r / r_path - 1.0).abs() < tol,
             "R {} against {r_path}",
             c.r
         );
-        assert!((c.k_e / k - 1.0).abs() < 0.05, "k_e {}", c.k_e);
+        assert!((c.k_e / k - 1.0).abs() < tol, "k_e {}", c.k_e);
         assert!((c.inertia / j - 1.0).abs() < 0.15, "J {}", c.inertia);
         assert!((c.inductance / l - 1.0).abs() < 0.20, "L {}", c.inductance);
         // The current PI is the rule's for the winding measured, at the loop's rate.

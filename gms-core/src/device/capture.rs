@@ -17,8 +17,11 @@ use crate::protocol::CaptureState;
 /// sample stands for \[A, V\] (`current` and `volts` are that step's alone: decimated, a
 /// current or a voltage that ripples at the encoder's count rate aliases into its mean;
 /// `current_mean` and `volts_mean` are the boxcar's, every PWM period counted: with the
-/// current loop faster than the position loop, the periods between position steps too).
-pub const CAPTURE_NAMES: [&str; 10] = [
+/// current loop faster than the position loop, the periods between position steps too), and
+/// the mean of the measured current's sign over the same periods \[-1, 1\] (`sign_mean`: the
+/// share of the time a bridge's dead time takes its voltage one way less the other's, when a
+/// loop swings the current through zero faster than a capture can sample it).
+pub const CAPTURE_NAMES: [&str; 11] = [
     "t",
     "pos",
     "ref",
@@ -29,6 +32,7 @@ pub const CAPTURE_NAMES: [&str; 10] = [
     "volts",
     "current_mean",
     "volts_mean",
+    "sign_mean",
 ];
 
 /// The index in [`CAPTURE_NAMES`] of the field `name`.
@@ -46,6 +50,7 @@ pub fn capture_field(name: &str) -> Option<u8> {
         "volts" => Some(7),
         "current_mean" => Some(8),
         "volts_mean" => Some(9),
+        "sign_mean" => Some(10),
         _ => None,
     }
 }
@@ -65,7 +70,7 @@ pub fn capture_fields(list: &str) -> Result<([u8; CAPTURE_FIELDS], u8), &'static
             let name = list.get(start..at).unwrap_or("");
             let i = capture_field(name).ok_or(
                 "unknown field (t, pos, ref, error, ff, current, friction, volts, current_mean, \
-                 volts_mean)",
+                 volts_mean, sign_mean)",
             )?;
             let slot = idx.get_mut(n).ok_or("at most 4 fields")?;
             *slot = i;
@@ -123,11 +128,15 @@ pub struct StepValues {
     pub friction: f32,
     /// The bridge voltage commanded \[V\] (0 while off).
     pub volts: f32,
-    /// The current's mean over the PWM periods since the last position step \[A\] (with the
+    /// The current summed over the PWM periods since the last position step \[A\] (with the
     /// current loop faster than the position loop, `current` is one of them).
     pub current_period: f32,
-    /// The bridge voltage's mean over those periods \[V\].
+    /// The bridge voltage summed over those periods \[V\].
     pub volts_period: f32,
+    /// The measured current's sign summed over those periods \[-\] (+1 at +0 A).
+    pub sign_period: f32,
+    /// How many periods the sums hold.
+    pub periods: u32,
 }
 
 /// A capture in progress over a buffer of `B`.
@@ -140,9 +149,9 @@ pub struct Capture<B: AsRef<[f32]> + AsMut<[f32]>> {
     skip: u32,
     t0: u64,
     pos0: i64,
-    /// The current \[A\] and the voltage \[V\] summed over the steps since the last sample,
-    /// and their number.
-    sum: (f32, f32, u32),
+    /// The current \[A\], the voltage \[V\] and the current's sign \[-\] summed over the
+    /// PWM periods of the steps since the last sample, and their number.
+    sum: (f32, f32, f32, u32),
 }
 
 impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
@@ -156,7 +165,7 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             skip: 0,
             t0: 0,
             pos0: 0,
-            sum: (0.0, 0.0, 0),
+            sum: (0.0, 0.0, 0.0, 0),
         }
     }
 
@@ -168,6 +177,11 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
     /// Where it is and how many samples it holds.
     pub fn state(&self) -> (CaptureState, u32) {
         (self.state, self.count)
+    }
+
+    /// Whether the capture is armed or recording (the loop's period sums are wanted).
+    pub fn active(&self) -> bool {
+        matches!(self.state, CaptureState::Armed | CaptureState::Recording)
     }
 
     /// The encoder position at the trigger \[counts\] (the origin of `pos` and `ref`).
@@ -216,7 +230,7 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
             self.t0 = v.steps;
             self.pos0 = v.pos;
             self.skip = 0;
-            self.sum = (0.0, 0.0, 0);
+            self.sum = (0.0, 0.0, 0.0, 0);
         }
         if self.state != CaptureState::Recording {
             return;
@@ -224,7 +238,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         self.sum = (
             self.sum.0 + v.current_period,
             self.sum.1 + v.volts_period,
-            self.sum.2.saturating_add(1),
+            self.sum.2 + v.sign_period,
+            self.sum.3.saturating_add(v.periods),
         );
         if self.skip > 0 {
             self.skip -= 1;
@@ -245,9 +260,9 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
         let at = self.count as usize * n;
         let (fields, t0, pos0) = (self.spec.fields, self.t0, self.pos0);
         // At least this step is in the sum.
-        let steps = self.sum.2.max(1) as f32;
-        let (mean, volts_mean) = (self.sum.0 / steps, self.sum.1 / steps);
-        self.sum = (0.0, 0.0, 0);
+        let per = 1.0 / self.sum.3.max(1) as f32;
+        let (mean, volts_mean, sign_mean) = (self.sum.0 * per, self.sum.1 * per, self.sum.2 * per);
+        self.sum = (0.0, 0.0, 0.0, 0);
         let buf = self.buf.as_mut();
         for (k, &f) in fields.iter().take(n).enumerate() {
             let x = match f {
@@ -264,7 +279,8 @@ impl<B: AsRef<[f32]> + AsMut<[f32]>> Capture<B> {
                 6 => v.friction,
                 7 => v.volts,
                 8 => mean,
-                _ => volts_mean,
+                9 => volts_mean,
+                _ => sign_mean,
             };
             if let Some(slot) = buf.get_mut(at + k) {
                 *slot = x;

@@ -179,9 +179,10 @@ pub struct ControlLoop {
     last_pos: i64,
     /// PWM periods missed since the last position step (the loop stood still).
     missed_since_pos: u32,
-    /// The current \[A\] and the bridge voltage \[V\] summed over the PWM periods since the
-    /// last position step, and their number (the capture's means count every period).
-    period_sum: (f32, f32, u32),
+    /// The current \[A\], the bridge voltage \[V\] and the current's sign \[-\] summed over
+    /// the PWM periods since the last position step, and their number (the capture's means
+    /// count every period).
+    period_sum: (f32, f32, f32, u32),
     sense: CurrentSense,
     faults: Faults,
     enabled: bool,
@@ -285,7 +286,7 @@ impl ControlLoop {
             last_raw: encoder,
             last_pos: 0,
             missed_since_pos: 0,
-            period_sum: (0.0, 0.0, 0),
+            period_sum: (0.0, 0.0, 0.0, 0),
             sense,
             faults,
             enabled: false,
@@ -732,11 +733,19 @@ impl ControlLoop {
         } else {
             0.0
         };
-        self.period_sum = (
-            self.period_sum.0 + self.current,
-            self.period_sum.1 + volts,
-            self.period_sum.2.saturating_add(1),
-        );
+        // Summed only for a capture armed or recording (the sums count their periods, so a
+        // capture armed within a position period averages those after it): a step without
+        // one pays a test, not the sums (18 cycles at rest on the F405 with the sign's).
+        if self.capture.active() {
+            // The sign by its bit (no branch): +1 at +0 A.
+            let sign = 1.0f32.copysign(self.current);
+            self.period_sum = (
+                self.period_sum.0 + self.current,
+                self.period_sum.1 + volts,
+                self.period_sum.2 + sign,
+                self.period_sum.3.saturating_add(1),
+            );
+        }
         // Requests are taken in the last current step of a position period: with the current
         // loop faster than the position loop, that step has no position step of its own, and a
         // parameter set's hand-over (the costliest request) does not add to one (at 40 kHz the
@@ -859,9 +868,10 @@ impl ControlLoop {
             let p = self.ctrl.params();
             // The step's values only for a capture armed or recording (not built in every
             // step for nothing).
-            let n = self.period_sum.2.max(1) as f32;
-            let (current_period, volts_period) = (self.period_sum.0 / n, self.period_sum.1 / n);
-            self.period_sum = (0.0, 0.0, 0);
+            // The sums go to the capture as they are: it divides once a sample, and a step
+            // without one divides nothing.
+            let (current_period, volts_period, sign_period, periods) = self.period_sum;
+            self.period_sum = (0.0, 0.0, 0.0, 0);
             if matches!(
                 self.capture.state().0,
                 super::CaptureState::Armed | super::CaptureState::Recording
@@ -879,6 +889,8 @@ impl ControlLoop {
                     volts,
                     current_period,
                     volts_period,
+                    sign_period,
+                    periods,
                 });
             }
         } else if self.enabled && drive::over_current(self.current, self.limits.i_trip) {
