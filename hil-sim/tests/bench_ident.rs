@@ -393,8 +393,12 @@ proptest! {
         // delta 1.1-5.0 %, sigma <= 0.7 %, C 0.2-5.8 %, the virgin curve 0.59-3.66 % of Fs.
         // (In the 20 kHz tracking loop instead: Fs up to 7.4 %, Vs 14 %; in the earlier 10 kHz
         // kp 0.2 one: Fs 3.9 %, delta 9.3 %, C 12.6 %.) The bounds but for the virgin
-        // curve (2 %: early breakaway), docs/identification.md.
-        prop_assert!(within(&acc, 0.03, 0.10, 0.15, 0.05), "{acc:?}");
+        // curve (2 %: early breakaway), docs/identification.md. Fs and Fc at 4 % on the default
+        // plant's real sense chain: its reading at the counter's bottom is ahead of the
+        // bridge's brake (the bridge's delay, the amplifier's lag) and reads the current
+        // 0.5-1 % over its mean; the worst draw's Fs +3.44 % (+2.59 % on the ideal bridge;
+        // docs/results.md).
+        prop_assert!(within(&acc, 0.04, 0.10, 0.15, 0.05), "{acc:?}");
     }
 }
 
