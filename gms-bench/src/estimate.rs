@@ -116,22 +116,19 @@ pub struct BridgeLoss {
 /// on the default motor with a 100 pF node). `None` unless both directions are held and
 /// three magnitudes at least (the three unknowns apart).
 pub fn resistance_and_loss(points: &[(f64, f64)]) -> Option<BridgeLoss> {
-    let basis = |i: f64| [i, i.signum(), -1.0 / i];
-    // Normal equations A x = b, A = Σ φ φᵀ, b = Σ φ v.
-    let mut a = [[0.0f64; 3]; 3];
-    let mut b = [0.0f64; 3];
+    use nalgebra::{Matrix3, Vector3};
+    // Normal equations A x = b, A = Σ φ φᵀ, b = Σ φ v, φ = (i, sign(i), −1 / i); solved as
+    // `posmap::harmonic_fit` solves its own.
+    let mut a = Matrix3::<f64>::zeros();
+    let mut b = Vector3::<f64>::zeros();
     let mut mags: Vec<f64> = Vec::new();
     for &(i, v) in points {
         if i == 0.0 || !i.is_finite() || !v.is_finite() {
             return None;
         }
-        let phi = basis(i);
-        for r in 0..3 {
-            for c in 0..3 {
-                a[r][c] += phi[r] * phi[c];
-            }
-            b[r] += phi[r] * v;
-        }
+        let phi = Vector3::new(i, i.signum(), -1.0 / i);
+        a += phi * phi.transpose();
+        b += phi * v;
         if !mags.iter().any(|m| (m - i.abs()).abs() <= 1e-3 * m) {
             mags.push(i.abs());
         }
@@ -140,28 +137,11 @@ pub fn resistance_and_loss(points: &[(f64, f64)]) -> Option<BridgeLoss> {
     if !both || mags.len() < 3 {
         return None;
     }
-    let det3 = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let det = det3(&a);
-    let scale = a[0][0] * a[1][1] * a[2][2];
-    if !(det.is_finite() && det > 1e-12 * scale) {
-        return None;
-    }
-    // Cramer's rule: each unknown's column replaced by b.
-    let solve = |k: usize| {
-        let mut m = a;
-        for (r, row) in m.iter_mut().enumerate() {
-            row[k] = b[r];
-        }
-        det3(&m) / det
-    };
-    Some(BridgeLoss {
-        r: solve(0),
-        alpha: solve(1),
-        beta: solve(2),
+    let x = a.cholesky()?.solve(&b);
+    x.iter().all(|v| v.is_finite()).then(|| BridgeLoss {
+        r: x[0],
+        alpha: x[1],
+        beta: x[2],
     })
 }
 

@@ -69,6 +69,31 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
     }
 }
 
+/// The capture's first 64 values, read back through the requests' chunk (given back at the
+/// next exchange), in PWM periods at rest `period` cycles apart.
+fn read_capture(lp: &mut ControlLoop, period: u32) -> gms_core::device::Chunk {
+    use gms_core::device::CaptureRequest;
+    let mut chunk = None;
+    let mut req = Some(leak(Requests {
+        capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
+        ..Requests::default()
+    }));
+    for _ in 0..4 {
+        let inp = Inputs {
+            encoder: 0,
+            current_codes: codes(2048),
+            since_last: period,
+        };
+        lp.step(inp, |_, h| {
+            if let Some(r) = h.returned {
+                chunk = Some(r.chunk);
+            }
+            req.take()
+        });
+    }
+    chunk.expect("a chunk")
+}
+
 #[test]
 fn a_missed_period_is_counted_and_latches_overrun_while_driving() {
     let period = period_cycles();
@@ -277,27 +302,8 @@ fn a_capture_records_what_the_loop_saw() {
     }
     let st = lp.status();
     assert_eq!((st.capture, st.captured), (CaptureState::Done, 10));
-    // Read back through the requests' chunk (given back at the next exchange): position 0
-    // (at rest), current 0.
-    let mut chunk = None;
-    let mut req = Some(leak(Requests {
-        capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
-        ..Requests::default()
-    }));
-    for _ in 0..4 {
-        let inp = Inputs {
-            encoder: 0,
-            current_codes: codes(2048),
-            since_last: period,
-        };
-        lp.step(inp, |_, h| {
-            if let Some(r) = h.returned {
-                chunk = Some(r.chunk);
-            }
-            req.take()
-        });
-    }
-    let c = chunk.expect("a chunk");
+    // Read back: position 0 (at rest), current 0.
+    let c = read_capture(&mut lp, period);
     assert_eq!((c.start, c.samples, c.nfields), (0, 10, 2));
     assert!(c.values[..20].iter().all(|v| *v == 0.0));
 }
@@ -400,25 +406,7 @@ fn sign_mean_counts_each_periods_current_direction() {
     }
     let st = lp.status();
     assert_eq!((st.capture, st.captured), (CaptureState::Done, 20));
-    let mut chunk = None;
-    let mut req = Some(leak(Requests {
-        capture: Some(CaptureRequest::Read { start: 0, max: 64 }),
-        ..Requests::default()
-    }));
-    for _ in 0..4 {
-        let inp = Inputs {
-            encoder: 0,
-            current_codes: codes(2048),
-            since_last: period,
-        };
-        lp.step(inp, |_, h| {
-            if let Some(r) = h.returned {
-                chunk = Some(r.chunk);
-            }
-            req.take()
-        });
-    }
-    let c = chunk.expect("a chunk");
+    let c = read_capture(&mut lp, period);
     let row = |j: usize| (c.values[3 * j], c.values[3 * j + 1], c.values[3 * j + 2]);
     // The held part: the sampled current is −100 codes' worth, the sign −1.
     let (mean_neg, sign_neg, i_neg) = row(15);

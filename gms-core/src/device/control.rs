@@ -872,10 +872,7 @@ impl ControlLoop {
             // without one divides nothing.
             let (current_period, volts_period, sign_period, periods) = self.period_sum;
             self.period_sum = (0.0, 0.0, 0.0, 0);
-            if matches!(
-                self.capture.state().0,
-                super::CaptureState::Armed | super::CaptureState::Recording
-            ) {
+            if self.capture.active() {
                 self.capture.step(&StepValues {
                     steps: self.steps,
                     dt: self.ctrl.dt_pos(),
