@@ -246,9 +246,10 @@ const KE_RUN_FRICTION_SHARE: f64 = 0.5;
 
 /// The winding's L/R, as a share of the current loop's period, under which commissioning
 /// warns that the sense reads the ripple under its mean \[-\]: on the simulated DRV8871 a
-/// 14 Ω winding at 0.54 (measured; 0.49 true) read R +6.5 % and k_e +8.5 %, the default
-/// motor at 0.9 R +0.03 %.
-pub const FAST_WINDING: f64 = 0.6;
+/// 14 Ω winding at 0.54 (measured; 0.49 true) read R +6.5 % and k_e +8.5 %; a 13.8 Ω one
+/// (7.8 mN·m/A) at 0.48, 0.6, 0.68, 0.8 and 1.0 read R +8.4, +3.7, +2.3, +0.8 and −0.2 %; the
+/// default motor at 0.9 R +0.03 %.
+pub const FAST_WINDING: f64 = 0.8;
 
 /// The derivative filter's corner during the back-EMF runs, as a division of its own \[-\]
 /// (see the runs in [`commission`]).
@@ -258,6 +259,12 @@ pub const KE_RUN_D_FILTER_DIV: f64 = 16.0;
 /// back-EMF at the runs' top speed should reach \[-\]; under it commissioning warns that k_e is
 /// uncertain.
 pub const KE_EMF_OVER_STEP: f64 = 10.0;
+
+/// How many times the back-EMF's rise over the runs R times the current's rise (the
+/// friction's viscous part) may be before commissioning warns that R's error is amplified in
+/// k_e \[-\]: R reads within about 1 % on the simulated real bridge, so up to 4 % in k_e (the
+/// default motor on Table 1's friction: 2.4).
+pub const KE_DROP_OVER_EMF: f64 = 4.0;
 
 /// The length of each back-EMF run at constant speed \[s\] (0.1 s settling, 0.3 s averaged).
 /// With 0.1 s averaged, k_e on a coarse-encoder motor with ten times the modelled friction
@@ -508,6 +515,8 @@ pub(crate) fn commission_steps(
     b.hold()?;
     let loss_seen = dead > DEAD_TIME_SEEN;
     let mut pts = Vec::new();
+    // (|ω|, |current|) of each run, for the friction's drop below.
+    let mut drops = Vec::new();
     for k in 1..=3 {
         for dir in [1.0, -1.0] {
             let v = dir * speed * k as f64;
@@ -556,6 +565,7 @@ pub(crate) fn commission_steps(
             let x: Vec<f64> = rows.iter().map(|r| r[1]).collect();
             let w = ls_slope(&t, &x, dt * dt).unwrap_or(0.0);
             pts.push((w, m[3] - c.r * m[2] - loss.alpha * m[4]));
+            drops.push((w.abs(), m[2].abs()));
         }
     }
     // The derivative's filter back: the position gains' rule below starts from it.
@@ -586,6 +596,21 @@ pub(crate) fn commission_steps(
         pts.len(),
         3.0 * speed
     ));
+    // k_e is what is left of the voltage's rise with the speed once R times the current's
+    //    rise is taken out, and the current rises with the friction's viscous part: where R
+    //    times that rise is several times the back-EMF's, R's error reads that many times
+    //    over in k_e (`hil-sim/tests` motors of 4 mN·m/A on Table 1's viscous friction: the
+    //    drop 7.8 times the back-EMF, R −0.5 % against the runs' k_e −4 %).
+    let (aw, ai): (Vec<f64>, Vec<f64>) = drops.into_iter().unzip();
+    let drop = ls_slope(&aw, &ai, f64::MIN_POSITIVE).unwrap_or(0.0) * c.r / c.k_e.abs();
+    if drop > KE_DROP_OVER_EMF {
+        c.lines.push(format!(
+            "  warning: over the runs R times the current's rise with the speed (the friction's \
+             viscous part) is {drop:.1} times the back-EMF's rise: an error in R reads {drop:.1} \
+             times over in k_e (R reads within about 1 % on a real bridge's sense chain): check k_e against the motor's \
+             datasheet (k_e = k_M in SI)"
+        ));
+    }
     // Beside a bridge's dead time the runs' back-EMF must stand well clear of its step: where
     // the current's ripple crosses zero the bridge loses less than the step, and the fit's
     // c' sign(ω) no longer takes all of it (k_e read −35 % on a coarse motor of
@@ -1246,7 +1271,7 @@ pub(crate) fn inductance(
             "  warning: L/R is under {FAST_WINDING} of the current period ({:.1} µs): the \
              current's ripple decays within the period, and the sense's window at the \
              counter's bottom reads under the period's mean: R and k_e read high (+6.5 % and \
-             +8.5 % at half the period on the simulated DRV8871); a faster current loop \
+             +8.5 % at half the period on the simulated DRV8871, R +2.3 % at 0.68); a faster current loop \
              (rate.cur_hz) or an inductor in series resolves it",
             FAST_WINDING * h * 1e6
         ));

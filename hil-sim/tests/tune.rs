@@ -268,7 +268,7 @@ fn commissioning_measures_a_hidden_motor_and_fixes_the_directions() {
         );
         assert_eq!(c.enc_dir, if enc_rev { -1.0 } else { 1.0 });
         assert_eq!(c.sense_dir, if sense_rev { -1.0 } else { 1.0 });
-        // A winding faster than the sense resolves (L/R under 0.6 of the 25 µs period: the 14
+        // A winding faster than the sense resolves (L/R under 0.8 of the 25 µs period: the 14
         // Ω one's 12.4 µs with the switches) is flagged; with the real bridge its ripple reads
         // under the period's mean, R +6.5 % and k_e +8.5 % (docs/results.md): 10 % there.
         let fast = l / r_path < gms_bench::commission::FAST_WINDING * 25e-6;
