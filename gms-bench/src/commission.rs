@@ -260,12 +260,6 @@ pub const KE_RUN_D_FILTER_DIV: f64 = 16.0;
 /// uncertain.
 pub const KE_EMF_OVER_STEP: f64 = 10.0;
 
-/// How many times the back-EMF's rise over the runs R times the current's rise (the
-/// friction's viscous part) may be before commissioning warns that R's error is amplified in
-/// k_e \[-\]: R reads within about 1 % on the simulated real bridge, so up to 4 % in k_e (the
-/// default motor on Table 1's friction: 2.4).
-pub const KE_DROP_OVER_EMF: f64 = 4.0;
-
 /// The length of each back-EMF run at constant speed \[s\] (0.1 s settling, 0.3 s averaged).
 /// With 0.1 s averaged, k_e on a coarse-encoder motor with ten times the modelled friction
 /// (`hil-sim/tests/coarse.rs`: R 4.19 Ω, 2000 counts) read anywhere from +1 % to −6 % as a
@@ -435,7 +429,13 @@ pub(crate) fn commission_steps(
     let step = loss.alpha - loss.beta / holds[4].0.abs().max(f64::MIN_POSITIVE);
     let dead = loss.alpha / v_supply / rate;
     let (lo, hi) = DEAD_TIME_RANGE;
-    c.dead_time = dead.clamp(lo, hi);
+    // Under DEAD_TIME_SEEN the holds' noise, not a bridge (the ideal bridge read 0.12 ns and
+    // was set so): none.
+    c.dead_time = if dead > DEAD_TIME_SEEN {
+        dead.clamp(lo, hi)
+    } else {
+        0.0
+    };
     let held: Vec<String> = holds
         .iter()
         .map(|(i, v)| format!("{} at {}", si(*v, "V"), si(*i, "A")))
@@ -467,7 +467,7 @@ pub(crate) fn commission_steps(
             si(hi, "s"),
             si(c.dead_time, "s")
         )
-    } else if dead > lo {
+    } else if dead > DEAD_TIME_SEEN {
         format!(
             "bridge dead time: {} (the bridge loses {} of the voltage in the current's \
              direction at {} and {}{fades}): drive.dead_time",
@@ -478,9 +478,11 @@ pub(crate) fn commission_steps(
         )
     } else {
         format!(
-            "bridge dead time: none seen (a loss of {} in the current's direction): \
-             drive.dead_time 0",
-            si(loss.alpha, "V")
+            "bridge dead time: none seen ({} from a loss of {} in the current's direction, \
+             under {}): drive.dead_time 0",
+            si(dead, "s"),
+            si(loss.alpha, "V"),
+            si(DEAD_TIME_SEEN, "s")
         )
     });
     // 5. k_e from timed runs both ways: V - R i against the speed. The motor's inertia is
@@ -515,8 +517,6 @@ pub(crate) fn commission_steps(
     b.hold()?;
     let loss_seen = dead > DEAD_TIME_SEEN;
     let mut pts = Vec::new();
-    // (|ω|, |current|) of each run, for the friction's drop below.
-    let mut drops = Vec::new();
     for k in 1..=3 {
         for dir in [1.0, -1.0] {
             let v = dir * speed * k as f64;
@@ -565,7 +565,6 @@ pub(crate) fn commission_steps(
             let x: Vec<f64> = rows.iter().map(|r| r[1]).collect();
             let w = ls_slope(&t, &x, dt * dt).unwrap_or(0.0);
             pts.push((w, m[3] - c.r * m[2] - loss.alpha * m[4]));
-            drops.push((w.abs(), m[2].abs()));
         }
     }
     // The derivative's filter back: the position gains' rule below starts from it.
@@ -596,21 +595,6 @@ pub(crate) fn commission_steps(
         pts.len(),
         3.0 * speed
     ));
-    // k_e is what is left of the voltage's rise with the speed once R times the current's
-    //    rise is taken out, and the current rises with the friction's viscous part: where R
-    //    times that rise is several times the back-EMF's, R's error reads that many times
-    //    over in k_e (`hil-sim/tests` motors of 4 mN·m/A on Table 1's viscous friction: the
-    //    drop 7.8 times the back-EMF, R −0.5 % against the runs' k_e −4 %).
-    let (aw, ai): (Vec<f64>, Vec<f64>) = drops.into_iter().unzip();
-    let drop = ls_slope(&aw, &ai, f64::MIN_POSITIVE).unwrap_or(0.0) * c.r / c.k_e.abs();
-    if drop > KE_DROP_OVER_EMF {
-        c.lines.push(format!(
-            "  warning: over the runs R times the current's rise with the speed (the friction's \
-             viscous part) is {drop:.1} times the back-EMF's rise: an error in R reads {drop:.1} \
-             times over in k_e (R reads within about 1 % on a real bridge's sense chain): check k_e against the motor's \
-             datasheet (k_e = k_M in SI)"
-        ));
-    }
     // Beside a bridge's dead time the runs' back-EMF must stand well clear of its step: where
     // the current's ripple crosses zero the bridge loses less than the step, and the fit's
     // c' sign(ω) no longer takes all of it (k_e read −35 % on a coarse motor of

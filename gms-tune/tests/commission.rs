@@ -19,11 +19,23 @@ fn path_resistance(path: &std::path::Path) -> f64 {
         .path_resistance()
 }
 
-/// The actuator's viscous friction on the scenario at `path` \[N·m·s/rad\] (the plant's truth).
-fn viscous(path: &std::path::Path) -> f64 {
+/// How far ahead of the bridge's brake the sense reads on the scenario at `path` \[s\]: the
+/// bridge's delay and the amplifier's lag (1 / 2π its bandwidth); 0 on the ideal bridge.
+fn sense_lead(path: &std::path::Path) -> f64 {
     let text = std::fs::read_to_string(path).unwrap();
-    let sc = hil_sim::scenario::Scenario::parse(&text, "test").unwrap();
-    sc.plant.actuator.sigma.unwrap_or(0.0)
+    let p = hil_sim::scenario::Scenario::parse(&text, "test")
+        .unwrap()
+        .plant;
+    let lag = if p.sense.bandwidth_hz > 0.0 {
+        1.0 / (2.0 * std::f64::consts::PI * p.sense.bandwidth_hz)
+    } else {
+        0.0
+    };
+    if p.bridge.ideal {
+        0.0
+    } else {
+        p.bridge.delay_s + lag
+    }
 }
 
 /// `commission --apply` on a virtual device 10× faster than real time whose motor the device
@@ -106,9 +118,9 @@ fn commission_measures_a_hidden_motor_and_applies_it() {
 /// ohm, k 4-10 mN·m/A, J 3-12e-8 kg·m², L/R 12-60 µs (a faster winding settles within the
 /// 25 µs current period and shows too little of its L), either wiring reversed or not, each
 /// behind `hil-sim serve --speed 10`: `gms-tune commission --out m.toml` finds R (the
-/// winding's and the bridge's switches') within 5 % and k_e within 5 % and the viscous
-/// friction's amplification of R's error (below), both within 10 % on a winding it flags as
-/// faster than the sense resolves, J within 15 %, the current loop's kp within 20 % of the
+/// winding's and the bridge's switches') within 5 % and k_e within 5 % and the share of L/R
+/// the sense reads ahead of the bridge's brake (below), both within 10 % on a winding it
+/// flags as faster than the sense resolves, J within 15 %, the current loop's kp within 20 % of the
 /// rule's for the true winding, and both directions.
 #[test]
 fn commission_finds_random_hidden_motors() {
@@ -164,22 +176,25 @@ fn commission_finds_random_hidden_motors() {
             // A winding faster than the sense resolves is flagged (certainly under 0.6 of
             // the 25 µs period, never over one period: the tool judges it by its measured L/R,
             // at 0.8), and reads R and k_e high: 10 % there. Elsewhere R within 5 %, and k_e
-            // within 5 % plus 1 % for each time R times the viscous friction's current per
-            // rad/s stands over k (an error in R reads that many times over in k_e: the tool
-            // warns from 4).
-            let tau = l / path_resistance(&sc) / 25e-6;
+            // within 5 % plus the share of L/R by which the sense reads ahead of the bridge's
+            // brake (its delay and the amplifier's lag, 1.1 µs on the DRV8871 and INA240):
+            // it reads the brake's decay early, which the back-EMF steepens, and k_e low by
+            // about that (−2.9 and −3.0 % at 31 and 27 µs, −0.2 and −0.9 % with the delay 0;
+            // docs/results.md).
+            let l_r = l / path_resistance(&sc);
+            let tau = l_r / 25e-6;
             let fast = out.contains("reads under the period's mean");
             assert!(fast || tau >= 0.6, "{out}");
             assert!(!fast || tau <= 1.0, "{out}");
-            let drop = path_resistance(&sc) * viscous(&sc) / (k * k);
-            eprintln!("  flagged fast {fast} (L/R {tau:.2} of the period), drop {drop:.1}");
+            let ahead = sense_lead(&sc) / l_r;
+            eprintln!("  flagged fast {fast} (L/R {tau:.2} of the period), ahead {ahead:.3}");
             let (tol_r, tol_k) = if fast {
                 (0.10, 0.10)
             } else {
-                (0.05, 0.05 + 0.01 * drop)
+                (0.05, 0.05 + ahead)
             };
             assert!(rel(got("motor.r"), path_resistance(&sc)) < tol_r, "{text}");
-            assert!(rel(got("motor.k_e"), k) < tol_k, "drop {drop:.1}: {text}");
+            assert!(rel(got("motor.k_e"), k) < tol_k, "{text}");
             assert!(rel(got("ff.inertia"), j) < 0.15, "{text}");
             // cur.kp: the rule's for the true winding and switches at the loop's rate (it holds L through
             // |j ω₁₈₀ L + R|).
