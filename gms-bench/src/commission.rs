@@ -424,6 +424,11 @@ pub(crate) fn commission_steps(
             beta: 0.0,
         }
     };
+    // A resistance that is not positive is the holds' noise or motion, not a winding: an
+    // error here, not a `set` the device refuses.
+    if !(loss.r.is_finite() && loss.r > 0.0) {
+        return Err(unfit());
+    }
     c.r = loss.r;
     // The loss the holds saw at their largest current: what the speed runs below meet.
     let step = loss.alpha - loss.beta / holds[4].0.abs().max(f64::MIN_POSITIVE);
