@@ -520,7 +520,12 @@ pub(crate) fn commission_steps(
     b.set(ParamId::PosKi, ki / 8.0)?;
     b.set(ParamId::PosDFilterHz, d_filter / KE_RUN_D_FILTER_DIV)?;
     b.hold()?;
-    let loss_seen = dead > DEAD_TIME_SEEN;
+    // The bridge's loss taken out of the runs' voltage, where step 4 saw one.
+    let alpha = if dead > DEAD_TIME_SEEN {
+        loss.alpha
+    } else {
+        0.0
+    };
     let mut pts = Vec::new();
     for k in 1..=3 {
         for dir in [1.0, -1.0] {
@@ -536,29 +541,15 @@ pub(crate) fn commission_steps(
             //    count rate, more often the faster it runs, and the bridge's loss is α times
             //    that mean, not α (k_e read −58 % on a 1.5 Ω gear motor of
             //    `hil-sim/tests/coarse.rs`: its current was negative 16, 32 and 44 % of the
-            //    time at 5, 10 and 15 rad/s). With four fields at most, the time is then the
+            //    time at 5, 10 and 15 rad/s). With four fields at most, the time is the
             //    sample's index × its steps.
-            let fields = if loss_seen {
-                "pos,current_mean,volts_mean,sign_mean"
-            } else {
-                "t,pos,current_mean,volts_mean"
-            };
+            let fields = "pos,current_mean,volts_mean,sign_mean";
             let every = f64::from(timed_run(b, v, run, fields, dt)?);
             // (t, pos, current, volts, sign)
             let rows: Vec<Vec<f64>> = capture_rows(b)?
                 .into_iter()
                 .enumerate()
-                .map(|(j, r)| {
-                    if loss_seen {
-                        let mut row = vec![j as f64 * every * dt];
-                        row.extend_from_slice(&r);
-                        row
-                    } else {
-                        let mut row = r;
-                        row.push(0.0);
-                        row
-                    }
-                })
+                .map(|(j, r)| [&[j as f64 * every * dt], &r[..]].concat())
                 .filter(|r| r.len() == 5 && r[0] >= t_acc + 0.1 && r[0] <= t_acc + run)
                 .collect();
             if rows.len() < 2 {
@@ -569,7 +560,7 @@ pub(crate) fn commission_steps(
             let t: Vec<f64> = rows.iter().map(|r| r[0]).collect();
             let x: Vec<f64> = rows.iter().map(|r| r[1]).collect();
             let w = ls_slope(&t, &x, dt * dt).unwrap_or(0.0);
-            pts.push((w, m[3] - c.r * m[2] - loss.alpha * m[4]));
+            pts.push((w, m[3] - c.r * m[2] - alpha * m[4]));
         }
     }
     // The derivative's filter back: the position gains' rule below starts from it.
