@@ -69,6 +69,19 @@ fn step(lp: &mut ControlLoop, since_last: u32, req: Option<Requests>) {
     }
 }
 
+/// Arms a capture of `spec` in one step at rest, `period` cycles after the last.
+fn arm_capture(lp: &mut ControlLoop, period: u32, spec: gms_core::device::CaptureSpec) {
+    use gms_core::device::CaptureRequest;
+    step(
+        lp,
+        period,
+        Some(Requests {
+            capture: Some(CaptureRequest::Arm(spec)),
+            ..Requests::default()
+        }),
+    );
+}
+
 /// The capture's first 64 values, read back through the requests' chunk (given back at the
 /// next exchange), in PWM periods at rest `period` cycles apart.
 fn read_capture(lp: &mut ControlLoop, period: u32) -> gms_core::device::Chunk {
@@ -278,7 +291,7 @@ fn capture_field_lists() {
 
 #[test]
 fn a_capture_records_what_the_loop_saw() {
-    use gms_core::device::{CaptureRequest, CaptureSpec, CaptureState};
+    use gms_core::device::{CaptureSpec, CaptureState};
     let period = period_cycles();
     let mut lp = rest();
     // Every 2nd position step, pos and current, 10 samples, at once.
@@ -289,14 +302,7 @@ fn a_capture_records_what_the_loop_saw() {
         samples: 10,
         on_next: false,
     };
-    step(
-        &mut lp,
-        period,
-        Some(Requests {
-            capture: Some(CaptureRequest::Arm(spec)),
-            ..Requests::default()
-        }),
-    );
+    arm_capture(&mut lp, period, spec);
     for _ in 0..60 {
         step(&mut lp, period, None);
     }
@@ -367,7 +373,7 @@ fn current_mean_is_the_boxcar_of_the_decimated_steps() {
 /// −100 codes it reads −1.
 #[test]
 fn sign_mean_counts_each_periods_current_direction() {
-    use gms_core::device::{CaptureRequest, CaptureSpec, CaptureState};
+    use gms_core::device::{CaptureSpec, CaptureState};
     let period = period_cycles();
     let mut lp = rest();
     let s = default_settings();
@@ -379,14 +385,7 @@ fn sign_mean_counts_each_periods_current_direction() {
         samples: 20,
         on_next: false,
     };
-    step(
-        &mut lp,
-        period,
-        Some(Requests {
-            capture: Some(CaptureRequest::Arm(spec)),
-            ..Requests::default()
-        }),
-    );
+    arm_capture(&mut lp, period, spec);
     let run = |lp: &mut ControlLoop, code: &dyn Fn(usize) -> u32, n: usize| {
         for k in 0..n {
             let inp = Inputs {

@@ -9,23 +9,23 @@ use std::process::{Command, Stdio};
 use crate::support;
 use support::*;
 
-/// The resistance commissioning measures on the scenario at `path`: the winding's and the
-/// real bridge's switches' in the current's path (the plant's truth, the tool not told it).
-fn path_resistance(path: &std::path::Path) -> f64 {
+/// The plant of the scenario at `path` (its truth, the tool not told it).
+fn plant(path: &std::path::Path) -> hil_sim::scenario::Plant {
     let text = std::fs::read_to_string(path).unwrap();
     hil_sim::scenario::Scenario::parse(&text, "test")
         .unwrap()
         .plant
-        .path_resistance()
 }
 
-/// How far ahead of the bridge's brake the sense reads on the scenario at `path` \[s\]: the
-/// bridge's delay and the amplifier's lag (1 / 2π its bandwidth); 0 on the ideal bridge.
-fn sense_lead(path: &std::path::Path) -> f64 {
-    let text = std::fs::read_to_string(path).unwrap();
-    let p = hil_sim::scenario::Scenario::parse(&text, "test")
-        .unwrap()
-        .plant;
+/// The resistance commissioning measures on the scenario at `path`: the winding's and the
+/// real bridge's switches' in the current's path (the plant's truth, the tool not told it).
+fn path_resistance(path: &std::path::Path) -> f64 {
+    plant(path).path_resistance()
+}
+
+/// How far ahead of the bridge's brake the sense reads on `p` \[s\]: the bridge's delay and
+/// the amplifier's lag (1 / 2π its bandwidth); 0 on the ideal bridge.
+fn sense_lead(p: &hil_sim::scenario::Plant) -> f64 {
     let lag = if p.sense.bandwidth_hz > 0.0 {
         1.0 / (2.0 * std::f64::consts::PI * p.sense.bandwidth_hz)
     } else {
@@ -164,11 +164,13 @@ fn commission_finds_random_hidden_motors() {
             let got = |p: &str| dev[p].as_float().unwrap();
             let rel = |a: f64, b: f64| (a / b - 1.0).abs();
             let rate = gms_core::device::default_settings().cur_rate_hz as f64;
-            let kp_true = gms_ident::gains::current_pi(path_resistance(&sc), l, rate).0;
+            let truth = plant(&sc);
+            let r_path = truth.path_resistance();
+            let kp_true = gms_ident::gains::current_pi(r_path, l, rate).0;
             eprintln!(
                 "R {r:.3} -> {:+.2} %, k {k:.3e} -> {:+.2} %, J {j:.3e} -> {:+.2} %, L {l:.3e} -> \
                  {:+.2} %, enc {enc} sense {sense}",
-                (got("motor.r") / path_resistance(&sc) - 1.0) * 100.0,
+                (got("motor.r") / r_path - 1.0) * 100.0,
                 (got("motor.k_e") / k - 1.0) * 100.0,
                 (got("ff.inertia") / j - 1.0) * 100.0,
                 (got("cur.kp") / kp_true - 1.0) * 100.0,
@@ -181,19 +183,19 @@ fn commission_finds_random_hidden_motors() {
             // it reads the brake's decay early, which the back-EMF steepens, and k_e low by
             // about that (−2.9 and −3.0 % at 31 and 27 µs, −0.2 and −0.9 % with the delay 0;
             // docs/results.md).
-            let l_r = l / path_resistance(&sc);
+            let l_r = l / r_path;
             let tau = l_r / 25e-6;
             let fast = out.contains("reads under the period's mean");
             assert!(fast || tau >= 0.6, "{out}");
             assert!(!fast || tau <= 1.0, "{out}");
-            let ahead = sense_lead(&sc) / l_r;
+            let ahead = sense_lead(&truth) / l_r;
             eprintln!("  flagged fast {fast} (L/R {tau:.2} of the period), ahead {ahead:.3}");
             let (tol_r, tol_k) = if fast {
                 (0.10, 0.10)
             } else {
                 (0.05, 0.05 + ahead)
             };
-            assert!(rel(got("motor.r"), path_resistance(&sc)) < tol_r, "{text}");
+            assert!(rel(got("motor.r"), r_path) < tol_r, "{text}");
             assert!(rel(got("motor.k_e"), k) < tol_k, "{text}");
             assert!(rel(got("ff.inertia"), j) < 0.15, "{text}");
             // cur.kp: the rule's for the true winding and switches at the loop's rate (it holds L through

@@ -46,8 +46,6 @@ guideway = false
 
 /// The truth hidden in [`PLANT`] (and the default scenario's Table 1 friction).
 const R: f64 = 7.5;
-/// The default plant's bridge: its switches' resistance in the current's path \[ohm\].
-const R_ON: f64 = 0.565;
 const K: f64 = 8e-3;
 const J: f64 = 8e-8;
 const L: f64 = 0.3e-3;
@@ -55,6 +53,14 @@ const FS: f64 = 220e-6;
 const FC: f64 = 125e-6;
 const VS: f64 = 0.2;
 const SIGMA: f64 = 10.5e-6;
+/// The resistance in the current's path on [`PLANT`] \[ohm\]: the winding's [`R`] and the
+/// default plant's bridge switches' (the plant's own sum).
+fn r_path() -> f64 {
+    let sc = hil_sim::scenario::Scenario::parse(PLANT, "bench").expect("the bench's plant");
+    assert_eq!(sc.plant.resistance, R);
+    sc.plant.path_resistance()
+}
+
 /// The encoder's resolution \[rad/count\] (the default plant's).
 const RAD_PER_COUNT: f64 = 3.8e-6;
 
@@ -210,7 +216,7 @@ fn check(who: &str, f: &Figures) {
         );
     };
     // The current path's: the winding's and the default plant's bridge switches'.
-    within("R", f.r, R + R_ON, 0.05);
+    within("R", f.r, r_path(), 0.05);
     within("k_e", f.k_e, K, 0.05);
     within("J", f.j, J, 0.15);
     within("L", f.l, L, 0.20);
@@ -257,7 +263,7 @@ fn the_bench_tools_against_the_image_and_the_virtual_device() {
     drop(vd);
 
     let rows: [(&str, f64, f64, f64); 10] = [
-        ("R [Ω]", R + R_ON, on_image.r, on_virtual.r),
+        ("R [Ω]", r_path(), on_image.r, on_virtual.r),
         ("k_e [V·s/rad]", K, on_image.k_e, on_virtual.k_e),
         ("J [kg·m²]", J, on_image.j, on_virtual.j),
         ("L [H]", L, on_image.l, on_virtual.l),
@@ -316,6 +322,8 @@ fn the_bench_tools_against_the_image_and_the_virtual_device() {
 #[test]
 fn commissioning_measures_the_bridges_dead_time_on_the_image() {
     const DEAD: f64 = 350e-9;
+    /// The switches' resistance this test's bridge is given \[ohm\].
+    const R_ON: f64 = 0.565;
     let dir = tempfile::tempdir().unwrap();
     let sc = dir.path().join("plant.toml");
     let plant = PLANT.replace(
